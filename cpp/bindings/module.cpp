@@ -1,0 +1,270 @@
+// The thin pybind11 layer: numpy arrays in and out, nothing else. Python
+// (python/evomesh) validates shapes, dtypes and values before calling in.
+#include <pybind11/numpy.h>
+#include <pybind11/pybind11.h>
+#include <pybind11/stl.h>
+
+#include <cstring>
+
+#include "evomesh/frfc.hpp"
+#include "evomesh/packing.hpp"
+#include "evomesh/spacing.hpp"
+#include "evomesh/triangulation.hpp"
+
+namespace py = pybind11;
+using namespace evomesh;
+
+namespace {
+
+using Float_array = py::array_t<double, py::array::c_style | py::array::forcecast>;
+using Int_array = py::array_t<std::int64_t, py::array::c_style | py::array::forcecast>;
+using Byte_array = py::array_t<std::uint8_t, py::array::c_style | py::array::forcecast>;
+
+void require_shape(const py::array& a, py::ssize_t cols, const char* name) {
+  if (a.ndim() != 2 || a.shape(1) != cols) {
+    throw Input_error(std::string(name) + " must have shape (n, " + std::to_string(cols) + ")");
+  }
+}
+
+std::vector<Vec2> to_points(const Float_array& a, const char* name = "points") {
+  require_shape(a, 2, name);
+  std::vector<Vec2> out(static_cast<std::size_t>(a.shape(0)));
+  if (!out.empty()) std::memcpy(out.data(), a.data(), out.size() * sizeof(Vec2));
+  return out;
+}
+
+template <std::size_t K>
+std::vector<std::array<Index, K>> to_index_rows(const Int_array& a, const char* name) {
+  require_shape(a, K, name);
+  std::vector<std::array<Index, K>> out(static_cast<std::size_t>(a.shape(0)));
+  if (!out.empty()) std::memcpy(out.data(), a.data(), out.size() * sizeof(std::array<Index, K>));
+  return out;
+}
+
+template <class T>
+std::vector<T> to_vector(const py::array_t<T, py::array::c_style | py::array::forcecast>& a) {
+  if (a.ndim() != 1) throw Input_error("expected a one-dimensional array");
+  return std::vector<T>(a.data(), a.data() + a.shape(0));
+}
+
+Float_array points_array(const std::vector<Vec2>& pts) {
+  Float_array out({static_cast<py::ssize_t>(pts.size()), py::ssize_t{2}});
+  if (!pts.empty()) std::memcpy(out.mutable_data(), pts.data(), pts.size() * sizeof(Vec2));
+  return out;
+}
+
+template <std::size_t K>
+Int_array rows_array(const std::vector<std::array<Index, K>>& rows) {
+  Int_array out({static_cast<py::ssize_t>(rows.size()), static_cast<py::ssize_t>(K)});
+  if (!rows.empty()) std::memcpy(out.mutable_data(), rows.data(), rows.size() * sizeof(std::array<Index, K>));
+  return out;
+}
+
+template <class T>
+py::array_t<T> vector_array(const std::vector<T>& v) {
+  py::array_t<T> out(static_cast<py::ssize_t>(v.size()));
+  if (!v.empty()) std::memcpy(out.mutable_data(), v.data(), v.size() * sizeof(T));
+  return out;
+}
+
+Byte_array kinds_array(const std::vector<Point_kind>& kind) {
+  Byte_array out(static_cast<py::ssize_t>(kind.size()));
+  for (std::size_t i = 0; i < kind.size(); ++i) out.mutable_data()[i] = static_cast<std::uint8_t>(kind[i]);
+  return out;
+}
+
+std::vector<Point_kind> to_kinds(const Byte_array& a) {
+  auto raw = to_vector<std::uint8_t>(a);
+  std::vector<Point_kind> out(raw.size());
+  for (std::size_t i = 0; i < raw.size(); ++i) {
+    if (raw[i] > static_cast<std::uint8_t>(Point_kind::sampled)) throw Input_error("kind values must be in 0..4");
+    out[i] = static_cast<Point_kind>(raw[i]);
+  }
+  return out;
+}
+
+Mesh_arrays to_mesh(const Float_array& points, const Int_array& triangles, const Int_array& segments,
+                    const Byte_array& segment_is_boundary, const Byte_array& kind) {
+  Mesh_arrays mesh;
+  mesh.points = to_points(points);
+  mesh.triangles = to_index_rows<3>(triangles, "triangles");
+  mesh.segments = to_index_rows<2>(segments, "segments");
+  mesh.segment_is_boundary = to_vector<std::uint8_t>(segment_is_boundary);
+  mesh.kind = to_kinds(kind);
+  if (mesh.kind.size() != mesh.points.size()) throw Input_error("kind must have one value per point");
+  if (mesh.segment_is_boundary.size() != mesh.segments.size()) throw Input_error("one boundary flag per segment");
+  return mesh;
+}
+
+}  // namespace
+
+PYBIND11_MODULE(_core, m) {
+  m.doc() = "evomesh C++ core (CGAL): spacing functions, sampling, lexical-first MIS, FRFC";
+
+  m.def(
+      "prepare_mesh",
+      [](const Float_array& points, const Int_array& triangles, std::optional<Int_array> segments,
+         bool check_planar) {
+        Mesh_arrays mesh;
+        mesh.points = to_points(points);
+        mesh.triangles = to_index_rows<3>(triangles, "triangles");
+        std::vector<Edge> user;
+        if (segments) user = to_index_rows<2>(*segments, "segments");
+        std::size_t flipped;
+        {
+          py::gil_scoped_release release;
+          flipped = orient_triangles(mesh.points, mesh.triangles);
+          build_segments(mesh, user);
+          if (check_planar) check_planar_mesh(mesh.points, mesh.triangles);
+          mesh.kind = classify_points(mesh);
+        }
+        return py::make_tuple(rows_array<3>(mesh.triangles), rows_array<2>(mesh.segments),
+                              vector_array<std::uint8_t>(mesh.segment_is_boundary), kinds_array(mesh.kind),
+                              flipped);
+      },
+      py::arg("points"), py::arg("triangles"), py::arg("segments") = py::none(), py::arg("check_planar") = true,
+      "Orient triangles CCW, build segments, check planarity, classify points. "
+      "Returns (triangles, segments, segment_is_boundary, kind, n_flipped).");
+
+  m.def(
+      "nn_spacing",
+      [](const Float_array& points) {
+        auto pts = to_points(points);
+        std::vector<double> nn;
+        {
+          py::gil_scoped_release release;
+          nn = nn_spacing(pts);
+        }
+        return vector_array(nn);
+      },
+      py::arg("points"));
+
+  py::class_<Spacing_function>(m, "SpacingFunction")
+      .def(py::init([](const Float_array& sites, const Float_array& weights) {
+             auto s = to_points(sites, "sites");
+             auto w = to_vector<double>(weights);
+             py::gil_scoped_release release;
+             return std::make_unique<Spacing_function>(s, w);
+           }),
+           py::arg("sites"), py::arg("weights"))
+      .def(
+          "evaluate",
+          [](const Spacing_function& self, const Float_array& queries, int threads, bool certified) {
+            auto q = to_points(queries, "x");
+            std::vector<double> f(q.size());
+            std::vector<Index> site(q.size());
+            {
+              py::gil_scoped_release release;
+              self.evaluate(q.data(), q.size(), f.data(), site.data(), threads, certified);
+            }
+            return py::make_tuple(vector_array(f), vector_array(site));
+          },
+          py::arg("x"), py::arg("threads") = 0, py::arg("certified") = true)
+      .def_property_readonly("n_sites", &Spacing_function::n_sites)
+      .def_property_readonly("n_hidden", &Spacing_function::n_hidden);
+
+  m.def(
+      "lexical_first_mis",
+      [](const Float_array& centers, const Float_array& radii, const Int_array& order, std::size_t n_forced) {
+        auto c = to_points(centers, "centers");
+        auto r = to_vector<double>(radii);
+        auto o = to_vector<Index>(order);
+        std::vector<std::uint8_t> kept;
+        {
+          py::gil_scoped_release release;
+          kept = lexical_first_mis(c, r, o, n_forced);
+        }
+        return vector_array(kept);
+      },
+      py::arg("centers"), py::arg("radii"), py::arg("order"), py::arg("n_forced") = 0);
+
+  m.def(
+      "packing_order",
+      [](const Byte_array& classes, const Float_array& radii) {
+        return vector_array(packing_order(to_vector<std::uint8_t>(classes), to_vector<double>(radii)));
+      },
+      py::arg("classes"), py::arg("radii"));
+
+  m.def(
+      "frfc",
+      [](const Float_array& points, const Int_array& triangles, const Int_array& segments,
+         const Byte_array& segment_is_boundary, const Byte_array& kind, const Float_array& delta,
+         std::uint64_t seed, double cell_factor, bool exact_radius, int sample_mode, bool skip_coarse_triangles,
+         int threads, double max_samples, double radius_scale) {
+        Mesh_arrays mesh = to_mesh(points, triangles, segments, segment_is_boundary, kind);
+        auto d = to_vector<double>(delta);
+        if (sample_mode < 0 || sample_mode > 3) throw Input_error("unknown sample mode");
+        Frfc_options options;
+        options.seed = seed;
+        options.cell_factor = cell_factor;
+        options.exact_radius = exact_radius;
+        options.sample_mode = static_cast<Sample_mode>(sample_mode);
+        options.skip_coarse_triangles = skip_coarse_triangles;
+        options.threads = threads;
+        options.max_samples = max_samples;
+        options.radius_scale = radius_scale;
+        Evolve_result r;
+        {
+          py::gil_scoped_release release;
+          r = frfc(mesh, d, options);
+        }
+        py::dict out;
+        out["points"] = points_array(r.mesh.points);
+        out["triangles"] = rows_array<3>(r.mesh.triangles);
+        out["segments"] = rows_array<2>(r.mesh.segments);
+        out["segment_is_boundary"] = vector_array(r.mesh.segment_is_boundary);
+        out["kind"] = kinds_array(r.mesh.kind);
+        out["origin"] = vector_array(r.origin);
+        out["input_f"] = vector_array(r.input_f);
+        out["input_nn"] = vector_array(r.input_nn);
+        py::dict stats;
+        for (const auto& s : r.stats) stats[py::str(s.first)] = s.second;
+        out["stats"] = stats;
+        return out;
+      },
+      py::arg("points"), py::arg("triangles"), py::arg("segments"), py::arg("segment_is_boundary"),
+      py::arg("kind"), py::arg("delta"), py::arg("seed") = 0, py::arg("cell_factor") = 1.0,
+      py::arg("exact_radius") = true, py::arg("sample_mode") = 0, py::arg("skip_coarse_triangles") = false,
+      py::arg("threads") = 0, py::arg("max_samples") = 5e7, py::arg("radius_scale") = 1.0);
+
+  m.def(
+      "constrained_delaunay",
+      [](const Float_array& points, const Int_array& pieces, const Byte_array& boundary) {
+        auto pts = to_points(points);
+        auto p = to_index_rows<2>(pieces, "pieces");
+        auto b = to_vector<std::uint8_t>(boundary);
+        if (b.size() != p.size()) throw Input_error("one boundary flag per piece");
+        for (const auto& e : p) {
+          for (Index v : e) {
+            if (v < 0 || static_cast<std::size_t>(v) >= pts.size()) throw Input_error("piece index out of range");
+          }
+        }
+        std::vector<Constraint_piece> cp(p.size());
+        for (std::size_t i = 0; i < p.size(); ++i) cp[i] = {p[i][0], p[i][1], b[i] != 0};
+        std::vector<Triangle> tris;
+        {
+          py::gil_scoped_release release;
+          tris = constrained_delaunay(pts, cp);
+        }
+        return rows_array<3>(tris);
+      },
+      py::arg("points"), py::arg("pieces"), py::arg("boundary"));
+
+  m.def(
+      "locate_points",
+      [](const Float_array& points, const Int_array& triangles, const Float_array& queries) {
+        auto pts = to_points(points);
+        auto tris = to_index_rows<3>(triangles, "triangles");
+        auto q = to_points(queries, "queries");
+        std::vector<Index> t;
+        std::vector<std::array<double, 3>> bary;
+        {
+          py::gil_scoped_release release;
+          locate_points(pts, tris, q, t, bary);
+        }
+        Float_array b({static_cast<py::ssize_t>(bary.size()), py::ssize_t{3}});
+        if (!bary.empty()) std::memcpy(b.mutable_data(), bary.data(), bary.size() * sizeof(bary[0]));
+        return py::make_tuple(vector_array(t), b);
+      },
+      py::arg("points"), py::arg("triangles"), py::arg("queries"));
+}

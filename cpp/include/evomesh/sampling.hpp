@@ -1,0 +1,50 @@
+// Sample points S2 of FRFC (Section 3.2, step 2) and the practical variations of Section 5.
+#pragma once
+
+#include <cstdint>
+#include <vector>
+
+#include "evomesh/types.hpp"
+
+namespace evomesh {
+
+enum class Sample_mode : std::uint8_t {
+  random_grid = 0,  // one random point in each grid cell's part inside the triangle (the paper)
+  barycentre = 1,   // the barycentre of every triangle
+  midpoints = 2,    // the midpoint of every edge
+  barycentre_midpoints = 3,
+};
+
+struct Sample_set {
+  std::vector<Vec2> points;
+  std::vector<Index> parent;  // triangle index (interior samples) or segment index (segment samples)
+};
+
+// Interior samples. Cell side = cell_factor * f(q) / (2 sqrt 2), q the vertex of the
+// triangle with the smallest f. Every interior sample is strictly inside its triangle
+// (checked with exact orientation predicates). Triangles with skip[t] != 0 get none.
+// Edges that are segments are never sampled here (see sample_segments).
+Sample_set sample_triangles(const Mesh_arrays& mesh, const std::vector<double>& vertex_f,
+                            double cell_factor, Sample_mode mode, std::uint64_t seed,
+                            const std::vector<std::uint8_t>& skip);
+
+// Samples on the segments, strictly between their endpoints, sorted along each
+// segment from a to b: one random point per 1-D cell of side cell_factor * min f / (2 sqrt 2),
+// or the midpoint (modes with midpoints).
+Sample_set sample_segments(const Mesh_arrays& mesh, const std::vector<double>& vertex_f,
+                           double cell_factor, Sample_mode mode, std::uint64_t seed);
+
+// Upper bound on the number of samples sample_triangles/sample_segments would
+// produce, computed in O(n) so callers can refuse inputs that would exhaust memory.
+double estimate_sample_count(const Mesh_arrays& mesh, const std::vector<double>& vertex_f,
+                             double cell_factor);
+
+// Counter-based random numbers: the same (seed, stream) always gives the same sequence.
+struct Random_stream {
+  std::uint64_t state;
+  Random_stream(std::uint64_t seed, std::uint64_t stream);
+  std::uint64_t next();
+  double uniform();  // in [0, 1)
+};
+
+}  // namespace evomesh

@@ -1,0 +1,50 @@
+// Spacing functions (Section 3.1 of Li, Teng, Ungor).
+#pragma once
+
+#include <cstddef>
+#include <memory>
+#include <vector>
+
+#include "evomesh/types.hpp"
+
+namespace evomesh {
+
+// nn_M(p): distance from every point to its nearest other point, from the
+// Delaunay triangulation (the nearest neighbour is a Delaunay neighbour).
+// Precondition: at least two points, no duplicates (throws Input_error).
+std::vector<double> nn_spacing(const std::vector<Vec2>& points);
+
+// f(x) = min_i (weight_i + |x - site_i|), the lower envelope of cones of
+// slope 1 (Eq. 3). Evaluated through CGAL's Apollonius graph (additively
+// weighted Voronoi diagram): the site minimising weight_i + |x - site_i| is
+// the Apollonius nearest neighbour for the shifted weights W - weight_i >= 0.
+class Spacing_function {
+ public:
+  // Preconditions: sites distinct and finite, weights finite and >= 0.
+  Spacing_function(const std::vector<Vec2>& sites, const std::vector<double>& weights);
+  ~Spacing_function();
+  Spacing_function(const Spacing_function&) = delete;
+  Spacing_function& operator=(const Spacing_function&) = delete;
+
+  // f at n query points. Queries are answered in Hilbert order with the
+  // previous answer as hint, in fixed chunks so the result does not depend on
+  // the number of threads. `site_out` (optional) receives the minimising site.
+  // certified: the site is CGAL's exact Apollonius nearest neighbour. Otherwise
+  // a greedy walk on the Apollonius graph in floating point finds it, which can
+  // differ only where two cones tie up to rounding (same f up to rounding) and is
+  // several times faster: FRFC uses it for the radii of sampled spheres.
+  void evaluate(const Vec2* queries, std::size_t n, double* f_out, Index* site_out = nullptr,
+                int threads = 0, bool certified = true) const;
+
+  std::size_t n_sites() const;
+  // Sites whose cone never attains the minimum (hidden in the Apollonius graph).
+  std::size_t n_hidden() const;
+  const std::vector<Vec2>& sites() const;
+  const std::vector<double>& weights() const;
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace evomesh

@@ -1,0 +1,52 @@
+// Constrained Delaunay triangulation and mesh checks (CGAL).
+#pragma once
+
+#include <vector>
+
+#include "evomesh/types.hpp"
+
+namespace evomesh {
+
+// A constraint between two output points. For a boundary piece the domain lies
+// to the left of a -> b; an interior piece has the domain on both sides.
+struct Constraint_piece {
+  Index a;
+  Index b;
+  bool boundary;
+};
+
+// Constrained Delaunay triangulation of `points` with `pieces` as constraints;
+// returns the counter-clockwise triangles inside the domain the pieces bound
+// (regions are flood-filled from the sides of the pieces, so holes stay holes).
+std::vector<Triangle> constrained_delaunay(const std::vector<Vec2>& points,
+                                           const std::vector<Constraint_piece>& pieces);
+
+// Checks that `triangles` (counter-clockwise, non-degenerate) form a planar
+// triangulation: no edge crosses another, no point lies inside an edge, and
+// every triangle is a face of the constrained triangulation of all edges, so no
+// two triangles overlap. Throws Input_error naming the problem.
+void check_planar_mesh(const std::vector<Vec2>& points, const std::vector<Triangle>& triangles);
+
+// Orients every triangle counter-clockwise (exact predicate); throws Input_error
+// for a zero-area triangle. Returns the number of triangles flipped.
+std::size_t orient_triangles(const std::vector<Vec2>& points, std::vector<Triangle>& triangles);
+
+// Fills mesh.segments/segment_is_boundary from user segments (or the boundary
+// edges when `segments` is empty): every boundary edge becomes a segment, boundary
+// segments are oriented with the domain on the left, and a segment that is not an
+// edge of the mesh throws Input_error. Also checks edge manifoldness (an edge of
+// more than two triangles, or inconsistently oriented neighbours, throw).
+void build_segments(Mesh_arrays& mesh, const std::vector<Edge>& segments);
+
+// Kinds for a user mesh: corner (a segment end, a vertex where segments meet
+// other than two, or where the boundary turns: exact orientation), boundary (other
+// points on segments), original (interior).
+std::vector<Point_kind> classify_points(const Mesh_arrays& mesh);
+
+// Point location: for each query, the index of a triangle containing it (or -1)
+// and its barycentric coordinates in that triangle.
+void locate_points(const std::vector<Vec2>& points, const std::vector<Triangle>& triangles,
+                   const std::vector<Vec2>& queries, std::vector<Index>& triangle_out,
+                   std::vector<std::array<double, 3>>& barycentric_out);
+
+}  // namespace evomesh

@@ -1,0 +1,44 @@
+// Plain data types shared by the evomesh core. No CGAL and no pybind11 here.
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+namespace evomesh {
+
+using Index = std::int64_t;
+using Vec2 = std::array<double, 2>;
+using Triangle = std::array<Index, 3>;
+using Edge = std::array<Index, 2>;
+
+// Per-point label; the numeric order is the packing priority of Section 6
+// (corner, boundary, original, Steiner, sampled).
+enum class Point_kind : std::uint8_t {
+  corner = 0,
+  boundary = 1,
+  original = 2,
+  steiner = 3,
+  sampled = 4,
+};
+
+// Thrown for malformed user input; the bindings map it to ValueError.
+struct Input_error : std::invalid_argument {
+  using std::invalid_argument::invalid_argument;
+};
+
+// A triangle mesh as plain arrays. Triangles are counter-clockwise.
+// Segments are constraint edges; `segment_is_boundary[k]` tells whether
+// segment k is a boundary edge (domain on its left, a -> b) or an interior
+// constraint (domain on both sides).
+struct Mesh_arrays {
+  std::vector<Vec2> points;
+  std::vector<Triangle> triangles;
+  std::vector<Edge> segments;
+  std::vector<std::uint8_t> segment_is_boundary;
+  std::vector<Point_kind> kind;
+};
+
+}  // namespace evomesh

@@ -1,0 +1,318 @@
+#include "evomesh/frfc.hpp"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <string>
+
+#include "evomesh/kernel.hpp"
+#include "evomesh/packing.hpp"
+#include "evomesh/spacing.hpp"
+#include "evomesh/triangulation.hpp"
+
+namespace evomesh {
+
+namespace {
+
+class Stage_timer {
+ public:
+  explicit Stage_timer(std::vector<std::pair<std::string, double>>& stats) : stats_(stats) {}
+  void lap(const std::string& name) {
+    const auto now = std::chrono::steady_clock::now();
+    stats_.emplace_back("seconds_" + name, std::chrono::duration<double>(now - last_).count());
+    last_ = now;
+  }
+
+ private:
+  std::vector<std::pair<std::string, double>>& stats_;
+  std::chrono::steady_clock::time_point last_ = std::chrono::steady_clock::now();
+};
+
+// Packing priority classes (Section 6): corner, boundary (existing, then new),
+// original, Steiner (points sampled in an earlier step), sampled now.
+enum Priority : std::uint8_t {
+  prio_corner = 0,
+  prio_boundary = 1,
+  prio_boundary_sample = 2,
+  prio_original = 3,
+  prio_steiner = 4,
+  prio_sampled = 5,
+};
+
+}  // namespace
+
+std::vector<Segment_chain> segment_chains(const Mesh_arrays& mesh) {
+  const std::size_t n = mesh.points.size();
+  const std::size_t k = mesh.segments.size();
+  // Segments incident to each vertex (compressed lists: xadj/adj).
+  std::vector<Index> xadj(n + 1, 0), adj(2 * k);
+  for (const auto& e : mesh.segments) {
+    ++xadj[e[0] + 1];
+    ++xadj[e[1] + 1];
+  }
+  for (std::size_t v = 0; v < n; ++v) xadj[v + 1] += xadj[v];
+  {
+    std::vector<Index> fill(xadj.begin(), xadj.end() - 1);
+    for (std::size_t s = 0; s < k; ++s) {
+      adj[fill[mesh.segments[s][0]]++] = static_cast<Index>(s);
+      adj[fill[mesh.segments[s][1]]++] = static_cast<Index>(s);
+    }
+  }
+  auto degree = [&](Index v) { return xadj[v + 1] - xadj[v]; };
+  std::vector<std::uint8_t> is_corner(n, 0);
+  for (std::size_t v = 0; v < n; ++v) {
+    if (degree(v) == 0) continue;
+    bool corner = mesh.kind[v] == Point_kind::corner || degree(v) != 2;
+    if (!corner) {
+      const Index s0 = adj[xadj[v]], s1 = adj[xadj[v] + 1];
+      corner = mesh.segment_is_boundary[s0] != mesh.segment_is_boundary[s1];
+    }
+    is_corner[v] = corner;
+  }
+  std::vector<std::uint8_t> used(k, 0);
+  std::vector<Segment_chain> chains;
+  auto walk = [&](Index start, Index first_segment) {
+    Segment_chain chain;
+    chain.boundary = mesh.segment_is_boundary[first_segment] != 0;
+    Index v = start, s = first_segment;
+    chain.vertices.push_back(v);
+    while (true) {
+      used[s] = 1;
+      const Edge& e = mesh.segments[s];
+      const bool forward = e[0] == v;
+      const Index w = forward ? e[1] : e[0];
+      chain.segments.push_back(s);
+      chain.forward.push_back(forward);
+      if (w == start) {
+        chain.closed = true;
+        break;
+      }
+      chain.vertices.push_back(w);
+      if (is_corner[w]) break;
+      const Index s0 = adj[xadj[w]], s1 = adj[xadj[w] + 1];
+      s = s0 == s ? s1 : s0;
+      v = w;
+      if (used[s]) break;
+    }
+    chains.push_back(std::move(chain));
+  };
+  for (std::size_t v = 0; v < n; ++v) {
+    if (!is_corner[v]) continue;
+    for (Index a = xadj[v]; a < xadj[v + 1]; ++a) {
+      if (!used[adj[a]]) walk(static_cast<Index>(v), adj[a]);
+    }
+  }
+  // Loops without a corner (kinds handed in from outside): start them at a point
+  // where the loop turns, which every closed polygon has.
+  for (std::size_t s = 0; s < k; ++s) {
+    if (used[s]) continue;
+    Index start = mesh.segments[s][0];
+    Index v = start, seg = static_cast<Index>(s);
+    for (std::size_t guard = 0; guard <= k; ++guard) {
+      const Edge& e = mesh.segments[seg];
+      const Index w = e[0] == v ? e[1] : e[0];
+      const Index s0 = adj[xadj[w]], s1 = adj[xadj[w] + 1];
+      const Index next = s0 == seg ? s1 : s0;
+      const Edge& f = mesh.segments[next];
+      const Index x = f[0] == w ? f[1] : f[0];
+      if (orientation(mesh.points[v], mesh.points[w], mesh.points[x]) != 0) {
+        start = w;
+        break;
+      }
+      v = w;
+      seg = next;
+    }
+    const Index s0 = adj[xadj[start]];
+    walk(start, used[s0] ? adj[xadj[start] + 1] : s0);
+  }
+  return chains;
+}
+
+Evolve_result frfc(const Mesh_arrays& mesh, const std::vector<double>& delta, const Frfc_options& options) {
+  const std::size_t n = mesh.points.size();
+  if (delta.size() != n) throw Input_error("delta must have one value per mesh point");
+  for (double d : delta) {
+    if (!std::isfinite(d) || !(d > 0)) throw Input_error("delta must be finite and > 0");
+  }
+  if (!(options.cell_factor > 0) || !std::isfinite(options.cell_factor)) {
+    throw Input_error("cell_factor must be finite and > 0");
+  }
+  if (!(options.radius_scale > 0 && options.radius_scale <= 1)) {
+    throw Input_error("radius_scale must be in (0, 1]");
+  }
+  Evolve_result result;
+  auto& stats = result.stats;
+  Stage_timer timer(stats);
+
+  // Step 1: nn_M and the spacing function f (Section 3.1).
+  result.input_nn = nn_spacing(mesh.points);
+  std::vector<double> weight(n);
+  for (std::size_t i = 0; i < n; ++i) weight[i] = delta[i] * result.input_nn[i];
+  timer.lap("nn");
+  Spacing_function spacing(mesh.points, weight);
+  timer.lap("apollonius");
+  auto& f = result.input_f;
+  f.resize(n);
+  spacing.evaluate(mesh.points.data(), n, f.data(), nullptr, options.threads);
+  // f_p(p) = w_p is one of the cones: taking it makes Lemma 3.1 hold exactly.
+  for (std::size_t i = 0; i < n; ++i) f[i] = std::min(f[i], weight[i]);
+  timer.lap("spacing_at_points");
+
+  // Step 2: samples in triangles and on segments.
+  const double estimate = estimate_sample_count(mesh, f, options.cell_factor);
+  if (estimate > options.max_samples) {
+    throw Input_error("delta asks for too much refinement in one step: sampling would create about " +
+                      std::to_string(static_cast<long long>(estimate)) + " points (max_samples is " +
+                      std::to_string(static_cast<long long>(options.max_samples)) +
+                      "); raise delta or max_samples, or refine over several steps");
+  }
+  std::vector<std::uint8_t> skip;
+  if (options.skip_coarse_triangles) {
+    skip.resize(mesh.triangles.size());
+    for (std::size_t t = 0; t < mesh.triangles.size(); ++t) {
+      const auto& tri = mesh.triangles[t];
+      skip[t] = delta[tri[0]] > 1 && delta[tri[1]] > 1 && delta[tri[2]] > 1;
+    }
+  }
+  const Sample_set on_segments = sample_segments(mesh, f, options.cell_factor, options.sample_mode, options.seed);
+  const Sample_set inside = sample_triangles(mesh, f, options.cell_factor, options.sample_mode, options.seed, skip);
+  timer.lap("sampling");
+
+  // Candidate spheres: input points, segment samples, interior samples.
+  const std::size_t n_seg = on_segments.points.size();
+  const std::size_t n_in = inside.points.size();
+  const std::size_t total = n + n_seg + n_in;
+  std::vector<Vec2> centers;
+  centers.reserve(total);
+  centers.insert(centers.end(), mesh.points.begin(), mesh.points.end());
+  centers.insert(centers.end(), on_segments.points.begin(), on_segments.points.end());
+  centers.insert(centers.end(), inside.points.begin(), inside.points.end());
+  std::vector<double> radius(total);
+  for (std::size_t i = 0; i < n; ++i) radius[i] = 0.5 * f[i];
+  if (options.exact_radius) {
+    spacing.evaluate(centers.data() + n, n_seg + n_in, radius.data() + n, nullptr, options.threads,
+                     /*certified=*/false);
+    for (std::size_t i = n; i < total; ++i) radius[i] *= 0.5;
+  } else {
+    // (f(q) + |x - q|) / 2 with q the vertex of smallest f (Section 3.2, step 2).
+    auto cheap = [&](const Vec2& x, Index q) {
+      return 0.5 * (f[q] + std::hypot(x[0] - mesh.points[q][0], x[1] - mesh.points[q][1]));
+    };
+    for (std::size_t j = 0; j < n_seg; ++j) {
+      const Edge& e = mesh.segments[on_segments.parent[j]];
+      const Index q = f[e[0]] <= f[e[1]] ? e[0] : e[1];
+      radius[n + j] = cheap(on_segments.points[j], q);
+    }
+    for (std::size_t j = 0; j < n_in; ++j) {
+      const Triangle& t = mesh.triangles[inside.parent[j]];
+      Index q = t[0];
+      if (f[t[1]] < f[q]) q = t[1];
+      if (f[t[2]] < f[q]) q = t[2];
+      radius[n + n_seg + j] = cheap(inside.points[j], q);
+    }
+  }
+  for (double& r : radius) r *= options.radius_scale;
+  timer.lap("sample_radii");
+
+  // Steps 3-5: order the spheres, lexical-first MIS; corners are always kept.
+  const auto chains = segment_chains(mesh);
+  std::vector<std::uint8_t> forced_corner(n, 0);
+  for (std::size_t i = 0; i < n; ++i) forced_corner[i] = mesh.kind[i] == Point_kind::corner;
+  for (const auto& chain : chains) {
+    forced_corner[chain.vertices.front()] = 1;
+    forced_corner[chain.vertices.back()] = 1;
+  }
+  std::vector<std::uint8_t> priority(total);
+  std::size_t n_forced = 0;
+  for (std::size_t i = 0; i < n; ++i) {
+    if (forced_corner[i]) {
+      priority[i] = prio_corner;
+      ++n_forced;
+      continue;
+    }
+    switch (mesh.kind[i]) {
+      case Point_kind::corner:
+      case Point_kind::boundary: priority[i] = prio_boundary; break;
+      case Point_kind::original: priority[i] = prio_original; break;
+      default: priority[i] = prio_steiner; break;
+    }
+  }
+  std::fill(priority.begin() + n, priority.begin() + n + n_seg, prio_boundary_sample);
+  std::fill(priority.begin() + n + n_seg, priority.end(), prio_sampled);
+  const auto order = packing_order(priority, radius);
+  const auto kept = lexical_first_mis(centers, radius, order, n_forced);
+  timer.lap("lfmis");
+
+  // Output points: kept input points in input order, then kept samples.
+  std::vector<Index> out_index(total, -1);
+  Mesh_arrays& out = result.mesh;
+  for (std::size_t c = 0; c < total; ++c) {
+    if (!kept[c]) continue;
+    out_index[c] = static_cast<Index>(out.points.size());
+    out.points.push_back(centers[c]);
+    if (c < n) {
+      result.origin.push_back(static_cast<Index>(c));
+      Point_kind k = mesh.kind[c];
+      if (forced_corner[c]) k = Point_kind::corner;
+      else if (k == Point_kind::sampled) k = Point_kind::steiner;
+      out.kind.push_back(k);
+    } else {
+      result.origin.push_back(-1);
+      out.kind.push_back(c < n + n_seg ? Point_kind::boundary : Point_kind::sampled);
+    }
+  }
+
+  // Constraint pieces between consecutive kept points along every chain.
+  std::vector<Index> segment_sample_begin(mesh.segments.size() + 1, 0);
+  for (Index parent : on_segments.parent) ++segment_sample_begin[parent + 1];
+  for (std::size_t s = 0; s < mesh.segments.size(); ++s) segment_sample_begin[s + 1] += segment_sample_begin[s];
+  std::vector<Constraint_piece> pieces;
+  std::vector<Index> along;
+  for (const auto& chain : chains) {
+    along.clear();
+    for (std::size_t k = 0; k < chain.segments.size(); ++k) {
+      const Index v = chain.vertices[k];
+      if (kept[v]) along.push_back(out_index[v]);
+      const Index s = chain.segments[k];
+      const Index b = segment_sample_begin[s], e = segment_sample_begin[s + 1];
+      if (chain.forward[k]) {
+        for (Index j = b; j < e; ++j) {
+          if (kept[n + j]) along.push_back(out_index[n + j]);
+        }
+      } else {
+        for (Index j = e; j-- > b;) {
+          if (kept[n + j]) along.push_back(out_index[n + j]);
+        }
+      }
+    }
+    if (chain.closed) along.push_back(along.front());
+    else if (kept[chain.vertices.back()]) along.push_back(out_index[chain.vertices.back()]);
+    // All segments of a boundary chain are oriented alike (domain on the left).
+    const bool flip = chain.boundary && !chain.forward.front();
+    for (std::size_t k = 0; k + 1 < along.size(); ++k) {
+      Constraint_piece piece{along[k], along[k + 1], chain.boundary};
+      if (flip) std::swap(piece.a, piece.b);
+      pieces.push_back(piece);
+    }
+  }
+  out.triangles = constrained_delaunay(out.points, pieces);
+  for (const auto& piece : pieces) {
+    out.segments.push_back({piece.a, piece.b});
+    out.segment_is_boundary.push_back(piece.boundary);
+  }
+  timer.lap("cdt");
+
+  double seconds = 0;
+  for (const auto& s : stats) seconds += s.second;
+  stats.emplace_back("seconds_total", seconds);
+  stats.emplace_back("n_input_points", static_cast<double>(n));
+  stats.emplace_back("n_segment_samples", static_cast<double>(n_seg));
+  stats.emplace_back("n_interior_samples", static_cast<double>(n_in));
+  stats.emplace_back("n_candidates", static_cast<double>(total));
+  stats.emplace_back("n_hidden_sites", static_cast<double>(spacing.n_hidden()));
+  stats.emplace_back("n_output_points", static_cast<double>(out.points.size()));
+  stats.emplace_back("n_output_triangles", static_cast<double>(out.triangles.size()));
+  return result;
+}
+
+}  // namespace evomesh

@@ -1,0 +1,191 @@
+#include "evomesh/spacing.hpp"
+
+#include <CGAL/Apollonius_graph_2.h>
+#include <CGAL/Apollonius_graph_filtered_traits_2.h>
+#include <CGAL/Apollonius_graph_vertex_base_2.h>
+#include <CGAL/Delaunay_triangulation_2.h>
+#include <CGAL/Simple_cartesian.h>
+#include <CGAL/Triangulation_vertex_base_with_info_2.h>
+#include <CGAL/hilbert_sort.h>
+#include <CGAL/spatial_sort.h>
+#include <CGAL/Spatial_sort_traits_adapter_2.h>
+#include <CGAL/property_map.h>
+
+#include <algorithm>
+#include <atomic>
+#include <cmath>
+#include <limits>
+#include <numeric>
+#include <thread>
+
+#include "evomesh/kernel.hpp"
+#include "evomesh/parallel.hpp"
+
+namespace evomesh {
+
+std::vector<double> nn_spacing(const std::vector<Vec2>& points) {
+  using Vb = CGAL::Triangulation_vertex_base_with_info_2<Index, Kernel>;
+  using Tds = CGAL::Triangulation_data_structure_2<Vb>;
+  using Delaunay = CGAL::Delaunay_triangulation_2<Kernel, Tds>;
+  const std::size_t n = points.size();
+  if (n < 2) throw Input_error("nn spacing needs at least two points");
+  std::vector<std::pair<Point_2, Index>> input;
+  input.reserve(n);
+  for (std::size_t i = 0; i < n; ++i) input.emplace_back(to_cgal(points[i]), static_cast<Index>(i));
+  Delaunay dt;
+  dt.insert(input.begin(), input.end());  // spatially sorted insert
+  if (dt.number_of_vertices() != n) throw Input_error("points contain duplicates");
+  std::vector<double> nn2(n, std::numeric_limits<double>::infinity());
+  for (auto e = dt.finite_edges_begin(); e != dt.finite_edges_end(); ++e) {
+    const auto f = e->first;
+    const int i = e->second;
+    const auto va = f->vertex(Delaunay::cw(i));
+    const auto vb = f->vertex(Delaunay::ccw(i));
+    const double d2 = CGAL::squared_distance(va->point(), vb->point());
+    nn2[va->info()] = std::min(nn2[va->info()], d2);
+    nn2[vb->info()] = std::min(nn2[vb->info()], d2);
+  }
+  std::vector<double> nn(n);
+  for (std::size_t i = 0; i < n; ++i) nn[i] = std::sqrt(nn2[i]);
+  return nn;
+}
+
+namespace {
+
+using Ag_kernel = CGAL::Simple_cartesian<double>;
+// The robust filtered traits: exact evaluation (MP_Float) behind interval filters.
+using Ag_traits = CGAL::Apollonius_graph_filtered_traits_2<Ag_kernel>;
+
+// Vertex base carrying the index of its site.
+template <class Gt, class Vb = CGAL::Triangulation_ds_vertex_base_2<>>
+class Ag_vertex_with_index : public CGAL::Apollonius_graph_vertex_base_2<Gt, false, Vb> {
+  using Base = CGAL::Apollonius_graph_vertex_base_2<Gt, false, Vb>;
+
+ public:
+  template <typename Tds2>
+  struct Rebind_TDS {
+    using Vb2 = typename Vb::template Rebind_TDS<Tds2>::Other;
+    using Other = Ag_vertex_with_index<Gt, Vb2>;
+  };
+  using Base::Base;
+  Index index = -1;
+};
+
+using Ag_tds = CGAL::Triangulation_data_structure_2<Ag_vertex_with_index<Ag_traits>,
+                                                    CGAL::Triangulation_face_base_2<Ag_traits>>;
+using Apollonius_graph = CGAL::Apollonius_graph_2<Ag_traits, Ag_tds>;
+using Site_2 = Ag_traits::Site_2;
+using Ag_point = Ag_traits::Point_2;
+
+// Answers are computed in chunks of this many queries (in Hilbert order), each
+// starting without a hint, so results are independent of the thread count.
+constexpr std::size_t kQueryChunk = 8192;
+
+}  // namespace
+
+struct Spacing_function::Impl {
+  std::vector<Vec2> sites;
+  std::vector<double> weights;
+  double shift = 0.0;
+  Apollonius_graph graph;
+};
+
+Spacing_function::Spacing_function(const std::vector<Vec2>& sites, const std::vector<double>& weights)
+    : impl_(std::make_unique<Impl>()) {
+  if (sites.empty()) throw Input_error("spacing function needs at least one site");
+  if (sites.size() != weights.size()) throw Input_error("one weight per site is required");
+  for (double w : weights) {
+    if (!std::isfinite(w) || w < 0) throw Input_error("spacing weights must be finite and >= 0");
+  }
+  impl_->sites = sites;
+  impl_->weights = weights;
+  // Apollonius distance is |x - c| - W; with W_i = shift - w_i >= 0 the nearest
+  // site minimises w_i + |x - c_i|.
+  impl_->shift = *std::max_element(weights.begin(), weights.end());
+  std::vector<Ag_point> pts;
+  pts.reserve(sites.size());
+  for (const auto& s : sites) pts.emplace_back(s[0], s[1]);
+  std::vector<std::size_t> order(sites.size());
+  std::iota(order.begin(), order.end(), 0);
+  using Sort_traits = CGAL::Spatial_sort_traits_adapter_2<
+      Ag_kernel, CGAL::Pointer_property_map<Ag_point>::type>;
+  CGAL::spatial_sort(order.begin(), order.end(), Sort_traits(CGAL::make_property_map(pts)));
+  Apollonius_graph::Vertex_handle hint;
+  for (std::size_t i : order) {
+    const Site_2 site(pts[i], impl_->shift - weights[i]);
+    auto v = hint == Apollonius_graph::Vertex_handle() ? impl_->graph.insert(site)
+                                                        : impl_->graph.insert(site, hint);
+    if (v != Apollonius_graph::Vertex_handle()) {
+      v->index = static_cast<Index>(i);
+      hint = v;
+    }
+  }
+}
+
+Spacing_function::~Spacing_function() = default;
+
+std::size_t Spacing_function::n_sites() const { return impl_->sites.size(); }
+std::size_t Spacing_function::n_hidden() const {
+  return impl_->sites.size() - impl_->graph.number_of_vertices();
+}
+const std::vector<Vec2>& Spacing_function::sites() const { return impl_->sites; }
+const std::vector<double>& Spacing_function::weights() const { return impl_->weights; }
+
+void Spacing_function::evaluate(const Vec2* queries, std::size_t n, double* f_out, Index* site_out,
+                                int threads, bool certified) const {
+  if (n == 0) return;
+  std::vector<Ag_point> pts;
+  pts.reserve(n);
+  for (std::size_t i = 0; i < n; ++i) pts.emplace_back(queries[i][0], queries[i][1]);
+  std::vector<std::size_t> order(n);
+  std::iota(order.begin(), order.end(), 0);
+  using Sort_traits = CGAL::Spatial_sort_traits_adapter_2<
+      Ag_kernel, CGAL::Pointer_property_map<Ag_point>::type>;
+  CGAL::hilbert_sort(order.begin(), order.end(), Sort_traits(CGAL::make_property_map(pts)));
+  const auto& graph = impl_->graph;
+  const auto& sites = impl_->sites;
+  const auto& weights = impl_->weights;
+  const std::size_t n_chunks = (n + kQueryChunk - 1) / kQueryChunk;
+  parallel_for(n_chunks, threads, [&](std::size_t chunk) {
+    const std::size_t begin = chunk * kQueryChunk;
+    const std::size_t end = std::min(n, begin + kQueryChunk);
+    auto cone = [&](Apollonius_graph::Vertex_handle v, const Vec2& x) {
+      const Index s = v->index;
+      const double dx = x[0] - sites[s][0];
+      const double dy = x[1] - sites[s][1];
+      return weights[s] + std::sqrt(dx * dx + dy * dy);
+    };
+    Apollonius_graph::Vertex_handle hint;
+    for (std::size_t k = begin; k < end; ++k) {
+      const std::size_t q = order[k];
+      const Vec2& x = queries[q];
+      if (hint == Apollonius_graph::Vertex_handle()) {
+        hint = graph.nearest_neighbor(pts[q]);
+      } else if (certified) {
+        hint = graph.nearest_neighbor(pts[q], hint);
+      } else {
+        // Greedy descent over Apollonius-graph neighbours, as CGAL's walk does,
+        // with the cone values in double; values strictly decrease, so it ends.
+        double best = cone(hint, x);
+        for (bool moved = true; moved;) {
+          moved = false;
+          auto c = graph.incident_vertices(hint), done = c;
+          do {
+            if (graph.is_infinite(c)) continue;
+            const double value = cone(c, x);
+            if (value < best) {
+              best = value;
+              hint = c;
+              moved = true;
+              break;
+            }
+          } while (++c != done);
+        }
+      }
+      f_out[q] = cone(hint, x);
+      if (site_out) site_out[q] = hint->index;
+    }
+  });
+}
+
+}  // namespace evomesh

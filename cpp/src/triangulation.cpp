@@ -1,0 +1,340 @@
+#include "evomesh/triangulation.hpp"
+
+#include <CGAL/Constrained_Delaunay_triangulation_2.h>
+#include <CGAL/Triangulation_face_base_with_info_2.h>
+#include <CGAL/Triangulation_vertex_base_with_info_2.h>
+
+#include <CGAL/Spatial_sort_traits_adapter_2.h>
+#include <CGAL/hilbert_sort.h>
+#include <CGAL/property_map.h>
+
+#include <algorithm>
+#include <limits>
+#include <numeric>
+#include <string>
+
+#include "evomesh/kernel.hpp"
+
+namespace evomesh {
+
+namespace {
+
+using Vb = CGAL::Triangulation_vertex_base_with_info_2<Index, Kernel>;
+using Fb_info = CGAL::Triangulation_face_base_with_info_2<Index, Kernel>;
+using Fb = CGAL::Constrained_triangulation_face_base_2<Kernel, Fb_info>;
+using Tds = CGAL::Triangulation_data_structure_2<Vb, Fb>;
+// Constraints may pass through input points (split there) but never need a
+// constructed intersection point: output coordinates are never invented here.
+using Cdt = CGAL::Constrained_Delaunay_triangulation_2<
+    Kernel, Tds, CGAL::No_constraint_intersection_requiring_constructions_tag>;
+// For validation: any crossing or overlap of two constraints throws.
+using Cdt_strict = CGAL::Constrained_Delaunay_triangulation_2<Kernel, Tds, CGAL::No_constraint_intersection_tag>;
+
+template <class T>
+std::vector<typename T::Vertex_handle> insert_points(T& cdt, const std::vector<Vec2>& points) {
+  std::vector<std::pair<Point_2, Index>> input;
+  input.reserve(points.size());
+  for (std::size_t i = 0; i < points.size(); ++i) input.emplace_back(to_cgal(points[i]), static_cast<Index>(i));
+  cdt.insert(input.begin(), input.end());
+  if (cdt.number_of_vertices() != points.size()) throw Input_error("points contain duplicates");
+  std::vector<typename T::Vertex_handle> handles(points.size());
+  for (auto v = cdt.finite_vertices_begin(); v != cdt.finite_vertices_end(); ++v) handles[v->info()] = v;
+  return handles;
+}
+
+std::string edge_name(Index a, Index b) {
+  return "(" + std::to_string(a) + ", " + std::to_string(b) + ")";
+}
+
+// Directed edges of all triangles, sorted by undirected key.
+struct Directed_edge {
+  Index lo, hi;   // undirected key
+  Index from;     // direction: from -> other
+  Index triangle;
+};
+
+std::vector<Directed_edge> sorted_edges(const std::vector<Triangle>& triangles) {
+  std::vector<Directed_edge> edges;
+  edges.reserve(3 * triangles.size());
+  for (std::size_t t = 0; t < triangles.size(); ++t) {
+    for (int k = 0; k < 3; ++k) {
+      const Index a = triangles[t][k];
+      const Index b = triangles[t][(k + 1) % 3];
+      edges.push_back({std::min(a, b), std::max(a, b), a, static_cast<Index>(t)});
+    }
+  }
+  std::sort(edges.begin(), edges.end(), [](const Directed_edge& x, const Directed_edge& y) {
+    return x.lo < y.lo || (x.lo == y.lo && (x.hi < y.hi || (x.hi == y.hi && x.triangle < y.triangle)));
+  });
+  return edges;
+}
+
+}  // namespace
+
+std::size_t orient_triangles(const std::vector<Vec2>& points, std::vector<Triangle>& triangles) {
+  std::size_t flipped = 0;
+  for (std::size_t t = 0; t < triangles.size(); ++t) {
+    auto& tri = triangles[t];
+    const int o = orientation(points[tri[0]], points[tri[1]], points[tri[2]]);
+    if (o == 0) throw Input_error("triangle " + std::to_string(t) + " has zero area (collinear vertices)");
+    if (o < 0) {
+      std::swap(tri[1], tri[2]);
+      ++flipped;
+    }
+  }
+  return flipped;
+}
+
+void build_segments(Mesh_arrays& mesh, const std::vector<Edge>& user_segments) {
+  const auto edges = sorted_edges(mesh.triangles);
+  std::vector<Edge> boundary;
+  std::vector<Edge> interior_keys;  // undirected keys of interior edges
+  for (std::size_t i = 0; i < edges.size();) {
+    std::size_t j = i;
+    while (j < edges.size() && edges[j].lo == edges[i].lo && edges[j].hi == edges[i].hi) ++j;
+    const std::size_t count = j - i;
+    if (count > 2) {
+      throw Input_error("edge " + edge_name(edges[i].lo, edges[i].hi) + " is shared by " +
+                        std::to_string(count) + " triangles (non-manifold)");
+    }
+    if (count == 2) {
+      if (edges[i].from == edges[i + 1].from) {
+        throw Input_error("triangles " + std::to_string(edges[i].triangle) + " and " +
+                          std::to_string(edges[i + 1].triangle) + " overlap: they lie on the same side of edge " +
+                          edge_name(edges[i].lo, edges[i].hi));
+      }
+      interior_keys.push_back({edges[i].lo, edges[i].hi});
+    } else {
+      const Index a = edges[i].from;
+      boundary.push_back({a, a == edges[i].lo ? edges[i].hi : edges[i].lo});
+    }
+    i = j;
+  }
+  mesh.segments = boundary;
+  mesh.segment_is_boundary.assign(boundary.size(), 1);
+  std::vector<Edge> extra;
+  for (std::size_t k = 0; k < user_segments.size(); ++k) {
+    const Edge& s = user_segments[k];
+    if (s[0] == s[1]) throw Input_error("segment " + std::to_string(k) + " joins a point to itself");
+    const Edge key{std::min(s[0], s[1]), std::max(s[0], s[1])};
+    if (std::binary_search(interior_keys.begin(), interior_keys.end(), key)) {
+      extra.push_back(key);
+      continue;
+    }
+    // Boundary edges are already segments; anything else is not an edge at all.
+    auto it = std::lower_bound(edges.begin(), edges.end(), key, [](const Directed_edge& e, const Edge& k2) {
+      return e.lo < k2[0] || (e.lo == k2[0] && e.hi < k2[1]);
+    });
+    if (it == edges.end() || it->lo != key[0] || it->hi != key[1]) {
+      throw Input_error("segment " + std::to_string(k) + " " + edge_name(s[0], s[1]) + " is not an edge of the mesh");
+    }
+  }
+  std::sort(extra.begin(), extra.end());
+  extra.erase(std::unique(extra.begin(), extra.end()), extra.end());
+  for (const auto& e : extra) {
+    mesh.segments.push_back(e);
+    mesh.segment_is_boundary.push_back(0);
+  }
+}
+
+std::vector<Point_kind> classify_points(const Mesh_arrays& mesh) {
+  const std::size_t n = mesh.points.size();
+  std::vector<Point_kind> kind(n, Point_kind::original);
+  std::vector<int> degree(n, 0);
+  std::vector<std::array<Index, 2>> neighbour(n, {-1, -1});
+  std::vector<std::array<int, 2>> flavour(n, {-1, -1});
+  for (std::size_t k = 0; k < mesh.segments.size(); ++k) {
+    const Edge& e = mesh.segments[k];
+    for (int s = 0; s < 2; ++s) {
+      const Index v = e[s];
+      if (degree[v] < 2) {
+        neighbour[v][degree[v]] = e[1 - s];
+        flavour[v][degree[v]] = mesh.segment_is_boundary[k];
+      }
+      ++degree[v];
+    }
+  }
+  for (std::size_t v = 0; v < n; ++v) {
+    if (degree[v] == 0) continue;
+    if (degree[v] != 2 || flavour[v][0] != flavour[v][1]) {
+      kind[v] = Point_kind::corner;
+      continue;
+    }
+    const Vec2& u = mesh.points[neighbour[v][0]];
+    const Vec2& w = mesh.points[neighbour[v][1]];
+    const Vec2& p = mesh.points[v];
+    // A boundary point is a corner unless the boundary runs straight through it
+    // (collinear, and the neighbours on opposite sides).
+    const bool straight = orientation(u, p, w) == 0 &&
+                          ((u[0] - p[0]) * (w[0] - p[0]) + (u[1] - p[1]) * (w[1] - p[1])) < 0;
+    kind[v] = straight ? Point_kind::boundary : Point_kind::corner;
+  }
+  return kind;
+}
+
+void check_planar_mesh(const std::vector<Vec2>& points, const std::vector<Triangle>& triangles) {
+  Cdt_strict cdt;
+  auto handles = insert_points(cdt, points);
+  const auto edges = sorted_edges(triangles);
+  try {
+    for (std::size_t i = 0; i < edges.size(); ++i) {
+      if (i > 0 && edges[i].lo == edges[i - 1].lo && edges[i].hi == edges[i - 1].hi) continue;
+      cdt.insert_constraint(handles[edges[i].lo], handles[edges[i].hi]);
+    }
+  } catch (const Cdt_strict::Intersection_of_constraints_exception&) {
+    throw Input_error("mesh edges cross each other (overlapping or inverted triangles)");
+  }
+  for (std::size_t t = 0; t < triangles.size(); ++t) {
+    const auto& tri = triangles[t];
+    if (!cdt.is_face(handles[tri[0]], handles[tri[1]], handles[tri[2]])) {
+      throw Input_error("triangle " + std::to_string(t) +
+                        " overlaps other triangles or contains a point (not a planar triangulation)");
+    }
+  }
+}
+
+std::vector<Triangle> constrained_delaunay(const std::vector<Vec2>& points,
+                                           const std::vector<Constraint_piece>& pieces) {
+  Cdt cdt;
+  auto handles = insert_points(cdt, points);
+  for (const auto& piece : pieces) cdt.insert_constraint(handles[piece.a], handles[piece.b]);
+  constexpr Index unknown = 0, inside = 1, outside = 2;
+  for (auto f = cdt.all_faces_begin(); f != cdt.all_faces_end(); ++f) f->info() = unknown;
+  std::vector<Cdt::Face_handle> queue;
+  auto seed = [&](Cdt::Face_handle f, Index label) {
+    if (cdt.is_infinite(f)) label = outside;
+    if (f->info() == unknown) {
+      f->info() = label;
+      queue.push_back(f);
+    } else if (f->info() != label) {
+      throw std::runtime_error("constrained_delaunay: the constraints do not bound a consistent domain");
+    }
+  };
+  for (auto f = cdt.all_faces_begin(); f != cdt.all_faces_end(); ++f) {
+    if (cdt.is_infinite(f)) seed(f, outside);
+  }
+  for (const auto& piece : pieces) {
+    Cdt::Face_handle f;
+    int i;
+    if (!cdt.is_edge(handles[piece.a], handles[piece.b], f, i)) continue;  // split by a point on it
+    Cdt::Face_handle left = f, right = f->neighbor(i);
+    if (f->vertex(Cdt::ccw(i)) != handles[piece.a]) std::swap(left, right);
+    seed(left, inside);
+    seed(right, piece.boundary ? outside : inside);
+  }
+  // Flood fill across unconstrained edges: every region bounded by constraints
+  // gets the label of the sides of its constraints.
+  while (!queue.empty()) {
+    auto f = queue.back();
+    queue.pop_back();
+    for (int i = 0; i < 3; ++i) {
+      if (f->is_constrained(i)) continue;
+      auto g = f->neighbor(i);
+      if (g->info() == unknown) {
+        g->info() = f->info();
+        queue.push_back(g);
+      } else if (g->info() != f->info()) {
+        throw std::runtime_error("constrained_delaunay: domain boundary is not closed");
+      }
+    }
+  }
+  std::vector<Triangle> triangles;
+  triangles.reserve(cdt.number_of_faces());
+  for (auto f = cdt.finite_faces_begin(); f != cdt.finite_faces_end(); ++f) {
+    if (f->info() == unknown) throw std::runtime_error("constrained_delaunay: a region has no seed");
+    if (f->info() == inside) triangles.push_back({f->vertex(0)->info(), f->vertex(1)->info(), f->vertex(2)->info()});
+  }
+  return triangles;
+}
+
+void locate_points(const std::vector<Vec2>& points, const std::vector<Triangle>& triangles,
+                   const std::vector<Vec2>& queries, std::vector<Index>& triangle_out,
+                   std::vector<std::array<double, 3>>& barycentric_out) {
+  Cdt cdt;
+  auto handles = insert_points(cdt, points);
+  const auto edges = sorted_edges(triangles);
+  for (std::size_t i = 0; i < edges.size(); ++i) {
+    if (i > 0 && edges[i].lo == edges[i - 1].lo && edges[i].hi == edges[i - 1].hi) continue;
+    cdt.insert_constraint(handles[edges[i].lo], handles[edges[i].hi]);
+  }
+  for (auto f = cdt.all_faces_begin(); f != cdt.all_faces_end(); ++f) f->info() = -1;
+  for (std::size_t t = 0; t < triangles.size(); ++t) {
+    Cdt::Face_handle f;
+    if (!cdt.is_face(handles[triangles[t][0]], handles[triangles[t][1]], handles[triangles[t][2]], f)) {
+      throw Input_error("triangle " + std::to_string(t) + " is not a face of the mesh's triangulation");
+    }
+    f->info() = static_cast<Index>(t);
+  }
+  auto barycentric = [&](Index t, const Vec2& q) {
+    const Vec2& a = points[triangles[t][0]];
+    const Vec2& b = points[triangles[t][1]];
+    const Vec2& c = points[triangles[t][2]];
+    const double det = (b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0]);
+    const double l1 = ((q[0] - a[0]) * (c[1] - a[1]) - (q[1] - a[1]) * (c[0] - a[0])) / det;
+    const double l2 = ((b[0] - a[0]) * (q[1] - a[1]) - (b[1] - a[1]) * (q[0] - a[0])) / det;
+    return std::array<double, 3>{1.0 - l1 - l2, l1, l2};
+  };
+  // Of candidate faces, the mesh triangle where q is least outside.
+  auto best_of = [&](const std::vector<Cdt::Face_handle>& faces, const Vec2& q, std::array<double, 3>& bary) {
+    Index best = -1;
+    double best_score = -std::numeric_limits<double>::infinity();
+    for (auto f : faces) {
+      if (f->info() < 0) continue;
+      auto l = barycentric(f->info(), q);
+      const double score = std::min({l[0], l[1], l[2]});
+      if (score > best_score) {
+        best_score = score;
+        best = f->info();
+        bary = l;
+      }
+    }
+    return best;
+  };
+  const std::size_t k = queries.size();
+  triangle_out.assign(k, -1);
+  barycentric_out.assign(k, {0, 0, 0});
+  std::vector<std::size_t> order(k);
+  std::iota(order.begin(), order.end(), 0);
+  std::vector<Point_2> qp;
+  qp.reserve(k);
+  for (const auto& q : queries) qp.push_back(to_cgal(q));
+  using Sort_traits = CGAL::Spatial_sort_traits_adapter_2<Kernel, CGAL::Pointer_property_map<Point_2>::type>;
+  CGAL::hilbert_sort(order.begin(), order.end(), Sort_traits(CGAL::make_property_map(qp)));
+  Cdt::Face_handle hint;
+  std::vector<Cdt::Face_handle> candidates;
+  for (std::size_t idx : order) {
+    Cdt::Locate_type lt;
+    int li;
+    Cdt::Face_handle f = hint == Cdt::Face_handle() ? cdt.locate(qp[idx], lt, li) : cdt.locate(qp[idx], lt, li, hint);
+    hint = f;
+    candidates.clear();
+    candidates.push_back(f);
+    if (lt == Cdt::EDGE) candidates.push_back(f->neighbor(li));
+    if (lt == Cdt::VERTEX || f->info() < 0) {
+      // On a vertex, or just outside the mesh (a point on a boundary edge up to
+      // rounding): consider the triangles around the face's vertices.
+      for (int i = 0; i < 3; ++i) {
+        if (cdt.is_infinite(f->vertex(i))) continue;
+        auto c = cdt.incident_faces(f->vertex(i)), done = c;
+        do {
+          candidates.push_back(c);
+        } while (++c != done);
+      }
+    }
+    std::array<double, 3> bary{0, 0, 0};
+    Index t = best_of(candidates, queries[idx], bary);
+    // Barycentric coordinates are scale-free: a point more than this far outside
+    // every nearby triangle is outside the mesh, not off by rounding.
+    constexpr double kOutsideTolerance = 1e-9;
+    if (t >= 0 && std::min({bary[0], bary[1], bary[2]}) < -kOutsideTolerance) t = -1;
+    triangle_out[idx] = t;
+    if (t >= 0) {
+      for (auto& l : bary) l = std::max(l, 0.0);
+      const double s = bary[0] + bary[1] + bary[2];
+      for (auto& l : bary) l /= s;
+      barycentric_out[idx] = bary;
+    }
+  }
+}
+
+}  // namespace evomesh

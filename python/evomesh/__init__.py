@@ -1,0 +1,26 @@
+"""evomesh: simultaneous refinement and coarsening of triangle meshes.
+
+Implements Li, Teng and Ungor, "Simultaneous Refinement and Coarsening for
+Adaptive Meshing": one call to :func:`evolve` refines where delta < 1 and
+coarsens where delta > 1, keeping the mesh well shaped and as many old points
+as it can.
+"""
+
+from evomesh.evolve import FRFC_DEFAULTS, evolve
+from evomesh.mesh import Mesh, PointKind
+from evomesh.quality import Quality, quality
+from evomesh.spacing import SpacingFunction, nn_spacing, spacing
+
+__all__ = [
+    "Mesh",
+    "PointKind",
+    "evolve",
+    "FRFC_DEFAULTS",
+    "nn_spacing",
+    "spacing",
+    "SpacingFunction",
+    "quality",
+    "Quality",
+]
+
+__version__ = "0.1.0"

@@ -1,0 +1,224 @@
+"""The immutable triangle mesh that evomesh evolves."""
+
+from __future__ import annotations
+
+from enum import IntEnum
+from types import MappingProxyType
+from typing import Any, Mapping
+
+import numpy as np
+
+from evomesh import _core
+
+__all__ = ["Mesh", "PointKind"]
+
+# Coordinates beyond this would overflow squared distances (1e308).
+_MAX_COORDINATE = 1e150
+
+
+class PointKind(IntEnum):
+    """Per-point label; the value is the packing priority (paper, Section 6).
+
+    CORNER points (ends of segment chains, and boundary points where the
+    boundary turns) are always kept. BOUNDARY points lie on a segment.
+    ORIGINAL points are interior points of the first mesh, STEINER points were
+    sampled in an earlier step, SAMPLED points in the step that made the mesh.
+    """
+
+    CORNER = 0
+    BOUNDARY = 1
+    ORIGINAL = 2
+    STEINER = 3
+    SAMPLED = 4
+
+
+def _frozen(array: np.ndarray) -> np.ndarray:
+    array = np.ascontiguousarray(array)
+    array.flags.writeable = False
+    return array
+
+
+def _as_points(points: Any) -> np.ndarray:
+    array = np.asarray(points)
+    if array.dtype == object or array.dtype.kind not in "fiu":
+        raise TypeError(f"points must be a real numeric array, got dtype {array.dtype}")
+    if array.ndim != 2 or array.shape[1] != 2:
+        raise ValueError(f"points must have shape (n, 2), got {array.shape}")
+    array = array.astype(np.float64)  # always a copy: the caller's array is never touched
+    finite = np.isfinite(array).all(axis=1)
+    if not finite.all():
+        raise ValueError(f"points contain NaN or infinite coordinates (first at row {int(np.argmin(finite))})")
+    if array.size and np.abs(array).max() > _MAX_COORDINATE:
+        raise ValueError(f"point coordinates must be below {_MAX_COORDINATE:g} in magnitude")
+    return array
+
+
+def _as_indices(values: Any, columns: int, name: str, n_points: int) -> np.ndarray:
+    array = np.asarray(values)
+    if array.dtype == object or array.dtype.kind not in "iu":
+        raise TypeError(f"{name} must be an integer array, got dtype {array.dtype}")
+    if array.ndim != 2 or array.shape[1] != columns:
+        if not (array.size == 0 and name == "segments"):
+            raise ValueError(f"{name} must have shape (k, {columns}), got {array.shape}")
+        array = array.reshape(0, columns)
+    if array.size and (array.min() < 0 or array.max() >= n_points):
+        bad = int(np.argmax(((array < 0) | (array >= n_points)).any(axis=1)))
+        raise ValueError(f"{name} row {bad} has a point index out of range [0, {n_points})")
+    return array.astype(np.int64)
+
+
+def _check_topology(points: np.ndarray, triangles: np.ndarray) -> None:
+    n = len(points)
+    t = np.sort(triangles, axis=1)
+    repeated_vertex = (t[:, 0] == t[:, 1]) | (t[:, 1] == t[:, 2])
+    if repeated_vertex.any():
+        raise ValueError(f"triangle {int(np.argmax(repeated_vertex))} repeats a vertex (zero area)")
+    _, first, counts = np.unique(t, axis=0, return_index=True, return_counts=True)
+    if (counts > 1).any():
+        raise ValueError(f"triangle {int(first[np.argmax(counts > 1)])} appears more than once")
+    used = np.bincount(triangles.ravel(), minlength=n)
+    if (used == 0).any():
+        raise ValueError(f"point {int(np.argmax(used == 0))} is not used by any triangle (orphan point)")
+    order = np.lexsort((points[:, 1], points[:, 0]))
+    same = (np.diff(points[order], axis=0) == 0).all(axis=1)
+    if same.any():
+        k = int(np.argmax(same))
+        a, b = sorted((int(order[k]), int(order[k + 1])))
+        raise ValueError(f"points {a} and {b} are duplicates")
+
+
+class Mesh:
+    """A valid 2-D triangle mesh with constraint segments; immutable.
+
+    Parameters
+    ----------
+    points : array_like, shape (n, 2)
+        Point coordinates (float64; copied).
+    triangles : array_like of int, shape (m, 3)
+        Point indices of each triangle, in either orientation; stored
+        counter-clockwise.
+    segments : array_like of int, shape (k, 2), optional
+        Constraint edges, each an edge of the mesh. Every boundary edge (an edge
+        of exactly one triangle) is always a segment, so holes are kept; extra
+        segments are interior constraints (material interfaces, cracks).
+    kind : array_like of int, shape (n,), optional
+        :class:`PointKind` per point; computed from the geometry when omitted
+        (a boundary point is a corner unless the boundary runs straight through
+        it, tested with exact predicates).
+    origin : array_like of int, shape (n,), optional
+        Index of each point in the mesh it was evolved from, -1 for a new point.
+
+    Raises
+    ------
+    TypeError
+        For arrays of the wrong dtype.
+    ValueError
+        For any malformed mesh: wrong shapes, NaN or infinite coordinates,
+        indices out of range, zero-area, repeated or overlapping triangles,
+        duplicate or orphan points, an edge shared by more than two triangles.
+    """
+
+    __slots__ = ("points", "triangles", "segments", "segment_is_boundary", "kind", "origin", "stats")
+
+    points: np.ndarray
+    triangles: np.ndarray
+    segments: np.ndarray
+    segment_is_boundary: np.ndarray
+    kind: np.ndarray
+    origin: np.ndarray
+    stats: Mapping[str, float]
+
+    def __init__(self, points: Any, triangles: Any, segments: Any = None, *, kind: Any = None, origin: Any = None):
+        pts = _as_points(points)
+        n = len(pts)
+        if n < 3:
+            raise ValueError(f"a mesh needs at least 3 points, got {n}")
+        tris = _as_indices(triangles, 3, "triangles", n)
+        if len(tris) == 0:
+            raise ValueError("a mesh needs at least one triangle")
+        segs = None if segments is None else _as_indices(segments, 2, "segments", n)
+        _check_topology(pts, tris)
+        tris, segs, boundary, computed_kind, _ = _core.prepare_mesh(pts, tris, segs, True)
+        if kind is None:
+            kinds = computed_kind
+        else:
+            kinds = np.asarray(kind)
+            if kinds.dtype == object or kinds.dtype.kind not in "iu":
+                raise TypeError(f"kind must be an integer array, got dtype {kinds.dtype}")
+            if kinds.shape != (n,):
+                raise ValueError(f"kind must have shape ({n},), got {kinds.shape}")
+            if kinds.min() < 0 or kinds.max() > 4:
+                raise ValueError("kind values must be PointKind values 0..4")
+            on_segment = computed_kind <= PointKind.BOUNDARY
+            given_on_segment = kinds <= PointKind.BOUNDARY
+            if (on_segment != given_on_segment).any():
+                bad = int(np.argmax(on_segment != given_on_segment))
+                raise ValueError(f"kind of point {bad} says corner/boundary exactly when the point lies on a segment")
+            kinds = kinds.astype(np.uint8)
+        if origin is None:
+            org = np.full(n, -1, dtype=np.int64)
+        else:
+            org = np.asarray(origin)
+            if org.dtype == object or org.dtype.kind not in "iu":
+                raise TypeError(f"origin must be an integer array, got dtype {org.dtype}")
+            if org.shape != (n,):
+                raise ValueError(f"origin must have shape ({n},), got {org.shape}")
+            org = org.astype(np.int64)
+        self._assign(pts, tris, segs, boundary, kinds, org, {})
+
+    def _assign(self, points, triangles, segments, segment_is_boundary, kind, origin, stats) -> None:
+        set_ = object.__setattr__
+        set_(self, "points", _frozen(np.asarray(points, dtype=np.float64)))
+        set_(self, "triangles", _frozen(np.asarray(triangles, dtype=np.int64)))
+        set_(self, "segments", _frozen(np.asarray(segments, dtype=np.int64).reshape(-1, 2)))
+        set_(self, "segment_is_boundary", _frozen(np.asarray(segment_is_boundary, dtype=bool)))
+        set_(self, "kind", _frozen(np.asarray(kind, dtype=np.uint8)))
+        set_(self, "origin", _frozen(np.asarray(origin, dtype=np.int64)))
+        set_(self, "stats", MappingProxyType(dict(stats)))
+
+    @classmethod
+    def _trusted(cls, points, triangles, segments, segment_is_boundary, kind, origin, stats=None) -> "Mesh":
+        """Wrap arrays that evomesh itself produced (already valid); no checks."""
+        mesh = cls.__new__(cls)
+        mesh._assign(points, triangles, segments, segment_is_boundary, kind, origin, stats or {})
+        return mesh
+
+    def __setattr__(self, name: str, value: Any) -> None:
+        raise AttributeError("Mesh is immutable; evolve() returns a new mesh")
+
+    @property
+    def n_points(self) -> int:
+        return len(self.points)
+
+    @property
+    def n_triangles(self) -> int:
+        return len(self.triangles)
+
+    @property
+    def triangle_areas(self) -> np.ndarray:
+        """Signed areas (positive: counter-clockwise), shape (m,)."""
+        p = self.points[self.triangles]
+        d1 = p[:, 1] - p[:, 0]
+        d2 = p[:, 2] - p[:, 0]
+        return 0.5 * (d1[:, 0] * d2[:, 1] - d1[:, 1] * d2[:, 0])
+
+    @property
+    def area(self) -> float:
+        return float(self.triangle_areas.sum())
+
+    @property
+    def kinds(self) -> np.ndarray:
+        """``kind`` as an object array of :class:`PointKind` (for display)."""
+        return np.array([PointKind(k) for k in self.kind], dtype=object)
+
+    def euler_characteristic(self) -> int:
+        """V - E + F (F counts triangles only): 1 for a disc, 1 - h with h holes."""
+        t = self.triangles
+        edges = np.sort(np.concatenate([t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]]), axis=1)
+        n_edges = len(np.unique(edges, axis=0))
+        return self.n_points - n_edges + self.n_triangles
+
+    def __repr__(self) -> str:
+        counts = np.bincount(self.kind, minlength=5)
+        by_kind = ", ".join(f"{k.name.lower()}={int(c)}" for k, c in zip(PointKind, counts) if c)
+        return f"Mesh(n_points={self.n_points}, n_triangles={self.n_triangles}, segments={len(self.segments)}, {by_kind})"
