@@ -212,6 +212,10 @@ Evolve_result frfc(const Mesh_arrays& mesh, const std::vector<double>& delta, co
     }
   }
   for (double& r : radius) r *= options.radius_scale;
+  for (std::size_t i = 0; i < n; ++i) {
+    if (mesh.kind[i] == Point_kind::corner || mesh.kind[i] == Point_kind::boundary) radius[i] *= options.boundary_radius_scale;
+  }
+  for (std::size_t j = n; j < n + n_seg; ++j) radius[j] *= options.boundary_radius_scale;
   timer.lap("sample_radii");
 
   // Steps 3-5: order the spheres, lexical-first MIS; corners are always kept.

@@ -8,6 +8,7 @@ as it can.
 
 from evomesh.evolve import FRFC_DEFAULTS, evolve
 from evomesh.mesh import Mesh, PointKind
+from evomesh.packing import lexical_first_mis
 from evomesh.quality import Quality, quality
 from evomesh.spacing import SpacingFunction, nn_spacing, spacing
 
@@ -19,6 +20,7 @@ __all__ = [
     "nn_spacing",
     "spacing",
     "SpacingFunction",
+    "lexical_first_mis",
     "quality",
     "Quality",
 ]

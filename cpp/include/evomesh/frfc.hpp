@@ -17,6 +17,9 @@ struct Frfc_options {
   // Spheres are B(x, radius_scale * f(x) / 2). 1 is the paper's choice; a smaller
   // scale packs tighter (radius_scale * f is still a valid, Lipschitz spacing).
   double radius_scale = 1.0;
+  // Extra factor for spheres centred on segments (corners, boundary points and
+  // segment samples): the boundary is a 1-D packing, which leaves larger gaps.
+  double boundary_radius_scale = 1.0;
   Sample_mode sample_mode = Sample_mode::random_grid;
   bool skip_coarse_triangles = false;  // no samples where all three vertices have delta > 1
   std::uint64_t seed = 0;
