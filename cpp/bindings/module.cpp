@@ -190,7 +190,7 @@ PYBIND11_MODULE(_core, m) {
       [](const Float_array& points, const Int_array& triangles, const Int_array& segments,
          const Byte_array& segment_is_boundary, const Byte_array& kind, const Float_array& delta,
          std::uint64_t seed, double cell_factor, bool exact_radius, int sample_mode, bool skip_coarse_triangles,
-         int threads, double max_samples, double radius_scale, double boundary_radius_scale) {
+         int threads, double max_samples, double radius_scale, double boundary_radius_scale, bool ring_samples, double repair_ratio) {
         Mesh_arrays mesh = to_mesh(points, triangles, segments, segment_is_boundary, kind);
         auto d = to_vector<double>(delta);
         if (sample_mode < 0 || sample_mode > 3) throw Input_error("unknown sample mode");
@@ -204,6 +204,8 @@ PYBIND11_MODULE(_core, m) {
         options.max_samples = max_samples;
         options.radius_scale = radius_scale;
         options.boundary_radius_scale = boundary_radius_scale;
+        options.ring_samples = ring_samples;
+        options.repair_ratio = repair_ratio;
         Evolve_result r;
         {
           py::gil_scoped_release release;
@@ -226,7 +228,7 @@ PYBIND11_MODULE(_core, m) {
       py::arg("points"), py::arg("triangles"), py::arg("segments"), py::arg("segment_is_boundary"),
       py::arg("kind"), py::arg("delta"), py::arg("seed") = 0, py::arg("cell_factor") = 1.0,
       py::arg("exact_radius") = true, py::arg("sample_mode") = 0, py::arg("skip_coarse_triangles") = false,
-      py::arg("threads") = 0, py::arg("max_samples") = 5e7, py::arg("radius_scale") = 1.0, py::arg("boundary_radius_scale") = 1.0);
+      py::arg("threads") = 0, py::arg("max_samples") = 5e7, py::arg("radius_scale") = 1.0, py::arg("boundary_radius_scale") = 1.0, py::arg("ring_samples") = true, py::arg("repair_ratio") = 1.75);
 
   m.def(
       "constrained_delaunay",

@@ -5,6 +5,9 @@
 #include <cmath>
 #include <string>
 
+#include <CGAL/Delaunay_triangulation_2.h>
+#include <CGAL/Triangulation_vertex_base_with_info_2.h>
+
 #include "evomesh/kernel.hpp"
 #include "evomesh/packing.hpp"
 #include "evomesh/spacing.hpp"
@@ -28,16 +31,232 @@ class Stage_timer {
   std::chrono::steady_clock::time_point last_ = std::chrono::steady_clock::now();
 };
 
-// Packing priority classes (Section 6): corner, boundary (existing, then new),
-// original, Steiner (points sampled in an earlier step), sampled now.
+// Packing priority classes (Section 6): corner, boundary (existing, then ring
+// candidates by round, then other segment samples), original, Steiner (points
+// sampled in an earlier step), interior ring candidates by round, sampled now.
 enum Priority : std::uint8_t {
   prio_corner = 0,
   prio_boundary = 1,
-  prio_boundary_sample = 2,
-  prio_original = 3,
-  prio_steiner = 4,
-  prio_sampled = 5,
+  prio_boundary_ring = 2,  // + round (0, 1)
+  prio_boundary_sample = 4,
+  prio_original = 5,
+  prio_steiner = 6,
+  prio_ring = 7,  // + round (0 .. kRingDirections - 1)
+  prio_sampled = 7 + 6,
 };
+
+// Around every R-point p (delta < 1) f is a cone of slope 1 with its tip
+// f(p) = delta nn_M(p) (Lemma 3.1). A sphere B(y, k f(y)/2) with f(y) = f(p) + |y - p|
+// misses B(p, k f(p)/2) once |y - p| >= k f(p) / (1 - k/2). Candidates just beyond
+// that distance are the smallest spheres that can be p's neighbours; offering them
+// keeps nn_M'(p) close to f(p) instead of leaving the ring around p to spheres
+// centred further away (the grid samples land there only up to a cell size).
+//
+// Ring candidates are packed in rounds: first one candidate per R-point (in
+// radius order), then a second one, and so on, so that the rings of neighbouring
+// R-points cannot take every place around p before p's own ring is offered.
+// `inside_round`/`segment_round` receive the round of every sample (-1: not a ring sample).
+constexpr int kRingDirections = 6;
+
+void add_ring_samples(const Mesh_arrays& mesh, const std::vector<double>& delta, const std::vector<double>& f,
+                      double radius_scale, std::uint64_t seed, Sample_set& inside, Sample_set& on_segments,
+                      std::vector<std::int8_t>& inside_round, std::vector<std::int8_t>& segment_round) {
+  constexpr int kDirections = kRingDirections;
+  constexpr double kMargin = 1.02;
+  constexpr double kTwoPi = 6.283185307179586;
+  const std::size_t n = mesh.points.size();
+  // Triangles around each point (compressed lists).
+  std::vector<Index> xadj(n + 1, 0), adj(3 * mesh.triangles.size());
+  for (const auto& t : mesh.triangles) {
+    for (Index v : t) ++xadj[v + 1];
+  }
+  for (std::size_t v = 0; v < n; ++v) xadj[v + 1] += xadj[v];
+  {
+    std::vector<Index> fill(xadj.begin(), xadj.end() - 1);
+    for (std::size_t t = 0; t < mesh.triangles.size(); ++t) {
+      for (Index v : mesh.triangles[t]) adj[fill[v]++] = static_cast<Index>(t);
+    }
+  }
+  const double reach = kMargin * radius_scale / (1.0 - 0.5 * radius_scale);
+  for (std::size_t p = 0; p < n; ++p) {
+    if (!(delta[p] < 1)) continue;
+    const Vec2& c = mesh.points[p];
+    const double d = reach * f[p];
+    Random_stream rng(seed, (std::uint64_t{3} << 61) + p);
+    const double phase = rng.uniform() * kTwoPi / kDirections;
+    for (int k = 0; k < kDirections; ++k) {
+      const double angle = phase + kTwoPi * k / kDirections;
+      const Vec2 x{c[0] + d * std::cos(angle), c[1] + d * std::sin(angle)};
+      for (Index a = xadj[p]; a < xadj[p + 1]; ++a) {
+        const Triangle& t = mesh.triangles[adj[a]];
+        const Vec2& t0 = mesh.points[t[0]];
+        const Vec2& t1 = mesh.points[t[1]];
+        const Vec2& t2 = mesh.points[t[2]];
+        if (orientation(t0, t1, x) > 0 && orientation(t1, t2, x) > 0 && orientation(t2, t0, x) > 0) {
+          inside.points.push_back(x);
+          inside.parent.push_back(adj[a]);
+          inside_round.push_back(static_cast<std::int8_t>(k));
+          break;
+        }
+      }
+    }
+  }
+  // The same along segments: one candidate each way from an R-point, on the segment.
+  segment_round.assign(on_segments.points.size(), -1);
+  std::vector<std::pair<Index, double>> extra;  // (segment, t)
+  std::vector<std::int8_t> extra_round;
+  for (std::size_t s = 0; s < mesh.segments.size(); ++s) {
+    const Edge& e = mesh.segments[s];
+    const Vec2& a = mesh.points[e[0]];
+    const Vec2& b = mesh.points[e[1]];
+    const double length = std::hypot(b[0] - a[0], b[1] - a[1]);
+    // round 0 for the segment leaving a point, 1 for the one entering it
+    if (delta[e[0]] < 1) {
+      extra.emplace_back(static_cast<Index>(s), reach * f[e[0]] / length);
+      extra_round.push_back(0);
+    }
+    if (delta[e[1]] < 1) {
+      extra.emplace_back(static_cast<Index>(s), 1.0 - reach * f[e[1]] / length);
+      extra_round.push_back(1);
+    }
+  }
+  if (extra.empty()) return;
+  // Merge into the per-segment lists, keeping each segment's samples sorted by t.
+  std::vector<std::pair<Index, double>> all;
+  all.reserve(on_segments.points.size() + extra.size());
+  for (std::size_t j = 0; j < on_segments.points.size(); ++j) {
+    const Edge& e = mesh.segments[on_segments.parent[j]];
+    const Vec2& a = mesh.points[e[0]];
+    const Vec2& b = mesh.points[e[1]];
+    const double dx = b[0] - a[0], dy = b[1] - a[1];
+    const double t = ((on_segments.points[j][0] - a[0]) * dx + (on_segments.points[j][1] - a[1]) * dy) / (dx * dx + dy * dy);
+    all.emplace_back(on_segments.parent[j], t);
+  }
+  std::vector<Vec2> points = std::move(on_segments.points);
+  std::vector<std::int8_t> rounds(points.size(), -1);
+  for (std::size_t i = 0; i < extra.size(); ++i) {
+    const auto [s, t] = extra[i];
+    if (!(t > 0 && t < 1)) continue;
+    const Edge& e = mesh.segments[s];
+    const Vec2& a = mesh.points[e[0]];
+    const Vec2& b = mesh.points[e[1]];
+    const Vec2 x{a[0] + t * (b[0] - a[0]), a[1] + t * (b[1] - a[1])};
+    if ((x[0] == a[0] && x[1] == a[1]) || (x[0] == b[0] && x[1] == b[1])) continue;
+    all.emplace_back(s, t);
+    points.push_back(x);
+    rounds.push_back(extra_round[i]);
+  }
+  std::vector<std::size_t> order(all.size());
+  for (std::size_t i = 0; i < order.size(); ++i) order[i] = i;
+  std::sort(order.begin(), order.end(), [&](std::size_t i, std::size_t j) {
+    if (all[i].first != all[j].first) return all[i].first < all[j].first;
+    if (all[i].second != all[j].second) return all[i].second < all[j].second;
+    return i < j;
+  });
+  on_segments.points.clear();
+  on_segments.parent.clear();
+  segment_round.clear();
+  for (std::size_t i : order) {
+    const Vec2& x = points[i];
+    // drop exact duplicates (a ring sample can coincide with a grid sample only by accident)
+    if (!on_segments.points.empty() && on_segments.points.back() == x) continue;
+    on_segments.points.push_back(x);
+    on_segments.parent.push_back(all[i].first);
+    segment_round.push_back(rounds[i]);
+  }
+}
+
+// Spacing repair. The packing guarantees nn_M'(p) = Theta(f(p)) only up to a
+// constant; where an R-point p that was kept ends up with no kept point within
+// repair_ratio * delta(p) nn_M(p) (its ring blocked by larger spheres kept
+// earlier), keep the ring candidate of p farthest from every kept point. That
+// candidate lies just outside p's sphere, so afterwards nn_M'(p) is about 1.2 f(p).
+// Returns the number of candidates added to `kept`.
+std::size_t repair_spacing(const Mesh_arrays& mesh, const std::vector<double>& delta, const std::vector<double>& nn,
+                           const std::vector<Vec2>& centers, std::size_t first_inside,
+                           const std::vector<std::int8_t>& inside_round, const std::vector<Index>& inside_parent,
+                           double repair_ratio, std::vector<std::uint8_t>& kept) {
+  using Vb = CGAL::Triangulation_vertex_base_with_info_2<Index, Kernel>;
+  using Tds = CGAL::Triangulation_data_structure_2<Vb>;
+  using Delaunay = CGAL::Delaunay_triangulation_2<Kernel, Tds>;
+  const std::size_t n = mesh.points.size();
+  std::vector<std::pair<Point_2, Index>> input;
+  for (std::size_t c = 0; c < centers.size(); ++c) {
+    if (kept[c]) input.emplace_back(to_cgal(centers[c]), static_cast<Index>(c));
+  }
+  Delaunay dt;
+  dt.insert(input.begin(), input.end());
+  std::vector<Delaunay::Vertex_handle> handle_of_point(n);
+  for (auto v = dt.finite_vertices_begin(); v != dt.finite_vertices_end(); ++v) {
+    if (v->info() < static_cast<Index>(n)) handle_of_point[v->info()] = v;
+  }
+  // Ring candidates of each point, found through the triangle they lie in: a
+  // ring candidate of p is inside a triangle incident to p and within the ring
+  // distance; group them by owner with one pass.
+  std::vector<std::vector<Index>> ring_of;  // only filled for points that need repair
+  std::vector<Index> needy;
+  auto nearest_kept_distance2 = [&](Delaunay::Vertex_handle v) {
+    double best = std::numeric_limits<double>::infinity();
+    auto c = dt.incident_vertices(v), done = c;
+    if (c == nullptr) return best;
+    do {
+      if (!dt.is_infinite(c)) best = std::min(best, CGAL::squared_distance(v->point(), c->point()));
+    } while (++c != done);
+    return best;
+  };
+  std::vector<std::uint8_t> is_needy(n, 0);
+  for (std::size_t p = 0; p < n; ++p) {
+    if (!kept[p] || !(delta[p] < 1) || dt.number_of_vertices() < 2) continue;
+    const double target = repair_ratio * delta[p] * nn[p];
+    if (nearest_kept_distance2(handle_of_point[p]) > target * target) {
+      is_needy[p] = 1;
+      needy.push_back(static_cast<Index>(p));
+    }
+  }
+  if (needy.empty()) return 0;
+  std::vector<std::vector<Index>> candidates(n);
+  for (std::size_t j = 0; j < inside_round.size(); ++j) {
+    if (inside_round[j] < 0) continue;
+    const Index c = static_cast<Index>(first_inside + j);
+    // the owner is the vertex of the parent triangle nearest to the candidate
+    const Triangle& t = mesh.triangles[inside_parent[j]];
+    Index owner = t[0];
+    double best = std::numeric_limits<double>::infinity();
+    for (Index v : t) {
+      const double dx = centers[c][0] - mesh.points[v][0], dy = centers[c][1] - mesh.points[v][1];
+      const double d2 = dx * dx + dy * dy;
+      if (d2 < best) {
+        best = d2;
+        owner = v;
+      }
+    }
+    if (is_needy[owner]) candidates[owner].push_back(c);
+  }
+  std::size_t added = 0;
+  Delaunay::Face_handle hint;
+  for (Index p : needy) {
+    // re-check: an earlier repair may have served p
+    const double target = repair_ratio * delta[p] * nn[p];
+    if (nearest_kept_distance2(handle_of_point[p]) <= target * target) continue;
+    Index best = -1;
+    double best_d2 = 0;
+    for (Index c : candidates[p]) {
+      const Point_2 q = to_cgal(centers[c]);
+      auto v = dt.nearest_vertex(q, hint);
+      hint = v->face();
+      const double d2 = CGAL::squared_distance(q, v->point());
+      if (d2 > best_d2) {
+        best_d2 = d2;
+        best = c;
+      }
+    }
+    if (best < 0) continue;
+    kept[best] = 1;
+    dt.insert(to_cgal(centers[best]))->info() = best;
+    ++added;
+  }
+  return added;
+}
 
 }  // namespace
 
@@ -174,8 +393,13 @@ Evolve_result frfc(const Mesh_arrays& mesh, const std::vector<double>& delta, co
       skip[t] = delta[tri[0]] > 1 && delta[tri[1]] > 1 && delta[tri[2]] > 1;
     }
   }
-  const Sample_set on_segments = sample_segments(mesh, f, options.cell_factor, options.sample_mode, options.seed);
-  const Sample_set inside = sample_triangles(mesh, f, options.cell_factor, options.sample_mode, options.seed, skip);
+  Sample_set on_segments = sample_segments(mesh, f, options.cell_factor, options.sample_mode, options.seed);
+  Sample_set inside = sample_triangles(mesh, f, options.cell_factor, options.sample_mode, options.seed, skip);
+  std::vector<std::int8_t> inside_round(inside.points.size(), -1), segment_round(on_segments.points.size(), -1);
+  if (options.ring_samples) {
+    add_ring_samples(mesh, delta, f, options.radius_scale, options.seed, inside, on_segments, inside_round,
+                     segment_round);
+  }
   timer.lap("sampling");
 
   // Candidate spheres: input points, segment samples, interior samples.
@@ -241,11 +465,21 @@ Evolve_result frfc(const Mesh_arrays& mesh, const std::vector<double>& delta, co
       default: priority[i] = prio_steiner; break;
     }
   }
-  std::fill(priority.begin() + n, priority.begin() + n + n_seg, prio_boundary_sample);
-  std::fill(priority.begin() + n + n_seg, priority.end(), prio_sampled);
+  for (std::size_t j = 0; j < n_seg; ++j) {
+    priority[n + j] = segment_round[j] < 0 ? prio_boundary_sample : prio_boundary_ring + segment_round[j];
+  }
+  for (std::size_t j = 0; j < n_in; ++j) {
+    priority[n + n_seg + j] = inside_round[j] < 0 ? prio_sampled : prio_ring + inside_round[j];
+  }
   const auto order = packing_order(priority, radius);
-  const auto kept = lexical_first_mis(centers, radius, order, n_forced);
+  auto kept = lexical_first_mis(centers, radius, order, n_forced);
   timer.lap("lfmis");
+  std::size_t n_repairs = 0;
+  if (options.repair_ratio > 0 && options.ring_samples) {
+    n_repairs = repair_spacing(mesh, delta, result.input_nn, centers, n + n_seg, inside_round, inside.parent,
+                               options.repair_ratio, kept);
+  }
+  timer.lap("spacing_repair");
 
   // Output points: kept input points in input order, then kept samples.
   std::vector<Index> out_index(total, -1);
@@ -313,6 +547,7 @@ Evolve_result frfc(const Mesh_arrays& mesh, const std::vector<double>& delta, co
   stats.emplace_back("n_segment_samples", static_cast<double>(n_seg));
   stats.emplace_back("n_interior_samples", static_cast<double>(n_in));
   stats.emplace_back("n_candidates", static_cast<double>(total));
+  stats.emplace_back("n_spacing_repairs", static_cast<double>(n_repairs));
   stats.emplace_back("n_hidden_sites", static_cast<double>(spacing.n_hidden()));
   stats.emplace_back("n_output_points", static_cast<double>(out.points.size()));
   stats.emplace_back("n_output_triangles", static_cast<double>(out.triangles.size()));

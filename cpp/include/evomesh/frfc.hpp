@@ -20,6 +20,11 @@ struct Frfc_options {
   // Extra factor for spheres centred on segments (corners, boundary points and
   // segment samples): the boundary is a 1-D packing, which leaves larger gaps.
   double boundary_radius_scale = 1.0;
+  // Offer candidates on a ring just outside every R-point's sphere (see frfc.cpp).
+  bool ring_samples = true;
+  // Spacing repair: a kept R-point p with no kept point within
+  // repair_ratio * delta(p) nn_M(p) gets its best ring candidate. 0 disables.
+  double repair_ratio = 1.75;
   Sample_mode sample_mode = Sample_mode::random_grid;
   bool skip_coarse_triangles = false;  // no samples where all three vertices have delta > 1
   std::uint64_t seed = 0;
