@@ -1,0 +1,33 @@
+#!/usr/bin/env bash
+# Sets up evomesh on a fresh Debian machine: installs the Debian packages it
+# needs when they are missing (CGAL's libcgal-dev, a C++ compiler, Python headers
+# and venv), creates the virtual environment .venv and installs evomesh into it
+# with its test tools. Safe to run again: it only installs what is missing.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+sudo_cmd=()
+if [ "$(id -u)" -ne 0 ]; then sudo_cmd=(sudo); fi
+
+missing=()
+dpkg -s libcgal-dev >/dev/null 2>&1 || missing+=(libcgal-dev)
+command -v g++ >/dev/null 2>&1 || missing+=(g++)
+command -v python3 >/dev/null 2>&1 || missing+=(python3)
+if command -v python3 >/dev/null 2>&1; then
+  python3 -c 'import ensurepip, venv' >/dev/null 2>&1 || missing+=(python3-venv)
+  python3 -c 'import os, sysconfig; assert os.path.exists(os.path.join(sysconfig.get_paths()["include"], "Python.h"))' \
+    >/dev/null 2>&1 || missing+=(python3-dev)
+fi
+if [ ${#missing[@]} -gt 0 ]; then
+  echo "evomesh: installing Debian packages: ${missing[*]}"
+  "${sudo_cmd[@]}" apt-get update -qq
+  DEBIAN_FRONTEND=noninteractive "${sudo_cmd[@]}" apt-get install -y -qq "${missing[@]}" >/dev/null
+fi
+
+if [ ! -x .venv/bin/python ]; then
+  python3 -m venv .venv
+fi
+.venv/bin/python -m pip install -q --upgrade pip
+# The package (C++ extension built against Debian's CGAL) and the test tools.
+.venv/bin/python -m pip install -q ".[test]"
+echo "evomesh: installed in $(pwd)/.venv"
