@@ -10,13 +10,14 @@
 // of the band, coarsens behind it and leaves the rest (delta = 1) alone.
 //
 //   bench_evolve [--sizes 1e4,1e5,1e6] [--repeats 3] [--threads 0] [--no-baseline]
-//                [--max-samples 5e7] [--json FILE]
+//                [--max-samples 5e7] [--json FILE] [--cache-dir DIR]
 #include <malloc.h>
 #include <sys/resource.h>
 
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <cstdint>
 #include <cstdio>
 #include <cstdlib>
 #include <fstream>
@@ -45,7 +46,7 @@ constexpr double kBandHalfWidth = 0.025;
 constexpr double kGradingLength = 0.05;
 constexpr double kCoarseRatio = 8.0;
 // Output points of the setup step per 1 / s^2 (measured; sets s for a target size).
-constexpr double kPointsPerInverseSquareSpacing = 0.205;
+constexpr double kPointsPerInverseSquareSpacing = 0.104;
 
 double target_spacing(double x, double band_center, double s) {
   const double d = std::max(0.0, std::abs(x - band_center) - kBandHalfWidth);
@@ -90,6 +91,7 @@ Frfc_options bench_options(int threads, double max_samples) {
   options.cell_factor = 1.0;
   options.exact_radius = true;
   options.radius_scale = 0.75;
+  options.boundary_radius_scale = 0.8;  // "boundary_scale"
   options.sample_mode = Sample_mode::random_grid;
   options.seed = 0;
   options.threads = threads;
@@ -132,6 +134,56 @@ Graded_case graded_case(double target, int threads, double max_samples) {
   return out;
 }
 
+// Graded meshes are cached as raw arrays so repeated runs (and profiles) skip the setup.
+template <class T>
+void write_vector(std::ofstream& out, const std::vector<T>& v) {
+  const std::uint64_t n = v.size();
+  out.write(reinterpret_cast<const char*>(&n), sizeof n);
+  out.write(reinterpret_cast<const char*>(v.data()), static_cast<std::streamsize>(n * sizeof(T)));
+}
+
+template <class T>
+void read_vector(std::ifstream& in, std::vector<T>& v) {
+  std::uint64_t n = 0;
+  in.read(reinterpret_cast<char*>(&n), sizeof n);
+  v.resize(n);
+  in.read(reinterpret_cast<char*>(v.data()), static_cast<std::streamsize>(n * sizeof(T)));
+}
+
+constexpr std::uint64_t kCacheVersion = 1;
+
+void save_case(const std::string& path, const Graded_case& c) {
+  std::ofstream out(path, std::ios::binary);
+  out.write(reinterpret_cast<const char*>(&kCacheVersion), sizeof kCacheVersion);
+  write_vector(out, c.mesh.points);
+  write_vector(out, c.mesh.triangles);
+  write_vector(out, c.mesh.segments);
+  write_vector(out, c.mesh.segment_is_boundary);
+  write_vector(out, c.mesh.kind);
+  write_vector(out, c.delta);
+  const std::vector<double> meta{static_cast<double>(c.grid_side), c.spacing_scale, c.setup_seconds};
+  write_vector(out, meta);
+}
+
+bool load_case(const std::string& path, Graded_case& c) {
+  std::ifstream in(path, std::ios::binary);
+  std::uint64_t version = 0;
+  if (!in.read(reinterpret_cast<char*>(&version), sizeof version) || version != kCacheVersion) return false;
+  read_vector(in, c.mesh.points);
+  read_vector(in, c.mesh.triangles);
+  read_vector(in, c.mesh.segments);
+  read_vector(in, c.mesh.segment_is_boundary);
+  read_vector(in, c.mesh.kind);
+  read_vector(in, c.delta);
+  std::vector<double> meta;
+  read_vector(in, meta);
+  if (!in || meta.size() != 3) return false;
+  c.grid_side = static_cast<Index>(meta[0]);
+  c.spacing_scale = meta[1];
+  c.setup_seconds = meta[2];
+  return true;
+}
+
 // Memory from /proc/self/status, in MiB (-1 when unavailable).
 double status_mib(const std::string& key) {
   std::ifstream in("/proc/self/status");
@@ -157,6 +209,18 @@ bool reset_peak_memory() {
   return static_cast<bool>(out);
 }
 
+// FNV-1a over the output points and triangles: equal hashes, identical meshes.
+std::uint64_t mesh_hash(const Mesh_arrays& mesh) {
+  std::uint64_t h = 0xcbf29ce484222325ULL;
+  auto add = [&h](const void* data, std::size_t bytes) {
+    const auto* p = static_cast<const unsigned char*>(data);
+    for (std::size_t k = 0; k < bytes; ++k) h = (h ^ p[k]) * 0x100000001b3ULL;
+  };
+  add(mesh.points.data(), mesh.points.size() * sizeof(Vec2));
+  add(mesh.triangles.data(), mesh.triangles.size() * sizeof(Triangle));
+  return h;
+}
+
 double median(std::vector<double> v) {
   std::sort(v.begin(), v.end());
   const std::size_t m = v.size() / 2;
@@ -180,8 +244,11 @@ std::string cpu_model() {
   return "unknown";
 }
 
-const char* const kStages[] = {"nn", "apollonius", "spacing_at_points", "sampling", "sample_radii", "lfmis", "cdt",
-                               "total"};
+double rusage_max_mib() {
+  rusage usage{};
+  getrusage(RUSAGE_SELF, &usage);
+  return static_cast<double>(usage.ru_maxrss) / 1024.0;
+}
 
 }  // namespace
 
@@ -190,7 +257,7 @@ int main(int argc, char** argv) {
   int repeats = 3, threads = 0;
   bool baseline = true;
   double max_samples = 5e7;
-  std::string json_path;
+  std::string json_path, cache_dir;
   for (int a = 1; a < argc; ++a) {
     const std::string arg = argv[a];
     auto value = [&]() -> std::string {
@@ -203,38 +270,51 @@ int main(int argc, char** argv) {
     else if (arg == "--no-baseline") baseline = false;
     else if (arg == "--max-samples") max_samples = std::stod(value());
     else if (arg == "--json") json_path = value();
+    else if (arg == "--cache-dir") cache_dir = value();
     else {
       std::fprintf(stderr,
                    "usage: bench_evolve [--sizes 1e4,1e5,1e6] [--repeats 3] [--threads 0] [--no-baseline]"
-                   " [--max-samples 5e7] [--json FILE]\n");
+                   " [--max-samples 5e7] [--json FILE] [--cache-dir DIR]\n");
       return arg == "--help" || arg == "-h" ? 0 : 2;
     }
   }
-  std::printf("# bench_evolve: CGAL %s, %u hardware threads, threads=%d, %s, repeats=%d\n", CGAL_VERSION_STR,
-              std::thread::hardware_concurrency(), threads, cpu_model().c_str(), repeats);
-  std::printf("| target | input pts | output pts | samples/input pt | nn | apollonius | f at points | sampling"
-              " | sample radii | lfmis | cdt | total (s) | CDT of output (s) | total / CDT | step peak (MiB)"
-              " | input RSS (MiB) |\n");
-  std::printf("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+  std::printf("# bench_evolve: CGAL %s, %u hardware threads, threads=%d, %s, repeats=%d (medians)\n",
+              CGAL_VERSION_STR, std::thread::hardware_concurrency(), threads, cpu_model().c_str(), repeats);
   std::fflush(stdout);
   std::ostringstream json;
   json << "[";
+  std::vector<std::string> stages;  // in the order frfc reports them
   for (std::size_t si = 0; si < sizes.size(); ++si) {
     const double target = sizes[si];
-    Graded_case c = graded_case(target, threads, max_samples);
+    Graded_case c;
+    const std::string cache =
+        cache_dir.empty() ? "" : cache_dir + "/graded_" + std::to_string(static_cast<long long>(target)) + ".bin";
+    if (cache.empty() || !load_case(cache, c)) {
+      c = graded_case(target, threads, max_samples);
+      if (!cache.empty()) save_case(cache, c);
+    }
     const Frfc_options options = bench_options(threads, max_samples);
     std::map<std::string, std::vector<double>> stage_seconds;
     std::map<std::string, double> counts;
     std::vector<double> cdt_seconds;
     double peak_mib = -1, input_mib = -1;
+    std::uint64_t output_hash = 0;
     for (int r = 0; r < repeats; ++r) {
       const bool tracked = reset_peak_memory();
       if (r == 0) input_mib = status_mib("VmRSS");
       Evolve_result result = frfc(c.mesh, c.delta, options);
-      if (r == 0 && tracked) peak_mib = status_mib("VmHWM");
+      if (r == 0) peak_mib = tracked ? status_mib("VmHWM") : rusage_max_mib();
+      const std::uint64_t hash = mesh_hash(result.mesh);
+      if (r > 0 && hash != output_hash) throw std::runtime_error("FRFC is not deterministic: outputs differ");
+      output_hash = hash;
       for (const auto& [name, value] : result.stats) {
-        if (name.rfind("seconds_", 0) == 0) stage_seconds[name.substr(8)].push_back(value);
-        else counts[name] = value;
+        if (name.rfind("seconds_", 0) == 0) {
+          const std::string stage = name.substr(8);
+          stage_seconds[stage].push_back(value);
+          if (std::find(stages.begin(), stages.end(), stage) == stages.end()) stages.push_back(stage);
+        } else {
+          counts[name] = value;
+        }
       }
       if (baseline) {
         // The plain CGAL constrained Delaunay of the output points and segments.
@@ -247,25 +327,23 @@ int main(int argc, char** argv) {
         const auto t0 = std::chrono::steady_clock::now();
         const auto triangles = constrained_delaunay(result.mesh.points, pieces);
         cdt_seconds.push_back(seconds_since(t0));
-        if (triangles.size() != result.mesh.triangles.size()) {
-          std::fprintf(stderr, "baseline CDT has %zu triangles, FRFC output %zu\n", triangles.size(),
-                       result.mesh.triangles.size());
-          return 1;
-        }
+        if (triangles.empty()) throw std::runtime_error("the baseline CDT is empty");
       }
     }
-    if (peak_mib < 0) peak_mib = static_cast<double>([] {
-      rusage usage{};
-      getrusage(RUSAGE_SELF, &usage);
-      return usage.ru_maxrss;
-    }()) / 1024.0;
     const double n_in = counts["n_input_points"];
     const double samples = counts["n_interior_samples"] + counts["n_segment_samples"];
     const double total = median(stage_seconds["total"]);
     const double cdt = baseline ? median(cdt_seconds) : NAN;
-    std::printf("| %.0e | %.0f | %.0f | %.2f |", target, n_in, counts["n_output_points"], samples / n_in);
-    for (const char* stage : kStages) std::printf(" %.3f |", median(stage_seconds[stage]));
-    std::printf(" %.3f | %.1f | %.0f | %.0f |\n", cdt, total / cdt, peak_mib, input_mib);
+    if (si == 0) {
+      std::printf("\n| target | input pts | output pts | samples / input pt |");
+      for (const auto& stage : stages) std::printf(" %s |", stage.c_str());
+      std::printf(" CDT of output | total / CDT | step peak (MiB) | input RSS (MiB) |\n|");
+      for (std::size_t k = 0; k < stages.size() + 8; ++k) std::printf("---|");
+      std::printf("\n");
+    }
+    std::printf("| %.0e | %.0f | %.0f | %.1f |", target, n_in, counts["n_output_points"], samples / n_in);
+    for (const auto& stage : stages) std::printf(" %.3f |", median(stage_seconds[stage]));
+    std::printf(" %.3f | %.0f | %.0f | %.0f |\n", cdt, total / cdt, peak_mib, input_mib);
     std::fflush(stdout);
     json << (si ? "," : "") << "\n  {\"target\": " << target << ", \"grid_side\": " << c.grid_side
          << ", \"spacing_scale\": " << c.spacing_scale << ", \"setup_seconds\": " << c.setup_seconds
@@ -273,7 +351,9 @@ int main(int argc, char** argv) {
     for (const auto& [name, values] : stage_seconds) json << ", \"seconds_" << name << "\": " << median(values);
     for (const auto& [name, value] : counts) json << ", \"" << name << "\": " << value;
     if (baseline) json << ", \"seconds_cdt_baseline\": " << cdt;
-    json << ", \"peak_step_mib\": " << peak_mib << ", \"input_rss_mib\": " << input_mib << "}";
+    json << ", \"peak_step_mib\": " << peak_mib << ", \"input_rss_mib\": " << input_mib
+         << ", \"process_peak_mib\": " << rusage_max_mib() << ", \"output_hash\": \"" << std::hex << output_hash
+         << std::dec << "\"}";
   }
   json << "\n]\n";
   if (!json_path.empty()) std::ofstream(json_path) << json.str();

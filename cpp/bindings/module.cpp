@@ -6,6 +6,7 @@
 
 #include <cstring>
 
+#include "evomesh/drfc.hpp"
 #include "evomesh/frfc.hpp"
 #include "evomesh/packing.hpp"
 #include "evomesh/spacing.hpp"
@@ -94,6 +95,32 @@ Mesh_arrays to_mesh(const Float_array& points, const Int_array& triangles, const
   if (mesh.kind.size() != mesh.points.size()) throw Input_error("kind must have one value per point");
   if (mesh.segment_is_boundary.size() != mesh.segments.size()) throw Input_error("one boundary flag per segment");
   return mesh;
+}
+
+py::dict evolve_result_dict(const Evolve_result& r) {
+  py::dict out;
+  out["points"] = points_array(r.mesh.points);
+  out["triangles"] = rows_array<3>(r.mesh.triangles);
+  out["segments"] = rows_array<2>(r.mesh.segments);
+  out["segment_is_boundary"] = vector_array(r.mesh.segment_is_boundary);
+  out["kind"] = kinds_array(r.mesh.kind);
+  out["origin"] = vector_array(r.origin);
+  out["input_f"] = vector_array(r.input_f);
+  out["input_nn"] = vector_array(r.input_nn);
+  py::dict stats;
+  for (const auto& s : r.stats) stats[py::str(s.first)] = s.second;
+  out["stats"] = stats;
+  return out;
+}
+
+Quality_options quality_options(double min_angle, double crowding_angle, double max_inserted_fraction,
+                                double max_inserted_extra) {
+  Quality_options q;
+  q.min_angle = min_angle;
+  q.crowding_angle = crowding_angle;
+  q.max_inserted_fraction = max_inserted_fraction;
+  q.max_inserted_extra = max_inserted_extra;
+  return q;
 }
 
 }  // namespace
@@ -190,7 +217,8 @@ PYBIND11_MODULE(_core, m) {
       [](const Float_array& points, const Int_array& triangles, const Int_array& segments,
          const Byte_array& segment_is_boundary, const Byte_array& kind, const Float_array& delta,
          std::uint64_t seed, double cell_factor, bool exact_radius, int sample_mode, bool skip_coarse_triangles,
-         int threads, double max_samples, double radius_scale, double boundary_radius_scale, bool ring_samples, double repair_ratio) {
+         int threads, double max_samples, double radius_scale, double boundary_radius_scale, bool ring_samples, double repair_ratio,
+         bool quality, double min_angle, double crowding_angle, double quality_max_fraction, double quality_max_extra) {
         Mesh_arrays mesh = to_mesh(points, triangles, segments, segment_is_boundary, kind);
         auto d = to_vector<double>(delta);
         if (sample_mode < 0 || sample_mode > 3) throw Input_error("unknown sample mode");
@@ -206,6 +234,8 @@ PYBIND11_MODULE(_core, m) {
         options.boundary_radius_scale = boundary_radius_scale;
         options.ring_samples = ring_samples;
         options.repair_ratio = repair_ratio;
+        options.quality = quality;
+        options.quality_options = quality_options(min_angle, crowding_angle, quality_max_fraction, quality_max_extra);
         Evolve_result r;
         {
           py::gil_scoped_release release;
@@ -228,7 +258,75 @@ PYBIND11_MODULE(_core, m) {
       py::arg("points"), py::arg("triangles"), py::arg("segments"), py::arg("segment_is_boundary"),
       py::arg("kind"), py::arg("delta"), py::arg("seed") = 0, py::arg("cell_factor") = 1.0,
       py::arg("exact_radius") = true, py::arg("sample_mode") = 0, py::arg("skip_coarse_triangles") = false,
-      py::arg("threads") = 0, py::arg("max_samples") = 5e7, py::arg("radius_scale") = 1.0, py::arg("boundary_radius_scale") = 1.0, py::arg("ring_samples") = true, py::arg("repair_ratio") = 1.75);
+      py::arg("threads") = 0, py::arg("max_samples") = 5e7, py::arg("radius_scale") = 1.0, py::arg("boundary_radius_scale") = 1.0, py::arg("ring_samples") = true, py::arg("repair_ratio") = 1.75,
+      py::arg("quality") = false, py::arg("min_angle") = 20.0, py::arg("crowding_angle") = 120.0,
+      py::arg("quality_max_fraction") = 0.5, py::arg("quality_max_extra") = 1000.0);
+
+  m.def(
+      "drfc",
+      [](const Float_array& points, const Int_array& triangles, const Int_array& segments,
+         const Byte_array& segment_is_boundary, const Byte_array& kind, const Float_array& delta, double min_angle,
+         double radius_scale, int threads, double max_samples, bool quality, double crowding_angle,
+         double quality_max_fraction, double quality_max_extra) {
+        Mesh_arrays mesh = to_mesh(points, triangles, segments, segment_is_boundary, kind);
+        auto d = to_vector<double>(delta);
+        Drfc_options options;
+        options.min_angle = min_angle;
+        options.radius_scale = radius_scale;
+        options.threads = threads;
+        options.max_samples = max_samples;
+        options.quality = quality;
+        options.quality_options = quality_options(min_angle, crowding_angle, quality_max_fraction, quality_max_extra);
+        Evolve_result r;
+        {
+          py::gil_scoped_release release;
+          r = drfc(mesh, d, options);
+        }
+        return evolve_result_dict(r);
+      },
+      py::arg("points"), py::arg("triangles"), py::arg("segments"), py::arg("segment_is_boundary"),
+      py::arg("kind"), py::arg("delta"), py::arg("min_angle") = 20.0, py::arg("radius_scale") = 1.0,
+      py::arg("threads") = 0, py::arg("max_samples") = 5e7, py::arg("quality") = false,
+      py::arg("crowding_angle") = 120.0, py::arg("quality_max_fraction") = 0.5,
+      py::arg("quality_max_extra") = 1000.0,
+      "Delaunay-Refining-Functional-Coarsening (Section 5); returns the same dict as frfc.");
+
+  m.def(
+      "drfc_refine",
+      [](const Float_array& points, const Int_array& triangles, const Int_array& segments,
+         const Byte_array& segment_is_boundary, const Byte_array& kind, const Float_array& delta, double min_angle,
+         int threads, double max_samples) {
+        Mesh_arrays mesh = to_mesh(points, triangles, segments, segment_is_boundary, kind);
+        auto d = to_vector<double>(delta);
+        Drfc_options options;
+        options.min_angle = min_angle;
+        options.threads = threads;
+        options.max_samples = max_samples;
+        Refined_mesh r;
+        {
+          py::gil_scoped_release release;
+          r = drfc_refine(mesh, d, options);
+        }
+        py::dict out;
+        out["points"] = points_array(r.mesh.points);
+        out["triangles"] = rows_array<3>(r.mesh.triangles);
+        out["segments"] = rows_array<2>(r.mesh.segments);
+        out["segment_is_boundary"] = vector_array(r.mesh.segment_is_boundary);
+        out["kind"] = kinds_array(r.mesh.kind);
+        out["origin"] = vector_array(r.source);
+        out["f"] = vector_array(r.f);
+        py::dict stats;
+        stats["points_added"] = static_cast<double>(r.report.n_inserted);
+        stats["points_added_on_segments"] = static_cast<double>(r.report.n_inserted_on_segments);
+        stats["rounds"] = static_cast<double>(r.report.rounds);
+        stats["capped"] = r.report.capped ? 1.0 : 0.0;
+        out["stats"] = stats;
+        return out;
+      },
+      py::arg("points"), py::arg("triangles"), py::arg("segments"), py::arg("segment_is_boundary"),
+      py::arg("kind"), py::arg("delta"), py::arg("min_angle") = 20.0, py::arg("threads") = 0,
+      py::arg("max_samples") = 5e7,
+      "DRFC step 1 alone: Delaunay refinement with Ruppert's rules and rule 4 (Section 5).");
 
   m.def(
       "constrained_delaunay",

@@ -17,19 +17,7 @@ namespace evomesh {
 
 namespace {
 
-class Stage_timer {
- public:
-  explicit Stage_timer(std::vector<std::pair<std::string, double>>& stats) : stats_(stats) {}
-  void lap(const std::string& name) {
-    const auto now = std::chrono::steady_clock::now();
-    stats_.emplace_back("seconds_" + name, std::chrono::duration<double>(now - last_).count());
-    last_ = now;
-  }
-
- private:
-  std::vector<std::pair<std::string, double>>& stats_;
-  std::chrono::steady_clock::time_point last_ = std::chrono::steady_clock::now();
-};
+using detail::Stage_timer;
 
 // Packing priority classes (Section 6): corner, boundary (existing, then ring
 // candidates by round, then other segment samples), original, Steiner (points
@@ -60,7 +48,8 @@ constexpr int kRingDirections = 6;
 
 void add_ring_samples(const Mesh_arrays& mesh, const std::vector<double>& delta, const std::vector<double>& f,
                       double radius_scale, std::uint64_t seed, Sample_set& inside, Sample_set& on_segments,
-                      std::vector<std::int8_t>& inside_round, std::vector<std::int8_t>& segment_round) {
+                      std::vector<std::int8_t>& inside_round, std::vector<std::int8_t>& segment_round,
+                      std::vector<Index>& inside_owner, std::vector<Index>& segment_owner) {
   constexpr int kDirections = kRingDirections;
   constexpr double kMargin = 1.02;
   constexpr double kTwoPi = 6.283185307179586;
@@ -96,6 +85,7 @@ void add_ring_samples(const Mesh_arrays& mesh, const std::vector<double>& delta,
           inside.points.push_back(x);
           inside.parent.push_back(adj[a]);
           inside_round.push_back(static_cast<std::int8_t>(k));
+          inside_owner.push_back(static_cast<Index>(p));
           break;
         }
       }
@@ -103,8 +93,10 @@ void add_ring_samples(const Mesh_arrays& mesh, const std::vector<double>& delta,
   }
   // The same along segments: one candidate each way from an R-point, on the segment.
   segment_round.assign(on_segments.points.size(), -1);
+  segment_owner.assign(on_segments.points.size(), -1);
   std::vector<std::pair<Index, double>> extra;  // (segment, t)
   std::vector<std::int8_t> extra_round;
+  std::vector<Index> extra_owner;
   for (std::size_t s = 0; s < mesh.segments.size(); ++s) {
     const Edge& e = mesh.segments[s];
     const Vec2& a = mesh.points[e[0]];
@@ -114,10 +106,12 @@ void add_ring_samples(const Mesh_arrays& mesh, const std::vector<double>& delta,
     if (delta[e[0]] < 1) {
       extra.emplace_back(static_cast<Index>(s), reach * f[e[0]] / length);
       extra_round.push_back(0);
+      extra_owner.push_back(e[0]);
     }
     if (delta[e[1]] < 1) {
       extra.emplace_back(static_cast<Index>(s), 1.0 - reach * f[e[1]] / length);
       extra_round.push_back(1);
+      extra_owner.push_back(e[1]);
     }
   }
   if (extra.empty()) return;
@@ -134,6 +128,7 @@ void add_ring_samples(const Mesh_arrays& mesh, const std::vector<double>& delta,
   }
   std::vector<Vec2> points = std::move(on_segments.points);
   std::vector<std::int8_t> rounds(points.size(), -1);
+  std::vector<Index> owners(points.size(), -1);
   for (std::size_t i = 0; i < extra.size(); ++i) {
     const auto [s, t] = extra[i];
     if (!(t > 0 && t < 1)) continue;
@@ -145,6 +140,7 @@ void add_ring_samples(const Mesh_arrays& mesh, const std::vector<double>& delta,
     all.emplace_back(s, t);
     points.push_back(x);
     rounds.push_back(extra_round[i]);
+    owners.push_back(extra_owner[i]);
   }
   std::vector<std::size_t> order(all.size());
   for (std::size_t i = 0; i < order.size(); ++i) order[i] = i;
@@ -156,6 +152,7 @@ void add_ring_samples(const Mesh_arrays& mesh, const std::vector<double>& delta,
   on_segments.points.clear();
   on_segments.parent.clear();
   segment_round.clear();
+  segment_owner.clear();
   for (std::size_t i : order) {
     const Vec2& x = points[i];
     // drop exact duplicates (a ring sample can coincide with a grid sample only by accident)
@@ -163,6 +160,7 @@ void add_ring_samples(const Mesh_arrays& mesh, const std::vector<double>& delta,
     on_segments.points.push_back(x);
     on_segments.parent.push_back(all[i].first);
     segment_round.push_back(rounds[i]);
+    segment_owner.push_back(owners[i]);
   }
 }
 
@@ -173,8 +171,7 @@ void add_ring_samples(const Mesh_arrays& mesh, const std::vector<double>& delta,
 // candidate lies just outside p's sphere, so afterwards nn_M'(p) is about 1.2 f(p).
 // Returns the number of candidates added to `kept`.
 std::size_t repair_spacing(const Mesh_arrays& mesh, const std::vector<double>& delta, const std::vector<double>& nn,
-                           const std::vector<Vec2>& centers, std::size_t first_inside,
-                           const std::vector<std::int8_t>& inside_round, const std::vector<Index>& inside_parent,
+                           const std::vector<Vec2>& centers, const std::vector<Index>& ring_owner,
                            double repair_ratio, std::vector<std::uint8_t>& kept) {
   using Vb = CGAL::Triangulation_vertex_base_with_info_2<Index, Kernel>;
   using Tds = CGAL::Triangulation_data_structure_2<Vb>;
@@ -190,10 +187,6 @@ std::size_t repair_spacing(const Mesh_arrays& mesh, const std::vector<double>& d
   for (auto v = dt.finite_vertices_begin(); v != dt.finite_vertices_end(); ++v) {
     if (v->info() < static_cast<Index>(n)) handle_of_point[v->info()] = v;
   }
-  // Ring candidates of each point, found through the triangle they lie in: a
-  // ring candidate of p is inside a triangle incident to p and within the ring
-  // distance; group them by owner with one pass.
-  std::vector<std::vector<Index>> ring_of;  // only filled for points that need repair
   std::vector<Index> needy;
   auto nearest_kept_distance2 = [&](Delaunay::Vertex_handle v) {
     double best = std::numeric_limits<double>::infinity();
@@ -206,7 +199,7 @@ std::size_t repair_spacing(const Mesh_arrays& mesh, const std::vector<double>& d
   };
   std::vector<std::uint8_t> is_needy(n, 0);
   for (std::size_t p = 0; p < n; ++p) {
-    if (!kept[p] || !(delta[p] < 1) || dt.number_of_vertices() < 2) continue;
+    if (!kept[p] || !(delta[p] < 1) || dt.dimension() < 2) continue;
     const double target = repair_ratio * delta[p] * nn[p];
     if (nearest_kept_distance2(handle_of_point[p]) > target * target) {
       is_needy[p] = 1;
@@ -215,22 +208,8 @@ std::size_t repair_spacing(const Mesh_arrays& mesh, const std::vector<double>& d
   }
   if (needy.empty()) return 0;
   std::vector<std::vector<Index>> candidates(n);
-  for (std::size_t j = 0; j < inside_round.size(); ++j) {
-    if (inside_round[j] < 0) continue;
-    const Index c = static_cast<Index>(first_inside + j);
-    // the owner is the vertex of the parent triangle nearest to the candidate
-    const Triangle& t = mesh.triangles[inside_parent[j]];
-    Index owner = t[0];
-    double best = std::numeric_limits<double>::infinity();
-    for (Index v : t) {
-      const double dx = centers[c][0] - mesh.points[v][0], dy = centers[c][1] - mesh.points[v][1];
-      const double d2 = dx * dx + dy * dy;
-      if (d2 < best) {
-        best = d2;
-        owner = v;
-      }
-    }
-    if (is_needy[owner]) candidates[owner].push_back(c);
+  for (std::size_t c = 0; c < ring_owner.size(); ++c) {
+    if (ring_owner[c] >= 0 && is_needy[ring_owner[c]]) candidates[ring_owner[c]].push_back(static_cast<Index>(c));
   }
   std::size_t added = 0;
   Delaunay::Face_handle hint;
@@ -396,9 +375,10 @@ Evolve_result frfc(const Mesh_arrays& mesh, const std::vector<double>& delta, co
   Sample_set on_segments = sample_segments(mesh, f, options.cell_factor, options.sample_mode, options.seed);
   Sample_set inside = sample_triangles(mesh, f, options.cell_factor, options.sample_mode, options.seed, skip);
   std::vector<std::int8_t> inside_round(inside.points.size(), -1), segment_round(on_segments.points.size(), -1);
+  std::vector<Index> inside_owner(inside.points.size(), -1), segment_owner(on_segments.points.size(), -1);
   if (options.ring_samples) {
     add_ring_samples(mesh, delta, f, options.radius_scale, options.seed, inside, on_segments, inside_round,
-                     segment_round);
+                     segment_round, inside_owner, segment_owner);
   }
   timer.lap("sampling");
 
@@ -476,14 +456,18 @@ Evolve_result frfc(const Mesh_arrays& mesh, const std::vector<double>& delta, co
   timer.lap("lfmis");
   std::size_t n_repairs = 0;
   if (options.repair_ratio > 0 && options.ring_samples) {
-    n_repairs = repair_spacing(mesh, delta, result.input_nn, centers, n + n_seg, inside_round, inside.parent,
+    // ring candidate -> the point whose ring it belongs to, over all candidates
+    std::vector<Index> ring_owner(total, -1);
+    std::copy(segment_owner.begin(), segment_owner.end(), ring_owner.begin() + n);
+    std::copy(inside_owner.begin(), inside_owner.end(), ring_owner.begin() + n + n_seg);
+    n_repairs = repair_spacing(mesh, delta, result.input_nn, centers, ring_owner,
                                options.repair_ratio, kept);
   }
   timer.lap("spacing_repair");
 
   // Output points: kept input points in input order, then kept samples.
   std::vector<Index> out_index(total, -1);
-  Mesh_arrays& out = result.mesh;
+  Mesh_arrays out;
   for (std::size_t c = 0; c < total; ++c) {
     if (!kept[c]) continue;
     out_index[c] = static_cast<Index>(out.points.size());
@@ -533,15 +517,15 @@ Evolve_result frfc(const Mesh_arrays& mesh, const std::vector<double>& delta, co
       pieces.push_back(piece);
     }
   }
-  out.triangles = constrained_delaunay(out.points, pieces);
-  for (const auto& piece : pieces) {
-    out.segments.push_back({piece.a, piece.b});
-    out.segment_is_boundary.push_back(piece.boundary);
-  }
-  timer.lap("cdt");
+  std::vector<Index> origin = std::move(result.origin);
+  triangulate_selection(std::move(out), std::move(origin), pieces,
+                        options.quality ? &options.quality_options : nullptr, result);
+  timer.lap(options.quality ? "quality" : "cdt");
 
   double seconds = 0;
-  for (const auto& s : stats) seconds += s.second;
+  for (const auto& s : stats) {
+    if (s.first.rfind("seconds_", 0) == 0) seconds += s.second;
+  }
   stats.emplace_back("seconds_total", seconds);
   stats.emplace_back("n_input_points", static_cast<double>(n));
   stats.emplace_back("n_segment_samples", static_cast<double>(n_seg));
@@ -549,9 +533,42 @@ Evolve_result frfc(const Mesh_arrays& mesh, const std::vector<double>& delta, co
   stats.emplace_back("n_candidates", static_cast<double>(total));
   stats.emplace_back("n_spacing_repairs", static_cast<double>(n_repairs));
   stats.emplace_back("n_hidden_sites", static_cast<double>(spacing.n_hidden()));
-  stats.emplace_back("n_output_points", static_cast<double>(out.points.size()));
-  stats.emplace_back("n_output_triangles", static_cast<double>(out.triangles.size()));
+  stats.emplace_back("n_output_points", static_cast<double>(result.mesh.points.size()));
+  stats.emplace_back("n_output_triangles", static_cast<double>(result.mesh.triangles.size()));
   return result;
+}
+
+void triangulate_selection(Mesh_arrays selected, std::vector<Index> origin,
+                           const std::vector<Constraint_piece>& pieces, const Quality_options* quality,
+                           Evolve_result& result) {
+  auto& stats = result.stats;
+  if (quality == nullptr) {
+    selected.triangles = constrained_delaunay(selected.points, pieces);
+    for (const auto& piece : pieces) {
+      selected.segments.push_back({piece.a, piece.b});
+      selected.segment_is_boundary.push_back(piece.boundary);
+    }
+    result.mesh = std::move(selected);
+    result.origin = std::move(origin);
+  } else {
+    Refined_mesh refined = quality_triangulate(selected.points, selected.kind, pieces, *quality);
+    result.origin.resize(refined.source.size());
+    for (std::size_t i = 0; i < refined.source.size(); ++i) {
+      result.origin[i] = refined.source[i] < 0 ? -1 : origin[refined.source[i]];
+    }
+    result.mesh = std::move(refined.mesh);
+    const auto& report = refined.report;
+    stats.emplace_back("quality_points_added", static_cast<double>(report.n_inserted));
+    stats.emplace_back("quality_points_added_on_segments", static_cast<double>(report.n_inserted_on_segments));
+    stats.emplace_back("quality_points_removed", static_cast<double>(report.n_removed));
+    stats.emplace_back("quality_crowded_segments", static_cast<double>(report.n_crowded_segments));
+    stats.emplace_back("quality_capped", report.capped ? 1.0 : 0.0);
+  }
+  // The smallest angle and where it is (Section 6 reports it per step).
+  const auto angle = smallest_angle(result.mesh.points, result.mesh.triangles);
+  stats.emplace_back("min_angle", angle.first);
+  stats.emplace_back("min_angle_x", angle.second[0]);
+  stats.emplace_back("min_angle_y", angle.second[1]);
 }
 
 }  // namespace evomesh

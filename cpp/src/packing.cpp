@@ -5,114 +5,231 @@
 #include <limits>
 #include <numeric>
 
+#include "evomesh/parallel.hpp"
+
 namespace evomesh {
 
 namespace {
 
-// Static kd-tree over sphere centres. Each node keeps its bounding box and the
-// largest radius among the *kept* spheres below it (-1: none kept yet).
+// Static kd-tree over sphere centres, stored as a complete binary tree in heap
+// order (node 1 is the root, node k has children 2k and 2k + 1, leaves are
+// n_leaves .. 2 n_leaves - 1). Leaf L holds the positions [leaf_begin(L),
+// leaf_begin(L + 1)) of `slots_`: the spheres in tree order, centre and radius
+// copied, so a leaf is scanned in one contiguous sweep. Each node keeps its
+// bounding box and the largest radius among the *kept* spheres below it (-1:
+// none kept yet).
+//
+// A query starts at the sphere's own leaf and climbs to the root, searching the
+// sibling subtree at each level: a sphere that conflicts with a kept one (most
+// candidates of FRFC) usually finds it in the first leaves visited and stops.
+// The result does not depend on the shape of the tree or the search order, only
+// on the conflict test, which is the same expression for every pair.
 class Kept_sphere_tree {
  public:
-  Kept_sphere_tree(const std::vector<Vec2>& centers, const std::vector<double>& radii)
-      : centers_(centers), radii_(radii), items_(centers.size()), leaf_of_(centers.size(), -1) {
-    std::iota(items_.begin(), items_.end(), Index{0});
-    nodes_.reserve(2 * centers.size() / kLeafSize + 2);
-    if (!centers.empty()) build(0, static_cast<Index>(centers.size()), -1);
+  // `order`: the visiting order (a permutation of the sphere indices).
+  Kept_sphere_tree(const std::vector<Vec2>& centers, const std::vector<double>& radii, const std::vector<Index>& order)
+      : n_(centers.size()) {
+    if (n_ == 0) return;
+    while ((n_ >> depth_) > kLeafSize) ++depth_;
+    n_leaves_ = std::size_t{1} << depth_;
+    nodes_.resize(2 * n_leaves_);
+    std::vector<std::uint32_t> index_at(n_);  // sphere at each position
+    {
+      // The shape of the tree only affects speed, so it is chosen on compact
+      // float copies of the centres (normalised to the bounding box, so any
+      // coordinate scale works); the boxes are then computed exactly.
+      double lo_x = std::numeric_limits<double>::infinity(), lo_y = lo_x, hi_x = -lo_x, hi_y = -lo_x;
+      for (const auto& c : centers) {
+        lo_x = std::min(lo_x, c[0]);
+        lo_y = std::min(lo_y, c[1]);
+        hi_x = std::max(hi_x, c[0]);
+        hi_y = std::max(hi_y, c[1]);
+      }
+      const double extent = std::max(hi_x - lo_x, hi_y - lo_y);
+      const double scale = extent > 0 ? 1.0 / extent : 1.0;
+      std::vector<Build_item> items(n_);
+      for (std::size_t i = 0; i < n_; ++i) {
+        items[i] = {static_cast<float>((centers[i][0] - lo_x) * scale), static_cast<float>((centers[i][1] - lo_y) * scale),
+                    static_cast<std::uint32_t>(i)};
+      }
+      // The top levels are split first; the subtrees below them are independent
+      // and built in parallel. The tree is the same whatever the number of threads.
+      const int top = std::min(depth_, 2);
+      for (int level = 0; level < top; ++level) {
+        for (std::size_t node = std::size_t{1} << level; node < (std::size_t{2} << level); ++node) {
+          split(items, node, level);
+        }
+      }
+      const std::size_t first = std::size_t{1} << top;
+      parallel_for(first, 0, [&](std::size_t k) { build(items, first + k, top); });
+      for (std::size_t k = 0; k < n_; ++k) index_at[k] = items[k].index;
+    }
+    slots_.resize(n_);
+    for (std::size_t k = 0; k < n_; ++k) slots_[k] = {centers[index_at[k]][0], centers[index_at[k]][1], radii[index_at[k]]};
+    {
+      std::vector<std::uint32_t> position_of(n_);
+      for (std::size_t k = 0; k < n_; ++k) position_of[index_at[k]] = static_cast<std::uint32_t>(k);
+      index_at = std::vector<std::uint32_t>();
+      visit_.resize(n_);
+      for (std::size_t k = 0; k < n_; ++k) visit_[k] = position_of[order[k]];
+    }
+    for (std::size_t leaf = 0; leaf < n_leaves_; ++leaf) {
+      Node& box = nodes_[n_leaves_ + leaf];
+      box.lo_x = box.lo_y = std::numeric_limits<double>::infinity();
+      box.hi_x = box.hi_y = -std::numeric_limits<double>::infinity();
+      for (std::size_t k = leaf_begin(leaf); k < leaf_begin(leaf + 1); ++k) {
+        box.lo_x = std::min(box.lo_x, slots_[k].x);
+        box.lo_y = std::min(box.lo_y, slots_[k].y);
+        box.hi_x = std::max(box.hi_x, slots_[k].x);
+        box.hi_y = std::max(box.hi_y, slots_[k].y);
+      }
+    }
+    for (std::size_t node = n_leaves_ - 1; node >= 1; --node) {
+      const Node& l = nodes_[2 * node];
+      const Node& r = nodes_[2 * node + 1];
+      nodes_[node] = {std::min(l.lo_x, r.lo_x), std::min(l.lo_y, r.lo_y), std::max(l.hi_x, r.hi_x),
+                      std::max(l.hi_y, r.hi_y), -1.0};
+    }
+    kept_in_leaf_.assign(n_leaves_, 0);
   }
 
-  bool conflicts_with_kept(Index i) const {
-    const Vec2& c = centers_[i];
-    const double r = radii_[i];
-    Index stack[128];
+  // Position of the k-th sphere of the visiting order.
+  std::size_t visit(std::size_t k) const { return visit_[k]; }
+
+  // Fetches what a query at `position` reads first, ahead of time.
+  void prefetch(std::size_t position) const {
+    __builtin_prefetch(&slots_[position]);
+    const std::size_t node = n_leaves_ + leaf_of(position);
+    __builtin_prefetch(&kept_in_leaf_[node - n_leaves_]);
+    __builtin_prefetch(&nodes_[node ^ 1]);
+  }
+
+  bool conflicts_with_kept(std::size_t position) const {
+    const Slot& s = slots_[position];
+    const double cx = s.x, cy = s.y, r = s.radius;
+    std::size_t node = n_leaves_ + leaf_of(position);
+    if (leaf_conflicts(node - n_leaves_, cx, cy, r)) return true;
+    for (; node > 1; node >>= 1) {
+      if (subtree_conflicts(node ^ 1, cx, cy, r)) return true;
+    }
+    return false;
+  }
+
+  void keep(std::size_t position) {
+    const double r = slots_[position].radius;
+    const std::size_t leaf = leaf_of(position);
+    kept_in_leaf_[leaf] |= std::uint64_t{1} << (position - leaf_begin(leaf));
+    for (std::size_t node = n_leaves_ + leaf; node >= 1; node >>= 1) {
+      if (nodes_[node].max_kept_radius >= r) break;  // ancestors are at least as large
+      nodes_[node].max_kept_radius = r;
+    }
+  }
+
+ private:
+  static constexpr std::size_t kLeafSize = 48;
+  // Leaves hold at most kLeafSize + 1 spheres: one bit each in kept_in_leaf_.
+  static_assert(kLeafSize < 64, "leaf masks are 64 bits");
+  struct Slot {
+    double x, y, radius;
+  };
+  struct Build_item {
+    float x, y;
+    std::uint32_t index;
+  };
+  struct Node {
+    double lo_x, lo_y, hi_x, hi_y;
+    double max_kept_radius = -1;
+  };
+
+  // Leaves split the positions as evenly as integers allow.
+  std::size_t leaf_begin(std::size_t leaf) const {
+    return static_cast<std::size_t>(static_cast<unsigned __int128>(leaf) * n_ / n_leaves_);
+  }
+  std::size_t leaf_of(std::size_t position) const {
+    return static_cast<std::size_t>((static_cast<unsigned __int128>(position + 1) * n_leaves_ + n_ - 1) / n_ - 1);
+  }
+  // Positions [begin, end) of a node at `level` (root: 0).
+  std::pair<std::size_t, std::size_t> range(std::size_t node, int level) const {
+    const std::size_t j = node - (std::size_t{1} << level);
+    const int shift = depth_ - level;
+    return {leaf_begin(j << shift), leaf_begin((j + 1) << shift)};
+  }
+
+  // Partitions an inner node's range at its children's boundary, along the
+  // longer side of the range's (float) bounding box.
+  void split(std::vector<Build_item>& items, std::size_t node, int level) const {
+    if (level == depth_) return;
+    const auto [begin, end] = range(node, level);
+    float lo_x = std::numeric_limits<float>::infinity(), lo_y = lo_x, hi_x = -lo_x, hi_y = -lo_x;
+    for (std::size_t k = begin; k < end; ++k) {
+      lo_x = std::min(lo_x, items[k].x);
+      lo_y = std::min(lo_y, items[k].y);
+      hi_x = std::max(hi_x, items[k].x);
+      hi_y = std::max(hi_y, items[k].y);
+    }
+    const std::size_t mid = range(2 * node + 1, level + 1).first;
+    auto first = items.begin();
+    if (hi_x - lo_x >= hi_y - lo_y) {
+      std::nth_element(first + begin, first + mid, first + end, [](const Build_item& u, const Build_item& v) {
+        return u.x < v.x || (u.x == v.x && u.index < v.index);
+      });
+    } else {
+      std::nth_element(first + begin, first + mid, first + end, [](const Build_item& u, const Build_item& v) {
+        return u.y < v.y || (u.y == v.y && u.index < v.index);
+      });
+    }
+  }
+
+  void build(std::vector<Build_item>& items, std::size_t node, int level) const {
+    split(items, node, level);
+    if (level == depth_) return;
+    build(items, 2 * node, level + 1);
+    build(items, 2 * node + 1, level + 1);
+  }
+
+  bool leaf_conflicts(std::size_t leaf, double cx, double cy, double r) const {
+    const Slot* first = &slots_[leaf_begin(leaf)];
+    for (std::uint64_t mask = kept_in_leaf_[leaf]; mask != 0; mask &= mask - 1) {
+      const Slot& s = first[__builtin_ctzll(mask)];
+      const double ex = s.x - cx;
+      const double ey = s.y - cy;
+      const double sum = r + s.radius;
+      if (ex * ex + ey * ey < sum * sum) return true;
+    }
+    return false;
+  }
+
+  bool subtree_conflicts(std::size_t root, double cx, double cy, double r) const {
+    std::size_t stack[128];
     int top = 0;
-    if (!nodes_.empty()) stack[top++] = 0;
+    stack[top++] = root;
     while (top > 0) {
-      const Node& node = nodes_[stack[--top]];
-      if (node.max_kept_radius < 0) continue;
-      const double dx = std::max({node.lo[0] - c[0], 0.0, c[0] - node.hi[0]});
-      const double dy = std::max({node.lo[1] - c[1], 0.0, c[1] - node.hi[1]});
-      const double reach = r + node.max_kept_radius;
+      const std::size_t node = stack[--top];
+      const Node& b = nodes_[node];
+      if (b.max_kept_radius < 0) continue;
+      // Rounding is monotone, so this distance never exceeds the computed
+      // distance to any centre in the box: pruning never skips a conflict.
+      const double dx = std::max({b.lo_x - cx, 0.0, cx - b.hi_x});
+      const double dy = std::max({b.lo_y - cy, 0.0, cy - b.hi_y});
+      const double reach = r + b.max_kept_radius;
       if (dx * dx + dy * dy >= reach * reach) continue;
-      if (node.left < 0) {
-        for (Index k = node.begin; k < node.end; ++k) {
-          const Index j = items_[k];
-          if (!kept_flag(j)) continue;
-          const double ex = centers_[j][0] - c[0];
-          const double ey = centers_[j][1] - c[1];
-          const double sum = r + radii_[j];
-          if (ex * ex + ey * ey < sum * sum) return true;
-        }
+      if (node >= n_leaves_) {
+        if (leaf_conflicts(node - n_leaves_, cx, cy, r)) return true;
       } else {
-        stack[top++] = node.left;
-        stack[top++] = node.right;
+        stack[top++] = 2 * node + 1;
+        stack[top++] = 2 * node;
       }
     }
     return false;
   }
 
-  void keep(Index i) {
-    kept_.push_back(i);
-    if (kept_mask_.empty()) kept_mask_.assign(centers_.size(), 0);
-    kept_mask_[i] = 1;
-    for (Index k = leaf_of_[i]; k >= 0; k = nodes_[k].parent) {
-      if (nodes_[k].max_kept_radius >= radii_[i]) break;  // ancestors are at least as large
-      nodes_[k].max_kept_radius = radii_[i];
-    }
-  }
-
- private:
-  static constexpr Index kLeafSize = 8;
-  struct Node {
-    Vec2 lo, hi;
-    double max_kept_radius = -1;
-    Index begin, end;
-    Index left = -1, right = -1, parent = -1;
-  };
-
-  bool kept_flag(Index j) const { return !kept_mask_.empty() && kept_mask_[j]; }
-
-  Index build(Index begin, Index end, Index parent) {
-    const Index id = static_cast<Index>(nodes_.size());
-    nodes_.push_back(Node{});
-    Node node;
-    node.begin = begin;
-    node.end = end;
-    node.parent = parent;
-    node.lo = {std::numeric_limits<double>::infinity(), std::numeric_limits<double>::infinity()};
-    node.hi = {-node.lo[0], -node.lo[1]};
-    for (Index k = begin; k < end; ++k) {
-      const Vec2& p = centers_[items_[k]];
-      node.lo = {std::min(node.lo[0], p[0]), std::min(node.lo[1], p[1])};
-      node.hi = {std::max(node.hi[0], p[0]), std::max(node.hi[1], p[1])};
-    }
-    if (end - begin <= kLeafSize) {
-      for (Index k = begin; k < end; ++k) leaf_of_[items_[k]] = id;
-      nodes_[id] = node;
-      return id;
-    }
-    const int axis = (node.hi[0] - node.lo[0]) >= (node.hi[1] - node.lo[1]) ? 0 : 1;
-    const Index mid = begin + (end - begin) / 2;
-    std::nth_element(items_.begin() + begin, items_.begin() + mid, items_.begin() + end,
-                     [&](Index u, Index v) {
-                       const double a = centers_[u][axis];
-                       const double b = centers_[v][axis];
-                       return a < b || (a == b && u < v);
-                     });
-    nodes_[id] = node;
-    const Index left = build(begin, mid, id);
-    const Index right = build(mid, end, id);
-    nodes_[id].left = left;
-    nodes_[id].right = right;
-    return id;
-  }
-
-  const std::vector<Vec2>& centers_;
-  const std::vector<double>& radii_;
-  std::vector<Index> items_;
-  std::vector<Index> leaf_of_;
+  std::size_t n_;
+  int depth_ = 0;
+  std::size_t n_leaves_ = 1;
+  std::vector<Slot> slots_;
+  std::vector<std::uint32_t> visit_;
   std::vector<Node> nodes_;
-  std::vector<Index> kept_;
-  std::vector<std::uint8_t> kept_mask_;
+  std::vector<std::uint64_t> kept_in_leaf_;  // bit k: position leaf_begin + k is kept
 };
 
 }  // namespace
@@ -123,22 +240,26 @@ std::vector<std::uint8_t> lexical_first_mis(const std::vector<Vec2>& centers,
   const std::size_t n = centers.size();
   if (radii.size() != n || order.size() != n) throw Input_error("centers, radii and order must have the same length");
   if (n_forced > n) throw Input_error("more forced spheres than spheres");
-  std::vector<std::uint8_t> seen(n, 0);
+  if (n >= std::numeric_limits<std::uint32_t>::max()) throw Input_error("too many spheres (at most 2^32 - 2)");
+  std::vector<std::uint8_t> kept(n, 0);
   for (Index i : order) {
-    if (i < 0 || static_cast<std::size_t>(i) >= n || seen[i]) throw Input_error("order must be a permutation of 0..n-1");
-    seen[i] = 1;
+    if (i < 0 || static_cast<std::size_t>(i) >= n || kept[i]) throw Input_error("order must be a permutation of 0..n-1");
+    kept[i] = 1;
   }
   for (std::size_t i = 0; i < n; ++i) {
     if (!std::isfinite(centers[i][0]) || !std::isfinite(centers[i][1])) throw Input_error("sphere centres must be finite");
     if (!std::isfinite(radii[i]) || !(radii[i] > 0)) throw Input_error("sphere radii must be finite and > 0");
   }
-  std::vector<std::uint8_t> kept(n, 0);
-  Kept_sphere_tree tree(centers, radii);
+  std::fill(kept.begin(), kept.end(), 0);
+  Kept_sphere_tree tree(centers, radii, order);
+  // The loop prefetches a few spheres ahead: which sphere comes next never
+  // depends on the decisions.
+  constexpr std::size_t kAhead = 8;
   for (std::size_t k = 0; k < n; ++k) {
-    const Index i = order[k];
-    if (k < n_forced || !tree.conflicts_with_kept(i)) {
-      kept[i] = 1;
-      tree.keep(i);
+    if (k + kAhead < n) tree.prefetch(tree.visit(k + kAhead));
+    if (k < n_forced || !tree.conflicts_with_kept(tree.visit(k))) {
+      kept[order[k]] = 1;
+      tree.keep(tree.visit(k));
     }
   }
   return kept;
@@ -147,13 +268,33 @@ std::vector<std::uint8_t> lexical_first_mis(const std::vector<Vec2>& centers,
 std::vector<Index> packing_order(const std::vector<std::uint8_t>& priority_class,
                                  const std::vector<double>& radii) {
   if (priority_class.size() != radii.size()) throw Input_error("classes and radii must have the same length");
-  std::vector<Index> order(radii.size());
-  std::iota(order.begin(), order.end(), Index{0});
-  std::sort(order.begin(), order.end(), [&](Index a, Index b) {
-    if (priority_class[a] != priority_class[b]) return priority_class[a] < priority_class[b];
-    if (radii[a] != radii[b]) return radii[a] < radii[b];
-    return a < b;
+  // (class, radius, index) is a strict total order, so any correct sort gives
+  // the same permutation.
+  struct Key {
+    double radius;
+    std::uint64_t class_and_index;  // class in the top byte
+  };
+  const std::size_t n = radii.size();
+  std::vector<Key> keys(n);
+  for (std::size_t i = 0; i < n; ++i) keys[i] = {radii[i], (std::uint64_t{priority_class[i]} << 56) | i};
+  auto less = [](const Key& a, const Key& b) {
+    const auto ca = a.class_and_index >> 56, cb = b.class_and_index >> 56;
+    if (ca != cb) return ca < cb;
+    if (a.radius != b.radius) return a.radius < b.radius;
+    return a.class_and_index < b.class_and_index;
+  };
+  // Two halves sorted in parallel, then merged straight into the output.
+  const std::size_t half = n / 2;
+  parallel_for(2, 0, [&](std::size_t h) {
+    std::sort(keys.begin() + (h ? half : 0), h ? keys.end() : keys.begin() + half, less);
   });
+  std::vector<Index> order(n);
+  constexpr std::uint64_t kIndexMask = (std::uint64_t{1} << 56) - 1;
+  std::size_t a = 0, b = half;
+  for (std::size_t k = 0; k < n; ++k) {
+    const bool take_b = a == half || (b < n && less(keys[b], keys[a]));
+    order[k] = static_cast<Index>(keys[take_b ? b++ : a++].class_and_index & kIndexMask);
+  }
   return order;
 }
 

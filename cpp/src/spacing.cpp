@@ -10,6 +10,9 @@
 #include <CGAL/spatial_sort.h>
 #include <CGAL/Spatial_sort_traits_adapter_2.h>
 #include <CGAL/property_map.h>
+#include <CGAL/algorithm.h>
+#include <boost/random/linear_congruential.hpp>
+#include <boost/random/random_number_generator.hpp>
 
 #include <algorithm>
 #include <atomic>
@@ -81,6 +84,74 @@ using Ag_point = Ag_traits::Point_2;
 // starting without a hint, so results are independent of the thread count.
 constexpr std::size_t kQueryChunk = 8192;
 
+// A query point with its index, sorted in place (contiguous, unlike sorting
+// indices into the point array).
+struct Query {
+  double x, y;
+  std::size_t index;
+};
+
+// CGAL::hilbert_sort with the median policy, on Query records: the same random
+// shuffle (boost::rand48, default seed), then the same recursive median splits
+// with the same comparisons, so it yields exactly the permutation
+// CGAL::hilbert_sort gives on indices. The subranges below the top levels are
+// independent and sorted in parallel; that does not change the result.
+template <int axis, bool up>
+bool hilbert_less(const Query& p, const Query& q) {
+  const double a = axis == 0 ? p.x : p.y;
+  const double b = axis == 0 ? q.x : q.y;
+  return up ? b < a : a < b;
+}
+
+template <int axis, bool up>
+Query* hilbert_split(Query* begin, Query* end) {
+  if (begin >= end) return begin;
+  Query* middle = begin + (end - begin) / 2;
+  std::nth_element(begin, middle, end, hilbert_less<axis, up>);
+  return middle;
+}
+
+using Hilbert_sort_fn = void (*)(Query*, Query*);
+struct Hilbert_task {
+  Query* begin;
+  Query* end;
+  Hilbert_sort_fn sort;
+};
+
+// Sorts [begin, end); with `tasks`, splits only `levels` levels and leaves the
+// subranges below as tasks.
+template <int x, bool upx, bool upy>
+void hilbert_sort_range(Query* begin, Query* end, int levels = -1, std::vector<Hilbert_task>* tasks = nullptr) {
+  constexpr int y = (x + 1) % 2;
+  if (end - begin <= 1) return;
+  if (tasks != nullptr && levels == 0) {
+    tasks->push_back({begin, end, [](Query* b, Query* e) { hilbert_sort_range<x, upx, upy>(b, e); }});
+    return;
+  }
+  Query* m2 = hilbert_split<x, upx>(begin, end);
+  Query* m1 = hilbert_split<y, upy>(begin, m2);
+  Query* m3 = hilbert_split<y, !upy>(m2, end);
+  hilbert_sort_range<y, upy, upx>(begin, m1, levels - 1, tasks);
+  hilbert_sort_range<x, upx, upy>(m1, m2, levels - 1, tasks);
+  hilbert_sort_range<x, upx, upy>(m2, m3, levels - 1, tasks);
+  hilbert_sort_range<y, !upy, !upx>(m3, end, levels - 1, tasks);
+}
+
+void hilbert_sort_queries(std::vector<Query>& queries, int threads) {
+  boost::rand48 random;
+  boost::random_number_generator<boost::rand48, std::ptrdiff_t> rng(random);
+  CGAL::cpp98::random_shuffle(queries.begin(), queries.end(), rng);
+  Query* begin = queries.data();
+  Query* end = begin + queries.size();
+  if (queries.size() < 65536) {
+    hilbert_sort_range<0, false, false>(begin, end);
+    return;
+  }
+  std::vector<Hilbert_task> tasks;
+  hilbert_sort_range<0, false, false>(begin, end, 2, &tasks);  // 16 subranges
+  parallel_for(tasks.size(), threads, [&](std::size_t k) { tasks[k].sort(tasks[k].begin, tasks[k].end); });
+}
+
 }  // namespace
 
 struct Spacing_function::Impl {
@@ -134,14 +205,9 @@ const std::vector<double>& Spacing_function::weights() const { return impl_->wei
 void Spacing_function::evaluate(const Vec2* queries, std::size_t n, double* f_out, Index* site_out,
                                 int threads, bool certified) const {
   if (n == 0) return;
-  std::vector<Ag_point> pts;
-  pts.reserve(n);
-  for (std::size_t i = 0; i < n; ++i) pts.emplace_back(queries[i][0], queries[i][1]);
-  std::vector<std::size_t> order(n);
-  std::iota(order.begin(), order.end(), 0);
-  using Sort_traits = CGAL::Spatial_sort_traits_adapter_2<
-      Ag_kernel, CGAL::Pointer_property_map<Ag_point>::type>;
-  CGAL::hilbert_sort(order.begin(), order.end(), Sort_traits(CGAL::make_property_map(pts)));
+  std::vector<Query> sorted(n);
+  for (std::size_t i = 0; i < n; ++i) sorted[i] = {queries[i][0], queries[i][1], i};
+  hilbert_sort_queries(sorted, threads);
   const auto& graph = impl_->graph;
   const auto& sites = impl_->sites;
   const auto& weights = impl_->weights;
@@ -157,12 +223,14 @@ void Spacing_function::evaluate(const Vec2* queries, std::size_t n, double* f_ou
     };
     Apollonius_graph::Vertex_handle hint;
     for (std::size_t k = begin; k < end; ++k) {
-      const std::size_t q = order[k];
-      const Vec2& x = queries[q];
+      const std::size_t q = sorted[k].index;
+      const Vec2 x{sorted[k].x, sorted[k].y};
+      const Ag_point point(x[0], x[1]);
       if (hint == Apollonius_graph::Vertex_handle()) {
-        hint = graph.nearest_neighbor(pts[q]);
-      } else if (certified) {
-        hint = graph.nearest_neighbor(pts[q], hint);
+        hint = graph.nearest_neighbor(point);
+      } else if (certified || graph.dimension() < 2) {
+        // (the greedy walk needs a 2-D graph: one or two visible sites are answered by CGAL)
+        hint = graph.nearest_neighbor(point, hint);
       } else {
         // Greedy descent over Apollonius-graph neighbours, as CGAL's walk does,
         // with the cone values in double; values strictly decrease, so it ends.

@@ -26,3 +26,25 @@ __all__ = [
 ]
 
 __version__ = "0.1.0"
+
+# Moving-front workflow (issue 3).
+from evomesh.fronts import CircleFront, Front, LevelSetFront, PointFront, SpacingLaw  # noqa: E402
+from evomesh.transfer import transfer  # noqa: E402
+from evomesh.driver import Driver, Run, Step, growing_circle, run, step_statistics  # noqa: E402
+from evomesh.meshgen import unit_square_mesh  # noqa: E402
+
+__all__ += [
+    "Front",
+    "CircleFront",
+    "PointFront",
+    "LevelSetFront",
+    "SpacingLaw",
+    "transfer",
+    "run",
+    "Run",
+    "Step",
+    "Driver",
+    "step_statistics",
+    "growing_circle",
+    "unit_square_mesh",
+]

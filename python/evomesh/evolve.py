@@ -11,7 +11,7 @@ from evomesh import _core
 from evomesh.mesh import Mesh
 from evomesh.spacing import _require_mesh, as_delta
 
-__all__ = ["evolve", "FRFC_DEFAULTS"]
+__all__ = ["evolve", "delaunay_refine", "FRFC_DEFAULTS", "DRFC_DEFAULTS"]
 
 _SAMPLE_MODES = {"random": 0, "barycentre": 1, "midpoints": 2, "barycentre+midpoints": 3}
 _RADII = ("exact", "cheap")
@@ -27,7 +27,56 @@ FRFC_DEFAULTS: dict[str, Any] = {
     "skip_coarse": False,
     "max_samples": 5e7,
     "threads": None,
+    "quality": True,
+    "min_angle": 20.0,
 }
+
+#: Options of method="drfc" and their defaults.
+DRFC_DEFAULTS: dict[str, Any] = {
+    "min_angle": 20.0,
+    "radius_scale": 0.75,
+    "quality": True,
+    "max_samples": 5e7,
+    "threads": None,
+}
+
+# Angles above this make Ruppert's refinement rely on its bound on inserted points.
+_MAX_MIN_ANGLE = 30.0
+
+
+def _check_real(o: dict[str, Any], name: str) -> None:
+    value = o[name]
+    if isinstance(value, bool) or not isinstance(value, numbers.Real):
+        raise TypeError(f"{name} must be a real number, got {type(value).__name__}")
+    if not np.isfinite(value) or value <= 0:
+        raise ValueError(f"{name} must be finite and > 0, got {value}")
+
+
+def _check_common(o: dict[str, Any]) -> None:
+    """Options shared by both methods: min_angle, quality, threads."""
+    _check_real(o, "min_angle")
+    if o["min_angle"] > _MAX_MIN_ANGLE:
+        raise ValueError(f"min_angle must be in (0, {_MAX_MIN_ANGLE:g}], got {o['min_angle']}")
+    if not isinstance(o["quality"], (bool, np.bool_)):
+        raise TypeError("quality must be a bool")
+    threads = o["threads"]
+    if threads is not None and (
+        isinstance(threads, bool) or not isinstance(threads, numbers.Integral) or not 1 <= threads < 2**31
+    ):
+        raise ValueError(f"threads must be None or an integer in [1, 2**31), got {threads!r}")
+
+
+def _drfc_options(options: dict[str, Any]) -> dict[str, Any]:
+    unknown = sorted(set(options) - set(DRFC_DEFAULTS))
+    if unknown:
+        raise TypeError(f"unknown option(s) for method 'drfc': {', '.join(unknown)}; known: {', '.join(DRFC_DEFAULTS)}")
+    o = {**DRFC_DEFAULTS, **options}
+    for name in ("radius_scale", "max_samples"):
+        _check_real(o, name)
+    if o["radius_scale"] > 1:
+        raise ValueError(f"radius_scale must be in (0, 1], got {o['radius_scale']}")
+    _check_common(o)
+    return o
 
 
 def _frfc_options(options: dict[str, Any]) -> dict[str, Any]:
@@ -57,11 +106,7 @@ def _frfc_options(options: dict[str, Any]) -> dict[str, Any]:
         raise ValueError(f"radius must be 'exact' or 'cheap', got {o['radius']!r}")
     if not isinstance(o["skip_coarse"], (bool, np.bool_)):
         raise TypeError("skip_coarse must be a bool")
-    threads = o["threads"]
-    if threads is not None and (
-        isinstance(threads, bool) or not isinstance(threads, numbers.Integral) or not 1 <= threads < 2**31
-    ):
-        raise ValueError(f"threads must be None or an integer in [1, 2**31), got {threads!r}")
+    _check_common(o)
     return o
 
 
@@ -87,8 +132,14 @@ def evolve(mesh: Mesh, delta: Any, *, method: str = "frfc", seed: int = 0, **opt
         l <= delta <= L); in addition a step whose sampling would create more
         than ``max_samples`` candidate points is refused (refine over several
         steps instead).
-    method : {"frfc"}
+    method : {"frfc", "drfc"}
         "frfc": Functional-Refining-Functional-Coarsening (paper, Section 3.2).
+        "drfc": Delaunay-Refining-Functional-Coarsening (Section 5): Delaunay
+        refinement with Ruppert's rules and rule 4 (see :func:`delaunay_refine`),
+        then the one-level coarsening of Miller, Talmor and Teng on the refined
+        points (lexical-first MIS of B(p, radius_scale f(p)/2), boundary first,
+        then original, Steiner and new points) and a constrained Delaunay
+        triangulation; no samples are added in the coarsening.
     seed : int
         Seed of the sampling; the same mesh, delta, options and seed give a
         bit-identical result.
@@ -124,6 +175,35 @@ def evolve(mesh: Mesh, delta: Any, *, method: str = "frfc", seed: int = 0, **opt
         threads : int or None
             Threads for spacing queries (None: all cores). Results do not
             depend on it.
+        quality : bool, default True
+            The quality pass (Section 6's suggestion, for both methods): a
+            point that sees a segment under more than 120 degrees is dropped and
+            the segment split at its midpoint instead; then Delaunay refinement
+            (CGAL's mesher: Ruppert's rules 1 and 3) splits every triangle with an
+            angle below ``min_angle``. There is no size criterion, so new points
+            follow the spacing of the selected points. The result has no angle
+            below ``min_angle`` whenever the domain has none below 60 degrees;
+            otherwise the pass stops after 0.5 n + 1000 insertions at most and
+            the small angles stay near the small input angles. ``stats`` reports
+            ``quality_points_added`` (``_on_segments``), ``quality_points_removed``,
+            ``quality_capped``. False reproduces the paper's algorithm.
+        min_angle : float in (0, 30], default 20.0
+            Target smallest angle in degrees (Ruppert's algorithm provably ends
+            up to about 20.7 degrees; beyond that the bound on inserted points
+            stops it).
+
+        For "drfc" (defaults in :data:`DRFC_DEFAULTS`): ``min_angle`` (also the
+        shape criterion of the refinement stage), ``quality``, ``max_samples``
+        (refuse a step whose refinement needs more points), ``threads`` as
+        above, and
+
+        radius_scale : float in (0, 1], default 0.75
+            Spheres B(p, radius_scale f(p)/2) of the coarsening; 1.0 is Miller,
+            Talmor and Teng's, 0.75 is FRFC's default, so the two methods compare
+            at equal sphere sizes.
+
+        Every output's ``stats`` holds ``min_angle`` (degrees) and its location
+        ``min_angle_x``, ``min_angle_y`` (centroid of the triangle that has it).
 
     Returns
     -------
@@ -144,8 +224,24 @@ def evolve(mesh: Mesh, delta: Any, *, method: str = "frfc", seed: int = 0, **opt
     _require_mesh(mesh)
     d = as_delta(mesh, delta)
     seed = _check_seed(seed)
+    if method == "drfc":
+        o = _drfc_options(options)
+        result = _core.drfc(
+            mesh.points,
+            mesh.triangles,
+            mesh.segments,
+            mesh.segment_is_boundary.astype(np.uint8),
+            mesh.kind,
+            d,
+            min_angle=float(o["min_angle"]),
+            radius_scale=float(o["radius_scale"]),
+            threads=o["threads"] or 0,
+            max_samples=float(o["max_samples"]),
+            quality=bool(o["quality"]),
+        )
+        return _wrap(result)
     if method != "frfc":
-        raise ValueError(f"unknown method {method!r}; available: 'frfc'")
+        raise ValueError(f"unknown method {method!r}; available: 'frfc', 'drfc'")
     o = _frfc_options(options)
     result = _core.frfc(
         mesh.points,
@@ -164,8 +260,13 @@ def evolve(mesh: Mesh, delta: Any, *, method: str = "frfc", seed: int = 0, **opt
         radius_scale=float(o["radius_scale"]),
         boundary_radius_scale=float(o["boundary_scale"]),
         repair_ratio=float(o["repair_ratio"]),
+        quality=bool(o["quality"]),
+        min_angle=float(o["min_angle"]),
     )
-    stats = dict(result["stats"])
+    return _wrap(result)
+
+
+def _wrap(result: dict[str, Any]) -> Mesh:
     return Mesh._trusted(
         result["points"],
         result["triangles"],
@@ -173,5 +274,55 @@ def evolve(mesh: Mesh, delta: Any, *, method: str = "frfc", seed: int = 0, **opt
         result["segment_is_boundary"],
         result["kind"],
         result["origin"],
-        stats,
+        dict(result["stats"]),
     )
+
+
+def delaunay_refine(mesh: Mesh, delta: Any, *, min_angle: float = 20.0, max_samples: float = 5e7,
+                    threads: int | None = None) -> Mesh:
+    """DRFC's first step alone (paper, Section 5): Delaunay refinement towards delta.
+
+    Ruppert's rules (split encroached segments at their midpoints, split
+    triangles with an angle below ``min_angle`` at their circumcentres unless
+    that encroaches a segment) and rule 4 in terms of the spacing function f of
+    :func:`evomesh.spacing`: a triangle is split while the nearest neighbour of
+    one of its vertices v is farther than f(v), so every point v of the result
+    has a neighbour within f(v). At an input point p, f(p) = delta(p) nn_M(p)
+    when delta(p) <= 1 (Lemma 3.1): the paper's rule; where delta(p) >= 1 it
+    never triggers. No point is removed.
+
+    Parameters
+    ----------
+    mesh : Mesh
+    delta : array_like, shape (n,), or a scalar
+    min_angle : float in (0, 30], default 20.0
+    max_samples : float, default 5e7
+        Refuse (ValueError) a refinement estimated to need more points.
+    threads : int or None
+
+    Returns
+    -------
+    Mesh
+        The refined mesh: the input points first (same indices, ``origin`` =
+        index), then the new points (``origin`` -1; kind BOUNDARY on segments,
+        SAMPLED inside). ``stats``: ``points_added``,
+        ``points_added_on_segments``, ``rounds`` (passes with exact f),
+        ``capped`` (1 if it stopped at its bound, twice the estimate).
+    """
+    _require_mesh(mesh)
+    d = as_delta(mesh, delta)
+    o = {"min_angle": min_angle, "quality": True, "threads": threads, "max_samples": max_samples}
+    _check_common(o)
+    _check_real(o, "max_samples")
+    result = _core.drfc_refine(
+        mesh.points,
+        mesh.triangles,
+        mesh.segments,
+        mesh.segment_is_boundary.astype(np.uint8),
+        mesh.kind,
+        d,
+        min_angle=float(min_angle),
+        threads=threads or 0,
+        max_samples=float(max_samples),
+    )
+    return _wrap(result)

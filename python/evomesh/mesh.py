@@ -12,8 +12,15 @@ from evomesh import _core
 
 __all__ = ["Mesh", "PointKind"]
 
-# Coordinates beyond this would overflow squared distances (1e308).
-_MAX_COORDINATE = 1e150
+# The core evaluates polynomials of degree up to 4 in the coordinates, in double
+# (squared cosines in CGAL's mesher, areas times lengths in the quality
+# criteria): they must stay within float64's normal range [2.2e-308, 1.8e308].
+# Hence |x| <= 1e75 and no two points closer than 1e-75; beyond these the
+# quality pass loses its angle bound or crashes in CGAL's exact arithmetic
+# (measured: extents near 1e-95 and 1e110). Any scale in between works and
+# gives the same mesh up to rounding.
+_MAX_COORDINATE = 1e75
+_MIN_POINT_DISTANCE = 1e-75
 
 
 class PointKind(IntEnum):
@@ -38,13 +45,22 @@ def _frozen(array: np.ndarray) -> np.ndarray:
     return array
 
 
+def _as_array(values: Any, name: str) -> np.ndarray:
+    """np.asarray with a clear message for ragged nested sequences."""
+    try:
+        return np.asarray(values)
+    except ValueError as error:  # inhomogeneous (ragged) nesting
+        raise ValueError(f"{name} must be a rectangular array, not a ragged nested sequence") from error
+
+
 def _as_points(points: Any) -> np.ndarray:
-    array = np.asarray(points)
+    array = _as_array(points, "points")
     if array.dtype == object or array.dtype.kind not in "fiu":
         raise TypeError(f"points must be a real numeric array, got dtype {array.dtype}")
     if array.ndim != 2 or array.shape[1] != 2:
         raise ValueError(f"points must have shape (n, 2), got {array.shape}")
-    array = array.astype(np.float64)  # always a copy: the caller's array is never touched
+    with np.errstate(over="ignore"):  # long double beyond float64 becomes inf, rejected below
+        array = array.astype(np.float64)  # always a copy: the caller's array is never touched
     finite = np.isfinite(array).all(axis=1)
     if not finite.all():
         raise ValueError(f"points contain NaN or infinite coordinates (first at row {int(np.argmin(finite))})")
@@ -54,7 +70,7 @@ def _as_points(points: Any) -> np.ndarray:
 
 
 def _as_indices(values: Any, columns: int, name: str, n_points: int) -> np.ndarray:
-    array = np.asarray(values)
+    array = _as_array(values, name)
     if array.dtype == object or array.dtype.kind not in "iu":
         raise TypeError(f"{name} must be an integer array, got dtype {array.dtype}")
     if array.ndim != 2 or array.shape[1] != columns:
@@ -87,13 +103,26 @@ def _check_topology(points: np.ndarray, triangles: np.ndarray) -> None:
         raise ValueError(f"points {a} and {b} are duplicates")
 
 
+def _check_point_distances(points: np.ndarray) -> None:
+    nn = _core.nn_spacing(points)
+    if nn.min() < _MIN_POINT_DISTANCE:
+        k = int(np.argmin(nn))
+        raise ValueError(
+            f"point {k} is {nn[k]:.3g} from its nearest point, below {_MIN_POINT_DISTANCE:g}: products of "
+            "coordinates would underflow; rescale the mesh"
+        )
+
+
 class Mesh:
     """A valid 2-D triangle mesh with constraint segments; immutable.
 
     Parameters
     ----------
     points : array_like, shape (n, 2)
-        Point coordinates (float64; copied).
+        Point coordinates (float64; copied). Finite, at most 1e75 in
+        magnitude, and no two points closer than 1e-75 (so the core's
+        products of coordinates neither overflow nor underflow); any scale in
+        between is fine.
     triangles : array_like of int, shape (m, 3)
         Point indices of each triangle, in either orientation; stored
         counter-clockwise.
@@ -113,9 +142,12 @@ class Mesh:
     TypeError
         For arrays of the wrong dtype.
     ValueError
-        For any malformed mesh: wrong shapes, NaN or infinite coordinates,
-        indices out of range, zero-area, repeated or overlapping triangles,
-        duplicate or orphan points, an edge shared by more than two triangles.
+        For any malformed mesh: wrong shapes, fewer than 3 points or no
+        triangle, NaN, infinite or out-of-range coordinates, indices out of
+        range, zero-area (collinear), repeated, overlapping or inverted
+        triangles, duplicate or orphan points, an edge shared by more than two
+        triangles, a segment that is not a mesh edge, bad ``kind`` or ``origin``.
+        The caller's arrays are never modified.
     """
 
     __slots__ = ("points", "triangles", "segments", "segment_is_boundary", "kind", "origin", "stats")
@@ -138,11 +170,12 @@ class Mesh:
             raise ValueError("a mesh needs at least one triangle")
         segs = None if segments is None else _as_indices(segments, 2, "segments", n)
         _check_topology(pts, tris)
+        _check_point_distances(pts)
         tris, segs, boundary, computed_kind, _ = _core.prepare_mesh(pts, tris, segs, True)
         if kind is None:
             kinds = computed_kind
         else:
-            kinds = np.asarray(kind)
+            kinds = _as_array(kind, "kind")
             if kinds.dtype == object or kinds.dtype.kind not in "iu":
                 raise TypeError(f"kind must be an integer array, got dtype {kinds.dtype}")
             if kinds.shape != (n,):
@@ -158,11 +191,13 @@ class Mesh:
         if origin is None:
             org = np.full(n, -1, dtype=np.int64)
         else:
-            org = np.asarray(origin)
+            org = _as_array(origin, "origin")
             if org.dtype == object or org.dtype.kind not in "iu":
                 raise TypeError(f"origin must be an integer array, got dtype {org.dtype}")
             if org.shape != (n,):
                 raise ValueError(f"origin must have shape ({n},), got {org.shape}")
+            if (org < -1).any() or (org.dtype.kind == "u" and (org > np.iinfo(np.int64).max).any()):
+                raise ValueError("origin values must be point indices >= 0, or -1 for a new point")
             org = org.astype(np.int64)
         self._assign(pts, tris, segs, boundary, kinds, org, {})
 

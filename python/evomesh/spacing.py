@@ -7,9 +7,16 @@ from typing import Any
 import numpy as np
 
 from evomesh import _core
-from evomesh.mesh import Mesh
+from evomesh.mesh import _MAX_COORDINATE, Mesh, _as_array
 
-__all__ = ["nn_spacing", "spacing", "SpacingFunction", "as_delta"]
+__all__ = ["nn_spacing", "spacing", "SpacingFunction", "as_delta", "DELTA_MIN", "DELTA_MAX"]
+
+#: Accepted range of the per-point factor delta: the paper's l <= delta <= L
+#: (Definition 2.6). Below DELTA_MIN one step would need more than ~1e12 samples
+#: per triangle; above DELTA_MAX a point's new spacing is 1e6 times its old one,
+#: which already coarsens any mesh down to its corners.
+DELTA_MIN = 1e-6
+DELTA_MAX = 1e6
 
 
 def nn_spacing(mesh: Mesh) -> np.ndarray:
@@ -27,17 +34,39 @@ def nn_spacing(mesh: Mesh) -> np.ndarray:
 
 
 def as_delta(mesh: Mesh, delta: Any) -> np.ndarray:
-    """Validate a per-point factor delta: shape (n,) (or a scalar), finite, > 0."""
-    array = np.asarray(delta)
+    """Validate a per-point factor delta: shape (n,) (or a scalar), finite, in
+    [DELTA_MIN, DELTA_MAX]; returns a float64 copy."""
+    array = _as_array(delta, "delta")
     if array.dtype == object or array.dtype.kind not in "fiu":
         raise TypeError(f"delta must be a real numeric array, got dtype {array.dtype}")
-    array = np.array(np.broadcast_to(array, (mesh.n_points,)) if array.ndim == 0 else array, dtype=np.float64)
+    with np.errstate(over="ignore"):  # long double beyond float64 becomes inf, rejected below
+        array = np.array(np.broadcast_to(array, (mesh.n_points,)) if array.ndim == 0 else array, dtype=np.float64)
     if array.shape != (mesh.n_points,):
         raise ValueError(f"delta must have one value per point: shape ({mesh.n_points},), got {array.shape}")
     bad = ~np.isfinite(array) | (array <= 0)
     if bad.any():
         k = int(np.argmax(bad))
         raise ValueError(f"delta must be finite and > 0; delta[{k}] = {array[k]}")
+    bad = (array < DELTA_MIN) | (array > DELTA_MAX)
+    if bad.any():
+        k = int(np.argmax(bad))
+        raise ValueError(f"delta must be in [{DELTA_MIN:g}, {DELTA_MAX:g}]; delta[{k}] = {array[k]:g}")
+    return array
+
+
+def _as_sites(x: Any, name: str) -> np.ndarray:
+    """Real, shape (k, 2), finite, within the coordinate limit of a Mesh; a float64 copy."""
+    array = _as_array(x, name)
+    if array.dtype == object or array.dtype.kind not in "fiu":
+        raise TypeError(f"{name} must be a real numeric array, got dtype {array.dtype}")
+    with np.errstate(over="ignore"):
+        array = np.array(array, dtype=np.float64)
+    if array.ndim != 2 or array.shape[1] != 2:
+        raise ValueError(f"{name} must have shape (k, 2), got {array.shape}")
+    if not np.isfinite(array).all():
+        raise ValueError(f"{name} contain NaN or infinite coordinates")
+    if array.size and np.abs(array).max() > _MAX_COORDINATE:
+        raise ValueError(f"{name} coordinates must be below {_MAX_COORDINATE:g} in magnitude")
     return array
 
 
@@ -58,25 +87,31 @@ class SpacingFunction:
         Points whose cone never attains the minimum.
     """
 
-    def __init__(self, sites: np.ndarray, weights: np.ndarray):
+    def __init__(self, sites: Any, weights: Any):
+        sites = _as_sites(sites, "sites")
+        if len(sites) == 0:
+            raise ValueError("a spacing function needs at least one site")
+        w = _as_array(weights, "weights")
+        if w.dtype == object or w.dtype.kind not in "fiu":
+            raise TypeError(f"weights must be a real numeric array, got dtype {w.dtype}")
+        with np.errstate(over="ignore"):
+            w = np.array(w, dtype=np.float64)
+        if w.shape != (len(sites),):
+            raise ValueError(f"weights must have shape ({len(sites)},), got {w.shape}")
+        if not (np.isfinite(w) & (w >= 0)).all():
+            raise ValueError("weights must be finite and >= 0")
         self.sites = sites
-        self.weights = weights
-        self._graph = _core.SpacingFunction(sites, weights)
+        self.weights = w
+        self._graph = _core.SpacingFunction(sites, w)
 
     @property
     def n_hidden(self) -> int:
         return self._graph.n_hidden
 
     def _query(self, x: Any) -> tuple[np.ndarray, np.ndarray]:
-        array = np.asarray(x)
-        if array.dtype == object or array.dtype.kind not in "fiu":
-            raise TypeError(f"query points must be a real numeric array, got dtype {array.dtype}")
+        array = _as_array(x, "query points")
         single = array.ndim == 1
-        array = np.atleast_2d(array).astype(np.float64)
-        if array.ndim != 2 or array.shape[1] != 2:
-            raise ValueError(f"query points must have shape (k, 2), got {np.shape(x)}")
-        if not np.isfinite(array).all():
-            raise ValueError("query points contain NaN or infinite coordinates")
+        array = _as_sites(np.atleast_2d(array) if single else array, "query points")
         f, site = self._graph.evaluate(array)
         return (f[0], site[0]) if single else (f, site)
 
@@ -98,8 +133,16 @@ def spacing(mesh: Mesh, delta: Any) -> SpacingFunction:
     Parameters
     ----------
     mesh : Mesh
-    delta : array_like, shape (n,)
-        Per-point factor: < 1 refines, > 1 coarsens.
+    delta : array_like, shape (n,), or a scalar
+        Per-point factor: < 1 refines, > 1 coarsens; finite and in
+        [:data:`DELTA_MIN`, :data:`DELTA_MAX`] = [1e-6, 1e6].
+
+    Raises
+    ------
+    TypeError
+        If mesh is not a Mesh or delta is not real.
+    ValueError
+        If delta has the wrong shape, or a value that is NaN, infinite or out of range.
     """
     _require_mesh(mesh)
     d = as_delta(mesh, delta)

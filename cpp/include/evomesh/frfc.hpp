@@ -1,12 +1,15 @@
 // Functional-Refining-Functional-Coarsening (Section 3.2): one evolution step.
 #pragma once
 
+#include <chrono>
 #include <cstdint>
 #include <string>
 #include <utility>
 #include <vector>
 
+#include "evomesh/refinement.hpp"
 #include "evomesh/sampling.hpp"
+#include "evomesh/triangulation.hpp"
 #include "evomesh/types.hpp"
 
 namespace evomesh {
@@ -30,6 +33,10 @@ struct Frfc_options {
   std::uint64_t seed = 0;
   int threads = 0;                   // 0: hardware concurrency (capped at 2 chunks per core)
   double max_samples = 5e7;          // refuse inputs whose sampling would exceed this
+  // The quality pass of Section 6 (refinement.hpp). Off here, so frfc() is the paper's
+  // algorithm; Python's evolve turns it on by default.
+  bool quality = false;
+  Quality_options quality_options;
 };
 
 struct Evolve_result {
@@ -53,5 +60,33 @@ struct Segment_chain {
   bool boundary = true;
 };
 std::vector<Segment_chain> segment_chains(const Mesh_arrays& mesh);
+
+// Shared by FRFC and DRFC: the last stage of a step. Triangulates the selected
+// points (`selected.points`, `selected.kind`, their input `origin`) with the
+// constraint pieces between them (constrained Delaunay, Section 3.2 step 6), or
+// runs the quality pass on them when `quality` is given. Fills result.mesh and
+// result.origin and adds the pass's counts and the smallest angle to result.stats.
+void triangulate_selection(Mesh_arrays selected, std::vector<Index> origin,
+                           const std::vector<Constraint_piece>& pieces, const Quality_options* quality,
+                           Evolve_result& result);
+
+namespace detail {
+
+// Appends ("seconds_" + stage, elapsed seconds since the previous lap) to stats.
+class Stage_timer {
+ public:
+  explicit Stage_timer(std::vector<std::pair<std::string, double>>& stats) : stats_(stats) {}
+  void lap(const std::string& name) {
+    const auto now = std::chrono::steady_clock::now();
+    stats_.emplace_back("seconds_" + name, std::chrono::duration<double>(now - last_).count());
+    last_ = now;
+  }
+
+ private:
+  std::vector<std::pair<std::string, double>>& stats_;
+  std::chrono::steady_clock::time_point last_ = std::chrono::steady_clock::now();
+};
+
+}  // namespace detail
 
 }  // namespace evomesh

@@ -1,0 +1,162 @@
+"""Figures in the style of the paper's Figure 4: spacing spheres, packing, mesh."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from evomesh.fronts import LevelSetFront
+from evomesh.mesh import Mesh
+from evomesh.spacing import _require_mesh, as_delta, spacing
+
+__all__ = ["plot_step", "plot_mesh", "draw_front"]
+
+_FRONT_STYLE = {"color": "crimson", "linewidth": 1.4, "linestyle": "--", "zorder": 5}
+_KEPT_COLOR = "0.55"
+_NEW_COLOR = "darkorange"
+
+
+def _figure(panels: int, size: float = 5.0):
+    # Figure without pyplot: no global state, works with any backend (Agg here).
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(size * panels, size + 0.6), layout="constrained")
+    axes = fig.subplots(1, panels, sharex=True, sharey=True, squeeze=False)[0]
+    return fig, axes
+
+
+def _frame(ax, mesh: Mesh) -> None:
+    lo, hi = mesh.points.min(axis=0), mesh.points.max(axis=0)
+    pad = 0.02 * float((hi - lo).max())
+    ax.set_xlim(lo[0] - pad, hi[0] + pad)
+    ax.set_ylim(lo[1] - pad, hi[1] + pad)
+    ax.set_aspect("equal")
+    ax.set_xticks([])
+    ax.set_yticks([])
+
+
+def _circles(ax, centers: np.ndarray, radii: np.ndarray, **style: Any) -> None:
+    from matplotlib.collections import EllipseCollection
+
+    diameters = 2.0 * radii
+    ax.add_collection(
+        EllipseCollection(
+            diameters, diameters, np.zeros(len(radii)), units="xy", offsets=centers, offset_transform=ax.transData, **style
+        )
+    )
+
+
+def draw_front(ax, front: Any, t: Any = None, mesh: Mesh | None = None) -> None:
+    """Draw a front on a matplotlib axes: its polylines, or the zero contour of a
+    level set (sampled on a 256 x 256 grid over the mesh's bounding box)."""
+    if front is None:
+        return
+    if isinstance(front, LevelSetFront):
+        if mesh is None:
+            return
+        lo, hi = mesh.points.min(axis=0), mesh.points.max(axis=0)
+        x, y = np.meshgrid(np.linspace(lo[0], hi[0], 256), np.linspace(lo[1], hi[1], 256))
+        phi = front.value(np.c_[x.ravel(), y.ravel()], t).reshape(x.shape)
+        if phi.min() < 0 < phi.max():
+            ax.contour(x, y, phi, levels=[0.0], colors=_FRONT_STYLE["color"], linewidths=_FRONT_STYLE["linewidth"],
+                       linestyles=_FRONT_STYLE["linestyle"], zorder=5)
+        return
+    for line in front.polylines(t):
+        ax.plot(line[:, 0], line[:, 1], **_FRONT_STYLE)
+
+
+def plot_step(
+    old: Mesh,
+    new: Mesh,
+    delta: Any,
+    *,
+    front: Any = None,
+    t: Any = None,
+    packing_scale: float = 1.0,
+    title: str | None = None,
+    size: float = 5.0,
+):
+    """One step in three panels, like a row of the paper's Figure 4.
+
+    1. The new spacing function as spheres: at every old point p a circle of
+       diameter f(p), f = :func:`evomesh.spacing` (old, delta), coloured by
+       delta (blue: refine, red: coarsen).
+    2. The selected packing: circles of radius ``packing_scale`` f(x) / 2 at
+       the new points (grey: kept from the old mesh, orange: new points).
+    3. The new mesh.
+
+    Parameters
+    ----------
+    old, new : Mesh
+    delta : array_like, shape (old.n_points,)
+    front : Front, optional
+        Drawn on every panel at time t.
+    packing_scale : float
+        Radius scale of the packing spheres (evolve's ``radius_scale``).
+    title : str, optional
+    size : float
+        Panel size in inches.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    from matplotlib.colors import LogNorm
+
+    _require_mesh(old)
+    _require_mesh(new)
+    d = as_delta(old, delta)
+    f = spacing(old, d)
+    f_old = f(old.points)
+    f_new = f(new.points)
+    fig, (a1, a2, a3) = _figure(3, size)
+    for ax in (a1, a2, a3):
+        _frame(ax, new)
+    lo, hi = min(d.min(), 1 / d.max(), 0.5), max(d.max(), 1 / d.min(), 2.0)
+    norm = LogNorm(vmin=lo, vmax=hi)  # symmetric around delta = 1
+    from matplotlib import colormaps
+
+    colors = colormaps["coolwarm"](norm(d))
+    colors[:, 3] = 0.35
+    _circles(a1, old.points, 0.5 * f_old, facecolors=colors, edgecolors="0.25", linewidths=0.3)
+    a1.set_title(f"spacing spheres: {old.n_points} old points\n(blue: refine, red: coarsen)", fontsize=10)
+    kept = new.origin >= 0
+    face = np.where(kept[:, None], np.array([0.55, 0.55, 0.55, 0.45]), np.array([1.0, 0.55, 0.0, 0.6]))
+    _circles(a2, new.points, 0.5 * packing_scale * f_new, facecolors=face, edgecolors="0.2", linewidths=0.3)
+    a2.set_title(f"selected packing: {int(kept.sum())} kept (grey), {int((~kept).sum())} new (orange)", fontsize=10)
+    a3.triplot(new.points[:, 0], new.points[:, 1], new.triangles, color="0.15", linewidth=0.35)
+    a3.plot(new.points[~kept, 0], new.points[~kept, 1], ".", color=_NEW_COLOR, markersize=2.0)
+    from evomesh.quality import quality
+
+    q = quality(new)
+    a3.set_title(f"mesh: {new.n_points} points, {new.n_triangles} triangles\nmin angle {q.min_angle:.2f} deg", fontsize=10)
+    for ax in (a1, a2, a3):
+        draw_front(ax, front, t, new)
+    if title:
+        fig.suptitle(title, fontsize=12)
+    return fig
+
+
+def plot_mesh(mesh: Mesh, *, front: Any = None, t: Any = None, ax=None, title: str | None = None):
+    """The mesh (and a front); returns the Figure (new unless ``ax`` is given)."""
+    _require_mesh(mesh)
+    if ax is None:
+        fig, (ax,) = _figure(1)
+    else:
+        fig = ax.figure
+    _frame(ax, mesh)
+    ax.triplot(mesh.points[:, 0], mesh.points[:, 1], mesh.triangles, color="0.15", linewidth=0.35)
+    draw_front(ax, front, t, mesh)
+    if title:
+        ax.set_title(title, fontsize=10)
+    return fig
+
+
+def save(fig, path: str | Path, dpi: int = 110) -> Path:
+    """Save a figure (PNG by suffix) and release it."""
+    path = Path(path)
+    fig.savefig(path, dpi=dpi)
+    fig.clear()
+    return path

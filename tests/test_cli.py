@@ -1,0 +1,96 @@
+"""The ``evomesh`` command, through its entry point."""
+
+import csv
+import shutil
+import subprocess
+import sys
+from importlib.metadata import entry_points
+from pathlib import Path
+
+import pytest
+
+from evomesh.cli import main
+
+TINY = ["growing-circle", "--points", "120", "--band", "0.1", "--h-min", "0.04"]
+
+
+def console_script():
+    (ep,) = [e for e in entry_points(group="console_scripts") if e.name == "evomesh"]
+    return ep
+
+
+def test_entry_point_is_installed():
+    assert console_script().value == "evomesh.cli:main"
+    assert console_script().load() is main
+
+
+def test_growing_circle_tiny_through_the_entry_point(tmp_path, capsys):
+    out = tmp_path / "out"
+    status = console_script().load()(TINY + ["--steps", "2", "--out", str(out)])
+    assert status == 0
+    printed = capsys.readouterr().out
+    header = next(line for line in printed.splitlines() if line.lstrip().startswith("iter"))
+    for column in ("points", "original", "% orig", "triangles", "min angle", "max R/e", "ratio max", "seconds"):
+        assert column in header
+    assert "paper" not in printed  # only beside a 6-step run
+    names = sorted(p.name for p in out.iterdir())
+    assert names == ["mesh_000.vtu", "mesh_001.vtu", "mesh_002.vtu", "meshes.pvd", "step_001.png", "step_002.png",
+                     "table.csv"]
+    with (out / "table.csv").open() as handle:
+        rows = list(csv.DictReader(handle))
+    assert [int(r["iteration"]) for r in rows] == [1, 2]
+
+
+def test_six_steps_print_the_paper_table(tmp_path, capsys):
+    assert main(TINY + ["--out", str(tmp_path), "--no-figures", "--seed", "3"]) == 0
+    printed = capsys.readouterr().out
+    assert "paper" in printed and "1416" in printed and "10.23" in printed
+    assert not list(tmp_path.glob("*.png"))
+    assert len(list(tmp_path.glob("*.vtu"))) == 7
+
+
+def test_quiet_prints_nothing(tmp_path, capsys):
+    assert main(TINY + ["--steps", "1", "--out", str(tmp_path), "--no-figures", "--quiet"]) == 0
+    assert capsys.readouterr().out == ""
+
+
+@pytest.mark.parametrize(
+    "arguments, message",
+    [
+        (["--band", "-1"], "band must be >= 0"),
+        (["--h-min", "1.0"], "h_min must be <= h_max"),
+        (["--method", "nope"], "method"),
+        (["--r0", "0.9"], "r0"),
+        (["--r-end", "0.01"], "r_end"),
+    ],
+)
+def test_bad_arguments_exit_2_with_one_line(tmp_path, capsys, arguments, message):
+    status = main(TINY + ["--steps", "1", "--no-figures", "--out", str(tmp_path / "x")] + arguments)
+    captured = capsys.readouterr()
+    assert status == 2
+    lines = captured.err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("evomesh: error:") and message in lines[0]
+    assert not (tmp_path / "x").exists()  # nothing written for a rejected run
+
+
+def test_malformed_options_exit_2(capsys):
+    with pytest.raises(SystemExit) as exit_info:
+        main(["growing-circle", "--steps", "0"])
+    assert exit_info.value.code == 2
+    with pytest.raises(SystemExit) as exit_info:
+        main([])
+    assert exit_info.value.code == 2
+
+
+def test_installed_command(tmp_path):
+    command = shutil.which("evomesh", path=str(Path(sys.executable).parent))
+    assert command is not None, "the evomesh console script is not installed next to the interpreter"
+    done = subprocess.run(
+        [command] + TINY + ["--steps", "1", "--out", str(tmp_path), "--no-figures", "--quiet"],
+        capture_output=True, text=True, timeout=60,
+    )
+    assert done.returncode == 0, done.stderr
+    assert (tmp_path / "table.csv").exists()
+    bad = subprocess.run([command, "growing-circle", "--band", "-1", "--out", str(tmp_path / "y")],
+                         capture_output=True, text=True, timeout=60)
+    assert bad.returncode == 2 and bad.stderr.startswith("evomesh: error: band")
