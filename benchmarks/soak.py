@@ -13,14 +13,17 @@ At the end it checks:
 - quality: the min angle of every step stays at or above the method's target
   (``min_angle``, 20 degrees by default, when its quality pass is on);
 - memory: the peak resident memory of the second sweep (steps 251-500, the
-  same mesh sizes again) exceeds that of the first by less than 10% (no leak),
-  and no step's memory strays far from the trend in the mesh size;
+  same mesh sizes again) exceeds that of the first by less than 10%, and
+  repeating the last step 200 times grows resident memory by less than 4 KiB
+  per step (no leak);
 - boundary: at step 500 the four corners are points of the mesh (exactly,
-  kind CORNER), the area is 1 up to 1e-12, every boundary edge lies on the
-  square's sides and the Euler characteristic is 1.
+  kind CORNER), every boundary point lies exactly on the square's sides (up
+  to 1e-14 with --slanted, whose slanted sides round their samples), the area
+  is unchanged up to the rounding of its sum, and the Euler characteristic is 1.
 
 Usage (from the repository root):
-    python benchmarks/soak.py                      # 500 steps, ~3 min
+    python benchmarks/soak.py                      # 500 steps, a few minutes
+    python benchmarks/soak.py --slanted --out /tmp/soak-slanted   # slanted sides
     python benchmarks/soak.py --steps 40 --out /tmp/soak   # quick look
 Outputs: benchmarks/soak.csv, benchmarks/soak.png (or under --out), and a
 Markdown summary on stdout (pasted into benchmarks/SOAK.md). Exit status 1 if
@@ -35,6 +38,7 @@ import importlib
 import resource
 import sys
 import time
+from fractions import Fraction
 from pathlib import Path
 
 import numpy as np
@@ -69,23 +73,47 @@ def front_position(step: int, steps: int) -> float:
     return step / half if step <= half else (steps - step) / half
 
 
-def band_front(steps: int) -> LevelSetFront:
-    # phi(x, t) = x - c(t) is a signed distance to the vertical line x = c(t)
-    return LevelSetFront(lambda x, t: x[:, 0] - front_position(int(round(t)), steps), signed_distance=True)
+# The square's frame -> the domain: identity, or the exact integer map (x, y) ->
+# (4x - 3y, 3x + 4y), a rotation by atan(3/4) = 36.87 degrees scaled by 5. On
+# dyadic coordinates (multiples of 2**-20) its images are exact, so points on
+# a side stay exactly collinear: the sides are slanted yet straight.
+SLANTED = np.array([[4.0, -3.0], [3.0, 4.0]])
 
 
-def boundary_check(mesh: evomesh.Mesh) -> dict[str, object]:
-    corners = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
+def band_front(steps: int, transform: np.ndarray, scale: float) -> LevelSetFront:
+    """The line u = c(t), u the first coordinate in the square's frame."""
+    inverse = np.linalg.inv(transform)
+    # phi = (u - c(t)) * scale is a signed distance (the map is a similarity)
+    return LevelSetFront(lambda x, t: ((x @ inverse.T)[:, 0] - front_position(int(round(t)), steps)) * scale,
+                         signed_distance=True)
+
+
+def boundary_check(initial: evomesh.Mesh, mesh: evomesh.Mesh) -> dict[str, object]:
+    """Corners, area and boundary of ``mesh`` against the initial mesh."""
+    corners = initial.points[initial.kind == PointKind.CORNER]
     corner_rows = [np.flatnonzero((mesh.points == c).all(axis=1)) for c in corners]
     corners_kept = all(len(r) == 1 and mesh.kind[r[0]] == PointKind.CORNER for r in corner_rows)
-    b = mesh.segments[mesh.segment_is_boundary]
-    ends = mesh.points[b]  # (k, 2, 2)
-    on_side = ((ends[:, :, 0] == 0).all(axis=1) | (ends[:, :, 0] == 1).all(axis=1)
-               | (ends[:, :, 1] == 0).all(axis=1) | (ends[:, :, 1] == 1).all(axis=1))
+    a = initial.segments[initial.segment_is_boundary]
+    b = np.unique(mesh.segments[mesh.segment_is_boundary])
+    p, start, end = mesh.points[b], initial.points[a[:, 0]], initial.points[a[:, 1]]
+    # distance from every boundary point of the mesh to the initial boundary
+    d = end - start
+    t = np.clip(np.einsum("pkj,kj->pk", p[:, None] - start[None], d) / np.einsum("kj,kj->k", d, d), 0, 1)
+    distances = np.linalg.norm(p[:, None] - (start[None] + t[..., None] * d[None]), axis=2)
+    nearest = distances.argmin(axis=1)
+
+    def exactly_on(q, a, c):  # exact orientation test in rationals
+        q, a, c = ([Fraction(float(v)) for v in w] for w in (q, a, c))
+        return (c[0] - a[0]) * (q[1] - a[1]) - (c[1] - a[1]) * (q[0] - a[0]) == 0
+
+    on_side = [exactly_on(q, start[k], end[k]) for q, k in zip(p, nearest)]
     return {
+        "n_corners": len(corners),
         "corners_kept": bool(corners_kept),
-        "area_error": abs(mesh.area - 1.0),
-        "boundary_edges_on_sides": bool(on_side.all()),
+        "area_error": abs(mesh.area - initial.area) / initial.area,
+        "boundary_distance": float(distances.min(axis=1).max()),
+        "boundary_points": len(p),
+        "boundary_points_exact": int(sum(on_side)),
         "euler": mesh.euler_characteristic(),
     }
 
@@ -118,14 +146,18 @@ def plot(rows: list[dict[str, float]], target: float, path: Path) -> None:
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--steps", type=int, default=500)
-    parser.add_argument("--points", type=int, default=1500, help="initial mesh size")
-    parser.add_argument("--h-min", type=float, default=0.008, help="spacing in the band")
-    parser.add_argument("--h-max", type=float, default=0.04, help="far-field spacing")
-    parser.add_argument("--band", type=float, default=0.06, help="full band width")
+    parser.add_argument("--points", type=int, default=3000, help="initial mesh size")
+    parser.add_argument("--h-min", type=float, default=0.005, help="spacing in the band")
+    parser.add_argument("--h-max", type=float, default=0.03, help="far-field spacing")
+    parser.add_argument("--band", type=float, default=0.08, help="full band width")
+    parser.add_argument("--slanted", action="store_true",
+                        help="the square rotated by 36.87 degrees and scaled by 5 (exactly straight slanted sides; "
+                        "points sampled on them are rounded)")
     parser.add_argument("--grade", type=float, default=0.3)
     parser.add_argument("--method", default="frfc")
     parser.add_argument("--threads", type=int, default=1)
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--leak-repeats", type=int, default=200, help="repetitions of the last step (leak probe)")
     parser.add_argument("--out", type=Path, default=HERE, help="folder for soak.csv and soak.png")
     args = parser.parse_args(argv)
 
@@ -133,11 +165,17 @@ def main(argv=None) -> int:
     # the quality target of the method: its min_angle when its quality pass is on
     defaults = getattr(importlib.import_module("evomesh.evolve"), f"{args.method.upper()}_DEFAULTS", {})
     target = float(defaults.get("min_angle", 0.0)) if defaults.get("quality", False) else 0.0
-    mesh = unit_square_mesh(args.points, seed=args.seed)
+    square = unit_square_mesh(args.points, seed=args.seed)
+    transform, scale = (SLANTED, 5.0) if args.slanted else (np.eye(2), 1.0)
+    if args.slanted:
+        dyadic = np.round(square.points * 2.0**20) / 2.0**20
+        mesh = evomesh.Mesh(dyadic @ transform.T, square.triangles)
+    else:
+        mesh = square
     initial = evomesh.quality(mesh)
-    law = SpacingLaw(args.h_min, args.h_max, args.band, grade=args.grade, lower=0.3, upper=3.0)
+    law = SpacingLaw(args.h_min * scale, args.h_max * scale, args.band * scale, grade=args.grade, lower=0.3, upper=3.0)
     driver = Driver(mesh, law, method=args.method, seed=args.seed, **options)
-    front = band_front(args.steps)
+    front = band_front(args.steps, transform, scale)
 
     rows: list[dict[str, float]] = []
     start = time.perf_counter()
@@ -170,13 +208,23 @@ def main(argv=None) -> int:
     png_path = args.out / "soak.png"
     plot(rows, target, png_path)
 
+    # --- leak probe: the same step again and again must not grow memory ---
+    probe_mesh, probe_delta = driver.mesh, driver.delta(front, float(args.steps))
+    options = {"method": args.method, "seed": args.seed, **options}
+    for _ in range(args.leak_repeats // 4):
+        evomesh.evolve(probe_mesh, probe_delta, **options)
+    rss_before = rss_mb()
+    for _ in range(args.leak_repeats):
+        evomesh.evolve(probe_mesh, probe_delta, **options)
+    leak_kib = (rss_mb() - rss_before) * 1024 / args.leak_repeats
+
     # --- checks ---------------------------------------------------------
     angle = np.array([r["min_angle_deg"] for r in rows])
     points = np.array([r["points"] for r in rows])
     rss = np.array([r["rss_mb"] for r in rows])
     peak = np.array([r["peak_rss_mb"] for r in rows])
     half = len(rows) // 2
-    boundary = boundary_check(driver.mesh)
+    boundary = boundary_check(mesh, driver.mesh)
     peak_first, peak_second = peak[:half].max(), peak.max()
     # resident memory against mesh size: a leak shows as a residual growing with the step
     fit = np.polyfit(points, rss, 1)
@@ -185,19 +233,25 @@ def main(argv=None) -> int:
     checks = {
         f"min angle >= target ({target:g} deg) at every step": bool((angle >= target - 1e-9).all()),
         "peak memory of the 2nd sweep < 1.1 x the 1st": bool(peak_second < 1.1 * peak_first),
-        "memory drift (beyond mesh size) < 1 MiB per 100 steps": abs(drift_per_100) < 1.0,
-        "4 corners kept exactly (kind CORNER)": boundary["corners_kept"],
-        "area = 1 up to 1e-12": boundary["area_error"] <= 1e-12,
-        "boundary edges on the square's sides": boundary["boundary_edges_on_sides"],
+        f"repeating the last step {args.leak_repeats} times grows memory < 4 KiB per step": leak_kib < 4.0,
+        f"{boundary['n_corners']} corners kept exactly (kind CORNER)": boundary["corners_kept"],
+        # the sum of triangle areas rounds; the domain itself is exact when its
+        # boundary points are exactly on the sides (always for axis-parallel ones)
+        "area unchanged up to rounding (1e-13)": boundary["area_error"] <= 1e-13,
+        "boundary points on the initial sides" + (" up to 1e-14 x size" if args.slanted else " (exactly)"):
+            boundary["boundary_distance"] <= 1e-14 * scale if args.slanted
+            else boundary["boundary_points_exact"] == boundary["boundary_points"],
         "Euler characteristic 1": boundary["euler"] == 1,
     }
 
     ratio = np.array([r["spacing_ratio_max"] for r in rows])
     print(f"## Soak: {len(rows)} steps of a sweeping band front\n")
-    print(f"`python benchmarks/soak.py --steps {args.steps} --points {args.points}` "
+    print(f"`python benchmarks/soak.py --steps {args.steps} --points {args.points}"
+          f"{' --slanted' if args.slanted else ''}` "
           f"(method {args.method}, threads {args.threads}, seed {args.seed}); {total:.0f} s in total, "
           f"{np.mean([r['seconds'] for r in rows]) * 1e3:.0f} ms per step.\n")
-    print(f"Initial mesh: unit square, {mesh.n_points} points, min angle {initial.min_angle:.1f} deg. "
+    shape = "unit square" + (" rotated by 36.87 deg and scaled by 5 (slanted sides)" if args.slanted else "")
+    print(f"Initial mesh: {shape}, {mesh.n_points} points, min angle {initial.min_angle:.1f} deg. "
           f"Band {args.band:g} wide with h_min = {args.h_min:g}, growing with slope {args.grade:g} to "
           f"h_max = {args.h_max:g}; delta = clip(h(d) / nn_M, 0.3, 3); the front x = c(t) goes "
           f"0 -> 1 (steps 1-{half}) -> 0.\n")
@@ -214,10 +268,12 @@ def main(argv=None) -> int:
               f"{fmt.format(values[0])} | {fmt.format(values[-1])} |")
     print(f"\nMemory: peak {peak_first:.0f} MiB after the first sweep, {peak_second:.0f} MiB after the second; "
           f"resident memory minus its linear fit in the point count drifts by {drift_per_100:+.2f} MiB "
-          f"per 100 steps.")
-    print(f"Boundary at step {len(rows)}: corners kept: {boundary['corners_kept']}, |area - 1| = "
-          f"{boundary['area_error']:.1e}, boundary edges on the sides: {boundary['boundary_edges_on_sides']}, "
-          f"Euler characteristic {boundary['euler']}.\n")
+          f"per 100 steps (allocator noise of a few MiB); the last step repeated {args.leak_repeats} times "
+          f"({probe_mesh.n_points} points) changes it by {leak_kib:+.2f} KiB per step.")
+    print(f"Boundary at step {len(rows)}: {boundary['n_corners']} corners kept: {boundary['corners_kept']}, "
+          f"relative area change {boundary['area_error']:.1e}; {boundary['boundary_points_exact']} of "
+          f"{boundary['boundary_points']} boundary points exactly on the initial sides (exact rational test), "
+          f"largest distance {boundary['boundary_distance']:.1e}; Euler characteristic {boundary['euler']}.\n")
     for name, ok in checks.items():
         print(f"- [{'x' if ok else ' '}] {name}")
     print(f"\nPer-step data: `{csv_path.relative_to(HERE.parent) if csv_path.is_relative_to(HERE.parent) else csv_path}`;"

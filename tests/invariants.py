@@ -59,8 +59,12 @@ def check_valid_mesh(mesh: evomesh.Mesh) -> None:
     assert ((mesh.kind <= PointKind.BOUNDARY) == on_segment).all(), "kind disagrees with segments"
 
 
-def check_evolved(old: evomesh.Mesh, new: evomesh.Mesh, *, rel_area: float = 1e-12) -> None:
-    """Output of evolve against its input: domain, boundary, corners, origins."""
+def check_evolved(old: evomesh.Mesh, new: evomesh.Mesh, *, rel_area: float = 1e-12, rel_distance: float = 1e-12) -> None:
+    """Output of evolve against its input: domain, boundary, corners, origins.
+
+    Points sampled on a slanted boundary segment are rounded to doubles, so they
+    lie on it only up to ulp(|x|): for a mesh far from the origin compared with
+    its size, loosen rel_area and rel_distance (relative to the mesh size)."""
     check_valid_mesh(new)
     assert abs(new.area - old.area) <= rel_area * old.area, (new.area, old.area)
     assert new.euler_characteristic() == old.euler_characteristic()
@@ -77,7 +81,7 @@ def check_evolved(old: evomesh.Mesh, new: evomesh.Mesh, *, rel_area: float = 1e-
     scale = np.ptp(old.points, axis=0).max()
     for probe in (new.points[nb[:, 0]], new.points[nb[:, 1]], new.points[nb].mean(axis=1)):
         dist = distance_to_segments(probe, old.points[ob[:, 0]], old.points[ob[:, 1]])
-        assert dist.max() <= 1e-12 * scale, dist.max()
+        assert dist.max() <= rel_distance * scale, dist.max()
 
 
 def nn_in(mesh_points: np.ndarray, probes: np.ndarray) -> np.ndarray:

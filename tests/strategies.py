@@ -288,9 +288,11 @@ def mutated_mesh_arrays(draw, invalid: bool = True):
         pts = pts.astype(str)
     elif mutation == "no-triangles":
         tris = tris[:0]
-    elif mutation == "collinear-only":
-        t = np.unique(rng.random(max(3, n)))
-        pts = np.c_[t, 2 * t + 1] * span
+    elif mutation == "collinear-only":  # exactly collinear: small integers times a power of two
+        t = np.unique(rng.integers(-50, 50, max(3, n))).astype(float)
+        if len(t) < 3:
+            t = np.array([0.0, 1.0, 2.0])
+        pts = np.c_[t, 2 * t + 1] * 2.0 ** int(rng.integers(-30, 30))
         k = len(pts)
         tris = np.c_[np.arange(k - 2), np.arange(1, k - 1), np.arange(2, k)]
     elif mutation == "points-1d":

@@ -107,6 +107,10 @@ MESH_CASES = [
     ("collinear-only-many", _with(points=np.c_[np.arange(6.0), 2 * np.arange(6.0)], triangles=[[0, 1, 2], [2, 3, 4], [3, 4, 5]]), ValueError, "zero area"),
     ("collinear-triangle", _with(points=np.r_[P, [[2.0, 0.0]]], triangles=[[0, 1, 2], [1, 3, 2], [0, 1, 4]]), ValueError, "zero area"),
     ("repeated-vertex", _with(triangles=np.array([[0, 1, 1], [1, 3, 2]])), ValueError, "repeats a vertex"),
+    # not exactly collinear, but flat at floating-point precision (crashed CGAL's mesher)
+    ("nearly-flat", _with(points=[[1.0000000000000001e-15, 5.0000000000000008e-15], [5.0000000000000008e-15, 9.0000000000000011e-15], [3.0000000000000006e-15, 7.0000000000000009e-15], [9.0000000000000011e-15, 9.0000000000000011e-15]], triangles=[[2, 1, 0], [3, 1, 2]]), ValueError, "degenerate"),
+    ("nearly-flat-relative-1e-12", _with(points=np.r_[P[[0, 1, 3]], [[0.5, 1e-12]]], triangles=[[0, 3, 2], [3, 1, 2], [0, 1, 3]]), ValueError, "degenerate"),
+    ("thin-but-fine-1e-8", _with(points=np.r_[P[[0, 1, 3]], [[0.5, 1e-8]]], triangles=[[0, 3, 2], [3, 1, 2], [0, 1, 3]]), None, None),
     # duplicates
     ("duplicate-triangle", _with(triangles=np.array([[0, 1, 2], [1, 3, 2], [2, 1, 0]])), ValueError, "more than once"),
     ("duplicate-point", _with(points=np.r_[P, [[1.0, 1.0]]], triangles=[[0, 1, 2], [1, 3, 2], [1, 4, 2]]), ValueError, "duplicates"),
@@ -467,3 +471,78 @@ def test_spacing_law_rejects_bad_distances(mesh, distance, error):
         law.delta(mesh, d)
     with pytest.raises(ValueError, match="one value per mesh point"):
         law.delta(mesh, np.ones(3))
+
+
+# ---------------------------------------------------------------------------
+# mesh files (evomesh.io, issue 3) and the command line
+# ---------------------------------------------------------------------------
+
+io = pytest.importorskip("evomesh.io")
+meshio = pytest.importorskip("meshio")
+
+_READ_MESH_BUG = (
+    "evomesh.io.read_mesh passes meshio's errors through: meshio.ReadError (not an OSError/ValueError) "
+    "for a missing file, and sys.exit(1) (SystemExit) for a corrupt one"
+)
+
+
+def test_mesh_file_round_trip_never_modifies_the_mesh(tmp_path):
+    mesh = grid_mesh(6, 6, hole=True)
+    path = io.write_mesh(tmp_path / "m.vtu", mesh)
+    again, _ = io.read_mesh(path)
+    check_valid_mesh(again)
+    assert np.array_equal(again.points, mesh.points) and np.array_equal(again.triangles, mesh.triangles)
+    assert np.array_equal(again.kind, mesh.kind)
+
+
+@pytest.mark.xfail(strict=True, raises=meshio.ReadError, reason=_READ_MESH_BUG)
+def test_missing_mesh_file_raises_file_not_found(tmp_path):
+    with pytest.raises(FileNotFoundError):
+        io.read_mesh(tmp_path / "missing.vtu")
+
+
+@pytest.mark.xfail(strict=True, raises=(SystemExit, meshio.ReadError), reason=_READ_MESH_BUG)
+@pytest.mark.parametrize(
+    "name, content",
+    [("garbage.vtu", b"garbage\x00\x01\x02"), ("truncated.vtu", b'<?xml version="1.0"?><VTKFile type="Unstr'),
+     ("empty.vtu", b""), ("mesh.unknown-suffix", b"0 0\n1 0\n0 1\n")],
+    ids=["garbage", "truncated", "empty", "unknown-format"],
+)
+def test_corrupt_mesh_file_raises_value_error(tmp_path, name, content):
+    path = tmp_path / name
+    path.write_bytes(content)
+    with pytest.raises(ValueError):
+        io.read_mesh(path)
+
+
+def test_mesh_file_with_a_malformed_mesh_raises_value_error(tmp_path):
+    """A well-formed file holding an invalid mesh goes through Mesh's checks."""
+    points = np.c_[SQUARE_POINTS, np.zeros(4)]
+    for triangles in ([[0, 1, 2], [1, 3, 2], [0, 1, 3]], [[0, 1, 2]]):  # overlapping; orphan point 3
+        path = tmp_path / "bad.vtu"
+        meshio.Mesh(points, [("triangle", np.array(triangles))]).write(path)
+        with pytest.raises(ValueError):
+            io.read_mesh(path)
+
+
+def test_cli_errors_are_one_line_and_exit_non_zero(tmp_path, capsys):
+    cli = pytest.importorskip("evomesh.cli")
+    blocker = tmp_path / "a-file"
+    blocker.write_text("not a folder")
+    base = ["growing-circle", "--steps", "1", "--points", "120", "--no-figures", "--quiet"]
+    for extra in (["--out", str(blocker)], ["--out", str(tmp_path / "o"), "--h-max", "nan"],
+                  ["--out", str(tmp_path / "o"), "--h-min", "inf"], ["--out", str(tmp_path / "o"), "--method", "x"]):
+        assert cli.main(base + extra) != 0
+        lines = capsys.readouterr().err.strip().splitlines()
+        assert len(lines) == 1 and lines[0].startswith("evomesh: error:"), lines
+
+
+@pytest.mark.xfail(
+    strict=True,
+    raises=IndexError,
+    reason="fronts: PointFront/as_query_points accept coordinates whose squared distances overflow (no 1e75 limit "
+    "as in Mesh); cKDTree then answers with the missing-neighbour index k and distance() raises IndexError",
+)
+def test_point_front_rejects_coordinates_beyond_the_mesh_limit():
+    with pytest.raises(ValueError):
+        fronts.PointFront([[0.0, 0.0], [1e300, 0.0], [1.0, 1e300]]).distance([[1.0, 1.0]])

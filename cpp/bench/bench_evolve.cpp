@@ -9,7 +9,7 @@
 // delta(p) = clamp(h_new(p) / h_old(p), 0.5, 2), a moving front that refines ahead
 // of the band, coarsens behind it and leaves the rest (delta = 1) alone.
 //
-//   bench_evolve [--sizes 1e4,1e5,1e6] [--repeats 3] [--threads 0] [--no-baseline]
+//   bench_evolve [--sizes 1e4,1e5,1e6] [--repeats 3] [--threads 0] [--no-baseline] [--quality]
 //                [--max-samples 5e7] [--json FILE] [--cache-dir DIR]
 #include <malloc.h>
 #include <sys/resource.h>
@@ -46,7 +46,7 @@ constexpr double kBandHalfWidth = 0.025;
 constexpr double kGradingLength = 0.05;
 constexpr double kCoarseRatio = 8.0;
 // Output points of the setup step per 1 / s^2 (measured; sets s for a target size).
-constexpr double kPointsPerInverseSquareSpacing = 0.104;
+constexpr double kPointsPerInverseSquareSpacing = 0.0634;
 
 double target_spacing(double x, double band_center, double s) {
   const double d = std::max(0.0, std::abs(x - band_center) - kBandHalfWidth);
@@ -86,8 +86,8 @@ Mesh_arrays structured_grid(Index k) {
   return mesh;
 }
 
-Frfc_options bench_options(int threads, double max_samples) {
-  Frfc_options options;  // python/evomesh/evolve.py FRFC_DEFAULTS
+Frfc_options bench_options(int threads, double max_samples, bool quality = false) {
+  Frfc_options options;  // python/evomesh/evolve.py FRFC_DEFAULTS, quality pass off unless asked
   options.cell_factor = 1.0;
   options.exact_radius = true;
   options.radius_scale = 0.75;
@@ -96,6 +96,7 @@ Frfc_options bench_options(int threads, double max_samples) {
   options.seed = 0;
   options.threads = threads;
   options.max_samples = max_samples;
+  options.quality = quality;  // min_angle 20 by default, as in Python
   return options;
 }
 
@@ -112,15 +113,16 @@ Graded_case graded_case(double target, int threads, double max_samples) {
   Graded_case out;
   const auto t0 = std::chrono::steady_clock::now();
   const double s = std::sqrt(kPointsPerInverseSquareSpacing / target);
-  // Grid spacing 2 s: the setup step refines the band by 2 and coarsens by up to 4.
-  const Index k = static_cast<Index>(std::ceil(1.0 / (2.0 * s))) + 1;
+  // Grid spacing 4 s: the setup step refines the band by 4 and coarsens by up to 2.
+  const Index k = static_cast<Index>(std::ceil(1.0 / (4.0 * s))) + 1;
   Mesh_arrays grid = structured_grid(k);
   const double grid_spacing = 1.0 / static_cast<double>(k - 1);
   std::vector<double> setup_delta(grid.points.size());
   for (std::size_t i = 0; i < grid.points.size(); ++i) {
     setup_delta[i] = target_spacing(grid.points[i][0], kBandCenter, s) / grid_spacing;
   }
-  Evolve_result setup = frfc(grid, setup_delta, bench_options(threads, max_samples));
+  // The setup step samples densely in the band: it is not limited by --max-samples.
+  Evolve_result setup = frfc(grid, setup_delta, bench_options(threads, std::max(max_samples, 1e10)));
   out.mesh = std::move(setup.mesh);
   out.delta.resize(out.mesh.points.size());
   for (std::size_t i = 0; i < out.mesh.points.size(); ++i) {
@@ -255,7 +257,7 @@ double rusage_max_mib() {
 int main(int argc, char** argv) {
   std::vector<double> sizes{1e4, 1e5, 1e6};
   int repeats = 3, threads = 0;
-  bool baseline = true;
+  bool baseline = true, quality = false;
   double max_samples = 5e7;
   std::string json_path, cache_dir;
   for (int a = 1; a < argc; ++a) {
@@ -268,18 +270,20 @@ int main(int argc, char** argv) {
     else if (arg == "--repeats") repeats = std::stoi(value());
     else if (arg == "--threads") threads = std::stoi(value());
     else if (arg == "--no-baseline") baseline = false;
+    else if (arg == "--quality") quality = true;
     else if (arg == "--max-samples") max_samples = std::stod(value());
     else if (arg == "--json") json_path = value();
     else if (arg == "--cache-dir") cache_dir = value();
     else {
       std::fprintf(stderr,
-                   "usage: bench_evolve [--sizes 1e4,1e5,1e6] [--repeats 3] [--threads 0] [--no-baseline]"
+                   "usage: bench_evolve [--sizes 1e4,1e5,1e6] [--repeats 3] [--threads 0] [--no-baseline] [--quality]"
                    " [--max-samples 5e7] [--json FILE] [--cache-dir DIR]\n");
       return arg == "--help" || arg == "-h" ? 0 : 2;
     }
   }
-  std::printf("# bench_evolve: CGAL %s, %u hardware threads, threads=%d, %s, repeats=%d (medians)\n",
-              CGAL_VERSION_STR, std::thread::hardware_concurrency(), threads, cpu_model().c_str(), repeats);
+  std::printf("# bench_evolve: CGAL %s, %u hardware threads, threads=%d, %s, quality pass %s, repeats=%d (medians)\n",
+              CGAL_VERSION_STR, std::thread::hardware_concurrency(), threads, cpu_model().c_str(), quality ? "on" : "off",
+              repeats);
   std::fflush(stdout);
   std::ostringstream json;
   json << "[";
@@ -293,7 +297,7 @@ int main(int argc, char** argv) {
       c = graded_case(target, threads, max_samples);
       if (!cache.empty()) save_case(cache, c);
     }
-    const Frfc_options options = bench_options(threads, max_samples);
+    const Frfc_options options = bench_options(threads, max_samples, quality);
     std::map<std::string, std::vector<double>> stage_seconds;
     std::map<std::string, double> counts;
     std::vector<double> cdt_seconds;
@@ -351,7 +355,7 @@ int main(int argc, char** argv) {
     for (const auto& [name, values] : stage_seconds) json << ", \"seconds_" << name << "\": " << median(values);
     for (const auto& [name, value] : counts) json << ", \"" << name << "\": " << value;
     if (baseline) json << ", \"seconds_cdt_baseline\": " << cdt;
-    json << ", \"peak_step_mib\": " << peak_mib << ", \"input_rss_mib\": " << input_mib
+    json << ", \"quality\": " << (quality ? "true" : "false") << ", \"peak_step_mib\": " << peak_mib << ", \"input_rss_mib\": " << input_mib
          << ", \"process_peak_mib\": " << rusage_max_mib() << ", \"output_hash\": \"" << std::hex << output_hash
          << std::dec << "\"}";
   }

@@ -4,6 +4,7 @@
 #include <pybind11/pybind11.h>
 #include <pybind11/stl.h>
 
+#include <cmath>
 #include <cstring>
 
 #include "evomesh/drfc.hpp"
@@ -27,11 +28,28 @@ void require_shape(const py::array& a, py::ssize_t cols, const char* name) {
   }
 }
 
+// The core assumes what Python's Mesh checks (a valid planar mesh); the bindings
+// check only what is cheap and would otherwise read out of bounds or feed NaN
+// to CGAL: shapes, finite coordinates, index ranges (issue 5).
 std::vector<Vec2> to_points(const Float_array& a, const char* name = "points") {
   require_shape(a, 2, name);
   std::vector<Vec2> out(static_cast<std::size_t>(a.shape(0)));
   if (!out.empty()) std::memcpy(out.data(), a.data(), out.size() * sizeof(Vec2));
+  for (const auto& p : out) {
+    if (!std::isfinite(p[0]) || !std::isfinite(p[1])) throw Input_error(std::string(name) + " must be finite");
+  }
   return out;
+}
+
+template <std::size_t K>
+void require_indices(const std::vector<std::array<Index, K>>& rows, std::size_t n, const char* name) {
+  for (const auto& row : rows) {
+    for (Index v : row) {
+      if (v < 0 || static_cast<std::size_t>(v) >= n) {
+        throw Input_error(std::string(name) + " has a point index out of range [0, " + std::to_string(n) + ")");
+      }
+    }
+  }
 }
 
 template <std::size_t K>
@@ -90,6 +108,8 @@ Mesh_arrays to_mesh(const Float_array& points, const Int_array& triangles, const
   mesh.points = to_points(points);
   mesh.triangles = to_index_rows<3>(triangles, "triangles");
   mesh.segments = to_index_rows<2>(segments, "segments");
+  require_indices(mesh.triangles, mesh.points.size(), "triangles");
+  require_indices(mesh.segments, mesh.points.size(), "segments");
   mesh.segment_is_boundary = to_vector<std::uint8_t>(segment_is_boundary);
   mesh.kind = to_kinds(kind);
   if (mesh.kind.size() != mesh.points.size()) throw Input_error("kind must have one value per point");
@@ -137,6 +157,8 @@ PYBIND11_MODULE(_core, m) {
         mesh.triangles = to_index_rows<3>(triangles, "triangles");
         std::vector<Edge> user;
         if (segments) user = to_index_rows<2>(*segments, "segments");
+        require_indices(mesh.triangles, mesh.points.size(), "triangles");
+        require_indices(user, mesh.points.size(), "segments");
         std::size_t flipped;
         {
           py::gil_scoped_release release;
@@ -356,6 +378,7 @@ PYBIND11_MODULE(_core, m) {
       [](const Float_array& points, const Int_array& triangles, const Float_array& queries) {
         auto pts = to_points(points);
         auto tris = to_index_rows<3>(triangles, "triangles");
+        require_indices(tris, pts.size(), "triangles");
         auto q = to_points(queries, "queries");
         std::vector<Index> t;
         std::vector<std::array<double, 3>> bary;

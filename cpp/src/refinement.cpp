@@ -45,10 +45,36 @@ using Cdt = CGAL::Constrained_Delaunay_triangulation_2<
 using Vertex_handle = Cdt::Vertex_handle;
 using Face_handle = Cdt::Face_handle;
 
-// Spacing data for rule 4 (Section 5): sites and weights of f = min_s (w_s + |x - s|).
+// The triangulation works on the points scaled by a power of two (exact) to
+// magnitude about 1: CGAL's circumcentres and the quality measures multiply three
+// lengths, which would overflow for coordinates near 1e150 (or underflow near 1e-150).
+struct Scaling {
+  double to_unit = 1;
+  double from_unit = 1;
+};
+
+Scaling unit_scaling(const std::vector<Vec2>& points) {
+  double largest = 0;
+  for (const auto& p : points) largest = std::max({largest, std::abs(p[0]), std::abs(p[1])});
+  if (!(largest > 0) || !std::isfinite(largest)) return {};
+  const int e = std::ilogb(largest);
+  const Scaling s{std::ldexp(1.0, -e), std::ldexp(1.0, e)};
+  // Exact unless a coordinate would become subnormal; then keep the input scale.
+  for (const auto& p : points) {
+    for (double x : p) {
+      const double y = x * s.to_unit;
+      if (y * s.from_unit != x || (y != 0 && !std::isnormal(y))) return {};
+    }
+  }
+  return s;
+}
+
+// Spacing data for rule 4 (Section 5): sites and weights of f = min_s (w_s + |x - s|)
+// in input units; f at the vertices is kept in the triangulation's units.
 struct Spacing_data {
   const std::vector<Vec2>* sites = nullptr;
   const std::vector<double>* weights = nullptr;
+  Scaling scaling;
 };
 
 double squared_distance(const Point_2& a, const Point_2& b) {
@@ -75,21 +101,22 @@ double target_spacing(const Cdt& tr, Vertex_handle v, const Spacing_data& spacin
   if (info.f >= 0) return info.f;
   double best = std::numeric_limits<double>::infinity();
   Index best_site = -1;
+  const double x = v->point().x() * spacing.scaling.from_unit, y = v->point().y() * spacing.scaling.from_unit;
   auto c = tr.incident_vertices(v), done = c;
   do {
     if (tr.is_infinite(c) || c->info().site < 0) continue;
     const Index s = c->info().site;
     const Vec2& p = (*spacing.sites)[s];
-    const double value = (*spacing.weights)[s] + std::hypot(v->point().x() - p[0], v->point().y() - p[1]);
+    const double value = (*spacing.weights)[s] + std::hypot(x - p[0], y - p[1]);
     if (value < best) {
       best = value;
       best_site = s;
     }
   } while (++c != done);
   if (best_site < 0) return best;  // no neighbour knows a site yet: no rule 4 here
-  info.f = best;
+  info.f = best * spacing.scaling.to_unit;
   info.site = best_site;
-  return best;
+  return info.f;
 }
 
 // Face criteria for CGAL's Delaunay mesher. Quality: for a triangle that breaks
@@ -100,15 +127,20 @@ class Refinement_criteria {
  public:
   using Quality = double;
 
-  Refinement_criteria(double min_angle_degrees, const Cdt& tr, const Spacing_data* spacing)
+  Refinement_criteria(double min_angle_degrees, const Cdt& tr, const Spacing_data* spacing, bool off_centres)
       : bound_(std::pow(std::sin(min_angle_degrees * kPi / 180.0), 2)),
         min_angle_(min_angle_degrees),
+        off_centres_(off_centres),
         tr_(&tr),
         spacing_(spacing) {}
 
-  // The off-centre's new triangle sees its short edge a little above the target
-  // angle, so rounding cannot make it bad again.
-  double off_centre_angle() const { return std::min(1.02 * min_angle_, 60.0); }
+  // Cotangent of half the angle under which an off-centre sees the short edge;
+  // infinite (always the circumcentre) without off-centres. That angle is a little
+  // above the target, so rounding cannot make the new triangle bad again.
+  double off_centre_half_angle_cotangent() const {
+    if (!off_centres_) return std::numeric_limits<double>::infinity();
+    return 1.0 / std::tan(0.5 * std::min(1.02 * min_angle_, 60.0) * kPi / 180.0);
+  }
 
   class Is_bad {
    public:
@@ -122,8 +154,7 @@ class Refinement_criteria {
       const Point_2& pa = fh->vertex(0)->point();
       const Point_2& pb = fh->vertex(1)->point();
       const Point_2& pc = fh->vertex(2)->point();
-      // Edge lengths, not their products, so that coordinates of any magnitude
-      // (1e-150 .. 1e150) neither overflow nor underflow.
+      // Edge lengths, not their products (which could leave the range of double).
       const double a = std::sqrt(squared_distance(pb, pc)), b = std::sqrt(squared_distance(pc, pa)),
                    c = std::sqrt(squared_distance(pa, pb));
       const double twice_area = (pb.x() - pa.x()) * (pc.y() - pa.y()) - (pb.y() - pa.y()) * (pc.x() - pa.x());
@@ -169,6 +200,7 @@ class Refinement_criteria {
  private:
   double bound_;
   double min_angle_;
+  bool off_centres_;
   const Cdt* tr_;
   const Spacing_data* spacing_;
 };
@@ -190,14 +222,15 @@ using Faces_base_cgal = CGAL::Mesh_2::Refine_faces_base<Cdt, Refinement_criteria
 // is inserted next to one of its vertices without destroying it. Such stale
 // entries are dropped before the mesher looks at the queue.
 //
-// Badly shaped triangles are split at their off-centre (Ungor, "Off-centers", 2004)
-// rather than their circumcentre: the point on the bisector of the shortest edge pq,
-// towards the circumcentre, from which pq is seen under the target angle. It is the
-// circumcentre when that is nearer. Same guarantees as Ruppert's rule 3, fewer points.
+// In the quality pass badly shaped triangles are split at their off-centre (Ungor,
+// "Off-centers", 2004) rather than their circumcentre: the point on the bisector of
+// the shortest edge pq, towards the circumcentre, from which pq is seen under the
+// target angle; the circumcentre when that is nearer. Same guarantees as Ruppert's
+// rule 3 with fewer points. DRFC's refinement uses circumcentres (Ruppert, Section 5).
 struct Faces_base : Faces_base_cgal {
   Faces_base(Cdt& tr, Refinement_criteria& criteria, Edges_level& edges)
       : Faces_base_cgal(tr, criteria, edges),
-        half_angle_cotangent_(1.0 / std::tan(0.5 * criteria.off_centre_angle() * kPi / 180.0)) {}
+        half_angle_cotangent_(criteria.off_centre_half_angle_cotangent()) {}
 
   Point_2 refinement_point_impl(const Cdt::Face_handle& f) const {
     const Point_2 c = this->triangulation_ref_impl().circumcenter(f);
@@ -271,13 +304,13 @@ class Mesher {
   Visitor visitor_;
 };
 
-std::vector<Vertex_handle> insert_points(Cdt& cdt, const std::vector<Vec2>& points) {
+std::vector<Vertex_handle> insert_points(Cdt& cdt, const std::vector<Vec2>& points, const Scaling& scaling) {
   std::vector<std::pair<Point_2, Vertex_info>> input;
   input.reserve(points.size());
   for (std::size_t i = 0; i < points.size(); ++i) {
     Vertex_info info;
     info.index = static_cast<Index>(i);
-    input.emplace_back(to_cgal(points[i]), info);
+    input.emplace_back(Point_2(points[i][0] * scaling.to_unit, points[i][1] * scaling.to_unit), info);
   }
   cdt.insert(input.begin(), input.end());
   if (cdt.number_of_vertices() != points.size()) throw Input_error("points contain duplicates");
@@ -388,7 +421,9 @@ std::size_t run_mesher(Mesher& mesher, std::size_t budget, Refinement_report& re
   return inserted;
 }
 
-Refined_mesh extract(Cdt& cdt, const std::vector<Point_kind>& input_kind, const std::vector<std::uint8_t>& removed) {
+// Input points keep their exact input coordinates; f is returned in input units.
+Refined_mesh extract(Cdt& cdt, const std::vector<Vec2>& input_points, const std::vector<Point_kind>& input_kind,
+                     const std::vector<std::uint8_t>& removed, const Scaling& scaling) {
   Refined_mesh result;
   Mesh_arrays& out = result.mesh;
   const std::size_t n = input_kind.size();
@@ -413,16 +448,16 @@ Refined_mesh extract(Cdt& cdt, const std::vector<Point_kind>& input_kind, const 
   for (auto v = cdt.finite_vertices_begin(); v != cdt.finite_vertices_end(); ++v) {
     if (v->info().index < 0) continue;
     const Index o = v->info().out;
-    out.points[o] = {v->point().x(), v->point().y()};
+    out.points[o] = input_points[v->info().index];
     out.kind[o] = input_kind[v->info().index];
-    result.f[o] = v->info().f;
+    result.f[o] = v->info().f * scaling.from_unit;
   }
   for (std::size_t k = 0; k < inserted.size(); ++k) {
     const Index o = static_cast<Index>(result.source.size() + k);
     inserted[k]->info().out = o;
-    out.points[o] = {inserted[k]->point().x(), inserted[k]->point().y()};
+    out.points[o] = {inserted[k]->point().x() * scaling.from_unit, inserted[k]->point().y() * scaling.from_unit};
     out.kind[o] = Point_kind::sampled;
-    result.f[o] = inserted[k]->info().f;
+    result.f[o] = inserted[k]->info().f * scaling.from_unit;
   }
   result.source.resize(n_out, -1);
   for (auto f = cdt.finite_faces_begin(); f != cdt.finite_faces_end(); ++f) {
@@ -487,7 +522,8 @@ Refined_mesh quality_triangulate(const std::vector<Vec2>& points, const std::vec
     throw Input_error("crowding_angle must be 0 (off) or in [90, 180)");
   }
   Cdt cdt;
-  const auto handles = insert_points(cdt, points);
+  const Scaling scaling = unit_scaling(points);
+  const auto handles = insert_points(cdt, points, scaling);
   for (const auto& piece : pieces) cdt.insert_constraint(handles[piece.a], handles[piece.b]);
   Refinement_report report;
   std::vector<std::uint8_t> removed(points.size(), 0);
@@ -496,13 +532,13 @@ Refined_mesh quality_triangulate(const std::vector<Vec2>& points, const std::vec
     crowded = drop_crowding_points(cdt, handles, pieces, options.crowding_angle, removed, report);
   }
   mark_domain(cdt, handles, pieces);
-  Mesher mesher(cdt, Refinement_criteria(options.min_angle, cdt, nullptr));
+  Mesher mesher(cdt, Refinement_criteria(options.min_angle, cdt, nullptr, /*off_centres=*/true));
   mesher.init();
   for (const auto& e : crowded) mesher.queue_split(e.first, e.second);
   const double budget = options.max_inserted_fraction * static_cast<double>(points.size()) + options.max_inserted_extra;
   run_mesher(mesher, static_cast<std::size_t>(std::max(0.0, budget)), report);
   report.rounds = 1;
-  Refined_mesh result = extract(cdt, kind, removed);
+  Refined_mesh result = extract(cdt, points, kind, removed, scaling);
   result.f.clear();
   result.report.n_inserted = report.n_inserted;
   result.report.n_removed = report.n_removed;
@@ -519,7 +555,8 @@ Refined_mesh spacing_refine(const Mesh_arrays& mesh, const Spacing_function& spa
   if (f_at_points.size() != n) throw Input_error("spacing_refine: one f value per point");
   if (!(min_angle >= 0 && min_angle < 60)) throw Input_error("min_angle must be in [0, 60)");
   Cdt cdt;
-  const auto handles = insert_points(cdt, mesh.points);
+  const Scaling scaling = unit_scaling(mesh.points);
+  const auto handles = insert_points(cdt, mesh.points, scaling);
   std::vector<Constraint_piece> pieces(mesh.segments.size());
   for (std::size_t k = 0; k < pieces.size(); ++k) {
     pieces[k] = {mesh.segments[k][0], mesh.segments[k][1], mesh.segment_is_boundary[k] != 0};
@@ -534,14 +571,14 @@ Refined_mesh spacing_refine(const Mesh_arrays& mesh, const Spacing_function& spa
     const auto& weights = spacing.weights();
     for (std::size_t i = 0; i < n; ++i) {
       auto& info = handles[i]->info();
-      info.f = f_at_points[i];
+      info.f = f_at_points[i] * scaling.to_unit;
       info.site = weights[i] <= f_eval[i] ? static_cast<Index>(i) : site[i];
       info.exact = true;
     }
   }
   mark_domain(cdt, handles, pieces);
-  const Spacing_data data{&spacing.sites(), &spacing.weights()};
-  Mesher mesher(cdt, Refinement_criteria(min_angle, cdt, &data));
+  const Spacing_data data{&spacing.sites(), &spacing.weights(), scaling};
+  Mesher mesher(cdt, Refinement_criteria(min_angle, cdt, &data, /*off_centres=*/false));
   mesher.init();
   Refinement_report report;
   std::vector<Vertex_handle> estimated;
@@ -557,13 +594,15 @@ Refined_mesh spacing_refine(const Mesh_arrays& mesh, const Spacing_function& spa
       if (!v->info().exact) estimated.push_back(v);
     }
     queries.resize(estimated.size());
-    for (std::size_t k = 0; k < estimated.size(); ++k) queries[k] = {estimated[k]->point().x(), estimated[k]->point().y()};
+    for (std::size_t k = 0; k < estimated.size(); ++k) {
+      queries[k] = {estimated[k]->point().x() * scaling.from_unit, estimated[k]->point().y() * scaling.from_unit};
+    }
     values.resize(estimated.size());
     sites.resize(estimated.size());
     spacing.evaluate(queries.data(), queries.size(), values.data(), sites.data(), threads);
     for (std::size_t k = 0; k < estimated.size(); ++k) {
       auto& info = estimated[k]->info();
-      info.f = values[k];
+      info.f = values[k] * scaling.to_unit;
       info.site = sites[k];
       info.exact = true;
     }
@@ -571,7 +610,7 @@ Refined_mesh spacing_refine(const Mesh_arrays& mesh, const Spacing_function& spa
     mesher.rescan_faces();
   }
   std::vector<std::uint8_t> removed(n, 0);
-  Refined_mesh result = extract(cdt, mesh.kind, removed);
+  Refined_mesh result = extract(cdt, mesh.points, mesh.kind, removed, scaling);
   result.report.n_inserted = report.n_inserted;
   result.report.rounds = report.rounds;
   result.report.capped = report.capped;

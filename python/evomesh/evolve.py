@@ -142,7 +142,7 @@ def evolve(mesh: Mesh, delta: Any, *, method: str = "frfc", seed: int = 0, **opt
         triangulation; no samples are added in the coarsening.
     seed : int
         Seed of the sampling; the same mesh, delta, options and seed give a
-        bit-identical result.
+        bit-identical result. ("drfc" draws no random numbers.)
     **options
         For "frfc" (defaults in :data:`FRFC_DEFAULTS`):
 

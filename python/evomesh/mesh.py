@@ -113,6 +113,31 @@ def _check_point_distances(points: np.ndarray) -> None:
         )
 
 
+# A triangle whose height is below this fraction of its longest edge (smallest
+# angle below ~6e-9 degrees) is degenerate for floating point: CGAL's mesher
+# (quality pass, DRFC) splits edges at rounded midpoints, and a vertex that close
+# to an edge can end up on its wrong side (measured: crashes below 1e-13).
+_MIN_RELATIVE_HEIGHT = 1e-10
+# ... and its height must exceed the rounding of its coordinates by this factor.
+_MIN_HEIGHT_ULPS = 1024
+
+
+def _check_not_flat(points: np.ndarray, triangles: np.ndarray) -> None:
+    p = points[triangles]
+    edges = np.stack([p[:, 1] - p[:, 0], p[:, 2] - p[:, 1], p[:, 0] - p[:, 2]], axis=1)
+    longest = np.sqrt((edges**2).sum(axis=2).max(axis=1))
+    twice_area = np.abs(edges[:, 0, 0] * edges[:, 2, 1] - edges[:, 0, 1] * edges[:, 2, 0])
+    height = twice_area / longest
+    reach = np.abs(p).max(axis=(1, 2))
+    flat = (height < _MIN_RELATIVE_HEIGHT * longest) | (height < _MIN_HEIGHT_ULPS * np.finfo(float).eps * reach)
+    if flat.any():
+        k = int(np.argmax(flat))
+        raise ValueError(
+            f"triangle {k} is degenerate: its height is {height[k] / longest[k]:.1e} of its longest edge "
+            f"(at least {_MIN_RELATIVE_HEIGHT:g}, and {_MIN_HEIGHT_ULPS} rounding units of its coordinates, are needed)"
+        )
+
+
 class Mesh:
     """A valid 2-D triangle mesh with constraint segments; immutable.
 
@@ -144,8 +169,8 @@ class Mesh:
     ValueError
         For any malformed mesh: wrong shapes, fewer than 3 points or no
         triangle, NaN, infinite or out-of-range coordinates, indices out of
-        range, zero-area (collinear), repeated, overlapping or inverted
-        triangles, duplicate or orphan points, an edge shared by more than two
+        range, zero-area (collinear) or nearly flat (height below 1e-10 of the
+        longest edge), repeated, overlapping or inverted triangles, duplicate or orphan points, an edge shared by more than two
         triangles, a segment that is not a mesh edge, bad ``kind`` or ``origin``.
         The caller's arrays are never modified.
     """
@@ -172,6 +197,7 @@ class Mesh:
         _check_topology(pts, tris)
         _check_point_distances(pts)
         tris, segs, boundary, computed_kind, _ = _core.prepare_mesh(pts, tris, segs, True)
+        _check_not_flat(pts, tris)
         if kind is None:
             kinds = computed_kind
         else:

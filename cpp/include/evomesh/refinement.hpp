@@ -50,7 +50,7 @@ struct Refined_mesh {
 // The quality pass: constrained Delaunay triangulation of `points` with `pieces`
 // (as in constrained_delaunay), then crowding points dropped and their segments
 // split (Section 6), then Ruppert's rules 1 and 3 with CGAL's Delaunay mesher
-// (midpoint splits of encroached segments, circumcentres of triangles below
+// (midpoint splits of encroached segments, off-centres (Ungor) of triangles below
 // min_angle, concentric-shell splits near small input angles). There is no size
 // criterion: new points only go where a triangle is badly shaped, so their spacing
 // follows that of the points handed in.
@@ -58,7 +58,7 @@ Refined_mesh quality_triangulate(const std::vector<Vec2>& points, const std::vec
                                  const std::vector<Constraint_piece>& pieces, const Quality_options& options);
 
 // DRFC, step 1 (Section 5): Delaunay refinement of `mesh` with rules 1 and 3 for
-// min_angle and rule 4 in terms of the spacing function: a triangle is split while
+// min_angle (circumcentres) and rule 4 in terms of the spacing function: a triangle is split while
 // one of its vertices v has a Delaunay neighbour spacing above f(v), where
 // f(p) = min(f from `spacing`, delta(p) nn_M(p)) at input points. (For an input
 // point this is nn > delta(p) nn_M(p) when delta(p) <= 1 (Lemma 3.1) and never

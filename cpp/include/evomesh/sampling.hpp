@@ -30,7 +30,7 @@ Sample_set sample_triangles(const Mesh_arrays& mesh, const std::vector<double>& 
 
 // Samples on the segments, strictly between their endpoints, sorted along each
 // segment from a to b: one random point per 1-D cell of side cell_factor * min f / (2 sqrt 2),
-// or the midpoint (modes with midpoints).
+// or, in every deterministic mode (barycentre and/or midpoints), the midpoint.
 Sample_set sample_segments(const Mesh_arrays& mesh, const std::vector<double>& vertex_f,
                            double cell_factor, Sample_mode mode, std::uint64_t seed);
 
