@@ -48,6 +48,8 @@ def build_parser() -> argparse.ArgumentParser:
     gc.add_argument("--seed", type=int, default=0, help="seed of the sampling (default %(default)s)")
     gc.add_argument("--method", default="frfc", help="evolve method (default %(default)s)")
     gc.add_argument("--out", default="evomesh-growing-circle", help="output folder (default %(default)s)")
+    gc.add_argument("--no-quality", action="store_true",
+                    help="switch off the quality pass (the paper's plain algorithm)")
     gc.add_argument("--no-figures", action="store_true", help="do not draw the PNG figures")
     gc.add_argument("--quiet", action="store_true", help="no table, no progress bar")
     return parser
@@ -70,6 +72,7 @@ def _growing_circle(args: argparse.Namespace) -> int:
         out=args.out,
         figures=not args.no_figures,
         progress=False if args.quiet else None,
+        quality=not args.no_quality,
     )
     if not args.quiet:
         initial = result.initial
