@@ -6,7 +6,7 @@ coarsens where delta > 1, keeping the mesh well shaped and as many old points
 as it can.
 """
 
-from evomesh.evolve import FRFC_DEFAULTS, evolve
+from evomesh.evolve import DRFC_DEFAULTS, FRFC_DEFAULTS, delaunay_refine, evolve
 from evomesh.mesh import Mesh, PointKind
 from evomesh.packing import lexical_first_mis
 from evomesh.quality import Quality, quality
@@ -16,7 +16,9 @@ __all__ = [
     "Mesh",
     "PointKind",
     "evolve",
+    "delaunay_refine",
     "FRFC_DEFAULTS",
+    "DRFC_DEFAULTS",
     "nn_spacing",
     "spacing",
     "SpacingFunction",
@@ -27,7 +29,7 @@ __all__ = [
 
 __version__ = "0.1.0"
 
-# Moving-front workflow (issue 3).
+# Moving-front workflow.
 from evomesh.fronts import CircleFront, Front, LevelSetFront, PointFront, SpacingLaw  # noqa: E402
 from evomesh.transfer import transfer  # noqa: E402
 from evomesh.driver import Driver, Run, Step, growing_circle, run, step_statistics  # noqa: E402
