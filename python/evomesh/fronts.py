@@ -16,7 +16,7 @@ from typing import Any, Callable
 import numpy as np
 from scipy.spatial import cKDTree
 
-from evomesh.mesh import Mesh
+from evomesh.mesh import _MAX_COORDINATE, Mesh
 from evomesh.spacing import _require_mesh, nn_spacing
 
 __all__ = ["Front", "CircleFront", "PointFront", "LevelSetFront", "SpacingLaw", "as_query_points"]
@@ -35,6 +35,8 @@ def as_query_points(x: Any, name: str = "x") -> np.ndarray:
     array = np.array(array, dtype=np.float64)
     if not np.isfinite(array).all():
         raise ValueError(f"{name} contains NaN or infinite coordinates")
+    if array.size and np.abs(array).max() > _MAX_COORDINATE:
+        raise ValueError(f"{name} coordinates must be below {_MAX_COORDINATE:g} in magnitude")
     return array
 
 

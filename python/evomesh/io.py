@@ -55,8 +55,21 @@ def read_mesh(path: str | Path) -> tuple[Mesh, dict[str, np.ndarray]]:
     origin and interior segments) and the other point data."""
     import meshio
 
-    m = meshio.read(Path(path))
-    triangles = np.concatenate([c.data for c in m.cells if c.type == "triangle"])
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"mesh file not found: {path}")
+    try:
+        m = meshio.read(path)
+    except SystemExit as error:  # meshio exits on some malformed files
+        raise ValueError(f"cannot read mesh file {path}: not a valid mesh file") from error
+    except (meshio.ReadError, KeyError, IndexError, TypeError, ValueError, EOFError, UnicodeDecodeError) as error:
+        raise ValueError(f"cannot read mesh file {path}: {error}") from error
+    except Exception as error:  # parsers of the many formats raise many things
+        raise ValueError(f"cannot read mesh file {path}: {type(error).__name__}: {error}") from error
+    tri_blocks = [c.data for c in m.cells if c.type == "triangle"]
+    if not tri_blocks:
+        raise ValueError(f"mesh file {path} has no triangles")
+    triangles = np.concatenate(tri_blocks)
     lines = [c.data for c in m.cells if c.type == "line"]
     segments = np.concatenate(lines) if lines else None
     data = {name: np.asarray(v) for name, v in m.point_data.items()}
