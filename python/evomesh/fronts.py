@@ -10,6 +10,7 @@ point on the moving boundary".
 
 from __future__ import annotations
 
+import abc
 import numbers
 from typing import Any, Callable
 
@@ -53,12 +54,13 @@ def _time(t: Any) -> float:
     return 0.0 if t is None else _real(t, "t")
 
 
-class Front:
+class Front(abc.ABC):
     """Base class of fronts: ``distance(x, t)`` is the unsigned distance from
     each point of x, shape (k, 2), to the front at time t, shape (k,)."""
 
-    def distance(self, x: Any, t: Any = None) -> np.ndarray:  # pragma: no cover - abstract
-        raise NotImplementedError
+    @abc.abstractmethod
+    def distance(self, x: Any, t: Any = None) -> np.ndarray:
+        """Unsigned distance from each point of x, shape (k, 2), to the front at time t."""
 
     def polylines(self, t: Any = None) -> list[np.ndarray]:
         """The front at time t as polylines (for drawing); empty if not explicit."""
