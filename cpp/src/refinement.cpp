@@ -17,6 +17,7 @@
 #include <stdexcept>
 #include <string>
 
+#include "evomesh/detail/domain.hpp"
 #include "evomesh/kernel.hpp"
 
 namespace evomesh {
@@ -333,46 +334,8 @@ bool left_face(const Cdt& cdt, Vertex_handle a, Vertex_handle b, Face_handle& f,
 // in_domain marks: regions bounded by the pieces take the side labels of their
 // pieces (left of a boundary piece: inside; right: outside), as in constrained_delaunay.
 void mark_domain(Cdt& cdt, const std::vector<Vertex_handle>& handles, const std::vector<Constraint_piece>& pieces) {
-  constexpr std::int8_t unknown = 0, inside = 1, outside = 2;
-  for (auto f = cdt.all_faces_begin(); f != cdt.all_faces_end(); ++f) f->info() = unknown;
-  std::vector<Face_handle> queue;
-  auto seed = [&](Face_handle f, std::int8_t label) {
-    if (cdt.is_infinite(f)) label = outside;
-    if (f->info() == unknown) {
-      f->info() = label;
-      queue.push_back(f);
-    } else if (f->info() != label) {
-      throw std::runtime_error("refinement: the constraints do not bound a consistent domain");
-    }
-  };
-  for (auto f = cdt.all_faces_begin(); f != cdt.all_faces_end(); ++f) {
-    if (cdt.is_infinite(f)) seed(f, outside);
-  }
-  for (const auto& piece : pieces) {
-    Face_handle f;
-    int i;
-    if (!left_face(cdt, handles[piece.a], handles[piece.b], f, i)) continue;  // split by a point on it
-    seed(f, inside);
-    seed(f->neighbor(i), piece.boundary ? outside : inside);
-  }
-  while (!queue.empty()) {
-    auto f = queue.back();
-    queue.pop_back();
-    for (int i = 0; i < 3; ++i) {
-      if (f->is_constrained(i)) continue;
-      auto g = f->neighbor(i);
-      if (g->info() == unknown) {
-        g->info() = f->info();
-        queue.push_back(g);
-      } else if (g->info() != f->info()) {
-        throw std::runtime_error("refinement: domain boundary is not closed");
-      }
-    }
-  }
-  for (auto f = cdt.all_faces_begin(); f != cdt.all_faces_end(); ++f) {
-    if (f->info() == unknown) throw std::runtime_error("refinement: a region has no seed");
-    f->set_in_domain(f->info() == inside);
-  }
+  detail::label_domain(cdt, handles, pieces, "refinement");
+  for (auto f = cdt.all_faces_begin(); f != cdt.all_faces_end(); ++f) f->set_in_domain(f->info() == detail::domain_inside);
 }
 
 // Section 6: drop free points that crowd a piece (see it under more than

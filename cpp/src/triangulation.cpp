@@ -13,6 +13,7 @@
 #include <numeric>
 #include <string>
 
+#include "evomesh/detail/domain.hpp"
 #include "evomesh/kernel.hpp"
 
 namespace evomesh {
@@ -198,51 +199,11 @@ std::vector<Triangle> constrained_delaunay(const std::vector<Vec2>& points,
   Cdt cdt;
   auto handles = insert_points(cdt, points);
   for (const auto& piece : pieces) cdt.insert_constraint(handles[piece.a], handles[piece.b]);
-  constexpr Index unknown = 0, inside = 1, outside = 2;
-  for (auto f = cdt.all_faces_begin(); f != cdt.all_faces_end(); ++f) f->info() = unknown;
-  std::vector<Cdt::Face_handle> queue;
-  auto seed = [&](Cdt::Face_handle f, Index label) {
-    if (cdt.is_infinite(f)) label = outside;
-    if (f->info() == unknown) {
-      f->info() = label;
-      queue.push_back(f);
-    } else if (f->info() != label) {
-      throw std::runtime_error("constrained_delaunay: the constraints do not bound a consistent domain");
-    }
-  };
-  for (auto f = cdt.all_faces_begin(); f != cdt.all_faces_end(); ++f) {
-    if (cdt.is_infinite(f)) seed(f, outside);
-  }
-  for (const auto& piece : pieces) {
-    Cdt::Face_handle f;
-    int i;
-    if (!cdt.is_edge(handles[piece.a], handles[piece.b], f, i)) continue;  // split by a point on it
-    Cdt::Face_handle left = f, right = f->neighbor(i);
-    if (f->vertex(Cdt::ccw(i)) != handles[piece.a]) std::swap(left, right);
-    seed(left, inside);
-    seed(right, piece.boundary ? outside : inside);
-  }
-  // Flood fill across unconstrained edges: every region bounded by constraints
-  // gets the label of the sides of its constraints.
-  while (!queue.empty()) {
-    auto f = queue.back();
-    queue.pop_back();
-    for (int i = 0; i < 3; ++i) {
-      if (f->is_constrained(i)) continue;
-      auto g = f->neighbor(i);
-      if (g->info() == unknown) {
-        g->info() = f->info();
-        queue.push_back(g);
-      } else if (g->info() != f->info()) {
-        throw std::runtime_error("constrained_delaunay: domain boundary is not closed");
-      }
-    }
-  }
+  detail::label_domain(cdt, handles, pieces, "constrained_delaunay");
   std::vector<Triangle> triangles;
   triangles.reserve(cdt.number_of_faces());
   for (auto f = cdt.finite_faces_begin(); f != cdt.finite_faces_end(); ++f) {
-    if (f->info() == unknown) throw std::runtime_error("constrained_delaunay: a region has no seed");
-    if (f->info() == inside) triangles.push_back({f->vertex(0)->info(), f->vertex(1)->info(), f->vertex(2)->info()});
+    if (f->info() == detail::domain_inside) triangles.push_back({f->vertex(0)->info(), f->vertex(1)->info(), f->vertex(2)->info()});
   }
   return triangles;
 }

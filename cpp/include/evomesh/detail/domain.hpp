@@ -1,0 +1,68 @@
+// Domain labelling of a constrained triangulation, shared by constrained_delaunay
+// and the quality pass. Internal: included by cpp/src only.
+#pragma once
+
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "evomesh/triangulation.hpp"
+
+namespace evomesh::detail {
+
+enum Domain_label : int { domain_unknown = 0, domain_inside = 1, domain_outside = 2 };
+
+// Sets face->info() to domain_inside / domain_outside for every face of `cdt`:
+// infinite faces are outside, the left side of a boundary piece inside and its
+// right side outside, both sides of an interior piece inside; regions bounded by
+// constraints are flood-filled from those seeds. A piece split by a point lying
+// on it is skipped (its sub-edges still bound the same regions). Throws
+// std::runtime_error naming `who` when the pieces do not bound a consistent domain.
+template <class Cdt, class Handles>
+void label_domain(Cdt& cdt, const Handles& handles, const std::vector<Constraint_piece>& pieces, const char* who) {
+  using Face_handle = typename Cdt::Face_handle;
+  using Info = typename Cdt::Face::Info;
+  const auto fail = [who](const char* what) { throw std::runtime_error(std::string(who) + ": " + what); };
+  for (auto f = cdt.all_faces_begin(); f != cdt.all_faces_end(); ++f) f->info() = Info(domain_unknown);
+  std::vector<Face_handle> queue;
+  auto seed = [&](Face_handle f, int label) {
+    if (cdt.is_infinite(f)) label = domain_outside;
+    if (f->info() == Info(domain_unknown)) {
+      f->info() = Info(label);
+      queue.push_back(f);
+    } else if (f->info() != Info(label)) {
+      fail("the constraints do not bound a consistent domain");
+    }
+  };
+  for (auto f = cdt.all_faces_begin(); f != cdt.all_faces_end(); ++f) {
+    if (cdt.is_infinite(f)) seed(f, domain_outside);
+  }
+  for (const auto& piece : pieces) {
+    Face_handle f;
+    int i;
+    if (!cdt.is_edge(handles[piece.a], handles[piece.b], f, i)) continue;
+    Face_handle left = f, right = f->neighbor(i);
+    if (f->vertex(Cdt::ccw(i)) != handles[piece.a]) std::swap(left, right);
+    seed(left, domain_inside);
+    seed(right, piece.boundary ? domain_outside : domain_inside);
+  }
+  while (!queue.empty()) {
+    auto f = queue.back();
+    queue.pop_back();
+    for (int i = 0; i < 3; ++i) {
+      if (f->is_constrained(i)) continue;
+      auto g = f->neighbor(i);
+      if (g->info() == Info(domain_unknown)) {
+        g->info() = f->info();
+        queue.push_back(g);
+      } else if (g->info() != f->info()) {
+        fail("domain boundary is not closed");
+      }
+    }
+  }
+  for (auto f = cdt.all_faces_begin(); f != cdt.all_faces_end(); ++f) {
+    if (f->info() == Info(domain_unknown)) fail("a region has no seed");
+  }
+}
+
+}  // namespace evomesh::detail
