@@ -576,3 +576,21 @@ def test_core_bindings_reject_bad_indices_and_non_finite_coordinates():
     assert done.returncode == 0, done.stderr[-2000:]
     lines = done.stdout.strip().splitlines()
     assert len(lines) == 9 and all(line.startswith("ValueError") for line in lines), lines
+
+
+def test_refused_step_reports_a_sane_sample_count():
+    """Run in a child process: under tools/sanitize.sh the undefined behaviour aborts."""
+    code = textwrap.dedent(
+        """
+        import evomesh, numpy as np
+        mesh = evomesh.Mesh(np.array({points!r}), {triangles!r})
+        try:
+            evomesh.evolve(mesh, 1.0, cell_factor=1e-300)
+        except ValueError as error:
+            print(error)
+        """
+    ).format(points=GRID_POINTS.tolist(), triangles=GRID_TRIANGLES.tolist())
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert "too much refinement" in done.stdout
+    assert "-" not in done.stdout.split("about")[1].split("points")[0]

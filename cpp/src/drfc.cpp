@@ -63,8 +63,8 @@ Refinement_stage refinement_stage(const Mesh_arrays& mesh, const std::vector<dou
   const double estimate = estimate_sample_count(mesh, stage.f, 1.0);
   if (estimate > options.max_samples) {
     throw Input_error("delta asks for too much refinement in one step: refinement would create about " +
-                      std::to_string(static_cast<long long>(estimate)) + " points (max_samples is " +
-                      std::to_string(static_cast<long long>(options.max_samples)) +
+                      format_count(estimate) + " points (max_samples is " +
+                      format_count(options.max_samples) +
                       "); raise delta or max_samples, or refine over several steps");
   }
   const auto cap = static_cast<std::size_t>(2 * estimate + 1000);

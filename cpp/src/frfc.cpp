@@ -360,8 +360,8 @@ Evolve_result frfc(const Mesh_arrays& mesh, const std::vector<double>& delta, co
   const double estimate = estimate_sample_count(mesh, f, options.cell_factor);
   if (estimate > options.max_samples) {
     throw Input_error("delta asks for too much refinement in one step: sampling would create about " +
-                      std::to_string(static_cast<long long>(estimate)) + " points (max_samples is " +
-                      std::to_string(static_cast<long long>(options.max_samples)) +
+                      format_count(estimate) + " points (max_samples is " +
+                      format_count(options.max_samples) +
                       "); raise delta or max_samples, or refine over several steps");
   }
   std::vector<std::uint8_t> skip;

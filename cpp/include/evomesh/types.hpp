@@ -2,6 +2,7 @@
 #pragma once
 
 #include <array>
+#include <cstdio>
 #include <cstdint>
 #include <stdexcept>
 #include <string>
@@ -23,6 +24,14 @@ enum class Point_kind : std::uint8_t {
   steiner = 3,
   sampled = 4,
 };
+
+// A count held in a double (possibly huge or infinite) for a message; never
+// converts to an integer type, which would be undefined beyond its range.
+inline std::string format_count(double value) {
+  char buffer[32];
+  std::snprintf(buffer, sizeof buffer, "%.4g", value);
+  return buffer;
+}
 
 // Thrown for malformed user input; the bindings map it to ValueError.
 struct Input_error : std::invalid_argument {
