@@ -2,7 +2,7 @@
 
 import numpy as np
 import pytest
-from hypothesis import given
+from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.spatial import cKDTree
 
@@ -105,3 +105,35 @@ def test_bad_delta_shape_and_queries():
         f(np.array([[np.nan, 0.0]]))
     with pytest.raises(TypeError):
         evomesh.spacing("not a mesh", 1.0)
+
+
+@settings(max_examples=12, deadline=None)
+@given(st.integers(0, 10_000), st.sampled_from([0.3, 1.0, 2.0]), st.booleans())
+def test_partitioned_apollonius_graphs_answer_like_one_graph(seed, delta_max, certified):
+    """Large site sets are split into parts with halos (spacing.cpp): same f, same sites, same hidden count."""
+    from evomesh import _core
+
+    rng = np.random.default_rng(seed)
+    k = 70
+    i, j = np.meshgrid(np.arange(k), np.arange(k))
+    sites = np.column_stack([i.ravel(), j.ravel()]).astype(float) / k
+    sites += rng.uniform(-0.3, 0.3, sites.shape) / k
+    nn = cKDTree(sites).query(sites, k=2)[0][:, 1]
+    weights = rng.uniform(0.1, delta_max, len(sites)) * nn
+    one = _core.SpacingFunction(sites, weights)
+    split = _core.SpacingFunction(sites, weights, min_sites_per_part=k * k // 5)
+    assert one.n_parts == 1
+    assert split.n_parts == (4 if delta_max <= 1 else 2)  # thick halos: two parts
+    # inside, at the sites, on the cuts, and far outside (answered by every part)
+    x = np.r_[rng.random((1000, 2)), sites[::7], rng.uniform(-3, 4, (200, 2)),
+              np.column_stack([np.full(200, np.median(sites[:, 0])), rng.random(200)])]
+    f1, s1 = one.evaluate(x, certified=certified)
+    f4, s4 = split.evaluate(x, certified=certified)
+    expected = brute_force_f(sites, weights, x)
+    assert np.all(np.abs(f4 - expected) <= 1e-12 * expected)
+    assert np.all(np.abs(f4 - f1) <= 1e-12 * f1)
+    cone = weights[s4] + np.linalg.norm(x - sites[s4], axis=1)
+    assert np.array_equal(cone, f4)
+    if certified:
+        assert np.array_equal(s1, s4)
+    assert one.n_hidden == split.n_hidden

@@ -246,6 +246,14 @@ std::string cpu_model() {
   return "unknown";
 }
 
+// User + system CPU seconds of the process so far (all threads).
+double cpu_seconds() {
+  rusage usage{};
+  getrusage(RUSAGE_SELF, &usage);
+  return static_cast<double>(usage.ru_utime.tv_sec + usage.ru_stime.tv_sec) +
+         1e-6 * static_cast<double>(usage.ru_utime.tv_usec + usage.ru_stime.tv_usec);
+}
+
 double rusage_max_mib() {
   rusage usage{};
   getrusage(RUSAGE_SELF, &usage);
@@ -300,13 +308,15 @@ int main(int argc, char** argv) {
     const Frfc_options options = bench_options(threads, max_samples, quality);
     std::map<std::string, std::vector<double>> stage_seconds;
     std::map<std::string, double> counts;
-    std::vector<double> cdt_seconds;
+    std::vector<double> cdt_seconds, step_cpu_seconds;
     double peak_mib = -1, input_mib = -1;
     std::uint64_t output_hash = 0;
     for (int r = 0; r < repeats; ++r) {
       const bool tracked = reset_peak_memory();
       if (r == 0) input_mib = status_mib("VmRSS");
+      const double cpu0 = cpu_seconds();
       Evolve_result result = frfc(c.mesh, c.delta, options);
+      step_cpu_seconds.push_back(cpu_seconds() - cpu0);
       if (r == 0) peak_mib = tracked ? status_mib("VmHWM") : rusage_max_mib();
       const std::uint64_t hash = mesh_hash(result.mesh);
       if (r > 0 && hash != output_hash) throw std::runtime_error("FRFC is not deterministic: outputs differ");
@@ -341,13 +351,13 @@ int main(int argc, char** argv) {
     if (si == 0) {
       std::printf("\n| target | input pts | output pts | samples / input pt |");
       for (const auto& stage : stages) std::printf(" %s |", stage.c_str());
-      std::printf(" CDT of output | total / CDT | step peak (MiB) | input RSS (MiB) |\n|");
-      for (std::size_t k = 0; k < stages.size() + 8; ++k) std::printf("---|");
+      std::printf(" CPU s (all threads) | CDT of output | total / CDT | step peak (MiB) | input RSS (MiB) |\n|");
+      for (std::size_t k = 0; k < stages.size() + 9; ++k) std::printf("---|");
       std::printf("\n");
     }
     std::printf("| %.0e | %.0f | %.0f | %.1f |", target, n_in, counts["n_output_points"], samples / n_in);
     for (const auto& stage : stages) std::printf(" %.3f |", median(stage_seconds[stage]));
-    std::printf(" %.3f | %.0f | %.0f | %.0f |\n", cdt, total / cdt, peak_mib, input_mib);
+    std::printf(" %.2f | %.3f | %.0f | %.0f | %.0f |\n", median(step_cpu_seconds), cdt, total / cdt, peak_mib, input_mib);
     std::fflush(stdout);
     json << (si ? "," : "") << "\n  {\"target\": " << target << ", \"grid_side\": " << c.grid_side
          << ", \"spacing_scale\": " << c.spacing_scale << ", \"setup_seconds\": " << c.setup_seconds
@@ -355,6 +365,7 @@ int main(int argc, char** argv) {
     for (const auto& [name, values] : stage_seconds) json << ", \"seconds_" << name << "\": " << median(values);
     for (const auto& [name, value] : counts) json << ", \"" << name << "\": " << value;
     if (baseline) json << ", \"seconds_cdt_baseline\": " << cdt;
+    json << ", \"cpu_seconds_step\": " << median(step_cpu_seconds);
     json << ", \"quality\": " << (quality ? "true" : "false") << ", \"peak_step_mib\": " << peak_mib << ", \"input_rss_mib\": " << input_mib
          << ", \"process_peak_mib\": " << rusage_max_mib() << ", \"output_hash\": \"" << std::hex << output_hash
          << std::dec << "\"}";

@@ -189,13 +189,13 @@ PYBIND11_MODULE(_core, m) {
       py::arg("points"));
 
   py::class_<Spacing_function>(m, "SpacingFunction")
-      .def(py::init([](const Float_array& sites, const Float_array& weights) {
+      .def(py::init([](const Float_array& sites, const Float_array& weights, std::size_t min_sites_per_part) {
              auto s = to_points(sites, "sites");
              auto w = to_vector<double>(weights);
              py::gil_scoped_release release;
-             return std::make_unique<Spacing_function>(s, w);
+             return std::make_unique<Spacing_function>(s, w, min_sites_per_part);
            }),
-           py::arg("sites"), py::arg("weights"))
+           py::arg("sites"), py::arg("weights"), py::arg("min_sites_per_part") = 0)
       .def(
           "evaluate",
           [](const Spacing_function& self, const Float_array& queries, int threads, bool certified) {
@@ -210,7 +210,8 @@ PYBIND11_MODULE(_core, m) {
           },
           py::arg("x"), py::arg("threads") = 0, py::arg("certified") = true)
       .def_property_readonly("n_sites", &Spacing_function::n_sites)
-      .def_property_readonly("n_hidden", &Spacing_function::n_hidden);
+      .def_property_readonly("n_hidden", &Spacing_function::n_hidden)
+      .def_property_readonly("n_parts", &Spacing_function::n_parts);
 
   m.def(
       "lexical_first_mis",

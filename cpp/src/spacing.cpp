@@ -4,10 +4,7 @@
 #include <CGAL/Apollonius_graph_filtered_traits_2.h>
 #include <CGAL/Apollonius_graph_vertex_base_2.h>
 #include <CGAL/Mpzf.h>
-#include <CGAL/Delaunay_triangulation_2.h>
 #include <CGAL/Simple_cartesian.h>
-#include <CGAL/Triangulation_vertex_base_with_info_2.h>
-#include <CGAL/hilbert_sort.h>
 #include <CGAL/spatial_sort.h>
 #include <CGAL/Spatial_sort_traits_adapter_2.h>
 #include <CGAL/property_map.h>
@@ -16,40 +13,197 @@
 #include <boost/random/random_number_generator.hpp>
 
 #include <algorithm>
-#include <atomic>
+#include <array>
 #include <cmath>
 #include <limits>
 #include <map>
 #include <numeric>
-#include <thread>
 
 #include "evomesh/kernel.hpp"
 #include "evomesh/parallel.hpp"
 
 namespace evomesh {
 
+namespace {
+
+// All nearest neighbours with a static kd-tree (leaves of at most 16 points in
+// tree order, boxes exact): nn(p) = min over q != p of the squared distance,
+// computed as CGAL::squared_distance does. The minimum over all points is the
+// minimum over the Delaunay neighbours (a nearest neighbour is one), without
+// building the triangulation, and the queries run in parallel.
+class Nearest_neighbor_tree {
+ public:
+  explicit Nearest_neighbor_tree(const std::vector<Vec2>& points) {
+    const std::size_t n = points.size();
+    while ((n >> depth_) > kLeafSize) ++depth_;
+    n_leaves_ = std::size_t{1} << depth_;
+    items_.resize(n);
+    for (std::size_t i = 0; i < n; ++i) items_[i] = {points[i][0], points[i][1], i};
+    boxes_.resize(2 * n_leaves_);
+    const int top = std::min(depth_, 2);
+    for (int level = 0; level < top; ++level) {
+      for (std::size_t node = std::size_t{1} << level; node < (std::size_t{2} << level); ++node) split(node, level);
+    }
+    const std::size_t first = std::size_t{1} << top;
+    parallel_for(first, 0, [&](std::size_t k) { build(first + k, top); });
+    for (std::size_t leaf = 0; leaf < n_leaves_; ++leaf) {
+      Box& box = boxes_[n_leaves_ + leaf];
+      box = {std::numeric_limits<double>::infinity(), std::numeric_limits<double>::infinity(),
+             -std::numeric_limits<double>::infinity(), -std::numeric_limits<double>::infinity()};
+      for (std::size_t k = leaf_begin(leaf); k < leaf_begin(leaf + 1); ++k) {
+        box = {std::min(box.lo_x, items_[k].x), std::min(box.lo_y, items_[k].y), std::max(box.hi_x, items_[k].x),
+               std::max(box.hi_y, items_[k].y)};
+      }
+    }
+    for (std::size_t node = n_leaves_ - 1; node >= 1; --node) {
+      const Box& l = boxes_[2 * node];
+      const Box& r = boxes_[2 * node + 1];
+      boxes_[node] = {std::min(l.lo_x, r.lo_x), std::min(l.lo_y, r.lo_y), std::max(l.hi_x, r.hi_x),
+                      std::max(l.hi_y, r.hi_y)};
+    }
+  }
+
+  // Squared nearest-neighbour distances, by point index.
+  std::vector<double> squared_nn(int threads) const {
+    const std::size_t n = items_.size();
+    std::vector<double> nn2(n);
+    constexpr std::size_t kChunk = 4096;  // in tree order: neighbouring queries
+    parallel_for((n + kChunk - 1) / kChunk, threads, [&](std::size_t c) {
+      for (std::size_t k = c * kChunk; k < std::min(n, (c + 1) * kChunk); ++k) {
+        nn2[items_[k].index] = query(k);
+        if (nn2[items_[k].index] == 0 && has_duplicate(k)) throw Input_error("points contain duplicates");
+      }
+    });
+    return nn2;
+  }
+
+ private:
+  static constexpr std::size_t kLeafSize = 16;
+  struct Item {
+    double x, y;
+    std::size_t index;
+  };
+  struct Box {
+    double lo_x, lo_y, hi_x, hi_y;
+  };
+
+  std::size_t leaf_begin(std::size_t leaf) const {
+    return static_cast<std::size_t>(static_cast<unsigned __int128>(leaf) * items_.size() / n_leaves_);
+  }
+  std::size_t leaf_of(std::size_t position) const {
+    const std::size_t n = items_.size();
+    return static_cast<std::size_t>((static_cast<unsigned __int128>(position + 1) * n_leaves_ + n - 1) / n - 1);
+  }
+  std::pair<std::size_t, std::size_t> range(std::size_t node, int level) const {
+    const std::size_t j = node - (std::size_t{1} << level);
+    const int shift = depth_ - level;
+    return {leaf_begin(j << shift), leaf_begin((j + 1) << shift)};
+  }
+
+  void split(std::size_t node, int level) {
+    if (level == depth_) return;
+    const auto [begin, end] = range(node, level);
+    double lo_x = std::numeric_limits<double>::infinity(), lo_y = lo_x, hi_x = -lo_x, hi_y = -lo_x;
+    for (std::size_t k = begin; k < end; ++k) {
+      lo_x = std::min(lo_x, items_[k].x);
+      lo_y = std::min(lo_y, items_[k].y);
+      hi_x = std::max(hi_x, items_[k].x);
+      hi_y = std::max(hi_y, items_[k].y);
+    }
+    const std::size_t mid = range(2 * node + 1, level + 1).first;
+    auto first = items_.begin();
+    if (hi_x - lo_x >= hi_y - lo_y) {
+      std::nth_element(first + begin, first + mid, first + end, [](const Item& u, const Item& v) {
+        return u.x < v.x || (u.x == v.x && u.index < v.index);
+      });
+    } else {
+      std::nth_element(first + begin, first + mid, first + end, [](const Item& u, const Item& v) {
+        return u.y < v.y || (u.y == v.y && u.index < v.index);
+      });
+    }
+  }
+
+  void build(std::size_t node, int level) {
+    split(node, level);
+    if (level == depth_) return;
+    build(2 * node, level + 1);
+    build(2 * node + 1, level + 1);
+  }
+
+  double leaf_min(std::size_t leaf, std::size_t self, double best) const {
+    const Item& p = items_[self];
+    for (std::size_t k = leaf_begin(leaf); k < leaf_begin(leaf + 1); ++k) {
+      if (k == self) continue;
+      const double dx = p.x - items_[k].x;
+      const double dy = p.y - items_[k].y;
+      best = std::min(best, dx * dx + dy * dy);
+    }
+    return best;
+  }
+
+  // Whether another point has the same coordinates: a squared distance of 0 is
+  // a duplicate only then (tiny distances underflow to 0 too; nn is then 0, as
+  // from the Delaunay edges).
+  bool has_duplicate(std::size_t self) const {
+    const Item& p = items_[self];
+    std::size_t stack[128];
+    int top = 0;
+    stack[top++] = 1;
+    while (top > 0) {
+      const std::size_t m = stack[--top];
+      const Box& b = boxes_[m];
+      if (p.x < b.lo_x || p.x > b.hi_x || p.y < b.lo_y || p.y > b.hi_y) continue;
+      if (m >= n_leaves_) {
+        for (std::size_t k = leaf_begin(m - n_leaves_); k < leaf_begin(m - n_leaves_ + 1); ++k) {
+          if (k != self && items_[k].x == p.x && items_[k].y == p.y) return true;
+        }
+      } else {
+        stack[top++] = 2 * m + 1;
+        stack[top++] = 2 * m;
+      }
+    }
+    return false;
+  }
+
+  // Own leaf first, then the sibling subtrees up to the root, pruned by the
+  // best distance so far (box distances never exceed point distances).
+  double query(std::size_t self) const {
+    const Item& p = items_[self];
+    std::size_t node = n_leaves_ + leaf_of(self);
+    double best = leaf_min(node - n_leaves_, self, std::numeric_limits<double>::infinity());
+    std::size_t stack[128];
+    for (; node > 1; node >>= 1) {
+      int top = 0;
+      stack[top++] = node ^ 1;
+      while (top > 0) {
+        const std::size_t m = stack[--top];
+        const Box& b = boxes_[m];
+        const double dx = std::max({b.lo_x - p.x, 0.0, p.x - b.hi_x});
+        const double dy = std::max({b.lo_y - p.y, 0.0, p.y - b.hi_y});
+        if (dx * dx + dy * dy > best) continue;
+        if (m >= n_leaves_) {
+          best = leaf_min(m - n_leaves_, self, best);
+        } else {
+          stack[top++] = 2 * m + 1;
+          stack[top++] = 2 * m;
+        }
+      }
+    }
+    return best;
+  }
+
+  int depth_ = 0;
+  std::size_t n_leaves_ = 1;
+  std::vector<Item> items_;
+  std::vector<Box> boxes_;
+};
+
+}  // namespace
+
 std::vector<double> nn_spacing(const std::vector<Vec2>& points) {
-  using Vb = CGAL::Triangulation_vertex_base_with_info_2<Index, Kernel>;
-  using Tds = CGAL::Triangulation_data_structure_2<Vb>;
-  using Delaunay = CGAL::Delaunay_triangulation_2<Kernel, Tds>;
   const std::size_t n = points.size();
   if (n < 2) throw Input_error("nn spacing needs at least two points");
-  std::vector<std::pair<Point_2, Index>> input;
-  input.reserve(n);
-  for (std::size_t i = 0; i < n; ++i) input.emplace_back(to_cgal(points[i]), static_cast<Index>(i));
-  Delaunay dt;
-  dt.insert(input.begin(), input.end());  // spatially sorted insert
-  if (dt.number_of_vertices() != n) throw Input_error("points contain duplicates");
-  std::vector<double> nn2(n, std::numeric_limits<double>::infinity());
-  for (auto e = dt.finite_edges_begin(); e != dt.finite_edges_end(); ++e) {
-    const auto f = e->first;
-    const int i = e->second;
-    const auto va = f->vertex(Delaunay::cw(i));
-    const auto vb = f->vertex(Delaunay::ccw(i));
-    const double d2 = CGAL::squared_distance(va->point(), vb->point());
-    nn2[va->info()] = std::min(nn2[va->info()], d2);
-    nn2[vb->info()] = std::min(nn2[vb->info()], d2);
-  }
+  const auto nn2 = Nearest_neighbor_tree(points).squared_nn(0);
   std::vector<double> nn(n);
   for (std::size_t i = 0; i < n; ++i) nn[i] = std::sqrt(nn2[i]);
   return nn;
@@ -144,6 +298,61 @@ void hilbert_sort_range(Query* begin, Query* end, int levels = -1, std::vector<H
   hilbert_sort_range<y, !upy, !upx>(m3, end, levels - 1, tasks);
 }
 
+// Index of the cell (x, y) of a 2^16 x 2^16 grid along the Hilbert curve.
+std::uint32_t hilbert_index(std::uint32_t x, std::uint32_t y) {
+  std::uint32_t d = 0;
+  for (std::uint32_t s = 1u << 15; s > 0; s >>= 1) {
+    const std::uint32_t rx = (x & s) > 0, ry = (y & s) > 0;
+    d += s * s * ((3 * rx) ^ ry);
+    if (ry == 0) {  // rotate the quadrant
+      if (rx == 1) {
+        x = s - 1 - x;
+        y = s - 1 - y;
+      }
+      std::swap(x, y);
+    }
+  }
+  return d;
+}
+
+// Queries in Hilbert-curve order on a 2^16 grid over their bounding box, ties
+// in input order: O(n) (keys in parallel, two 16-bit radix passes).
+std::vector<Query> hilbert_key_order(const Vec2* queries, std::size_t n, int threads) {
+  double lo_x = std::numeric_limits<double>::infinity(), lo_y = lo_x, hi_x = -lo_x, hi_y = -lo_x;
+  for (std::size_t i = 0; i < n; ++i) {
+    lo_x = std::min(lo_x, queries[i][0]);
+    lo_y = std::min(lo_y, queries[i][1]);
+    hi_x = std::max(hi_x, queries[i][0]);
+    hi_y = std::max(hi_y, queries[i][1]);
+  }
+  const double extent = std::max(hi_x - lo_x, hi_y - lo_y);
+  const double scale = extent > 0 ? 65535.0 / extent : 0.0;
+  std::vector<std::uint32_t> key(n), order(n), tmp(n);
+  constexpr std::size_t kBlock = 1 << 16;
+  parallel_for((n + kBlock - 1) / kBlock, threads, [&](std::size_t b) {
+    for (std::size_t i = b * kBlock; i < std::min(n, (b + 1) * kBlock); ++i) {
+      const auto qx = static_cast<std::uint32_t>(std::min(65535.0, (queries[i][0] - lo_x) * scale));
+      const auto qy = static_cast<std::uint32_t>(std::min(65535.0, (queries[i][1] - lo_y) * scale));
+      key[i] = hilbert_index(qx, qy);
+    }
+  });
+  std::vector<std::size_t> count(65537);
+  for (std::size_t i = 0; i < n; ++i) ++count[(key[i] & 0xffff) + 1];
+  for (std::size_t d = 0; d < 65536; ++d) count[d + 1] += count[d];
+  for (std::size_t i = 0; i < n; ++i) tmp[count[key[i] & 0xffff]++] = static_cast<std::uint32_t>(i);
+  std::fill(count.begin(), count.end(), 0);
+  for (std::size_t i = 0; i < n; ++i) ++count[(key[i] >> 16) + 1];
+  for (std::size_t d = 0; d < 65536; ++d) count[d + 1] += count[d];
+  for (std::size_t k = 0; k < n; ++k) order[count[key[tmp[k]] >> 16]++] = tmp[k];
+  std::vector<Query> sorted(n);
+  parallel_for((n + kBlock - 1) / kBlock, threads, [&](std::size_t b) {
+    for (std::size_t k = b * kBlock; k < std::min(n, (b + 1) * kBlock); ++k) {
+      sorted[k] = {queries[order[k]][0], queries[order[k]][1], order[k]};
+    }
+  });
+  return sorted;
+}
+
 void hilbert_sort_queries(std::vector<Query>& queries, int threads) {
   boost::rand48 random;
   boost::random_number_generator<boost::rand48, std::ptrdiff_t> rng(random);
@@ -161,38 +370,62 @@ void hilbert_sort_queries(std::vector<Query>& queries, int threads) {
 
 }  // namespace
 
+// Large site sets are split into up to four parts: the cells of a kd split of
+// the sites (x at the median, then y at each half's median), each with its own
+// Apollonius graph, built in parallel. A part holds the sites of its cell and
+// every site within `halo` = max_i w_i of it. Exactness (Eq. 3): any site c with
+// w_c + |x - c| <= v has |x - c| <= v since w_c >= 0, so when the nearest site
+// of x's part gives v <= halo, all sites that could tie or beat it are in the
+// part: its answer is the global one (certified), and at a mesh point p it always
+// is, since v <= w_p <= halo. Otherwise (a query far from every site) all parts
+// are asked and the best answer wins by the exact predicate. A site hidden in
+// the full graph is hidden by a site within w of it, so hiding is decided inside
+// its own part too. The parts depend only on the sites, never on the threads.
 struct Spacing_function::Impl {
   std::vector<Vec2> sites;
   std::vector<double> weights;
   double shift = 0.0;
-  Apollonius_graph graph;
+  double halo = 0.0;
+  // Cell of x: part (x < split_x ? 0 : 1) * (y splits) ...
+  int n_parts = 1;
+  double split_x = 0;
+  double split_y[2] = {0, 0};
+  struct Part {
+    Apollonius_graph graph;
+    double lo_x, lo_y, hi_x, hi_y;  // the cell (infinite at the outside)
+    std::size_t n_visible_own = 0;  // sites of the cell that are vertices
+  };
+  std::vector<std::unique_ptr<Part>> parts;
+
+  int part_of(double x, double y) const {
+    if (n_parts == 1) return 0;
+    const int side = x < split_x ? 0 : 1;
+    if (n_parts == 2) return side;
+    return 2 * side + (y < split_y[side] ? 0 : 1);
+  }
 };
 
-Spacing_function::Spacing_function(const std::vector<Vec2>& sites, const std::vector<double>& weights)
-    : impl_(std::make_unique<Impl>()) {
-  if (sites.empty()) throw Input_error("spacing function needs at least one site");
-  if (sites.size() != weights.size()) throw Input_error("one weight per site is required");
-  for (double w : weights) {
-    if (!std::isfinite(w) || w < 0) throw Input_error("spacing weights must be finite and >= 0");
-  }
-  impl_->sites = sites;
-  impl_->weights = weights;
-  // Apollonius distance is |x - c| - W; with W_i = shift - w_i >= 0 the nearest
-  // site minimises w_i + |x - c_i|.
-  impl_->shift = *std::max_element(weights.begin(), weights.end());
+namespace {
+
+// Sites per part below which one graph is used (splitting costs halo sites and
+// buys parallel construction and smaller, cache-friendlier graphs).
+constexpr std::size_t kMinSitesPerPart = std::size_t{1} << 17;
+
+// Inserts the sites `members` (spatially sorted, previous vertex as hint).
+void build_graph(Apollonius_graph& graph, const std::vector<Vec2>& sites, const std::vector<double>& weights,
+                 double shift, std::vector<std::size_t> members) {
   std::vector<Ag_point> pts;
-  pts.reserve(sites.size());
-  for (const auto& s : sites) pts.emplace_back(s[0], s[1]);
-  std::vector<std::size_t> order(sites.size());
+  pts.reserve(members.size());
+  for (std::size_t i : members) pts.emplace_back(sites[i][0], sites[i][1]);
+  std::vector<std::size_t> order(members.size());
   std::iota(order.begin(), order.end(), 0);
-  using Sort_traits = CGAL::Spatial_sort_traits_adapter_2<
-      Ag_kernel, CGAL::Pointer_property_map<Ag_point>::type>;
+  using Sort_traits = CGAL::Spatial_sort_traits_adapter_2<Ag_kernel, CGAL::Pointer_property_map<Ag_point>::type>;
   CGAL::spatial_sort(order.begin(), order.end(), Sort_traits(CGAL::make_property_map(pts)));
   Apollonius_graph::Vertex_handle hint;
-  for (std::size_t i : order) {
-    const Site_2 site(pts[i], impl_->shift - weights[i]);
-    auto v = hint == Apollonius_graph::Vertex_handle() ? impl_->graph.insert(site)
-                                                        : impl_->graph.insert(site, hint);
+  for (std::size_t k : order) {
+    const std::size_t i = members[k];
+    const Site_2 site(pts[k], shift - weights[i]);
+    auto v = hint == Apollonius_graph::Vertex_handle() ? graph.insert(site) : graph.insert(site, hint);
     if (v != Apollonius_graph::Vertex_handle()) {
       v->index = static_cast<Index>(i);
       hint = v;
@@ -201,23 +434,129 @@ Spacing_function::Spacing_function(const std::vector<Vec2>& sites, const std::ve
   // A site that hides all but one vertex makes CGAL rebuild the graph (clear(),
   // then insert_first/insert_second): the re-created vertices lost their index.
   // Sites are distinct, so the point names the site.
-  auto& graph = impl_->graph;
   bool lost = false;
   for (auto v = graph.finite_vertices_begin(); v != graph.finite_vertices_end(); ++v) lost = lost || v->index < 0;
   if (lost) {
     std::map<std::pair<double, double>, Index> index_of;
-    for (std::size_t i = 0; i < sites.size(); ++i) index_of[{sites[i][0], sites[i][1]}] = static_cast<Index>(i);
+    for (std::size_t i : members) index_of[{sites[i][0], sites[i][1]}] = static_cast<Index>(i);
     for (auto v = graph.finite_vertices_begin(); v != graph.finite_vertices_end(); ++v) {
       if (v->index < 0) v->index = index_of.at({v->site().point().x(), v->site().point().y()});
     }
   }
 }
 
+// The median of `values` (a copy), ties broken by position.
+double median_of(std::vector<double> values) {
+  const auto mid = values.begin() + static_cast<std::ptrdiff_t>(values.size() / 2);
+  std::nth_element(values.begin(), mid, values.end());
+  return *mid;
+}
+
+}  // namespace
+
+Spacing_function::Spacing_function(const std::vector<Vec2>& sites, const std::vector<double>& weights,
+                                   std::size_t min_sites_per_part)
+    : impl_(std::make_unique<Impl>()) {
+  if (min_sites_per_part == 0) min_sites_per_part = kMinSitesPerPart;
+  if (sites.empty()) throw Input_error("spacing function needs at least one site");
+  if (sites.size() != weights.size()) throw Input_error("one weight per site is required");
+  for (double w : weights) {
+    if (!std::isfinite(w) || w < 0) throw Input_error("spacing weights must be finite and >= 0");
+  }
+  Impl& impl = *impl_;
+  impl.sites = sites;
+  impl.weights = weights;
+  // Apollonius distance is |x - c| - W; with W_i = shift - w_i >= 0 the nearest
+  // site minimises w_i + |x - c_i|.
+  impl.shift = *std::max_element(weights.begin(), weights.end());
+  // Queries between sites have f a little above the weights: twice the largest
+  // weight certifies nearly all of them (and every query at a site).
+  impl.halo = 2 * impl.shift;
+  const std::size_t n = sites.size();
+
+  // The split, and every part's members: its own sites, then those within the
+  // halo of its cell (site membership uses a slightly larger halo, so rounding
+  // in these comparisons can only add sites).
+  std::vector<std::vector<std::size_t>> members;
+  std::vector<std::array<double, 4>> cells(1);  // lo_x, lo_y, hi_x, hi_y
+  int n_parts = n >= 4 * min_sites_per_part ? 4 : n >= 2 * min_sites_per_part ? 2 : 1;
+  while (n_parts > 1) {
+    std::vector<double> xs(n);
+    for (std::size_t i = 0; i < n; ++i) xs[i] = sites[i][0];
+    impl.split_x = median_of(std::move(xs));
+    if (n_parts == 4) {
+      for (int side = 0; side < 2; ++side) {
+        std::vector<double> ys;
+        for (std::size_t i = 0; i < n; ++i) {
+          if ((sites[i][0] < impl.split_x ? 0 : 1) == side) ys.push_back(sites[i][1]);
+        }
+        impl.split_y[side] = ys.empty() ? 0.0 : median_of(std::move(ys));
+      }
+    }
+    impl.n_parts = n_parts;
+    double max_abs = 0;
+    for (const auto& s : sites) max_abs = std::max({max_abs, std::abs(s[0]), std::abs(s[1])});
+    const double reach = impl.halo * (1 + 1e-6) + 1e-14 * (max_abs + impl.halo);
+    const double inf = std::numeric_limits<double>::infinity();
+    members.assign(n_parts, {});
+    cells.assign(n_parts, {-inf, -inf, inf, inf});
+    std::vector<std::size_t> own(n_parts, 0);
+    for (std::size_t i = 0; i < n; ++i) ++own[impl.part_of(sites[i][0], sites[i][1])];
+    bool balanced = true;
+    for (int k = 0; k < n_parts; ++k) balanced = balanced && own[k] >= n / (4 * n_parts);
+    std::size_t total = 0;
+    for (int k = 0; k < n_parts && balanced; ++k) {
+      auto& cell = cells[k];
+      const int side = n_parts == 2 ? k : k / 2;
+      (side == 0 ? cell[2] : cell[0]) = impl.split_x;
+      if (n_parts == 4) (k % 2 == 0 ? cell[3] : cell[1]) = impl.split_y[side];
+      for (std::size_t i = 0; i < n; ++i) {
+        if (impl.part_of(sites[i][0], sites[i][1]) == k) members[k].push_back(i);
+      }
+      for (std::size_t i = 0; i < n; ++i) {
+        const double x = sites[i][0], y = sites[i][1];
+        if (impl.part_of(x, y) != k && x >= cell[0] - reach && x <= cell[2] + reach && y >= cell[1] - reach &&
+            y <= cell[3] + reach) {
+          members[k].push_back(i);
+        }
+      }
+      total += members[k].size();
+    }
+    // Splitting pays only while the halos stay thin.
+    if (balanced && total <= n + n / 4) break;
+    n_parts /= 2;
+  }
+  if (n_parts == 1) {
+    impl.n_parts = 1;
+    const double inf = std::numeric_limits<double>::infinity();
+    cells.assign(1, {-inf, -inf, inf, inf});
+    members.assign(1, std::vector<std::size_t>(n));
+    std::iota(members[0].begin(), members[0].end(), 0);
+  }
+  impl.parts.resize(n_parts);
+  parallel_for(static_cast<std::size_t>(n_parts), 0, [&](std::size_t k) {
+    auto part = std::make_unique<Impl::Part>();
+    part->lo_x = cells[k][0];
+    part->lo_y = cells[k][1];
+    part->hi_x = cells[k][2];
+    part->hi_y = cells[k][3];
+    build_graph(part->graph, impl.sites, impl.weights, impl.shift, std::move(members[k]));
+    for (auto v = part->graph.finite_vertices_begin(); v != part->graph.finite_vertices_end(); ++v) {
+      const Vec2& c = impl.sites[v->index];
+      part->n_visible_own += impl.part_of(c[0], c[1]) == static_cast<int>(k);
+    }
+    impl.parts[k] = std::move(part);
+  });
+}
+
 Spacing_function::~Spacing_function() = default;
 
 std::size_t Spacing_function::n_sites() const { return impl_->sites.size(); }
+int Spacing_function::n_parts() const { return impl_->n_parts; }
 std::size_t Spacing_function::n_hidden() const {
-  return impl_->sites.size() - impl_->graph.number_of_vertices();
+  std::size_t visible = 0;
+  for (const auto& part : impl_->parts) visible += part->n_visible_own;
+  return impl_->sites.size() - visible;
 }
 const std::vector<Vec2>& Spacing_function::sites() const { return impl_->sites; }
 const std::vector<double>& Spacing_function::weights() const { return impl_->weights; }
@@ -225,53 +564,91 @@ const std::vector<double>& Spacing_function::weights() const { return impl_->wei
 void Spacing_function::evaluate(const Vec2* queries, std::size_t n, double* f_out, Index* site_out,
                                 int threads, bool certified) const {
   if (n == 0) return;
-  std::vector<Query> sorted(n);
-  for (std::size_t i = 0; i < n; ++i) sorted[i] = {queries[i][0], queries[i][1], i};
-  hilbert_sort_queries(sorted, threads);
-  const auto& graph = impl_->graph;
-  const auto& sites = impl_->sites;
-  const auto& weights = impl_->weights;
+  // Certified queries in CGAL's median Hilbert order; the many uncertified ones
+  // (sample radii) in the O(n) grid Hilbert order, which walks about as short.
+  std::vector<Query> sorted;
+  if (!certified) {
+    sorted = hilbert_key_order(queries, n, threads);
+  } else {
+    sorted.resize(n);
+    for (std::size_t i = 0; i < n; ++i) sorted[i] = {queries[i][0], queries[i][1], i};
+    hilbert_sort_queries(sorted, threads);
+  }
+  const Impl& impl = *impl_;
+  const auto& sites = impl.sites;
+  const auto& weights = impl.weights;
   const std::size_t n_chunks = (n + kQueryChunk - 1) / kQueryChunk;
+  using Vertex = Apollonius_graph::Vertex_handle;
+  auto cone = [&](Vertex v, const Vec2& x) {
+    const Index s = v->index;
+    const double dx = x[0] - sites[s][0];
+    const double dy = x[1] - sites[s][1];
+    return weights[s] + std::sqrt(dx * dx + dy * dy);
+  };
+  // Nearest site of x in one graph, from `hint` (may be null).
+  auto nearest = [&](const Apollonius_graph& graph, const Vec2& x, Vertex hint) {
+    const Ag_point point(x[0], x[1]);
+    if (hint == Vertex()) return graph.nearest_neighbor(point);
+    // Below three vertices the graph has no faces to walk on; CGAL scans them.
+    if (certified || graph.number_of_vertices() < 3) return graph.nearest_neighbor(point, hint);
+    // Greedy descent over Apollonius-graph neighbours, as CGAL's walk does,
+    // with the cone values in double; values strictly decrease, so it ends.
+    double best = cone(hint, x);
+    for (bool moved = true; moved;) {
+      moved = false;
+      auto c = graph.incident_vertices(hint), done = c;
+      do {
+        if (graph.is_infinite(c)) continue;
+        const double value = cone(c, x);
+        if (value < best) {
+          best = value;
+          hint = c;
+          moved = true;
+          break;
+        }
+      } while (++c != done);
+    }
+    return hint;
+  };
   parallel_for(n_chunks, threads, [&](std::size_t chunk) {
     const std::size_t begin = chunk * kQueryChunk;
     const std::size_t end = std::min(n, begin + kQueryChunk);
-    auto cone = [&](Apollonius_graph::Vertex_handle v, const Vec2& x) {
-      const Index s = v->index;
-      const double dx = x[0] - sites[s][0];
-      const double dy = x[1] - sites[s][1];
-      return weights[s] + std::sqrt(dx * dx + dy * dy);
-    };
-    Apollonius_graph::Vertex_handle hint;
+    Vertex hints[4];
     for (std::size_t k = begin; k < end; ++k) {
       const std::size_t q = sorted[k].index;
       const Vec2 x{sorted[k].x, sorted[k].y};
-      const Ag_point point(x[0], x[1]);
-      if (hint == Apollonius_graph::Vertex_handle()) {
-        hint = graph.nearest_neighbor(point);
-      } else if (certified || graph.dimension() < 2) {
-        // (the greedy walk needs a 2-D graph: one or two visible sites are answered by CGAL)
-        hint = graph.nearest_neighbor(point, hint);
-      } else {
-        // Greedy descent over Apollonius-graph neighbours, as CGAL's walk does,
-        // with the cone values in double; values strictly decrease, so it ends.
-        double best = cone(hint, x);
-        for (bool moved = true; moved;) {
-          moved = false;
-          auto c = graph.incident_vertices(hint), done = c;
-          do {
-            if (graph.is_infinite(c)) continue;
-            const double value = cone(c, x);
-            if (value < best) {
-              best = value;
-              hint = c;
-              moved = true;
-              break;
-            }
-          } while (++c != done);
+      const int part = impl.part_of(x[0], x[1]);
+      Vertex v = hints[part] = nearest(impl.parts[part]->graph, x, hints[part]);
+      double value = cone(v, x);
+      if (!(value <= impl.halo)) {
+        // Not certified by the part: ask every part, keep the best (exact
+        // comparison when certified; ties go to the lowest part).
+        int best_part = part;
+        for (int other = 0; other < impl.n_parts; ++other) {
+          const Impl::Part& cell = *impl.parts[other];
+          // The best site is an own site of a cell within `value` of x.
+          const double dx = std::max({cell.lo_x - x[0], 0.0, x[0] - cell.hi_x});
+          const double dy = std::max({cell.lo_y - x[1], 0.0, x[1] - cell.hi_y});
+          if (other == part || std::sqrt(dx * dx + dy * dy) > value * (1 + 1e-9)) continue;
+          const Vertex w = hints[other] = nearest(cell.graph, x, hints[other]);
+          const double w_value = cone(w, x);
+          bool better;
+          if (certified) {
+            const auto side = cell.graph.geom_traits().oriented_side_of_bisector_2_object()(
+                v->site(), w->site(), Ag_point(x[0], x[1]));
+            better = side == CGAL::ON_NEGATIVE_SIDE || (side == CGAL::ON_ORIENTED_BOUNDARY && other < best_part);
+          } else {
+            better = w_value < value || (w_value == value && other < best_part);
+          }
+          if (better) {
+            v = w;
+            value = w_value;
+            best_part = other;
+          }
         }
       }
-      f_out[q] = cone(hint, x);
-      if (site_out) site_out[q] = hint->index;
+      f_out[q] = value;
+      if (site_out) site_out[q] = v->index;
     }
   });
 }

@@ -20,8 +20,16 @@ std::vector<double> nn_spacing(const std::vector<Vec2>& points);
 // the Apollonius nearest neighbour for the shifted weights W - weight_i >= 0.
 class Spacing_function {
  public:
+  // Large site sets are split into up to four parts (a kd split of the sites),
+  // each with its own Apollonius graph built in parallel, when every part has at
+  // least `min_sites_per_part` sites and the halos stay thin; answers are the
+  // same as from one graph (see spacing.cpp). 0 picks the default (2^17).
   // Preconditions: sites distinct and finite, weights finite and >= 0.
-  Spacing_function(const std::vector<Vec2>& sites, const std::vector<double>& weights);
+  Spacing_function(const std::vector<Vec2>& sites, const std::vector<double>& weights,
+                   std::size_t min_sites_per_part = 0);
+
+  // Number of Apollonius graphs the sites are split into (1, 2 or 4).
+  int n_parts() const;
   ~Spacing_function();
   Spacing_function(const Spacing_function&) = delete;
   Spacing_function& operator=(const Spacing_function&) = delete;
