@@ -39,6 +39,10 @@ CONFIGURATIONS = [
     ("FRFC + pass, midpoints", "frfc", {"samples": "midpoints"}),
     ("FRFC + pass, barycentre+midpoints", "frfc", {"samples": "barycentre+midpoints"}),
     ("FRFC + pass, cheap radius", "frfc", {"radius": "cheap"}),
+    ("FRFC + pass, cell_factor 1", "frfc", {"cell_factor": 1.0}),
+    ("FRFC + pass, cell_factor 1.5", "frfc", {"cell_factor": 1.5}),
+    ("FRFC + pass, cell_factor 2", "frfc", {"cell_factor": 2.0}),
+    ("FRFC, no pass, cell_factor 2", "frfc", {"cell_factor": 2.0, "quality": False}),
     ("DRFC, no quality pass", "drfc", {"quality": False}),
     ("DRFC + quality pass (default)", "drfc", {}),
 ]

@@ -126,3 +126,26 @@ def test_defaults_are_documented():
     assert FRFC_DEFAULTS["radius"] == "exact"
     assert FRFC_DEFAULTS["quality"] is True
     assert FRFC_DEFAULTS["min_angle"] == 20.0
+
+
+@given(mesh_and_delta(), st.sampled_from(SAMPLES), st.sampled_from(["exact", "cheap"]),
+       st.sampled_from([0.5, 1.0, 2.0]), st.integers(0, 3))
+def test_sample_filter_changes_nothing_but_the_work(case, samples, radius, cell_factor, seed):
+    """Dropping samples that certainly overlap a kept sphere (the Lipschitz bound) keeps the same spheres."""
+    mesh, delta = case
+    opts = dict(samples=samples, radius=radius, cell_factor=cell_factor, seed=seed, quality=False)
+    filtered = evomesh.evolve(mesh, delta, **opts)
+    full = evomesh.evolve(mesh, delta, filter_samples=False, **opts)
+    assert np.array_equal(filtered.points, full.points)
+    assert np.array_equal(filtered.triangles, full.triangles)
+    assert np.array_equal(filtered.origin, full.origin)
+    assert filtered.stats["n_interior_samples_drawn"] == full.stats["n_interior_samples_drawn"]
+    assert filtered.stats["n_interior_samples"] <= full.stats["n_interior_samples"]
+
+
+def test_sample_filter_drops_most_samples_where_nothing_changes():
+    mesh = grid_mesh(30, 30, jitter=0.2, seed=3)
+    out = evomesh.evolve(mesh, np.ones(mesh.n_points))
+    assert out.stats["n_interior_samples"] < 0.3 * out.stats["n_interior_samples_drawn"]
+    with pytest.raises(TypeError, match="filter_samples"):
+        evomesh.evolve(mesh, np.ones(mesh.n_points), filter_samples=1)

@@ -241,11 +241,13 @@ PYBIND11_MODULE(_core, m) {
          const Byte_array& segment_is_boundary, const Byte_array& kind, const Float_array& delta,
          std::uint64_t seed, double cell_factor, bool exact_radius, int sample_mode, bool skip_coarse_triangles,
          int threads, double max_samples, double radius_scale, double boundary_radius_scale, bool ring_samples, double repair_ratio,
-         bool quality, double min_angle, double crowding_angle, double quality_max_fraction, double quality_max_extra) {
+         bool quality, double min_angle, double crowding_angle, double quality_max_fraction, double quality_max_extra,
+         bool filter_samples) {
         Mesh_arrays mesh = to_mesh(points, triangles, segments, segment_is_boundary, kind);
         auto d = to_vector<double>(delta);
         if (sample_mode < 0 || sample_mode > 3) throw Input_error("unknown sample mode");
         Frfc_options options;
+        options.filter_samples = filter_samples;
         options.seed = seed;
         options.cell_factor = cell_factor;
         options.exact_radius = exact_radius;
@@ -283,7 +285,7 @@ PYBIND11_MODULE(_core, m) {
       py::arg("exact_radius") = true, py::arg("sample_mode") = 0, py::arg("skip_coarse_triangles") = false,
       py::arg("threads") = 0, py::arg("max_samples") = 5e7, py::arg("radius_scale") = 1.0, py::arg("boundary_radius_scale") = 1.0, py::arg("ring_samples") = true, py::arg("repair_ratio") = 1.75,
       py::arg("quality") = false, py::arg("min_angle") = 20.0, py::arg("crowding_angle") = 120.0,
-      py::arg("quality_max_fraction") = 0.5, py::arg("quality_max_extra") = 1000.0);
+      py::arg("quality_max_fraction") = 0.5, py::arg("quality_max_extra") = 1000.0, py::arg("filter_samples") = true);
 
   m.def(
       "drfc",

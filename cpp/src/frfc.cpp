@@ -45,13 +45,17 @@ enum Priority : std::uint8_t {
 // R-points cannot take every place around p before p's own ring is offered.
 // `inside_round`/`segment_round` receive the round of every sample (-1: not a ring sample).
 constexpr int kRingDirections = 6;
+constexpr double kMargin = 1.02;
 
-void add_ring_samples(const Mesh_arrays& mesh, const std::vector<double>& delta, const std::vector<double>& f,
-                      double radius_scale, std::uint64_t seed, Sample_set& inside, Sample_set& on_segments,
-                      std::vector<std::int8_t>& inside_round, std::vector<std::int8_t>& segment_round,
-                      std::vector<Index>& inside_owner, std::vector<Index>& segment_owner) {
+double ring_reach(double radius_scale) {
+  return kMargin * radius_scale / (1.0 - 0.5 * radius_scale);
+}
+
+// Interior ring candidates, appended to `inside`.
+void add_interior_ring_samples(const Mesh_arrays& mesh, const std::vector<double>& delta, const std::vector<double>& f,
+                               double radius_scale, std::uint64_t seed, Sample_set& inside,
+                               std::vector<std::int8_t>& inside_round, std::vector<Index>& inside_owner) {
   constexpr int kDirections = kRingDirections;
-  constexpr double kMargin = 1.02;
   constexpr double kTwoPi = 6.283185307179586;
   const std::size_t n = mesh.points.size();
   // Triangles around each point (compressed lists).
@@ -66,7 +70,7 @@ void add_ring_samples(const Mesh_arrays& mesh, const std::vector<double>& delta,
       for (Index v : mesh.triangles[t]) adj[fill[v]++] = static_cast<Index>(t);
     }
   }
-  const double reach = kMargin * radius_scale / (1.0 - 0.5 * radius_scale);
+  const double reach = ring_reach(radius_scale);
   for (std::size_t p = 0; p < n; ++p) {
     if (!(delta[p] < 1)) continue;
     const Vec2& c = mesh.points[p];
@@ -91,7 +95,14 @@ void add_ring_samples(const Mesh_arrays& mesh, const std::vector<double>& delta,
       }
     }
   }
-  // The same along segments: one candidate each way from an R-point, on the segment.
+}
+
+// Segment ring candidates: one each way from an R-point, on the segment, merged
+// into the per-segment sample lists (which stay sorted along each segment).
+void add_segment_ring_samples(const Mesh_arrays& mesh, const std::vector<double>& delta, const std::vector<double>& f,
+                              double radius_scale, Sample_set& on_segments, std::vector<std::int8_t>& segment_round,
+                              std::vector<Index>& segment_owner) {
+  const double reach = ring_reach(radius_scale);
   segment_round.assign(on_segments.points.size(), -1);
   segment_owner.assign(on_segments.points.size(), -1);
   std::vector<std::pair<Index, double>> extra;  // (segment, t)
@@ -356,7 +367,7 @@ Evolve_result frfc(const Mesh_arrays& mesh, const std::vector<double>& delta, co
   for (std::size_t i = 0; i < n; ++i) f[i] = std::min(f[i], weight[i]);
   timer.lap("spacing_at_points");
 
-  // Step 2: samples in triangles and on segments.
+  // Step 2a: samples on segments, with the ring candidates of R-points on them.
   const double estimate = estimate_sample_count(mesh, f, options.cell_factor);
   if (estimate > options.max_samples) {
     throw Input_error("delta asks for too much refinement in one step: sampling would create about " +
@@ -364,65 +375,57 @@ Evolve_result frfc(const Mesh_arrays& mesh, const std::vector<double>& delta, co
                       format_count(options.max_samples) +
                       "); raise delta or max_samples, or refine over several steps");
   }
-  std::vector<std::uint8_t> skip;
-  if (options.skip_coarse_triangles) {
-    skip.resize(mesh.triangles.size());
-    for (std::size_t t = 0; t < mesh.triangles.size(); ++t) {
-      const auto& tri = mesh.triangles[t];
-      skip[t] = delta[tri[0]] > 1 && delta[tri[1]] > 1 && delta[tri[2]] > 1;
-    }
-  }
   Sample_set on_segments = sample_segments(mesh, f, options.cell_factor, options.sample_mode, options.seed);
-  Sample_set inside = sample_triangles(mesh, f, options.cell_factor, options.sample_mode, options.seed, skip);
-  std::vector<std::int8_t> inside_round(inside.points.size(), -1), segment_round(on_segments.points.size(), -1);
-  std::vector<Index> inside_owner(inside.points.size(), -1), segment_owner(on_segments.points.size(), -1);
+  std::vector<std::int8_t> segment_round(on_segments.points.size(), -1);
+  std::vector<Index> segment_owner(on_segments.points.size(), -1);
   if (options.ring_samples) {
-    add_ring_samples(mesh, delta, f, options.radius_scale, options.seed, inside, on_segments, inside_round,
-                     segment_round, inside_owner, segment_owner);
+    add_segment_ring_samples(mesh, delta, f, options.radius_scale, on_segments, segment_round, segment_owner);
   }
+  const std::size_t n_seg = on_segments.points.size();
   timer.lap("sampling");
 
-  // Candidate spheres: input points, segment samples, interior samples.
-  const std::size_t n_seg = on_segments.points.size();
-  const std::size_t n_in = inside.points.size();
-  const std::size_t total = n + n_seg + n_in;
+  // Sphere radii: radius_scale f(x) / 2, exact from the Apollonius graph or
+  // (f(q) + |x - q|) / 2 with q the vertex of smallest f (Section 3.2, step 2).
+  auto sample_radii = [&](const Sample_set& samples, bool on_segment, double* out) {
+    const std::size_t m = samples.points.size();
+    if (options.exact_radius) {
+      spacing.evaluate(samples.points.data(), m, out, nullptr, options.threads, /*certified=*/false);
+    } else {
+      for (std::size_t j = 0; j < m; ++j) {
+        Index q;
+        if (on_segment) {
+          const Edge& e = mesh.segments[samples.parent[j]];
+          q = f[e[0]] <= f[e[1]] ? e[0] : e[1];
+        } else {
+          const Triangle& t = mesh.triangles[samples.parent[j]];
+          q = t[0];
+          if (f[t[1]] < f[q]) q = t[1];
+          if (f[t[2]] < f[q]) q = t[2];
+        }
+        const Vec2& x = samples.points[j];
+        out[j] = f[q] + std::hypot(x[0] - mesh.points[q][0], x[1] - mesh.points[q][1]);
+      }
+    }
+    for (std::size_t j = 0; j < m; ++j) out[j] *= 0.5 * options.radius_scale * (on_segment ? options.boundary_radius_scale : 1.0);
+  };
+  // Candidates of the boundary and old-point classes: input points, then segment samples.
   std::vector<Vec2> centers;
-  centers.reserve(total);
+  centers.reserve(n + n_seg);
   centers.insert(centers.end(), mesh.points.begin(), mesh.points.end());
   centers.insert(centers.end(), on_segments.points.begin(), on_segments.points.end());
-  centers.insert(centers.end(), inside.points.begin(), inside.points.end());
-  std::vector<double> radius(total);
-  for (std::size_t i = 0; i < n; ++i) radius[i] = 0.5 * f[i];
-  if (options.exact_radius) {
-    spacing.evaluate(centers.data() + n, n_seg + n_in, radius.data() + n, nullptr, options.threads,
-                     /*certified=*/false);
-    for (std::size_t i = n; i < total; ++i) radius[i] *= 0.5;
-  } else {
-    // (f(q) + |x - q|) / 2 with q the vertex of smallest f (Section 3.2, step 2).
-    auto cheap = [&](const Vec2& x, Index q) {
-      return 0.5 * (f[q] + std::hypot(x[0] - mesh.points[q][0], x[1] - mesh.points[q][1]));
-    };
-    for (std::size_t j = 0; j < n_seg; ++j) {
-      const Edge& e = mesh.segments[on_segments.parent[j]];
-      const Index q = f[e[0]] <= f[e[1]] ? e[0] : e[1];
-      radius[n + j] = cheap(on_segments.points[j], q);
-    }
-    for (std::size_t j = 0; j < n_in; ++j) {
-      const Triangle& t = mesh.triangles[inside.parent[j]];
-      Index q = t[0];
-      if (f[t[1]] < f[q]) q = t[1];
-      if (f[t[2]] < f[q]) q = t[2];
-      radius[n + n_seg + j] = cheap(inside.points[j], q);
-    }
-  }
-  for (double& r : radius) r *= options.radius_scale;
+  std::vector<double> radius(n + n_seg);
   for (std::size_t i = 0; i < n; ++i) {
+    radius[i] = 0.5 * options.radius_scale * f[i];
     if (mesh.kind[i] == Point_kind::corner || mesh.kind[i] == Point_kind::boundary) radius[i] *= options.boundary_radius_scale;
   }
-  for (std::size_t j = n; j < n + n_seg; ++j) radius[j] *= options.boundary_radius_scale;
+  sample_radii(on_segments, true, radius.data() + n);
   timer.lap("sample_radii");
 
   // Steps 3-5: order the spheres, lexical-first MIS; corners are always kept.
+  // Every interior sample comes after every input point and segment sample in
+  // the order (its classes are last), so the MIS is computed in two passes: the
+  // first over input points and segment samples decides them for good; the
+  // second goes on with the interior samples, the spheres kept so far forced.
   const auto chains = segment_chains(mesh);
   std::vector<std::uint8_t> forced_corner(n, 0);
   for (std::size_t i = 0; i < n; ++i) forced_corner[i] = mesh.kind[i] == Point_kind::corner;
@@ -430,7 +433,7 @@ Evolve_result frfc(const Mesh_arrays& mesh, const std::vector<double>& delta, co
     forced_corner[chain.vertices.front()] = 1;
     forced_corner[chain.vertices.back()] = 1;
   }
-  std::vector<std::uint8_t> priority(total);
+  std::vector<std::uint8_t> priority(n + n_seg);
   std::size_t n_forced = 0;
   for (std::size_t i = 0; i < n; ++i) {
     if (forced_corner[i]) {
@@ -448,11 +451,77 @@ Evolve_result frfc(const Mesh_arrays& mesh, const std::vector<double>& delta, co
   for (std::size_t j = 0; j < n_seg; ++j) {
     priority[n + j] = segment_round[j] < 0 ? prio_boundary_sample : prio_boundary_ring + segment_round[j];
   }
-  for (std::size_t j = 0; j < n_in; ++j) {
-    priority[n + n_seg + j] = inside_round[j] < 0 ? prio_sampled : prio_ring + inside_round[j];
+  const auto first_order = packing_order(priority, radius);
+  std::vector<Index> blocker;
+  auto kept = lexical_first_mis(centers, radius, first_order, n_forced, &blocker);
+  timer.lap("lfmis");
+
+  // Step 2b: interior samples. A sample x is certainly rejected when it lies
+  // within cover(c) of a kept sphere B(c, r_c) at an input point c: f is
+  // 1-Lipschitz, so its radius is at least s (f(c) - |x - c|) / 2 (s =
+  // radius_scale; also for the cheap radius, which is at least f(x) / 2), and
+  // |x - c| < r_c + that radius when |x - c| (1 + s/2) < r_c + s f(c) / 2. Each
+  // triangle vertex v offers one such disc: its own when v is kept, else that of
+  // the kept input point that rejected it. Samples in a disc of their triangle
+  // are dropped before their radius is computed (the factor 1 - 1e-9 keeps
+  // rounding on the safe side); the kept spheres are the same as without.
+  std::vector<Disc> cover;
+  if (options.filter_samples) {
+    cover.assign(n, Disc{{0.0, 0.0}, 0.0});
+    const double s = options.radius_scale;
+    for (std::size_t v = 0; v < n; ++v) {
+      const Index c = kept[v] ? static_cast<Index>(v) : blocker[v];
+      if (c < 0 || static_cast<std::size_t>(c) >= n) continue;
+      cover[v] = {mesh.points[c], (radius[c] + 0.5 * s * f[c]) / (1 + 0.5 * s) * (1 - 1e-9)};
+    }
   }
-  const auto order = packing_order(priority, radius);
-  auto kept = lexical_first_mis(centers, radius, order, n_forced);
+  std::vector<std::uint8_t> skip;
+  if (options.skip_coarse_triangles) {
+    skip.resize(mesh.triangles.size());
+    for (std::size_t t = 0; t < mesh.triangles.size(); ++t) {
+      const auto& tri = mesh.triangles[t];
+      skip[t] = delta[tri[0]] > 1 && delta[tri[1]] > 1 && delta[tri[2]] > 1;
+    }
+  }
+  std::size_t n_drawn = 0;
+  Sample_set inside = sample_triangles(mesh, f, options.cell_factor, options.sample_mode, options.seed, skip, cover,
+                                       options.threads, &n_drawn);
+  std::vector<std::int8_t> inside_round(inside.points.size(), -1);
+  std::vector<Index> inside_owner(inside.points.size(), -1);
+  if (options.ring_samples) {
+    add_interior_ring_samples(mesh, delta, f, options.radius_scale, options.seed, inside, inside_round, inside_owner);
+  }
+  const std::size_t n_in = inside.points.size();
+  timer.lap("sampling");
+  std::vector<double> inside_radius(n_in);
+  sample_radii(inside, false, inside_radius.data());
+  timer.lap("sample_radii");
+
+  // Second pass: the kept spheres of the first (in their order, forced), then the
+  // interior samples by class, radius and index.
+  std::vector<Index> second_order;
+  {
+    std::vector<Vec2> second_centers;
+    std::vector<double> second_radius;
+    for (Index c : first_order) {
+      if (!kept[c]) continue;
+      second_order.push_back(static_cast<Index>(second_centers.size()));
+      second_centers.push_back(centers[c]);
+      second_radius.push_back(radius[c]);
+    }
+    const std::size_t n_first = second_order.size();
+    std::vector<std::uint8_t> inside_priority(n_in);
+    for (std::size_t j = 0; j < n_in; ++j) {
+      inside_priority[j] = inside_round[j] < 0 ? prio_sampled : prio_ring + inside_round[j];
+    }
+    for (Index j : packing_order(inside_priority, inside_radius)) second_order.push_back(static_cast<Index>(n_first + j));
+    second_centers.insert(second_centers.end(), inside.points.begin(), inside.points.end());
+    second_radius.insert(second_radius.end(), inside_radius.begin(), inside_radius.end());
+    const auto second_kept = lexical_first_mis(second_centers, second_radius, second_order, n_first);
+    kept.insert(kept.end(), second_kept.begin() + static_cast<std::ptrdiff_t>(n_first), second_kept.end());
+  }
+  centers.insert(centers.end(), inside.points.begin(), inside.points.end());
+  const std::size_t total = n + n_seg + n_in;
   timer.lap("lfmis");
   std::size_t n_repairs = 0;
   if (options.repair_ratio > 0 && options.ring_samples) {
@@ -530,6 +599,7 @@ Evolve_result frfc(const Mesh_arrays& mesh, const std::vector<double>& delta, co
   stats.emplace_back("n_input_points", static_cast<double>(n));
   stats.emplace_back("n_segment_samples", static_cast<double>(n_seg));
   stats.emplace_back("n_interior_samples", static_cast<double>(n_in));
+  stats.emplace_back("n_interior_samples_drawn", static_cast<double>(n_drawn));
   stats.emplace_back("n_candidates", static_cast<double>(total));
   stats.emplace_back("n_spacing_repairs", static_cast<double>(n_repairs));
   stats.emplace_back("n_hidden_sites", static_cast<double>(spacing.n_hidden()));

@@ -27,7 +27,9 @@ namespace {
 class Kept_sphere_tree {
  public:
   // `order`: the visiting order (a permutation of the sphere indices).
-  Kept_sphere_tree(const std::vector<Vec2>& centers, const std::vector<double>& radii, const std::vector<Index>& order)
+  // `keep_indices`: remember which sphere sits at each position (for sphere_at).
+  Kept_sphere_tree(const std::vector<Vec2>& centers, const std::vector<double>& radii, const std::vector<Index>& order,
+                   bool keep_indices = false)
       : n_(centers.size()) {
     if (n_ == 0) return;
     while ((n_ >> depth_) > kLeafSize) ++depth_;
@@ -69,6 +71,7 @@ class Kept_sphere_tree {
     {
       std::vector<std::uint32_t> position_of(n_);
       for (std::size_t k = 0; k < n_; ++k) position_of[index_at[k]] = static_cast<std::uint32_t>(k);
+      if (keep_indices) index_at_ = std::move(index_at);
       index_at = std::vector<std::uint32_t>();
       visit_.resize(n_);
       for (std::size_t k = 0; k < n_; ++k) visit_[k] = position_of[order[k]];
@@ -104,16 +107,25 @@ class Kept_sphere_tree {
     __builtin_prefetch(&nodes_[node ^ 1]);
   }
 
-  bool conflicts_with_kept(std::size_t position) const {
+  static constexpr std::size_t kNone = ~std::size_t{0};
+
+  // The position of a kept sphere that conflicts with the one at `position`
+  // (the first found), or kNone.
+  std::size_t conflicting_kept(std::size_t position) const {
     const Slot& s = slots_[position];
     const double cx = s.x, cy = s.y, r = s.radius;
     std::size_t node = n_leaves_ + leaf_of(position);
-    if (leaf_conflicts(node - n_leaves_, cx, cy, r)) return true;
+    std::size_t hit = leaf_conflicts(node - n_leaves_, cx, cy, r);
+    if (hit != kNone) return hit;
     for (; node > 1; node >>= 1) {
-      if (subtree_conflicts(node ^ 1, cx, cy, r)) return true;
+      hit = subtree_conflicts(node ^ 1, cx, cy, r);
+      if (hit != kNone) return hit;
     }
-    return false;
+    return kNone;
   }
+
+  // The sphere at a position (only with keep_indices).
+  std::size_t sphere_at(std::size_t position) const { return index_at_[position]; }
 
   void keep(std::size_t position) {
     const double r = slots_[position].radius;
@@ -187,19 +199,20 @@ class Kept_sphere_tree {
     build(items, 2 * node + 1, level + 1);
   }
 
-  bool leaf_conflicts(std::size_t leaf, double cx, double cy, double r) const {
-    const Slot* first = &slots_[leaf_begin(leaf)];
+  std::size_t leaf_conflicts(std::size_t leaf, double cx, double cy, double r) const {
+    const std::size_t begin = leaf_begin(leaf);
+    const Slot* first = &slots_[begin];
     for (std::uint64_t mask = kept_in_leaf_[leaf]; mask != 0; mask &= mask - 1) {
       const Slot& s = first[__builtin_ctzll(mask)];
       const double ex = s.x - cx;
       const double ey = s.y - cy;
       const double sum = r + s.radius;
-      if (ex * ex + ey * ey < sum * sum) return true;
+      if (ex * ex + ey * ey < sum * sum) return begin + static_cast<std::size_t>(&s - first);
     }
-    return false;
+    return kNone;
   }
 
-  bool subtree_conflicts(std::size_t root, double cx, double cy, double r) const {
+  std::size_t subtree_conflicts(std::size_t root, double cx, double cy, double r) const {
     std::size_t stack[128];
     int top = 0;
     stack[top++] = root;
@@ -214,13 +227,14 @@ class Kept_sphere_tree {
       const double reach = r + b.max_kept_radius;
       if (dx * dx + dy * dy >= reach * reach) continue;
       if (node >= n_leaves_) {
-        if (leaf_conflicts(node - n_leaves_, cx, cy, r)) return true;
+        const std::size_t hit = leaf_conflicts(node - n_leaves_, cx, cy, r);
+        if (hit != kNone) return hit;
       } else {
         stack[top++] = 2 * node + 1;
         stack[top++] = 2 * node;
       }
     }
-    return false;
+    return kNone;
   }
 
   std::size_t n_;
@@ -230,13 +244,15 @@ class Kept_sphere_tree {
   std::vector<std::uint32_t> visit_;
   std::vector<Node> nodes_;
   std::vector<std::uint64_t> kept_in_leaf_;  // bit k: position leaf_begin + k is kept
+  std::vector<std::uint32_t> index_at_;      // sphere at each position (keep_indices only)
 };
 
 }  // namespace
 
 std::vector<std::uint8_t> lexical_first_mis(const std::vector<Vec2>& centers,
                                             const std::vector<double>& radii,
-                                            const std::vector<Index>& order, std::size_t n_forced) {
+                                            const std::vector<Index>& order, std::size_t n_forced,
+                                            std::vector<Index>* blocker) {
   const std::size_t n = centers.size();
   if (radii.size() != n || order.size() != n) throw Input_error("centers, radii and order must have the same length");
   if (n_forced > n) throw Input_error("more forced spheres than spheres");
@@ -251,15 +267,19 @@ std::vector<std::uint8_t> lexical_first_mis(const std::vector<Vec2>& centers,
     if (!std::isfinite(radii[i]) || !(radii[i] > 0)) throw Input_error("sphere radii must be finite and > 0");
   }
   std::fill(kept.begin(), kept.end(), 0);
-  Kept_sphere_tree tree(centers, radii, order);
+  Kept_sphere_tree tree(centers, radii, order, blocker != nullptr);
+  if (blocker) blocker->assign(n, -1);
   // The loop prefetches a few spheres ahead: which sphere comes next never
   // depends on the decisions.
   constexpr std::size_t kAhead = 8;
   for (std::size_t k = 0; k < n; ++k) {
     if (k + kAhead < n) tree.prefetch(tree.visit(k + kAhead));
-    if (k < n_forced || !tree.conflicts_with_kept(tree.visit(k))) {
+    const std::size_t hit = k < n_forced ? Kept_sphere_tree::kNone : tree.conflicting_kept(tree.visit(k));
+    if (hit == Kept_sphere_tree::kNone) {
       kept[order[k]] = 1;
       tree.keep(tree.visit(k));
+    } else if (blocker) {
+      (*blocker)[order[k]] = static_cast<Index>(tree.sphere_at(hit));
     }
   }
   return kept;

@@ -30,6 +30,10 @@ struct Frfc_options {
   double repair_ratio = 1.75;
   Sample_mode sample_mode = Sample_mode::random_grid;
   bool skip_coarse_triangles = false;  // no samples where all three vertices have delta > 1
+  // Interior samples that certainly overlap a kept sphere at a vertex of their
+  // triangle are dropped before their radius is computed (frfc.cpp). The kept
+  // spheres are the same either way; on is faster and smaller.
+  bool filter_samples = true;
   std::uint64_t seed = 0;
   int threads = 0;                   // 0: hardware concurrency (capped at 2 chunks per core)
   double max_samples = 5e7;          // refuse inputs whose sampling would exceed this
@@ -76,10 +80,18 @@ namespace detail {
 class Stage_timer {
  public:
   explicit Stage_timer(std::vector<std::pair<std::string, double>>& stats) : stats_(stats) {}
+  // Adds the time since the last lap to the stage `name` (a stage may be timed in several laps).
   void lap(const std::string& name) {
     const auto now = std::chrono::steady_clock::now();
-    stats_.emplace_back("seconds_" + name, std::chrono::duration<double>(now - last_).count());
+    const double seconds = std::chrono::duration<double>(now - last_).count();
     last_ = now;
+    for (auto& entry : stats_) {
+      if (entry.first == "seconds_" + name) {
+        entry.second += seconds;
+        return;
+      }
+    }
+    stats_.emplace_back("seconds_" + name, seconds);
   }
 
  private:

@@ -17,11 +17,14 @@ namespace evomesh {
 // kd-tree over all centres whose nodes carry the largest radius kept below them,
 // so a query visits only nodes that can hold a conflicting kept sphere:
 // O(n log n) for systems of bounded ply (Lemma 3.6).
+// `blocker` (optional) receives, for every rejected sphere, a kept sphere it
+// conflicts with (the first one the search meets), and -1 for kept spheres.
 // Preconditions: radii finite and > 0, centres finite.
 std::vector<std::uint8_t> lexical_first_mis(const std::vector<Vec2>& centers,
                                             const std::vector<double>& radii,
                                             const std::vector<Index>& order,
-                                            std::size_t n_forced = 0);
+                                            std::size_t n_forced = 0,
+                                            std::vector<Index>* blocker = nullptr);
 
 // Packing order: by increasing priority class, then increasing radius, then index.
 std::vector<Index> packing_order(const std::vector<std::uint8_t>& priority_class,

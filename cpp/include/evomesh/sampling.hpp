@@ -15,6 +15,11 @@ enum class Sample_mode : std::uint8_t {
   barycentre_midpoints = 3,
 };
 
+struct Disc {
+  Vec2 center;
+  double radius;  // 0: empty
+};
+
 struct Sample_set {
   std::vector<Vec2> points;
   std::vector<Index> parent;  // triangle index (interior samples) or segment index (segment samples)
@@ -24,9 +29,15 @@ struct Sample_set {
 // triangle with the smallest f. Every interior sample is strictly inside its triangle
 // (checked with exact orientation predicates). Triangles with skip[t] != 0 get none.
 // Edges that are segments are never sampled here (see sample_segments).
+// A sample strictly inside the disc cover[v] of a vertex v of its triangle is
+// drawn but not returned (cover empty: all are returned); `n_drawn` receives
+// the number drawn.
+// Triangles are sampled in parallel in fixed blocks: the result never depends
+// on `threads` (0: hardware concurrency).
 Sample_set sample_triangles(const Mesh_arrays& mesh, const std::vector<double>& vertex_f,
                             double cell_factor, Sample_mode mode, std::uint64_t seed,
-                            const std::vector<std::uint8_t>& skip);
+                            const std::vector<std::uint8_t>& skip, const std::vector<Disc>& cover = {},
+                            int threads = 0, std::size_t* n_drawn = nullptr);
 
 // Samples on the segments, strictly between their endpoints, sorted along each
 // segment from a to b: one random point per 1-D cell of side cell_factor * min f / (2 sqrt 2),
