@@ -138,3 +138,29 @@ def test_unknown_method_and_option():
         evomesh.evolve(mesh, 1.0, colour="red")
     with pytest.raises(TypeError, match="seed"):
         evomesh.evolve(mesh, 1.0, seed=1.5)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_spacing_repair_brings_every_kept_r_point_a_neighbour(seed):
+    """Kept R-points whose ring was blocked get a ring candidate: nn_M'(p) <= repair_ratio delta nn_M(p)."""
+
+    mesh = grid_mesh(30, 30, jitter=0.2, seed=seed)
+    rng = np.random.default_rng(seed)
+    delta = np.exp(rng.uniform(np.log(0.2), np.log(3), mesh.n_points))
+    nn = evomesh.nn_spacing(mesh)
+
+    def worst_ratio(out):
+        kept = out.origin >= 0
+        p = out.origin[kept]
+        ratio = evomesh.nn_spacing(out)[kept] / (delta[p] * nn[p])
+        return ratio[delta[p] < 1].max()
+
+    repaired = evomesh.evolve(mesh, delta, quality=False, repair_ratio=1.75)
+    plain = evomesh.evolve(mesh, delta, quality=False, repair_ratio=None)
+    check_evolved(mesh, repaired)
+    assert repaired.stats["n_spacing_repairs"] > 0
+    assert plain.stats["n_spacing_repairs"] == 0
+    assert worst_ratio(plain) > 1.75
+    assert worst_ratio(repaired) <= 1.75
+    added = repaired.n_points - plain.n_points
+    assert added == repaired.stats["n_spacing_repairs"]

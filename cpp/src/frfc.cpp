@@ -8,6 +8,7 @@
 #include <CGAL/Delaunay_triangulation_2.h>
 #include <CGAL/Triangulation_vertex_base_with_info_2.h>
 
+#include "evomesh/detail/point_tree.hpp"
 #include "evomesh/kernel.hpp"
 #include "evomesh/packing.hpp"
 #include "evomesh/spacing.hpp"
@@ -51,49 +52,86 @@ double ring_reach(double radius_scale) {
   return kMargin * radius_scale / (1.0 - 0.5 * radius_scale);
 }
 
-// Interior ring candidates, appended to `inside`.
-void add_interior_ring_samples(const Mesh_arrays& mesh, const std::vector<double>& delta, const std::vector<double>& f,
-                               double radius_scale, std::uint64_t seed, Sample_set& inside,
-                               std::vector<std::int8_t>& inside_round, std::vector<Index>& inside_owner) {
-  constexpr int kDirections = kRingDirections;
-  constexpr double kTwoPi = 6.283185307179586;
-  const std::size_t n = mesh.points.size();
-  // Triangles around each point (compressed lists).
-  std::vector<Index> xadj(n + 1, 0), adj(3 * mesh.triangles.size());
-  for (const auto& t : mesh.triangles) {
-    for (Index v : t) ++xadj[v + 1];
-  }
-  for (std::size_t v = 0; v < n; ++v) xadj[v + 1] += xadj[v];
-  {
+// Triangles around each point (compressed lists).
+struct Triangle_fans {
+  std::vector<Index> xadj, adj;
+  explicit Triangle_fans(const Mesh_arrays& mesh) : xadj(mesh.points.size() + 1, 0), adj(3 * mesh.triangles.size()) {
+    const std::size_t n = mesh.points.size();
+    for (const auto& t : mesh.triangles) {
+      for (Index v : t) ++xadj[v + 1];
+    }
+    for (std::size_t v = 0; v < n; ++v) xadj[v + 1] += xadj[v];
     std::vector<Index> fill(xadj.begin(), xadj.end() - 1);
     for (std::size_t t = 0; t < mesh.triangles.size(); ++t) {
       for (Index v : mesh.triangles[t]) adj[fill[v]++] = static_cast<Index>(t);
     }
   }
-  const double reach = ring_reach(radius_scale);
-  for (std::size_t p = 0; p < n; ++p) {
-    if (!(delta[p] < 1)) continue;
-    const Vec2& c = mesh.points[p];
-    const double d = reach * f[p];
-    Random_stream rng(seed, (std::uint64_t{3} << 61) + p);
-    const double phase = rng.uniform() * kTwoPi / kDirections;
-    for (int k = 0; k < kDirections; ++k) {
-      const double angle = phase + kTwoPi * k / kDirections;
-      const Vec2 x{c[0] + d * std::cos(angle), c[1] + d * std::sin(angle)};
-      for (Index a = xadj[p]; a < xadj[p + 1]; ++a) {
-        const Triangle& t = mesh.triangles[adj[a]];
-        const Vec2& t0 = mesh.points[t[0]];
-        const Vec2& t1 = mesh.points[t[1]];
-        const Vec2& t2 = mesh.points[t[2]];
-        if (orientation(t0, t1, x) > 0 && orientation(t1, t2, x) > 0 && orientation(t2, t0, x) > 0) {
-          inside.points.push_back(x);
-          inside.parent.push_back(adj[a]);
-          inside_round.push_back(static_cast<std::int8_t>(k));
-          inside_owner.push_back(static_cast<Index>(p));
-          break;
-        }
+};
+
+// The interior ring candidates of the R-point p, in round order: emit(x,
+// triangle, round) for each of the kRingDirections points at distance reach f(p)
+// (random phase from the seed) that lies strictly inside a triangle around p.
+template <class Emit>
+void ring_candidates_of(const Mesh_arrays& mesh, const Triangle_fans& fans, const std::vector<double>& f, double reach,
+                        std::uint64_t seed, std::size_t p, Emit&& emit) {
+  constexpr double kTwoPi = 6.283185307179586;
+  const Vec2& c = mesh.points[p];
+  const double d = reach * f[p];
+  Random_stream rng(seed, (std::uint64_t{3} << 61) + p);
+  const double phase = rng.uniform() * kTwoPi / kRingDirections;
+  for (int k = 0; k < kRingDirections; ++k) {
+    const double angle = phase + kTwoPi * k / kRingDirections;
+    const Vec2 x{c[0] + d * std::cos(angle), c[1] + d * std::sin(angle)};
+    for (Index a = fans.xadj[p]; a < fans.xadj[p + 1]; ++a) {
+      const Triangle& t = mesh.triangles[fans.adj[a]];
+      if (orientation(mesh.points[t[0]], mesh.points[t[1]], x) > 0 &&
+          orientation(mesh.points[t[1]], mesh.points[t[2]], x) > 0 &&
+          orientation(mesh.points[t[2]], mesh.points[t[0]], x) > 0) {
+        emit(x, fans.adj[a], k);
+        break;
       }
     }
+  }
+}
+
+// Whether x lies strictly inside the cover disc of a vertex of triangle t.
+bool covered(const std::vector<Disc>& cover, const Triangle& t, const Vec2& x) {
+  if (cover.empty()) return false;
+  for (Index v : t) {
+    const Disc& d = cover[v];
+    const double dx = x[0] - d.center[0], dy = x[1] - d.center[1];
+    if (dx * dx + dy * dy < d.radius * d.radius) return true;
+  }
+  return false;
+}
+
+// Interior ring candidates of every R-point, in point order, appended to
+// `inside` (with their rounds), except those in a cover disc of their triangle.
+// Points are handled in parallel in fixed blocks joined in order.
+void add_interior_ring_samples(const Mesh_arrays& mesh, const Triangle_fans& fans, const std::vector<double>& delta,
+                               const std::vector<double>& f, double reach, std::uint64_t seed,
+                               const std::vector<Disc>& cover, int threads, Sample_set& inside,
+                               std::vector<std::int8_t>& inside_round) {
+  const std::size_t n = mesh.points.size();
+  constexpr std::size_t kBlock = 4096;
+  const std::size_t n_blocks = (n + kBlock - 1) / kBlock;
+  std::vector<Sample_set> blocks(n_blocks);
+  std::vector<std::vector<std::int8_t>> rounds(n_blocks);
+  parallel_for(n_blocks, threads, [&](std::size_t b) {
+    for (std::size_t p = b * kBlock; p < std::min(n, (b + 1) * kBlock); ++p) {
+      if (!(delta[p] < 1)) continue;
+      ring_candidates_of(mesh, fans, f, reach, seed, p, [&](const Vec2& x, Index t, int round) {
+        if (covered(cover, mesh.triangles[t], x)) return;
+        blocks[b].points.push_back(x);
+        blocks[b].parent.push_back(t);
+        rounds[b].push_back(static_cast<std::int8_t>(round));
+      });
+    }
+  });
+  for (std::size_t b = 0; b < n_blocks; ++b) {
+    inside.points.insert(inside.points.end(), blocks[b].points.begin(), blocks[b].points.end());
+    inside.parent.insert(inside.parent.end(), blocks[b].parent.begin(), blocks[b].parent.end());
+    inside_round.insert(inside_round.end(), rounds[b].begin(), rounds[b].end());
   }
 }
 
@@ -178,72 +216,94 @@ void add_segment_ring_samples(const Mesh_arrays& mesh, const std::vector<double>
 // Spacing repair. The packing guarantees nn_M'(p) = Theta(f(p)) only up to a
 // constant; where an R-point p that was kept ends up with no kept point within
 // repair_ratio * delta(p) nn_M(p) (its ring blocked by larger spheres kept
-// earlier), keep the ring candidate of p farthest from every kept point. That
-// candidate lies just outside p's sphere, so afterwards nn_M'(p) is about 1.2 f(p).
-// Returns the number of candidates added to `kept`.
-std::size_t repair_spacing(const Mesh_arrays& mesh, const std::vector<double>& delta, const std::vector<double>& nn,
-                           const std::vector<Vec2>& centers, const std::vector<Index>& ring_owner,
-                           double repair_ratio, std::vector<std::uint8_t>& kept) {
-  using Vb = CGAL::Triangulation_vertex_base_with_info_2<Index, Kernel>;
-  using Tds = CGAL::Triangulation_data_structure_2<Vb>;
-  using Delaunay = CGAL::Delaunay_triangulation_2<Kernel, Tds>;
+// earlier), keep the ring candidate of p farthest from every kept point: first
+// its candidates on segments (centres with segment_owner p, whose `kept` flag
+// is set), then its interior ones (regenerated, as the sample filter may have
+// dropped them; returned). That candidate lies just outside p's sphere, so
+// afterwards nn_M'(p) is about 1.2 f(p). Nearest kept points come from a static
+// kd-tree over the kept centres plus a Delaunay triangulation of the points
+// added here. `n_added` receives the number of candidates added.
+std::vector<Vec2> repair_spacing(const Mesh_arrays& mesh, const Triangle_fans& fans, const std::vector<double>& delta,
+                                 const std::vector<double>& nn, const std::vector<double>& f, double reach,
+                                 std::uint64_t seed, const std::vector<Vec2>& centers,
+                                 const std::vector<Index>& segment_owner, double repair_ratio, int threads,
+                                 std::vector<std::uint8_t>& kept, std::size_t& n_added) {
+  using Delaunay = CGAL::Delaunay_triangulation_2<Kernel>;
   const std::size_t n = mesh.points.size();
-  std::vector<std::pair<Point_2, Index>> input;
+  n_added = 0;
+  std::vector<Vec2> kept_points;
+  std::vector<Index> position_of(n, -1);
   for (std::size_t c = 0; c < centers.size(); ++c) {
-    if (kept[c]) input.emplace_back(to_cgal(centers[c]), static_cast<Index>(c));
+    if (!kept[c]) continue;
+    if (c < n) position_of[c] = static_cast<Index>(kept_points.size());
+    kept_points.push_back(centers[c]);
   }
-  Delaunay dt;
-  dt.insert(input.begin(), input.end());
-  std::vector<Delaunay::Vertex_handle> handle_of_point(n);
-  for (auto v = dt.finite_vertices_begin(); v != dt.finite_vertices_end(); ++v) {
-    if (v->info() < static_cast<Index>(n)) handle_of_point[v->info()] = v;
-  }
+  if (kept_points.size() < 2) return {};
+  const detail::Point_tree tree(kept_points);
+  const std::vector<double> nn2 = tree.squared_nn(threads);
   std::vector<Index> needy;
-  auto nearest_kept_distance2 = [&](Delaunay::Vertex_handle v) {
-    double best = std::numeric_limits<double>::infinity();
-    auto c = dt.incident_vertices(v), done = c;
-    if (c == nullptr) return best;
-    do {
-      if (!dt.is_infinite(c)) best = std::min(best, CGAL::squared_distance(v->point(), c->point()));
-    } while (++c != done);
-    return best;
-  };
   std::vector<std::uint8_t> is_needy(n, 0);
   for (std::size_t p = 0; p < n; ++p) {
-    if (!kept[p] || !(delta[p] < 1) || dt.dimension() < 2) continue;
+    if (position_of[p] < 0 || !(delta[p] < 1)) continue;
     const double target = repair_ratio * delta[p] * nn[p];
-    if (nearest_kept_distance2(handle_of_point[p]) > target * target) {
+    if (nn2[position_of[p]] > target * target) {
       is_needy[p] = 1;
       needy.push_back(static_cast<Index>(p));
     }
   }
-  if (needy.empty()) return 0;
-  std::vector<std::vector<Index>> candidates(n);
-  for (std::size_t c = 0; c < ring_owner.size(); ++c) {
-    if (ring_owner[c] >= 0 && is_needy[ring_owner[c]]) candidates[ring_owner[c]].push_back(static_cast<Index>(c));
+  std::vector<Vec2> added;
+  if (needy.empty()) return added;
+  std::vector<std::vector<Index>> on_segments(n);  // segment ring candidates (centre indices) of needy points
+  for (std::size_t j = 0; j < segment_owner.size(); ++j) {
+    if (segment_owner[j] >= 0 && is_needy[segment_owner[j]]) on_segments[segment_owner[j]].push_back(static_cast<Index>(n + j));
   }
-  std::size_t added = 0;
-  Delaunay::Face_handle hint;
+  Delaunay added_dt;  // every point added here (segment or interior)
+  Delaunay::Vertex_handle hint;
+  auto nearest2 = [&](const Vec2& x) {
+    double best = tree.squared_nearest(x);
+    if (added_dt.number_of_vertices() > 0) {
+      const Point_2 q = to_cgal(x);
+      hint = added_dt.nearest_vertex(q, hint == Delaunay::Vertex_handle() ? Delaunay::Face_handle() : hint->face());
+      best = std::min(best, CGAL::squared_distance(q, hint->point()));
+    }
+    return best;
+  };
   for (Index p : needy) {
     // re-check: an earlier repair may have served p
     const double target = repair_ratio * delta[p] * nn[p];
-    if (nearest_kept_distance2(handle_of_point[p]) <= target * target) continue;
-    Index best = -1;
+    double d2 = nn2[position_of[p]];
+    if (added_dt.number_of_vertices() > 0) {
+      const Point_2 q = to_cgal(mesh.points[p]);
+      d2 = std::min(d2, CGAL::squared_distance(q, added_dt.nearest_vertex(q)->point()));
+    }
+    if (d2 <= target * target) continue;
+    Index best_segment = -1;
+    Vec2 best_point{0.0, 0.0};
+    bool found = false;
     double best_d2 = 0;
-    for (Index c : candidates[p]) {
-      const Point_2 q = to_cgal(centers[c]);
-      auto v = dt.nearest_vertex(q, hint);
-      hint = v->face();
-      const double d2 = CGAL::squared_distance(q, v->point());
-      if (d2 > best_d2) {
-        best_d2 = d2;
-        best = c;
+    for (Index c : on_segments[p]) {
+      const double e2 = nearest2(centers[c]);
+      if (e2 > best_d2) {
+        best_d2 = e2;
+        best_segment = c;
+        best_point = centers[c];
+        found = true;
       }
     }
-    if (best < 0) continue;
-    kept[best] = 1;
-    dt.insert(to_cgal(centers[best]))->info() = best;
-    ++added;
+    ring_candidates_of(mesh, fans, f, reach, seed, static_cast<std::size_t>(p), [&](const Vec2& x, Index, int) {
+      const double e2 = nearest2(x);
+      if (e2 > best_d2) {
+        best_d2 = e2;
+        best_segment = -1;
+        best_point = x;
+        found = true;
+      }
+    });
+    if (!found) continue;
+    if (best_segment >= 0) kept[best_segment] = 1;
+    else added.push_back(best_point);
+    added_dt.insert(to_cgal(best_point));
+    ++n_added;
   }
   return added;
 }
@@ -362,9 +422,23 @@ Evolve_result frfc(const Mesh_arrays& mesh, const std::vector<double>& delta, co
   timer.lap("apollonius");
   auto& f = result.input_f;
   f.resize(n);
-  spacing.evaluate(mesh.points.data(), n, f.data(), nullptr, options.threads);
-  // f_p(p) = w_p is one of the cones: taking it makes Lemma 3.1 hold exactly.
-  for (std::size_t i = 0; i < n; ++i) f[i] = std::min(f[i], weight[i]);
+  // Lemma 3.1: f(p) = delta(p) nn_M(p) = w_p exactly where delta(p) <= 1; the
+  // Apollonius graph answers the others (f_p(p) = w_p is one of the cones, so
+  // f(p) <= w_p there too).
+  {
+    std::vector<Vec2> coarse;
+    std::vector<std::size_t> which;
+    for (std::size_t i = 0; i < n; ++i) {
+      f[i] = weight[i];
+      if (delta[i] > 1) {
+        coarse.push_back(mesh.points[i]);
+        which.push_back(i);
+      }
+    }
+    std::vector<double> value(coarse.size());
+    spacing.evaluate(coarse.data(), coarse.size(), value.data(), nullptr, options.threads);
+    for (std::size_t k = 0; k < which.size(); ++k) f[which[k]] = std::min(value[k], weight[which[k]]);
+  }
   timer.lap("spacing_at_points");
 
   // Step 2a: samples on segments, with the ring candidates of R-points on them.
@@ -487,9 +561,10 @@ Evolve_result frfc(const Mesh_arrays& mesh, const std::vector<double>& delta, co
   Sample_set inside = sample_triangles(mesh, f, options.cell_factor, options.sample_mode, options.seed, skip, cover,
                                        options.threads, &n_drawn);
   std::vector<std::int8_t> inside_round(inside.points.size(), -1);
-  std::vector<Index> inside_owner(inside.points.size(), -1);
+  const Triangle_fans fans(mesh);
+  const double reach = ring_reach(options.radius_scale);
   if (options.ring_samples) {
-    add_interior_ring_samples(mesh, delta, f, options.radius_scale, options.seed, inside, inside_round, inside_owner);
+    add_interior_ring_samples(mesh, fans, delta, f, reach, options.seed, cover, options.threads, inside, inside_round);
   }
   const std::size_t n_in = inside.points.size();
   timer.lap("sampling");
@@ -524,17 +599,15 @@ Evolve_result frfc(const Mesh_arrays& mesh, const std::vector<double>& delta, co
   const std::size_t total = n + n_seg + n_in;
   timer.lap("lfmis");
   std::size_t n_repairs = 0;
+  std::vector<Vec2> repair_points;
   if (options.repair_ratio > 0 && options.ring_samples) {
-    // ring candidate -> the point whose ring it belongs to, over all candidates
-    std::vector<Index> ring_owner(total, -1);
-    std::copy(segment_owner.begin(), segment_owner.end(), ring_owner.begin() + n);
-    std::copy(inside_owner.begin(), inside_owner.end(), ring_owner.begin() + n + n_seg);
-    n_repairs = repair_spacing(mesh, delta, result.input_nn, centers, ring_owner,
-                               options.repair_ratio, kept);
+    repair_points = repair_spacing(mesh, fans, delta, result.input_nn, f, reach, options.seed, centers, segment_owner,
+                                   options.repair_ratio, options.threads, kept, n_repairs);
   }
   timer.lap("spacing_repair");
 
-  // Output points: kept input points in input order, then kept samples.
+  // Output points: kept input points in input order, then kept samples, then
+  // the interior points of the spacing repair.
   std::vector<Index> out_index(total, -1);
   Mesh_arrays out;
   for (std::size_t c = 0; c < total; ++c) {
@@ -551,6 +624,11 @@ Evolve_result frfc(const Mesh_arrays& mesh, const std::vector<double>& delta, co
       result.origin.push_back(-1);
       out.kind.push_back(c < n + n_seg ? Point_kind::boundary : Point_kind::sampled);
     }
+  }
+  for (const Vec2& x : repair_points) {
+    out.points.push_back(x);
+    result.origin.push_back(-1);
+    out.kind.push_back(Point_kind::sampled);
   }
 
   // Constraint pieces between consecutive kept points along every chain.

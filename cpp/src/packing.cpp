@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <limits>
 #include <numeric>
 
@@ -288,33 +289,46 @@ std::vector<std::uint8_t> lexical_first_mis(const std::vector<Vec2>& centers,
 std::vector<Index> packing_order(const std::vector<std::uint8_t>& priority_class,
                                  const std::vector<double>& radii) {
   if (priority_class.size() != radii.size()) throw Input_error("classes and radii must have the same length");
-  // (class, radius, index) is a strict total order, so any correct sort gives
-  // the same permutation.
-  struct Key {
-    double radius;
+  // (class, radius, index) is a strict total order. A stable least-significant-
+  // digit radix sort on (class, radius) of the indices in increasing order gives
+  // it: the bits of a positive double order like the double, so the radius is
+  // sorted in six 11-bit passes (passes whose digit is the same everywhere are
+  // skipped), then the class in one 8-bit pass.
+  const std::size_t n = radii.size();
+  struct Item {
+    std::uint64_t radius_bits;
     std::uint64_t class_and_index;  // class in the top byte
   };
-  const std::size_t n = radii.size();
-  std::vector<Key> keys(n);
-  for (std::size_t i = 0; i < n; ++i) keys[i] = {radii[i], (std::uint64_t{priority_class[i]} << 56) | i};
-  auto less = [](const Key& a, const Key& b) {
-    const auto ca = a.class_and_index >> 56, cb = b.class_and_index >> 56;
-    if (ca != cb) return ca < cb;
-    if (a.radius != b.radius) return a.radius < b.radius;
-    return a.class_and_index < b.class_and_index;
+  std::vector<Item> items(n), next(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    if (!(radii[i] > 0)) throw Input_error("sphere radii must be > 0");
+    std::memcpy(&items[i].radius_bits, &radii[i], sizeof(double));
+    items[i].class_and_index = (std::uint64_t{priority_class[i]} << 56) | i;
+  }
+  std::vector<std::size_t> count(std::size_t{1} << 11);
+  auto pass = [&](auto digit_of, std::size_t n_buckets) {
+    std::fill(count.begin(), count.begin() + static_cast<std::ptrdiff_t>(n_buckets), 0);
+    for (const Item& item : items) ++count[digit_of(item)];
+    for (std::size_t d = 0; d < n_buckets; ++d) {
+      if (count[d] == n) return;  // one digit everywhere: the order stays
+    }
+    std::size_t sum = 0;
+    for (std::size_t d = 0; d < n_buckets; ++d) {
+      const std::size_t c = count[d];
+      count[d] = sum;
+      sum += c;
+    }
+    for (const Item& item : items) next[count[digit_of(item)]++] = item;
+    items.swap(next);
   };
-  // Two halves sorted in parallel, then merged straight into the output.
-  const std::size_t half = n / 2;
-  parallel_for(2, 0, [&](std::size_t h) {
-    std::sort(keys.begin() + (h ? half : 0), h ? keys.end() : keys.begin() + half, less);
-  });
+  for (int shift = 0; shift < 64; shift += 11) {
+    pass([shift](const Item& item) { return static_cast<std::size_t>((item.radius_bits >> shift) & 0x7ff); },
+         std::size_t{1} << 11);
+  }
+  pass([](const Item& item) { return static_cast<std::size_t>(item.class_and_index >> 56); }, 256);
   std::vector<Index> order(n);
   constexpr std::uint64_t kIndexMask = (std::uint64_t{1} << 56) - 1;
-  std::size_t a = 0, b = half;
-  for (std::size_t k = 0; k < n; ++k) {
-    const bool take_b = a == half || (b < n && less(keys[b], keys[a]));
-    order[k] = static_cast<Index>(keys[take_b ? b++ : a++].class_and_index & kIndexMask);
-  }
+  for (std::size_t k = 0; k < n; ++k) order[k] = static_cast<Index>(items[k].class_and_index & kIndexMask);
   return order;
 }
 
