@@ -4,6 +4,8 @@
 #include <chrono>
 #include <cmath>
 #include <string>
+#include <thread>
+#include <utility>
 
 #include <CGAL/Delaunay_triangulation_2.h>
 #include <CGAL/Triangulation_vertex_base_with_info_2.h>
@@ -51,6 +53,37 @@ constexpr double kMargin = 1.02;
 double ring_reach(double radius_scale) {
   return kMargin * radius_scale / (1.0 - 0.5 * radius_scale);
 }
+
+// Work started on another thread and waited for later; the destructor waits
+// too, so an exception on the main path never leaves a running thread behind.
+class Background {
+ public:
+  template <class Work>
+  void start(Work work, bool on_thread) {
+    if (!on_thread) {
+      work();
+      return;
+    }
+    thread_ = std::thread([this, work]() {
+      try {
+        work();
+      } catch (...) {
+        error_ = std::current_exception();
+      }
+    });
+  }
+  void wait() {
+    if (thread_.joinable()) thread_.join();
+    if (error_) std::rethrow_exception(std::exchange(error_, nullptr));
+  }
+  ~Background() {
+    if (thread_.joinable()) thread_.join();
+  }
+
+ private:
+  std::thread thread_;
+  std::exception_ptr error_;
+};
 
 // Triangles around each point (compressed lists).
 struct Triangle_fans {
@@ -528,6 +561,18 @@ Evolve_result frfc(const Mesh_arrays& mesh, const std::vector<double>& delta, co
   const auto first_order = packing_order(priority, radius);
   std::vector<Index> blocker;
   auto kept = lexical_first_mis(centers, radius, first_order, n_forced, &blocker);
+  const std::vector<std::uint8_t> kept_first(kept);
+  // The kept input points and segment samples are final: the quality pass's
+  // triangulation of them starts now, beside the interior sampling and packing.
+  std::vector<Vec2> first_points;
+  for (std::size_t c = 0; c < n + n_seg; ++c) {
+    if (kept_first[c]) first_points.push_back(centers[c]);
+  }
+  Early_triangulation early;
+  Background early_work;
+  if (options.quality) {
+    early_work.start([&]() { early.insert_first(first_points, mesh.points); }, options.threads != 1);
+  }
   timer.lap("lfmis");
 
   // Step 2b: interior samples. A sample x is certainly rejected when it lies
@@ -566,11 +611,51 @@ Evolve_result frfc(const Mesh_arrays& mesh, const std::vector<double>& delta, co
   if (options.ring_samples) {
     add_interior_ring_samples(mesh, fans, delta, f, reach, options.seed, cover, options.threads, inside, inside_round);
   }
-  const std::size_t n_in = inside.points.size();
   timer.lap("sampling");
-  std::vector<double> inside_radius(n_in);
+  std::vector<double> inside_radius(inside.points.size());
   sample_radii(inside, false, inside_radius.data());
   timer.lap("sample_radii");
+  if (options.filter_samples) {
+    // With its radius known, a sample that overlaps the kept sphere of a vertex
+    // of its triangle (or of the kept point that rejected that vertex) is
+    // rejected by the packing for sure: the test is the packing's own conflict
+    // test, so dropping it here changes nothing.
+    const std::size_t m = inside.points.size();
+    std::vector<std::uint8_t> drop(m, 0);
+    constexpr std::size_t kBlock = 1 << 16;
+    parallel_for((m + kBlock - 1) / kBlock, options.threads, [&](std::size_t b) {
+      for (std::size_t j = b * kBlock; j < std::min(m, (b + 1) * kBlock); ++j) {
+        const Vec2& x = inside.points[j];
+        const double r = inside_radius[j];
+        for (Index v : mesh.triangles[inside.parent[j]]) {
+          const Index c = kept[v] ? v : blocker[v];
+          if (c < 0) continue;
+          const double ex = centers[c][0] - x[0];
+          const double ey = centers[c][1] - x[1];
+          const double sum = r + radius[c];
+          if (ex * ex + ey * ey < sum * sum) {
+            drop[j] = 1;
+            break;
+          }
+        }
+      }
+    });
+    std::size_t k = 0;
+    for (std::size_t j = 0; j < m; ++j) {
+      if (drop[j]) continue;
+      inside.points[k] = inside.points[j];
+      inside.parent[k] = inside.parent[j];
+      inside_round[k] = inside_round[j];
+      inside_radius[k] = inside_radius[j];
+      ++k;
+    }
+    inside.points.resize(k);
+    inside.parent.resize(k);
+    inside_round.resize(k);
+    inside_radius.resize(k);
+    timer.lap("lfmis");
+  }
+  const std::size_t n_in = inside.points.size();
 
   // Second pass: the kept spheres of the first (in their order, forced), then the
   // interior samples by class, radius and index.
@@ -606,12 +691,23 @@ Evolve_result frfc(const Mesh_arrays& mesh, const std::vector<double>& delta, co
   }
   timer.lap("spacing_repair");
 
-  // Output points: kept input points in input order, then kept samples, then
-  // the interior points of the spacing repair.
+  // Output points: kept input points in input order and kept segment samples
+  // (the first points of the early triangulation), kept interior samples, then
+  // the points of the spacing repair (on segments, then inside).
   std::vector<Index> out_index(total, -1);
   Mesh_arrays out;
-  for (std::size_t c = 0; c < total; ++c) {
-    if (!kept[c]) continue;
+  std::vector<std::size_t> out_order;
+  out_order.reserve(total);
+  for (std::size_t c = 0; c < n + n_seg; ++c) {
+    if (kept_first[c]) out_order.push_back(c);
+  }
+  for (std::size_t c = n + n_seg; c < total; ++c) {
+    if (kept[c]) out_order.push_back(c);
+  }
+  for (std::size_t c = 0; c < n + n_seg; ++c) {
+    if (kept[c] && !kept_first[c]) out_order.push_back(c);
+  }
+  for (std::size_t c : out_order) {
     out_index[c] = static_cast<Index>(out.points.size());
     out.points.push_back(centers[c]);
     if (c < n) {
@@ -665,8 +761,9 @@ Evolve_result frfc(const Mesh_arrays& mesh, const std::vector<double>& delta, co
     }
   }
   std::vector<Index> origin = std::move(result.origin);
+  early_work.wait();
   triangulate_selection(std::move(out), std::move(origin), pieces,
-                        options.quality ? &options.quality_options : nullptr, result);
+                        options.quality ? &options.quality_options : nullptr, result, options.quality ? &early : nullptr);
   timer.lap(options.quality ? "quality" : "cdt");
 
   double seconds = 0;
@@ -688,7 +785,7 @@ Evolve_result frfc(const Mesh_arrays& mesh, const std::vector<double>& delta, co
 
 void triangulate_selection(Mesh_arrays selected, std::vector<Index> origin,
                            const std::vector<Constraint_piece>& pieces, const Quality_options* quality,
-                           Evolve_result& result) {
+                           Evolve_result& result, Early_triangulation* early) {
   auto& stats = result.stats;
   if (quality == nullptr) {
     selected.triangles = constrained_delaunay(selected.points, pieces);
@@ -699,7 +796,8 @@ void triangulate_selection(Mesh_arrays selected, std::vector<Index> origin,
     result.mesh = std::move(selected);
     result.origin = std::move(origin);
   } else {
-    Refined_mesh refined = quality_triangulate(selected.points, selected.kind, pieces, *quality);
+    Refined_mesh refined = early ? early->finish(selected.points, selected.kind, pieces, *quality)
+                                 : quality_triangulate(selected.points, selected.kind, pieces, *quality);
     result.origin.resize(refined.source.size());
     for (std::size_t i = 0; i < refined.source.size(); ++i) {
       result.origin[i] = refined.source[i] < 0 ? -1 : origin[refined.source[i]];

@@ -478,15 +478,19 @@ std::pair<double, Vec2> smallest_angle(const std::vector<Vec2>& points, const st
   return {best, where};
 }
 
-Refined_mesh quality_triangulate(const std::vector<Vec2>& points, const std::vector<Point_kind>& kind,
-                                 const std::vector<Constraint_piece>& pieces, const Quality_options& options) {
+namespace {
+
+void check_quality_options(const Quality_options& options) {
   if (!(options.min_angle >= 0 && options.min_angle < 60)) throw Input_error("min_angle must be in [0, 60)");
   if (!(options.crowding_angle == 0 || (options.crowding_angle >= 90 && options.crowding_angle < 180))) {
     throw Input_error("crowding_angle must be 0 (off) or in [90, 180)");
   }
-  Cdt cdt;
-  const Scaling scaling = unit_scaling(points);
-  const auto handles = insert_points(cdt, points, scaling);
+}
+
+// The quality pass on `cdt`, which holds all points (handles by point index).
+Refined_mesh quality_pass(Cdt& cdt, const std::vector<Vertex_handle>& handles, const Scaling& scaling,
+                          const std::vector<Vec2>& points, const std::vector<Point_kind>& kind,
+                          const std::vector<Constraint_piece>& pieces, const Quality_options& options) {
   for (const auto& piece : pieces) cdt.insert_constraint(handles[piece.a], handles[piece.b]);
   Refinement_report report;
   std::vector<std::uint8_t> removed(points.size(), 0);
@@ -509,6 +513,71 @@ Refined_mesh quality_triangulate(const std::vector<Vec2>& points, const std::vec
   result.report.rounds = report.rounds;
   result.report.capped = report.capped;
   return result;
+}
+
+// Whether every point scales exactly (and stays normal) with `s`.
+bool scales_exactly(const Vec2* begin, const Vec2* end, const Scaling& s) {
+  for (const Vec2* p = begin; p != end; ++p) {
+    for (double x : *p) {
+      const double y = x * s.to_unit;
+      if (y * s.from_unit != x || (y != 0 && !std::isnormal(y))) return false;
+    }
+  }
+  return true;
+}
+
+}  // namespace
+
+Refined_mesh quality_triangulate(const std::vector<Vec2>& points, const std::vector<Point_kind>& kind,
+                                 const std::vector<Constraint_piece>& pieces, const Quality_options& options) {
+  check_quality_options(options);
+  Cdt cdt;
+  const Scaling scaling = unit_scaling(points);
+  const auto handles = insert_points(cdt, points, scaling);
+  return quality_pass(cdt, handles, scaling, points, kind, pieces, options);
+}
+
+struct Early_triangulation::Impl {
+  Cdt cdt;
+  Scaling scaling;
+  std::size_t n_first = 0;
+  bool started = false;
+};
+
+Early_triangulation::Early_triangulation() : impl_(std::make_unique<Impl>()) {}
+Early_triangulation::~Early_triangulation() = default;
+
+void Early_triangulation::insert_first(const std::vector<Vec2>& first, const std::vector<Vec2>& reference) {
+  Impl& impl = *impl_;
+  impl.scaling = unit_scaling(reference);
+  if (!scales_exactly(first.data(), first.data() + first.size(), impl.scaling)) return;  // finish() starts over
+  insert_points(impl.cdt, first, impl.scaling);
+  impl.n_first = first.size();
+  impl.started = true;
+}
+
+Refined_mesh Early_triangulation::finish(const std::vector<Vec2>& points, const std::vector<Point_kind>& kind,
+                                         const std::vector<Constraint_piece>& pieces, const Quality_options& options) {
+  Impl& impl = *impl_;
+  check_quality_options(options);
+  if (!impl.started || impl.n_first > points.size() ||
+      !scales_exactly(points.data() + impl.n_first, points.data() + points.size(), impl.scaling) ||
+      unit_scaling(points).to_unit != impl.scaling.to_unit) {
+    return quality_triangulate(points, kind, pieces, options);
+  }
+  Cdt& cdt = impl.cdt;
+  std::vector<std::pair<Point_2, Vertex_info>> input;
+  input.reserve(points.size() - impl.n_first);
+  for (std::size_t i = impl.n_first; i < points.size(); ++i) {
+    Vertex_info info;
+    info.index = static_cast<Index>(i);
+    input.emplace_back(Point_2(points[i][0] * impl.scaling.to_unit, points[i][1] * impl.scaling.to_unit), info);
+  }
+  cdt.insert(input.begin(), input.end());
+  if (cdt.number_of_vertices() != points.size()) throw Input_error("points contain duplicates");
+  std::vector<Vertex_handle> handles(points.size());
+  for (auto v = cdt.finite_vertices_begin(); v != cdt.finite_vertices_end(); ++v) handles[v->info().index] = v;
+  return quality_pass(cdt, handles, impl.scaling, points, kind, pieces, options);
 }
 
 Refined_mesh spacing_refine(const Mesh_arrays& mesh, const Spacing_function& spacing,

@@ -68,11 +68,12 @@ std::vector<Segment_chain> segment_chains(const Mesh_arrays& mesh);
 // Shared by FRFC and DRFC: the last stage of a step. Triangulates the selected
 // points (`selected.points`, `selected.kind`, their input `origin`) with the
 // constraint pieces between them (constrained Delaunay, Section 3.2 step 6), or
-// runs the quality pass on them when `quality` is given. Fills result.mesh and
+// runs the quality pass on them when `quality` is given (on `early`, when given,
+// whose first points must be the first selected points). Fills result.mesh and
 // result.origin and adds the pass's counts and the smallest angle to result.stats.
 void triangulate_selection(Mesh_arrays selected, std::vector<Index> origin,
                            const std::vector<Constraint_piece>& pieces, const Quality_options* quality,
-                           Evolve_result& result);
+                           Evolve_result& result, Early_triangulation* early = nullptr);
 
 namespace detail {
 

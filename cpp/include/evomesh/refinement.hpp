@@ -3,6 +3,7 @@
 #pragma once
 
 #include <cstddef>
+#include <memory>
 #include <utility>
 #include <vector>
 
@@ -56,6 +57,32 @@ struct Refined_mesh {
 // follows that of the points handed in.
 Refined_mesh quality_triangulate(const std::vector<Vec2>& points, const std::vector<Point_kind>& kind,
                                  const std::vector<Constraint_piece>& pieces, const Quality_options& options);
+
+// The triangulation of quality_triangulate started early: the first points
+// (those known before the rest, e.g. the kept input points of FRFC) are inserted
+// now, possibly on another thread, and the rest by finish(). Inserting in two
+// batches gives the same triangulation whatever thread does the work.
+class Early_triangulation {
+ public:
+  Early_triangulation();
+  ~Early_triangulation();
+  Early_triangulation(const Early_triangulation&) = delete;
+  Early_triangulation& operator=(const Early_triangulation&) = delete;
+
+  // Inserts `first` (they become points 0 .. first.size() - 1), scaled as
+  // unit_scaling would scale `reference` (points spanning the whole domain).
+  void insert_first(const std::vector<Vec2>& first, const std::vector<Vec2>& reference);
+
+  // quality_triangulate(points, ...) where points starts with the `first` points.
+  // Falls back to a triangulation from scratch when the rest does not scale
+  // exactly with the reference's scaling.
+  Refined_mesh finish(const std::vector<Vec2>& points, const std::vector<Point_kind>& kind,
+                      const std::vector<Constraint_piece>& pieces, const Quality_options& options);
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
 
 // DRFC, step 1 (Section 5): Delaunay refinement of `mesh` with rules 1 and 3 for
 // min_angle (circumcentres) and rule 4 in terms of the spacing function: a triangle is split while
