@@ -443,6 +443,9 @@ FRONT_CASES = [
     ("points-spacing-zero", lambda: fronts.PointFront([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0]], spacing=0.0), ValueError),
     ("points-spacing-inf", lambda: fronts.PointFront([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0]], spacing=np.inf), ValueError),
     ("points-closed-str", lambda: fronts.PointFront([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0]], closed="yes"), TypeError),
+    ("points-spacing-tiny", lambda: fronts.PointFront([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0]], spacing=1e-8), ValueError),
+    ("points-spacing-subnormal", lambda: fronts.PointFront([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0]], spacing=5e-324),
+     ValueError),
     ("levelset-not-callable", lambda: fronts.LevelSetFront(3), TypeError),
     ("levelset-returns-str", lambda: fronts.LevelSetFront(lambda x, t: "a").distance([[0.0, 0.0]]), TypeError),
     ("levelset-returns-shape", lambda: fronts.LevelSetFront(lambda x, t: x).distance([[0.0, 0.0]]), ValueError),
@@ -530,6 +533,22 @@ def test_cli_errors_are_one_line_and_exit_non_zero(tmp_path, capsys):
         assert cli.main(base + extra) != 0
         lines = capsys.readouterr().err.strip().splitlines()
         assert len(lines) == 1 and lines[0].startswith("evomesh: error:"), lines
+
+
+def test_unbounded_sizes_are_refused_at_once(capsys):
+    """Sizes that could only exhaust memory or time are refused before any work (issue 5)."""
+    from evomesh.meshgen import MAX_POINTS, unit_square_mesh
+
+    cli = pytest.importorskip("evomesh.cli")
+    with pytest.raises(ValueError, match="at most"):
+        unit_square_mesh(MAX_POINTS + 1)
+    with pytest.raises(ValueError, match="at most"):
+        unit_square_mesh(10**11)
+    assert cli.main(["growing-circle", "--points", "100000000000", "--no-figures", "--quiet"]) == 2
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert len(lines) == 1 and "at most" in lines[0], lines
+    with pytest.raises(ValueError, match="points on a front"):
+        fronts.PointFront([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0]]).resampled(1e-9)
 
 
 def test_point_front_rejects_coordinates_beyond_the_mesh_limit():

@@ -88,7 +88,7 @@ Mesh_arrays structured_grid(Index k) {
 
 Frfc_options bench_options(int threads, double max_samples, bool quality = false) {
   Frfc_options options;  // python/evomesh/evolve.py FRFC_DEFAULTS, quality pass off unless asked
-  options.cell_factor = 1.0;
+  options.cell_factor = 2.0;
   options.exact_radius = true;
   options.radius_scale = 0.75;
   options.boundary_radius_scale = 0.8;  // "boundary_scale"

@@ -250,6 +250,10 @@ class PointFront(Front):
         return f"PointFront(n_points={len(self.points)}, closed={self.closed}, spacing={self.spacing})"
 
 
+#: Most points a PointFront is resampled to (about 0.8 GB of coordinates).
+MAX_FRONT_POINTS = 50_000_000
+
+
 def _resample(points: np.ndarray, closed: bool, spacing: float) -> np.ndarray:
     """Evenly spaced points along the polyline by arc length."""
     path = np.vstack([points, points[:1]]) if closed else points
@@ -260,7 +264,14 @@ def _resample(points: np.ndarray, closed: bool, spacing: float) -> np.ndarray:
     total = arc[-1]
     if total == 0:
         raise ValueError("the points of a PointFront must not all coincide")
-    n_segments = max(int(round(total / spacing)), 3 if closed else 1)
+    with np.errstate(over="ignore"):
+        ratio = total / spacing  # inf for a subnormal spacing: refused below
+    if not ratio <= MAX_FRONT_POINTS:
+        raise ValueError(
+            f"spacing {spacing:g} would put about {ratio:.3g} points on a front of length {total:.6g}; "
+            f"at most {MAX_FRONT_POINTS:.0e} are allowed: use a larger spacing"
+        )
+    n_segments = max(int(round(ratio)), 3 if closed else 1)
     s = np.linspace(0.0, total, n_segments + 1)
     if closed:
         s = s[:-1]  # the last equals the first

@@ -14,14 +14,34 @@ __all__ = ["unit_square_mesh"]
 _ROW_RATIO = np.sqrt(3.0) / 2.0  # row spacing / point spacing of a hexagonal lattice
 
 
+#: Largest n_points of unit_square_mesh (its arrays alone take about 10 GB there).
+MAX_POINTS = 100_000_000
+
+
 def _lattice_shape(n_points: int) -> tuple[int, int]:
     """Columns and rows of the lattice whose point count is nearest n_points,
     among those whose rows are within 5% of equilateral spacing."""
-    # count(nx, ny) ~ nx * ny; scan a window around the equilateral shape
+    # count(nx, ny) = ny nx - ny // 2 is linear in nx: for every row count in a
+    # window around the equilateral shape only the two nx next to the solution
+    # of count = n_points can be nearest (O(sqrt(n)) candidates).
     ny0 = np.sqrt(n_points / _ROW_RATIO)
     best = None
     for ny in range(max(3, int(ny0 * 0.7)), int(ny0 * 1.3) + 3):
-        for nx in range(max(3, int((ny - 1) * _ROW_RATIO * 0.9)), int((ny - 1) * _ROW_RATIO * 1.1) + 3):
+        def valid(nx: int) -> bool:
+            return abs((nx - 1) / ((ny - 1) * _ROW_RATIO) - 1.0) <= 0.05
+
+        # the nx with a near-equilateral ratio form a range [lo, hi]
+        # (from the closed form, then a step or two to settle rounding)
+        lo = max(3, int(1 + 0.95 * (ny - 1) * _ROW_RATIO) - 1)
+        while lo <= 3 + 2 * ny and not valid(lo):
+            lo += 1
+        hi = max(lo, int(1 + 1.05 * (ny - 1) * _ROW_RATIO) + 1)
+        while hi > lo and not valid(hi):
+            hi -= 1
+        if not valid(lo):
+            continue
+        exact = (n_points + ny // 2) / ny
+        for nx in sorted({min(max(int(np.floor(exact)) + k, lo), hi) for k in (0, 1)}):
             ratio = (nx - 1) / ((ny - 1) * _ROW_RATIO)
             if abs(ratio - 1.0) > 0.05:
                 continue
@@ -48,8 +68,9 @@ def unit_square_mesh(n_points: int = 1096, *, jitter: float = 0.1, seed: int = 0
     Parameters
     ----------
     n_points : int, default 1096
-        Target size; the lattice with the nearest point count is used (1102
-        points for the default, the paper's initial mesh has 1096).
+        Target size, 9 to ``MAX_POINTS`` (1e8); the lattice with the nearest
+        point count is used (1098 points for the default, the paper's initial
+        mesh has 1096).
     jitter : float, default 0.1
         Interior displacement in [-jitter, jitter] times the spacing in each
         coordinate; must be in [0, 0.2] so the mesh stays well shaped (the
@@ -70,6 +91,8 @@ def unit_square_mesh(n_points: int = 1096, *, jitter: float = 0.1, seed: int = 0
         raise TypeError(f"n_points must be an integer, got {type(n_points).__name__}")
     if n_points < 9:
         raise ValueError(f"n_points must be at least 9, got {n_points}")
+    if n_points > MAX_POINTS:
+        raise ValueError(f"n_points must be at most {MAX_POINTS:.0e}, got {n_points}")
     for name, value in (("jitter", jitter), ("size", size)):
         if isinstance(value, bool) or not isinstance(value, numbers.Real):
             raise TypeError(f"{name} must be a real number, got {type(value).__name__}")
