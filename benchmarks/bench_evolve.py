@@ -131,7 +131,7 @@ def run_size(target: float, repeats: int, quality: bool, threads: int | None) ->
         t0 = time.perf_counter()
         _core.constrained_delaunay(out.points, out.segments, out.segment_is_boundary.astype(np.uint8))
         cdt_seconds.append(time.perf_counter() - t0)
-    samples = counts.get("n_interior_samples", 0) + counts.get("n_segment_samples", 0)
+    samples = counts.get("n_interior_samples_drawn", 0) + counts.get("n_segment_samples", 0)
     return {
         "target": target,
         **info,
@@ -140,6 +140,7 @@ def run_size(target: float, repeats: int, quality: bool, threads: int | None) ->
         "n_input_points": graded.n_points,
         "n_output_points": out.n_points,
         "samples_per_input_point": samples / graded.n_points,
+        "mis_spheres_per_input_point": counts.get("n_candidates", 0) / graded.n_points,
         "seconds_mesh_construction": float(np.median(mesh_seconds)),
         **{f"seconds_{name}": float(np.median(v)) for name, v in stages.items()},
         "seconds_evolve": float(np.median(evolve_seconds)),
@@ -182,13 +183,14 @@ def main() -> None:
         stages = [k[len("seconds_"):] for k in r if k.startswith("seconds_")
                   and k not in ("seconds_mesh_construction", "seconds_evolve", "seconds_cdt_baseline")]
         if not header_done:
-            print("\n| target | input pts | output pts | samples / input pt | Mesh() | "
+            print("\n| target | input pts | output pts | samples drawn / input pt | MIS spheres / input pt | Mesh() | "
                   + " | ".join(stages) + " | evolve (s) | CPU s (all threads) | CDT of output | evolve / CDT | step peak (MiB) "
                   "| process peak (MiB) |")
-            print("|" + "---|" * (len(stages) + 11))
+            print("|" + "---|" * (len(stages) + 12))
             header_done = True
         row = [f"{r['target']:.0e}", str(r["n_input_points"]), str(r["n_output_points"]),
-               f"{r['samples_per_input_point']:.1f}", f"{r['seconds_mesh_construction']:.3f}"]
+               f"{r['samples_per_input_point']:.1f}", f"{r['mis_spheres_per_input_point']:.2f}",
+               f"{r['seconds_mesh_construction']:.3f}"]
         row += [f"{r.get('seconds_' + s, float('nan')):.3f}" for s in stages]
         row += [f"{r['seconds_evolve']:.3f}", f"{r['cpu_seconds_evolve']:.2f}", f"{r['seconds_cdt_baseline']:.3f}",
                 f"{r['seconds_evolve'] / r['seconds_cdt_baseline']:.0f}", f"{r['step_peak_mib']:.0f}",

@@ -4,9 +4,9 @@ Builds the graded meshes of ``bench_evolve.py`` (a grid evolved once towards a
 band of fine spacing) and times one ``evolve`` step with the band moved, each
 size in a fresh process: wall time of the set-up and of the step, and the peak
 RSS of the step (``VmHWM`` after a reset) and of the whole process
-(``resource.getrusage``). ``max_samples`` is raised for the step (about 24
+(``resource.getrusage``). ``max_samples`` is raised for the step (about 8
 samples per input point are drawn, so the default 5e7 refuses steps above
-about 2e6 points).
+about 6e6 points).
 
 A size that would not fit in memory is not started: the peak per input point
 measured on the sizes run before it (or ``--bytes-per-point``) times the size
@@ -56,7 +56,7 @@ def worker(size: float, quality: bool) -> dict:
     step_seconds = time.perf_counter() - t0
     step_peak = bench_evolve.status_mib("VmHWM") if tracked else float("nan")
     stats = dict(out.stats)
-    samples = stats.get("n_interior_samples", 0) + stats.get("n_segment_samples", 0)
+    samples = stats.get("n_interior_samples_drawn", 0) + stats.get("n_segment_samples", 0)
     return {
         "target": size,
         "n_input_points": graded.n_points,
@@ -91,7 +91,7 @@ def main() -> None:
 
     print(f"# scale.py: evomesh {evomesh.__version__}, {os.cpu_count()} cpus, quality={'on' if quality else 'off'}, "
           f"MemAvailable {mem_available_mib():.0f} MiB")
-    print("\n| target | input pts | output pts | samples / input pt | set-up (s) | step (s) | step peak (MiB) "
+    print("\n| target | input pts | output pts | samples drawn / input pt | set-up (s) | step (s) | step peak (MiB) "
           "| process peak (MiB) | peak bytes / input pt |")
     print("|---|---|---|---|---|---|---|---|---|")
     bytes_per_point = args.bytes_per_point

@@ -345,17 +345,19 @@ int main(int argc, char** argv) {
       }
     }
     const double n_in = counts["n_input_points"];
-    const double samples = counts["n_interior_samples"] + counts["n_segment_samples"];
+    // samples drawn (interior and on segments), and the spheres left for the MIS
+    const double samples = counts["n_interior_samples_drawn"] + counts["n_segment_samples"];
     const double total = median(stage_seconds["total"]);
     const double cdt = baseline ? median(cdt_seconds) : NAN;
     if (si == 0) {
-      std::printf("\n| target | input pts | output pts | samples / input pt |");
+      std::printf("\n| target | input pts | output pts | samples drawn / input pt | MIS spheres / input pt |");
       for (const auto& stage : stages) std::printf(" %s |", stage.c_str());
       std::printf(" CPU s (all threads) | CDT of output | total / CDT | step peak (MiB) | input RSS (MiB) |\n|");
-      for (std::size_t k = 0; k < stages.size() + 9; ++k) std::printf("---|");
+      for (std::size_t k = 0; k < stages.size() + 10; ++k) std::printf("---|");
       std::printf("\n");
     }
-    std::printf("| %.0e | %.0f | %.0f | %.1f |", target, n_in, counts["n_output_points"], samples / n_in);
+    std::printf("| %.0e | %.0f | %.0f | %.1f | %.2f |", target, n_in, counts["n_output_points"], samples / n_in,
+                counts["n_candidates"] / n_in);
     for (const auto& stage : stages) std::printf(" %.3f |", median(stage_seconds[stage]));
     std::printf(" %.2f | %.3f | %.0f | %.0f | %.0f |\n", median(step_cpu_seconds), cdt, total / cdt, peak_mib, input_mib);
     std::fflush(stdout);

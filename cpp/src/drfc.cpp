@@ -5,6 +5,7 @@
 #include <string>
 
 #include "evomesh/packing.hpp"
+#include "evomesh/parallel.hpp"
 #include "evomesh/sampling.hpp"
 #include "evomesh/spacing.hpp"
 #include "evomesh/triangulation.hpp"
@@ -78,6 +79,7 @@ Refinement_stage refinement_stage(const Mesh_arrays& mesh, const std::vector<dou
 Refined_mesh drfc_refine(const Mesh_arrays& mesh, const std::vector<double>& delta, const Drfc_options& options) {
   std::vector<std::pair<std::string, double>> unused;
   Stage_timer timer(unused);
+  const Thread_limit thread_limit(options.threads);
   return std::move(refinement_stage(mesh, delta, options, timer).refined);
 }
 
@@ -85,6 +87,7 @@ Evolve_result drfc(const Mesh_arrays& mesh, const std::vector<double>& delta, co
   Evolve_result result;
   auto& stats = result.stats;
   Stage_timer timer(stats);
+  const Thread_limit thread_limit(options.threads);
   // Step 1: Delaunay refinement with rules 1-4 (Section 5).
   Refinement_stage stage = refinement_stage(mesh, delta, options, timer);
   const Mesh_arrays& refined = stage.refined.mesh;

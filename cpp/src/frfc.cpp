@@ -13,6 +13,7 @@
 #include "evomesh/detail/point_tree.hpp"
 #include "evomesh/kernel.hpp"
 #include "evomesh/packing.hpp"
+#include "evomesh/parallel.hpp"
 #include "evomesh/spacing.hpp"
 #include "evomesh/triangulation.hpp"
 
@@ -445,6 +446,7 @@ Evolve_result frfc(const Mesh_arrays& mesh, const std::vector<double>& delta, co
   Evolve_result result;
   auto& stats = result.stats;
   Stage_timer timer(stats);
+  const Thread_limit thread_limit(options.threads);  // also for the stages without a threads argument
 
   // Step 1: nn_M and the spacing function f (Section 3.1).
   result.input_nn = nn_spacing(mesh.points);
@@ -563,7 +565,8 @@ Evolve_result frfc(const Mesh_arrays& mesh, const std::vector<double>& delta, co
   auto kept = lexical_first_mis(centers, radius, first_order, n_forced, &blocker);
   const std::vector<std::uint8_t> kept_first(kept);
   // The kept input points and segment samples are final: the quality pass's
-  // triangulation of them starts now, beside the interior sampling and packing.
+  // triangulation of them starts now, on a second thread, beside the interior
+  // sampling and packing.
   std::vector<Vec2> first_points;
   for (std::size_t c = 0; c < n + n_seg; ++c) {
     if (kept_first[c]) first_points.push_back(centers[c]);

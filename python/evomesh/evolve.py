@@ -184,8 +184,10 @@ def evolve(mesh: Mesh, delta: Any, *, method: str = "frfc", seed: int = 0, **opt
         max_samples : float, default 5e7
             Refuse (ValueError) a step whose sampling would exceed this.
         threads : int or None
-            Threads for spacing queries (None: all cores). Results do not
-            depend on it.
+            Threads of the parallel stages (nn, Apollonius graph parts,
+            sampling, spacing queries, the MIS tree, and the triangulation
+            started beside the packing); None: all cores, 1: everything on
+            the calling thread. Results do not depend on it.
         quality : bool, default True
             The quality pass (Section 6's suggestion, for both methods): a
             point that sees a segment under more than 120 degrees is dropped and

@@ -12,10 +12,31 @@
 
 namespace evomesh {
 
-// Calls body(i) for i in [0, n) on up to `threads` threads (0: hardware concurrency).
-// The first exception thrown by a body is rethrown in the caller.
+// The thread count that parallel_for uses when asked for 0 threads, on the
+// calling thread (0: hardware concurrency). Set for a scope with Thread_limit.
+inline int& default_threads() {
+  thread_local int threads = 0;
+  return threads;
+}
+
+// Limits every parallel_for(..., 0, ...) called from this thread, for its lifetime.
+class Thread_limit {
+ public:
+  explicit Thread_limit(int threads) : saved_(default_threads()) { default_threads() = threads; }
+  ~Thread_limit() { default_threads() = saved_; }
+  Thread_limit(const Thread_limit&) = delete;
+  Thread_limit& operator=(const Thread_limit&) = delete;
+
+ private:
+  int saved_;
+};
+
+// Calls body(i) for i in [0, n) on up to `threads` threads (0: default_threads(),
+// or hardware concurrency). The first exception thrown by a body is rethrown in
+// the caller.
 template <class Body>
 void parallel_for(std::size_t n, int threads, Body body) {
+  if (threads <= 0) threads = default_threads();
   std::size_t t = threads > 0 ? static_cast<std::size_t>(threads)
                               : std::max(1u, std::thread::hardware_concurrency());
   t = std::min(t, n);
