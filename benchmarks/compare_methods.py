@@ -42,7 +42,7 @@ CONFIGURATIONS = [
     ("FRFC + pass, cell_factor 1", "frfc", {"cell_factor": 1.0}),
     ("FRFC + pass, cell_factor 1.5", "frfc", {"cell_factor": 1.5}),
     ("FRFC + pass, cell_factor 2", "frfc", {"cell_factor": 2.0}),
-    ("FRFC, no pass, cell_factor 2", "frfc", {"cell_factor": 2.0, "quality": False}),
+    ("FRFC, no pass, cell_factor 1", "frfc", {"cell_factor": 1.0, "quality": False}),
     ("DRFC, no quality pass", "drfc", {"quality": False}),
     ("DRFC + quality pass (default)", "drfc", {}),
 ]
