@@ -266,19 +266,7 @@ PYBIND11_MODULE(_core, m) {
           py::gil_scoped_release release;
           r = frfc(mesh, d, options);
         }
-        py::dict out;
-        out["points"] = points_array(r.mesh.points);
-        out["triangles"] = rows_array<3>(r.mesh.triangles);
-        out["segments"] = rows_array<2>(r.mesh.segments);
-        out["segment_is_boundary"] = vector_array(r.mesh.segment_is_boundary);
-        out["kind"] = kinds_array(r.mesh.kind);
-        out["origin"] = vector_array(r.origin);
-        out["input_f"] = vector_array(r.input_f);
-        out["input_nn"] = vector_array(r.input_nn);
-        py::dict stats;
-        for (const auto& s : r.stats) stats[py::str(s.first)] = s.second;
-        out["stats"] = stats;
-        return out;
+        return evolve_result_dict(r);
       },
       py::arg("points"), py::arg("triangles"), py::arg("segments"), py::arg("segment_is_boundary"),
       py::arg("kind"), py::arg("delta"), py::arg("seed") = 0, py::arg("cell_factor") = 1.0,
