@@ -89,9 +89,16 @@ def _check_topology(points: np.ndarray, triangles: np.ndarray) -> None:
     repeated_vertex = (t[:, 0] == t[:, 1]) | (t[:, 1] == t[:, 2])
     if repeated_vertex.any():
         raise ValueError(f"triangle {int(np.argmax(repeated_vertex))} repeats a vertex (zero area)")
-    _, first, counts = np.unique(t, axis=0, return_index=True, return_counts=True)
-    if (counts > 1).any():
-        raise ValueError(f"triangle {int(first[np.argmax(counts > 1)])} appears more than once")
+    # sorted rows, then equal neighbours (one int64 key per row while n^3 < 2^63)
+    if n <= 2**21:
+        key = (t[:, 0].astype(np.int64) * n + t[:, 1]) * n + t[:, 2]
+        order = np.argsort(key, kind="stable")
+        repeated = np.flatnonzero(key[order[1:]] == key[order[:-1]])
+    else:
+        order = np.lexsort((t[:, 2], t[:, 1], t[:, 0]))
+        repeated = np.flatnonzero((t[order[1:]] == t[order[:-1]]).all(axis=1))
+    if len(repeated):
+        raise ValueError(f"triangle {int(order[repeated].min())} appears more than once")
     used = np.bincount(triangles.ravel(), minlength=n)
     if (used == 0).any():
         raise ValueError(f"point {int(np.argmax(used == 0))} is not used by any triangle (orphan point)")
