@@ -24,7 +24,7 @@ class Spacing_function {
   // Large site sets are split into up to four parts (a kd split of the sites),
   // each with its own Apollonius graph built in parallel, when every part has at
   // least `min_sites_per_part` sites and the halos stay thin; answers are the
-  // same as from one graph (see spacing.cpp). 0 picks the default (2^17).
+  // same as from one graph (see spacing.cpp). 0 picks the default (2^12).
   // Preconditions: sites distinct and finite, weights finite and >= 0.
   Spacing_function(const std::vector<Vec2>& sites, const std::vector<double>& weights,
                    std::size_t min_sites_per_part = 0);
