@@ -247,6 +247,54 @@ void add_segment_ring_samples(const Mesh_arrays& mesh, const std::vector<double>
   }
 }
 
+// Samples on a straight chain (all its vertices within 1e-12 |AB| of the line
+// through its end corners A, B) are projected onto that line. Chain points
+// kept from earlier steps are rounded; sampling between them would let new
+// boundary points drift by a rounding per step, while the projection keeps
+// every boundary point within a rounding or two of the original side for any
+// number of steps. A projection that would not lie strictly between its
+// segment's end points (in the order along AB) keeps the sample as drawn.
+void snap_to_straight_chains(const Mesh_arrays& mesh, const std::vector<Segment_chain>& chains, Sample_set& on_segments) {
+  std::vector<Index> chain_of(mesh.segments.size(), -1);
+  std::vector<std::uint8_t> straight(chains.size(), 0);
+  for (std::size_t c = 0; c < chains.size(); ++c) {
+    const auto& chain = chains[c];
+    if (chain.closed || chain.vertices.size() < 3) continue;  // a single segment is exact already
+    const Vec2& a = mesh.points[chain.vertices.front()];
+    const Vec2& b = mesh.points[chain.vertices.back()];
+    const double dx = b[0] - a[0], dy = b[1] - a[1];
+    const double length2 = dx * dx + dy * dy;
+    bool ok = length2 > 0;
+    for (std::size_t k = 1; ok && k + 1 < chain.vertices.size(); ++k) {
+      const Vec2& v = mesh.points[chain.vertices[k]];
+      const double cross = dx * (v[1] - a[1]) - dy * (v[0] - a[0]);
+      ok = std::abs(cross) <= 1e-12 * length2;  // distance <= 1e-12 |AB|
+    }
+    if (!ok) continue;
+    straight[c] = 1;
+    for (Index seg : chain.segments) chain_of[seg] = static_cast<Index>(c);
+  }
+  for (std::size_t j = 0; j < on_segments.points.size(); ++j) {
+    const Index c = chain_of[on_segments.parent[j]];
+    if (c < 0) continue;
+    const auto& chain = chains[c];
+    const Vec2& a = mesh.points[chain.vertices.front()];
+    const Vec2& b = mesh.points[chain.vertices.back()];
+    const double dx = b[0] - a[0], dy = b[1] - a[1];
+    const double length2 = dx * dx + dy * dy;
+    auto along = [&](const Vec2& p) { return ((p[0] - a[0]) * dx + (p[1] - a[1]) * dy) / length2; };
+    const Vec2& x = on_segments.points[j];
+    const double t = along(x);
+    const Vec2 y{a[0] + t * dx, a[1] + t * dy};
+    const Edge& e = mesh.segments[on_segments.parent[j]];
+    const double t0 = along(mesh.points[e[0]]), t1 = along(mesh.points[e[1]]);
+    const double ty = along(y);
+    if (ty > std::min(t0, t1) && ty < std::max(t0, t1) && y != mesh.points[e[0]] && y != mesh.points[e[1]]) {
+      on_segments.points[j] = y;
+    }
+  }
+}
+
 // Spacing repair. The packing guarantees nn_M'(p) = Theta(f(p)) only up to a
 // constant; where an R-point p that was kept ends up with no kept point within
 // repair_ratio * delta(p) nn_M(p) (its ring blocked by larger spheres kept
@@ -490,6 +538,8 @@ Evolve_result frfc(const Mesh_arrays& mesh, const std::vector<double>& delta, co
   if (options.ring_samples) {
     add_segment_ring_samples(mesh, delta, f, options.radius_scale, on_segments, segment_round, segment_owner);
   }
+  const auto chains = segment_chains(mesh);
+  snap_to_straight_chains(mesh, chains, on_segments);
   const std::size_t n_seg = on_segments.points.size();
   timer.lap("sampling");
 
@@ -535,7 +585,6 @@ Evolve_result frfc(const Mesh_arrays& mesh, const std::vector<double>& delta, co
   // the order (its classes are last), so the MIS is computed in two passes: the
   // first over input points and segment samples decides them for good; the
   // second goes on with the interior samples, the spheres kept so far forced.
-  const auto chains = segment_chains(mesh);
   std::vector<std::uint8_t> forced_corner(n, 0);
   for (std::size_t i = 0; i < n; ++i) forced_corner[i] = mesh.kind[i] == Point_kind::corner;
   for (const auto& chain : chains) {
