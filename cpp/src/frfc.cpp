@@ -128,17 +128,6 @@ void ring_candidates_of(const Mesh_arrays& mesh, const Triangle_fans& fans, cons
   }
 }
 
-// Whether x lies strictly inside the cover disc of a vertex of triangle t.
-bool covered(const std::vector<Disc>& cover, const Triangle& t, const Vec2& x) {
-  if (cover.empty()) return false;
-  for (Index v : t) {
-    const Disc& d = cover[v];
-    const double dx = x[0] - d.center[0], dy = x[1] - d.center[1];
-    if (dx * dx + dy * dy < d.radius * d.radius) return true;
-  }
-  return false;
-}
-
 // Interior ring candidates of every R-point, in point order, appended to
 // `inside` (with their rounds), except those in a cover disc of their triangle.
 // Points are handled in parallel in fixed blocks joined in order.
@@ -155,7 +144,7 @@ void add_interior_ring_samples(const Mesh_arrays& mesh, const Triangle_fans& fan
     for (std::size_t p = b * kBlock; p < std::min(n, (b + 1) * kBlock); ++p) {
       if (!(delta[p] < 1)) continue;
       ring_candidates_of(mesh, fans, f, reach, seed, p, [&](const Vec2& x, Index t, int round) {
-        if (covered(cover, mesh.triangles[t], x)) return;
+        if (in_cover(cover, mesh.triangles[t], x)) return;
         blocks[b].points.push_back(x);
         blocks[b].parent.push_back(t);
         rounds[b].push_back(static_cast<std::int8_t>(round));
@@ -623,7 +612,7 @@ Evolve_result frfc(const Mesh_arrays& mesh, const std::vector<double>& delta, co
   Early_triangulation early;
   Background early_work;
   if (options.quality) {
-    early_work.start([&]() { early.insert_first(first_points, mesh.points); }, options.threads != 1);
+    early_work.start([&]() { early.insert_first(first_points); }, options.threads != 1);
   }
   timer.lap("lfmis");
 

@@ -547,10 +547,9 @@ struct Early_triangulation::Impl {
 Early_triangulation::Early_triangulation() : impl_(std::make_unique<Impl>()) {}
 Early_triangulation::~Early_triangulation() = default;
 
-void Early_triangulation::insert_first(const std::vector<Vec2>& first, const std::vector<Vec2>& reference) {
+void Early_triangulation::insert_first(const std::vector<Vec2>& first) {
   Impl& impl = *impl_;
-  impl.scaling = unit_scaling(reference);
-  if (!scales_exactly(first.data(), first.data() + first.size(), impl.scaling)) return;  // finish() starts over
+  impl.scaling = unit_scaling(first);
   insert_points(impl.cdt, first, impl.scaling);
   impl.n_first = first.size();
   impl.started = true;

@@ -103,6 +103,16 @@ std::uint64_t Random_stream::next() { return splitmix64(state); }
 
 double Random_stream::uniform() { return static_cast<double>(next() >> 11) * 0x1.0p-53; }
 
+bool in_cover(const std::vector<Disc>& cover, const Triangle& t, const Vec2& x) {
+  if (cover.empty()) return false;
+  for (Index v : t) {
+    const Disc& d = cover[v];
+    const double dx = x[0] - d.center[0], dy = x[1] - d.center[1];
+    if (dx * dx + dy * dy < d.radius * d.radius) return true;
+  }
+  return false;
+}
+
 double estimate_sample_count(const Mesh_arrays& mesh, const std::vector<double>& vertex_f,
                              double cell_factor) {
   double total = 0;
@@ -131,7 +141,7 @@ namespace {
 // The samples of one triangle, appended to `out` unless a vertex covers them.
 void sample_one_triangle(const Mesh_arrays& mesh, std::size_t ti, const std::vector<double>& vertex_f,
                          double cell_factor, Sample_mode mode, std::uint64_t seed,
-                         const std::unordered_set<std::uint64_t>& segment_edges, const std::vector<Disc>& cover2,
+                         const std::unordered_set<std::uint64_t>& segment_edges, const std::vector<Disc>& cover,
                          Sample_set& out, std::size_t& n_drawn) {
   const auto& P = mesh.points;
   const std::size_t n = P.size();
@@ -141,13 +151,7 @@ void sample_one_triangle(const Mesh_arrays& mesh, std::size_t ti, const std::vec
   const Vec2& c = P[t[2]];
   auto emit = [&](const Vec2& x) {
     ++n_drawn;
-    if (!cover2.empty()) {
-      for (Index v : t) {
-        const Disc& d = cover2[v];  // radius squared
-        const double dx = x[0] - d.center[0], dy = x[1] - d.center[1];
-        if (dx * dx + dy * dy < d.radius) return;
-      }
-    }
+    if (in_cover(cover, t, x)) return;
     out.points.push_back(x);
     out.parent.push_back(static_cast<Index>(ti));
   };
@@ -223,8 +227,6 @@ Sample_set sample_triangles(const Mesh_arrays& mesh, const std::vector<double>& 
     segment_edges.reserve(mesh.segments.size() * 2);
     for (const auto& e : mesh.segments) segment_edges.insert(edge_key(e[0], e[1], mesh.points.size()));
   }
-  std::vector<Disc> cover2(cover);
-  for (auto& d : cover2) d.radius *= d.radius;
   // Fixed blocks of triangles, each with its own output, joined in block order:
   // the samples never depend on the number of threads.
   constexpr std::size_t kBlock = 2048;
@@ -235,7 +237,7 @@ Sample_set sample_triangles(const Mesh_arrays& mesh, const std::vector<double>& 
   parallel_for(n_blocks, threads, [&](std::size_t k) {
     for (std::size_t ti = k * kBlock; ti < std::min(n_triangles, (k + 1) * kBlock); ++ti) {
       if (!skip.empty() && skip[ti]) continue;
-      sample_one_triangle(mesh, ti, vertex_f, cell_factor, mode, seed, segment_edges, cover2, blocks[k], drawn[k]);
+      sample_one_triangle(mesh, ti, vertex_f, cell_factor, mode, seed, segment_edges, cover, blocks[k], drawn[k]);
     }
   });
   Sample_set out;

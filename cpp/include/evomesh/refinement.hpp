@@ -70,12 +70,13 @@ class Early_triangulation {
   Early_triangulation& operator=(const Early_triangulation&) = delete;
 
   // Inserts `first` (they become points 0 .. first.size() - 1), scaled as
-  // unit_scaling would scale `reference` (points spanning the whole domain).
-  void insert_first(const std::vector<Vec2>& first, const std::vector<Vec2>& reference);
+  // unit_scaling scales them (the corners span the domain, so all points
+  // usually scale alike; finish() checks).
+  void insert_first(const std::vector<Vec2>& first);
 
   // quality_triangulate(points, ...) where points starts with the `first` points.
   // Falls back to a triangulation from scratch when the rest does not scale
-  // exactly with the reference's scaling.
+  // exactly with the first points' scaling.
   Refined_mesh finish(const std::vector<Vec2>& points, const std::vector<Point_kind>& kind,
                       const std::vector<Constraint_piece>& pieces, const Quality_options& options);
 

@@ -45,6 +45,9 @@ Sample_set sample_triangles(const Mesh_arrays& mesh, const std::vector<double>& 
 Sample_set sample_segments(const Mesh_arrays& mesh, const std::vector<double>& vertex_f,
                            double cell_factor, Sample_mode mode, std::uint64_t seed);
 
+// Whether x lies strictly inside the cover disc of a vertex of t (cover empty: no).
+bool in_cover(const std::vector<Disc>& cover, const Triangle& t, const Vec2& x);
+
 // Upper bound on the number of samples sample_triangles/sample_segments would
 // produce, computed in O(n) so callers can refuse inputs that would exhaust memory.
 double estimate_sample_count(const Mesh_arrays& mesh, const std::vector<double>& vertex_f,
