@@ -61,12 +61,13 @@ Refinement_stage refinement_stage(const Mesh_arrays& mesh, const std::vector<dou
   for (std::size_t i = 0; i < n; ++i) stage.f[i] = std::min(stage.f[i], weight[i]);
   timer.lap("spacing_at_points");
   // FRFC's sampling count bounds the points a packing for f needs (Lemma 3.5).
-  const double estimate = estimate_sample_count(mesh, stage.f, 1.0);
+  const double estimate = estimate_sample_count(mesh, stage.f, 1.0, options.max_samples);
   if (estimate > options.max_samples) {
     throw Input_error("delta asks for too much refinement in one step: refinement would create about " +
                       format_count(estimate) + " points (max_samples is " +
                       format_count(options.max_samples) +
-                      "); raise delta or max_samples, or refine over several steps");
+                      "); delta is relative (the new spacing is delta times the current one): raise it, refine over "
+                      "several steps, or raise max_samples");
   }
   const auto cap = static_cast<std::size_t>(2 * estimate + 1000);
   stage.refined = spacing_refine(mesh, *stage.spacing, stage.f, options.min_angle, cap, options.threads);

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <stdexcept>
 #include <string>
 #include <thread>
 #include <utility>
@@ -398,16 +399,14 @@ std::vector<Segment_chain> segment_chains(const Mesh_arrays& mesh) {
       adj[fill[mesh.segments[s][1]]++] = static_cast<Index>(s);
     }
   }
-  auto degree = [&](Index v) { return xadj[v + 1] - xadj[v]; };
+  // Chains end at corners: those of the geometry (classify_points, whatever the
+  // kinds say) and points labelled corner. So every closed loop has a corner,
+  // and a kind that calls a turning point "boundary" cannot straighten the
+  // boundary through it (issue 9).
+  const std::vector<Point_kind> geometric = classify_points(mesh);
   std::vector<std::uint8_t> is_corner(n, 0);
   for (std::size_t v = 0; v < n; ++v) {
-    if (degree(v) == 0) continue;
-    bool corner = mesh.kind[v] == Point_kind::corner || degree(v) != 2;
-    if (!corner) {
-      const Index s0 = adj[xadj[v]], s1 = adj[xadj[v] + 1];
-      corner = mesh.segment_is_boundary[s0] != mesh.segment_is_boundary[s1];
-    }
-    is_corner[v] = corner;
+    is_corner[v] = geometric[v] == Point_kind::corner || (xadj[v + 1] > xadj[v] && mesh.kind[v] == Point_kind::corner);
   }
   std::vector<std::uint8_t> used(k, 0);
   std::vector<Segment_chain> chains;
@@ -442,28 +441,8 @@ std::vector<Segment_chain> segment_chains(const Mesh_arrays& mesh) {
       if (!used[adj[a]]) walk(static_cast<Index>(v), adj[a]);
     }
   }
-  // Loops without a corner (kinds handed in from outside): start them at a point
-  // where the loop turns, which every closed polygon has.
   for (std::size_t s = 0; s < k; ++s) {
-    if (used[s]) continue;
-    Index start = mesh.segments[s][0];
-    Index v = start, seg = static_cast<Index>(s);
-    for (std::size_t guard = 0; guard <= k; ++guard) {
-      const Edge& e = mesh.segments[seg];
-      const Index w = e[0] == v ? e[1] : e[0];
-      const Index s0 = adj[xadj[w]], s1 = adj[xadj[w] + 1];
-      const Index next = s0 == seg ? s1 : s0;
-      const Edge& f = mesh.segments[next];
-      const Index x = f[0] == w ? f[1] : f[0];
-      if (orientation(mesh.points[v], mesh.points[w], mesh.points[x]) != 0) {
-        start = w;
-        break;
-      }
-      v = w;
-      seg = next;
-    }
-    const Index s0 = adj[xadj[start]];
-    walk(start, used[s0] ? adj[xadj[start] + 1] : s0);
+    if (!used[s]) throw std::logic_error("segment_chains: a loop of segments without a corner");
   }
   return chains;
 }
@@ -514,12 +493,13 @@ Evolve_result frfc(const Mesh_arrays& mesh, const std::vector<double>& delta, co
   timer.lap("spacing_at_points");
 
   // Step 2a: samples on segments, with the ring candidates of R-points on them.
-  const double estimate = estimate_sample_count(mesh, f, options.cell_factor);
+  const double estimate = estimate_sample_count(mesh, f, options.cell_factor, options.max_samples);
   if (estimate > options.max_samples) {
     throw Input_error("delta asks for too much refinement in one step: sampling would create about " +
                       format_count(estimate) + " points (max_samples is " +
                       format_count(options.max_samples) +
-                      "); raise delta or max_samples, or refine over several steps");
+                      "); delta is relative (the new spacing is delta times the current one): raise it, refine over "
+                      "several steps, or raise max_samples");
   }
   Sample_set on_segments = sample_segments(mesh, f, options.cell_factor, options.sample_mode, options.seed);
   std::vector<std::int8_t> segment_round(on_segments.points.size(), -1);
@@ -828,6 +808,14 @@ void triangulate_selection(Mesh_arrays selected, std::vector<Index> origin,
                            const std::vector<Constraint_piece>& pieces, const Quality_options* quality,
                            Evolve_result& result, Early_triangulation* early) {
   auto& stats = result.stats;
+  // CGAL's triangulations assume these (a piece from a point to itself, or out
+  // of range, is undefined behaviour there): an internal error, never a crash.
+  for (const auto& piece : pieces) {
+    if (piece.a == piece.b || piece.a < 0 || piece.b < 0 || static_cast<std::size_t>(piece.a) >= selected.points.size() ||
+        static_cast<std::size_t>(piece.b) >= selected.points.size()) {
+      throw std::logic_error("triangulate_selection: a degenerate constraint piece");
+    }
+  }
   if (quality == nullptr) {
     selected.triangles = constrained_delaunay(selected.points, pieces);
     for (const auto& piece : pieces) {

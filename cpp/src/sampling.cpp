@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <limits>
 #include <unordered_set>
 
 #include "evomesh/kernel.hpp"
@@ -91,6 +92,101 @@ Index smallest_f_vertex(const Triangle& t, const std::vector<double>& f) {
   return q;
 }
 
+// Grid cells follow f, not only its value at the triangle's smallest vertex q.
+// The paper's cell side is c f(q) / (2 sqrt 2) over the whole triangle; where
+// the vertices' f differ by orders of magnitude (two input points 1e-9 apart in
+// a coarsening step) that draws (extent / f(q))^2 samples. f is 1-Lipschitz, so
+// over a box B, f >= lower(B) = max(f(q), max_v f(v) - max_{x in B} |x - v|), and a
+// box of side <= c lower(B) / (2 sqrt 2) is as dense as the rule asks. The fine
+// grid of side s = c f(q) / (2 sqrt 2) is grouped into aligned dyadic blocks of
+// 2^k x 2^k cells: a block is one cell when its side passes that test, else it is
+// split (blocks strictly outside the triangle are dropped). Cells are taken in
+// row-major order of their first fine cell, so where no block passes (the
+// vertices' f within a factor 2 + |edge| / f(q)) the samples are those of the
+// plain grid, draw for draw.
+struct Dyadic_cell {
+  std::int64_t ix, iy, size;  // first fine cell and side, in fine cells
+};
+
+double farthest_distance(const Vec2& v, double x0, double y0, double x1, double y1) {
+  const double dx = std::max(std::abs(v[0] - x0), std::abs(v[0] - x1));
+  const double dy = std::max(std::abs(v[1] - y0), std::abs(v[1] - y1));
+  return std::hypot(dx, dy);
+}
+
+// The cells of the adaptive grid over the box [xmin, xmax] x [ymin, ymax] (nx by
+// ny fine cells of side s) for the triangle `corners` with vertex values `fv`;
+// stops (returns false) once more than `limit` cells were found.
+bool adaptive_cells(const std::array<Vec2, 3>& corners, const std::array<double, 3>& fv, double xmin, double ymin,
+                    double xmax, double ymax, double s, double cell_factor, std::int64_t nx, std::int64_t ny,
+                    double limit, std::vector<Dyadic_cell>& cells) {
+  const double f_min = std::min({fv[0], fv[1], fv[2]});
+  std::int64_t top = 1;
+  while (top < std::max(nx, ny)) top *= 2;
+  std::vector<Dyadic_cell> stack{{0, 0, top}};
+  while (!stack.empty()) {
+    const Dyadic_cell block = stack.back();
+    stack.pop_back();
+    if (block.ix >= nx || block.iy >= ny) continue;
+    const double x0 = xmin + static_cast<double>(block.ix) * s;
+    const double y0 = ymin + static_cast<double>(block.iy) * s;
+    const double x1 = std::min(xmax, xmin + static_cast<double>(block.ix + block.size) * s);
+    const double y1 = std::min(ymax, ymin + static_cast<double>(block.iy + block.size) * s);
+    if (block.size > 1) {
+      // strictly right of a side of the triangle at all four box corners: outside
+      bool outside = false;
+      for (int k = 0; k < 3 && !outside; ++k) {
+        const Vec2& a = corners[k];
+        const Vec2& b = corners[(k + 1) % 3];
+        outside = orientation(a, b, {x0, y0}) < 0 && orientation(a, b, {x1, y0}) < 0 &&
+                  orientation(a, b, {x1, y1}) < 0 && orientation(a, b, {x0, y1}) < 0;
+      }
+      if (outside) continue;
+      double lower = f_min;
+      for (int k = 0; k < 3; ++k) lower = std::max(lower, fv[k] - farthest_distance(corners[k], x0, y0, x1, y1));
+      if (static_cast<double>(block.size) * s > cell_factor * lower * kInvTwoSqrtTwo) {
+        const std::int64_t half = block.size / 2;
+        // pushed in reverse so that blocks come off the stack in row-major order within a parent
+        stack.push_back({block.ix + half, block.iy + half, half});
+        stack.push_back({block.ix, block.iy + half, half});
+        stack.push_back({block.ix + half, block.iy, half});
+        stack.push_back({block.ix, block.iy, half});
+        continue;
+      }
+    }
+    cells.push_back(block);
+    if (static_cast<double>(cells.size()) > limit) return false;
+  }
+  std::sort(cells.begin(), cells.end(), [](const Dyadic_cell& p, const Dyadic_cell& q) {
+    return p.iy != q.iy ? p.iy < q.iy : p.ix < q.ix;
+  });
+  return true;
+}
+
+// The same for the 1-D cells of a segment of the given length (`cells` fine
+// cells), with f(a) and f(b) at its ends: the blocks as [first, size) pairs.
+void adaptive_segment_cells(double length, double fa, double fb, double cell_factor, std::int64_t n_cells,
+                            std::vector<std::array<std::int64_t, 2>>& out) {
+  const double fine = length / static_cast<double>(n_cells);
+  std::int64_t top = 1;
+  while (top < n_cells) top *= 2;
+  std::vector<std::array<std::int64_t, 2>> stack{{0, top}};
+  while (!stack.empty()) {
+    const auto [first, size] = stack.back();
+    stack.pop_back();
+    if (first >= n_cells) continue;
+    const double t0 = static_cast<double>(first) * fine;
+    const double t1 = std::min(length, static_cast<double>(first + size) * fine);
+    const double lower = std::max({std::min(fa, fb), fa - t1, fb - (length - t0)});
+    if (size > 1 && static_cast<double>(size) * fine > cell_factor * lower * kInvTwoSqrtTwo) {
+      stack.push_back({first + size / 2, size / 2});
+      stack.push_back({first, size / 2});
+      continue;
+    }
+    out.push_back({first, std::min(size, n_cells - first)});
+  }
+}
+
 }  // namespace
 
 Random_stream::Random_stream(std::uint64_t seed, std::uint64_t stream) {
@@ -113,25 +209,50 @@ bool in_cover(const std::vector<Disc>& cover, const Triangle& t, const Vec2& x) 
   return false;
 }
 
-double estimate_sample_count(const Mesh_arrays& mesh, const std::vector<double>& vertex_f,
-                             double cell_factor) {
+double estimate_sample_count(const Mesh_arrays& mesh, const std::vector<double>& vertex_f, double cell_factor,
+                             double limit) {
+  // The fine grid's count bounds the adaptive grid's; only triangles whose fine
+  // grid is large are counted cell by cell (and only up to the limit).
+  constexpr double kCountCells = 4096;
+  constexpr double kMaxCellsPerSide = 0x1.0p50;  // dyadic indices stay exact in int64 and double
   double total = 0;
+  std::vector<Dyadic_cell> cells;
   for (const auto& t : mesh.triangles) {
     const double s = cell_factor * vertex_f[smallest_f_vertex(t, vertex_f)] * kInvTwoSqrtTwo;
-    double xmin = mesh.points[t[0]][0], xmax = xmin, ymin = mesh.points[t[0]][1], ymax = ymin;
-    for (int k = 1; k < 3; ++k) {
-      xmin = std::min(xmin, mesh.points[t[k]][0]);
-      xmax = std::max(xmax, mesh.points[t[k]][0]);
-      ymin = std::min(ymin, mesh.points[t[k]][1]);
-      ymax = std::max(ymax, mesh.points[t[k]][1]);
+    const Vec2 &a = mesh.points[t[0]], &b = mesh.points[t[1]], &c = mesh.points[t[2]];
+    const double xmin = std::min({a[0], b[0], c[0]}), xmax = std::max({a[0], b[0], c[0]});
+    const double ymin = std::min({a[1], b[1], c[1]}), ymax = std::max({a[1], b[1], c[1]});
+    const double fx = std::ceil((xmax - xmin) / s), fy = std::ceil((ymax - ymin) / s);
+    if (!(fx <= kMaxCellsPerSide && fy <= kMaxCellsPerSide)) return std::numeric_limits<double>::infinity();
+    const double fine = std::max(fx, 1.0) * std::max(fy, 1.0);
+    if (fine <= kCountCells) {
+      total += fine;
+    } else {
+      cells.clear();
+      const bool complete = adaptive_cells({a, b, c}, {vertex_f[t[0]], vertex_f[t[1]], vertex_f[t[2]]}, xmin, ymin, xmax,
+                                           ymax, s, cell_factor, std::max<std::int64_t>(static_cast<std::int64_t>(fx), 1),
+                                           std::max<std::int64_t>(static_cast<std::int64_t>(fy), 1), limit - total, cells);
+      total += static_cast<double>(cells.size());
+      if (!complete) return total;
     }
-    total += (std::floor((xmax - xmin) / s) + 1) * (std::floor((ymax - ymin) / s) + 1);
+    if (total > limit) return total;
   }
+  std::vector<std::array<std::int64_t, 2>> blocks;
   for (const auto& e : mesh.segments) {
     const double s = cell_factor * std::min(vertex_f[e[0]], vertex_f[e[1]]) * kInvTwoSqrtTwo;
     const Vec2& a = mesh.points[e[0]];
     const Vec2& b = mesh.points[e[1]];
-    total += std::hypot(b[0] - a[0], b[1] - a[1]) / s + 1;
+    const double length = std::hypot(b[0] - a[0], b[1] - a[1]);
+    const double fine = std::ceil(length / s);
+    if (!(fine <= kMaxCellsPerSide)) return std::numeric_limits<double>::infinity();
+    if (fine <= kCountCells) {
+      total += fine + 1;
+    } else {
+      blocks.clear();
+      adaptive_segment_cells(length, vertex_f[e[0]], vertex_f[e[1]], cell_factor, static_cast<std::int64_t>(fine), blocks);
+      total += static_cast<double>(blocks.size()) + 1;
+    }
+    if (total > limit) return total;
   }
   return total;
 }
@@ -178,39 +299,40 @@ void sample_one_triangle(const Mesh_arrays& mesh, std::size_t ti, const std::vec
   const double xmax = std::max({a[0], b[0], c[0]});
   const double ymin = std::min({a[1], b[1], c[1]});
   const double ymax = std::max({a[1], b[1], c[1]});
-  const auto nx = static_cast<std::int64_t>(std::ceil((xmax - xmin) / s));
-  const auto ny = static_cast<std::int64_t>(std::ceil((ymax - ymin) / s));
+  const auto nx = std::max<std::int64_t>(static_cast<std::int64_t>(std::ceil((xmax - xmin) / s)), 1);
+  const auto ny = std::max<std::int64_t>(static_cast<std::int64_t>(std::ceil((ymax - ymin) / s)), 1);
+  std::vector<Dyadic_cell> cells;
+  adaptive_cells({a, b, c}, {vertex_f[t[0]], vertex_f[t[1]], vertex_f[t[2]]}, xmin, ymin, xmax, ymax, s, cell_factor,
+                 nx, ny, std::numeric_limits<double>::infinity(), cells);
   Polygon poly, clipped;
   std::array<double, 8> cumulative{};
-  for (std::int64_t iy = 0; iy < std::max<std::int64_t>(ny, 1); ++iy) {
-    const double y0 = ymin + static_cast<double>(iy) * s;
-    const double y1 = std::min(ymax, y0 + s);
-    for (std::int64_t ix = 0; ix < std::max<std::int64_t>(nx, 1); ++ix) {
-      const double x0 = xmin + static_cast<double>(ix) * s;
-      const double x1 = std::min(xmax, x0 + s);
-      poly.size = 0;
-      poly.push({x0, y0});
-      poly.push({x1, y0});
-      poly.push({x1, y1});
-      poly.push({x0, y1});
-      clip_left_of(poly, a, b, clipped);
-      clip_left_of(clipped, b, c, poly);
-      clip_left_of(poly, c, a, clipped);
-      if (clipped.size < 3) continue;
-      const double area = polygon_fan_area(clipped, cumulative);
-      if (!(area > 0)) continue;
-      const std::size_t n_fan = clipped.size - 2;
-      // A sample strictly inside the triangle (exact test); a few retries cover
-      // the rare draw that rounding puts on an edge.
-      for (int attempt = 0; attempt < 8; ++attempt) {
-        const double pick = rng.uniform() * area;
-        std::size_t k = std::lower_bound(cumulative.begin(), cumulative.begin() + n_fan, pick) - cumulative.begin();
-        k = std::min(k, n_fan - 1);
-        const Vec2 x = uniform_in_triangle(clipped.v[0], clipped.v[k + 1], clipped.v[k + 2], rng);
-        if (strictly_inside(a, b, c, x)) {
-          emit(x);
-          break;
-        }
+  for (const Dyadic_cell& cell : cells) {
+    const double y0 = ymin + static_cast<double>(cell.iy) * s;
+    const double y1 = std::min(ymax, ymin + static_cast<double>(cell.iy + cell.size) * s);
+    const double x0 = xmin + static_cast<double>(cell.ix) * s;
+    const double x1 = std::min(xmax, xmin + static_cast<double>(cell.ix + cell.size) * s);
+    poly.size = 0;
+    poly.push({x0, y0});
+    poly.push({x1, y0});
+    poly.push({x1, y1});
+    poly.push({x0, y1});
+    clip_left_of(poly, a, b, clipped);
+    clip_left_of(clipped, b, c, poly);
+    clip_left_of(poly, c, a, clipped);
+    if (clipped.size < 3) continue;
+    const double area = polygon_fan_area(clipped, cumulative);
+    if (!(area > 0)) continue;
+    const std::size_t n_fan = clipped.size - 2;
+    // A sample strictly inside the triangle (exact test); a few retries cover
+    // the rare draw that rounding puts on an edge.
+    for (int attempt = 0; attempt < 8; ++attempt) {
+      const double pick = rng.uniform() * area;
+      std::size_t k = std::lower_bound(cumulative.begin(), cumulative.begin() + n_fan, pick) - cumulative.begin();
+      k = std::min(k, n_fan - 1);
+      const Vec2 x = uniform_in_triangle(clipped.v[0], clipped.v[k + 1], clipped.v[k + 2], rng);
+      if (strictly_inside(a, b, c, x)) {
+        emit(x);
+        break;
       }
     }
   }
@@ -260,6 +382,7 @@ Sample_set sample_triangles(const Mesh_arrays& mesh, const std::vector<double>& 
 Sample_set sample_segments(const Mesh_arrays& mesh, const std::vector<double>& vertex_f,
                            double cell_factor, Sample_mode mode, std::uint64_t seed) {
   Sample_set out;
+  std::vector<std::array<std::int64_t, 2>> blocks;
   for (std::size_t k = 0; k < mesh.segments.size(); ++k) {
     const Edge& e = mesh.segments[k];
     const Vec2& a = mesh.points[e[0]];
@@ -275,8 +398,10 @@ Sample_set sample_segments(const Mesh_arrays& mesh, const std::vector<double>& v
     if (cells < 2) continue;
     // Stream ids for segments follow the triangles' so the two never share one.
     Random_stream rng(seed, (std::uint64_t{1} << 62) + k);
-    for (std::int64_t j = 0; j < cells; ++j) {
-      const double t = (static_cast<double>(j) + rng.uniform()) / static_cast<double>(cells);
+    blocks.clear();
+    adaptive_segment_cells(length, vertex_f[e[0]], vertex_f[e[1]], cell_factor, cells, blocks);
+    for (const auto& [first, size] : blocks) {
+      const double t = (static_cast<double>(first) + static_cast<double>(size) * rng.uniform()) / static_cast<double>(cells);
       if (!(t > 0 && t < 1)) continue;
       const Vec2 x{a[0] + t * (b[0] - a[0]), a[1] + t * (b[1] - a[1])};
       if ((x[0] == a[0] && x[1] == a[1]) || (x[0] == b[0] && x[1] == b[1])) continue;

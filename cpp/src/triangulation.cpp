@@ -9,6 +9,7 @@
 #include <CGAL/property_map.h>
 
 #include <algorithm>
+#include <cmath>
 #include <limits>
 #include <numeric>
 #include <string>
@@ -138,6 +139,17 @@ void build_segments(Mesh_arrays& mesh, const std::vector<Edge>& user_segments) {
   }
 }
 
+bool runs_straight_through(const Vec2& u, const Vec2& p, const Vec2& w) {
+  const double ux = u[0] - p[0], uy = u[1] - p[1], wx = w[0] - p[0], wy = w[1] - p[1];
+  if (!(ux * wx + uy * wy < 0)) return false;  // u and w must lie on opposite sides of p
+  if (orientation(u, p, w) == 0) return true;
+  // Within rounding of the line uw: |cross| / |w - u| is p's distance from it.
+  const double reach = std::max({std::abs(u[0]), std::abs(u[1]), std::abs(p[0]), std::abs(p[1]), std::abs(w[0]),
+                                 std::abs(w[1])});
+  const double tolerance = kStraightUlps * std::numeric_limits<double>::epsilon() * reach;
+  return std::abs(ux * wy - uy * wx) <= tolerance * std::hypot(w[0] - u[0], w[1] - u[1]);
+}
+
 std::vector<Point_kind> classify_points(const Mesh_arrays& mesh) {
   const std::size_t n = mesh.points.size();
   std::vector<Point_kind> kind(n, Point_kind::original);
@@ -161,14 +173,9 @@ std::vector<Point_kind> classify_points(const Mesh_arrays& mesh) {
       kind[v] = Point_kind::corner;
       continue;
     }
-    const Vec2& u = mesh.points[neighbour[v][0]];
-    const Vec2& w = mesh.points[neighbour[v][1]];
-    const Vec2& p = mesh.points[v];
-    // A boundary point is a corner unless the boundary runs straight through it
-    // (collinear, and the neighbours on opposite sides).
-    const bool straight = orientation(u, p, w) == 0 &&
-                          ((u[0] - p[0]) * (w[0] - p[0]) + (u[1] - p[1]) * (w[1] - p[1])) < 0;
-    kind[v] = straight ? Point_kind::boundary : Point_kind::corner;
+    kind[v] = runs_straight_through(mesh.points[neighbour[v][0]], mesh.points[v], mesh.points[neighbour[v][1]])
+                  ? Point_kind::boundary
+                  : Point_kind::corner;
   }
   return kind;
 }

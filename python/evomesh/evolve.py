@@ -8,7 +8,7 @@ from typing import Any
 import numpy as np
 
 from evomesh import _core
-from evomesh.mesh import Mesh
+from evomesh.mesh import Mesh, check_mesh_limits
 from evomesh.spacing import _require_mesh, as_delta
 
 __all__ = ["evolve", "delaunay_refine", "FRFC_DEFAULTS", "DRFC_DEFAULTS"]
@@ -281,6 +281,16 @@ def evolve(mesh: Mesh, delta: Any, *, method: str = "frfc", seed: int = 0, **opt
 
 
 def _wrap(result: dict[str, Any]) -> Mesh:
+    # Every output satisfies the limits Mesh() puts on inputs, or the step fails
+    # here, saying why (issue 9: a square of side 1e-70 refined step after step).
+    try:
+        check_mesh_limits(result["points"], result["triangles"])
+    except ValueError as error:
+        raise ValueError(
+            f"the step's output is not a valid mesh in float64: {error}. The requested spacing is beyond what "
+            "float64 resolves at these coordinates; rescale the mesh (or translate it towards the origin) or "
+            "refine less"
+        ) from None
     return Mesh._trusted(
         result["points"],
         result["triangles"],

@@ -40,9 +40,10 @@ class PointKind(IntEnum):
 
 
 def _frozen(array: np.ndarray) -> np.ndarray:
+    """A read-only array over an immutable ``bytes`` owner: numpy refuses to make
+    it (or any view of it) writeable again, so a Mesh cannot be changed in place."""
     array = np.ascontiguousarray(array)
-    array.flags.writeable = False
-    return array
+    return np.frombuffer(array.tobytes(), dtype=array.dtype).reshape(array.shape)
 
 
 def _as_array(values: Any, name: str) -> np.ndarray:
@@ -133,16 +134,43 @@ def _check_not_flat(points: np.ndarray, triangles: np.ndarray) -> None:
     p = points[triangles]
     edges = np.stack([p[:, 1] - p[:, 0], p[:, 2] - p[:, 1], p[:, 0] - p[:, 2]], axis=1)
     longest = np.sqrt((edges**2).sum(axis=2).max(axis=1))
-    twice_area = np.abs(edges[:, 0, 0] * edges[:, 2, 1] - edges[:, 0, 1] * edges[:, 2, 0])
-    height = twice_area / longest
-    reach = np.abs(p).max(axis=(1, 2))
-    flat = (height < _MIN_RELATIVE_HEIGHT * longest) | (height < _MIN_HEIGHT_ULPS * np.finfo(float).eps * reach)
-    if flat.any():
-        k = int(np.argmax(flat))
+    twice_area = edges[:, 0, 0] * edges[:, 2, 1] - edges[:, 0, 1] * edges[:, 2, 0]
+    height = np.abs(twice_area) / longest
+    rounding = np.finfo(float).eps * np.abs(p).max(axis=(1, 2))  # one unit of rounding of the coordinates
+    thin = height < _MIN_RELATIVE_HEIGHT * longest
+    coarse = height < _MIN_HEIGHT_ULPS * rounding
+    if thin.any():
+        k = int(np.argmax(thin))
         raise ValueError(
             f"triangle {k} is degenerate: its height is {height[k] / longest[k]:.1e} of its longest edge "
-            f"(at least {_MIN_RELATIVE_HEIGHT:g}, and {_MIN_HEIGHT_ULPS} rounding units of its coordinates, are needed)"
+            f"(at least {_MIN_RELATIVE_HEIGHT:g} is needed)"
         )
+    if coarse.any():
+        k = int(np.argmax(coarse))
+        raise ValueError(
+            f"triangle {k} is degenerate at this offset: its height {height[k]:.3g} is {height[k] / rounding[k]:.3g} "
+            f"units of rounding of its coordinates (|x| up to {rounding[k] / np.finfo(float).eps:.3g}; at least "
+            f"{_MIN_HEIGHT_ULPS} are needed); translate the mesh towards the origin (for example subtract "
+            "points.mean(axis=0)), which keeps its shape and makes the rounding smaller"
+        )
+
+
+def check_mesh_limits(points: np.ndarray, triangles: np.ndarray) -> None:
+    """Raise ValueError unless points and counter-clockwise triangles satisfy the
+    numeric limits of :class:`Mesh`: coordinates within 1e75, no two points closer
+    than 1e-75, every triangle positively oriented and not flat. O(n log n)."""
+    if points.size and not np.isfinite(points).all():
+        raise ValueError("points contain NaN or infinite coordinates")
+    if points.size and np.abs(points).max() > _MAX_COORDINATE:
+        raise ValueError(f"point coordinates must be below {_MAX_COORDINATE:g} in magnitude")
+    _check_point_distances(points)
+    p = points[triangles]
+    d1 = p[:, 1] - p[:, 0]
+    d2 = p[:, 2] - p[:, 0]
+    inverted = d1[:, 0] * d2[:, 1] - d1[:, 1] * d2[:, 0] <= 0
+    if inverted.any():
+        raise ValueError(f"triangle {int(np.argmax(inverted))} has zero or negative area")
+    _check_not_flat(points, triangles)
 
 
 class Mesh:
@@ -164,8 +192,13 @@ class Mesh:
         segments are interior constraints (material interfaces, cracks).
     kind : array_like of int, shape (n,), optional
         :class:`PointKind` per point; computed from the geometry when omitted
-        (a boundary point is a corner unless the boundary runs straight through
-        it, tested with exact predicates).
+        (a point on segments is a corner unless exactly two segments of the
+        same flavour meet there and the chain runs straight through it, up to
+        32 units of rounding of its coordinates). A given ``kind`` can only add
+        corners: every corner of the geometry is a CORNER whatever ``kind``
+        says (so the domain never changes), CORNER on a straight boundary point
+        pins it, and CORNER/BOUNDARY must be given exactly for the points on
+        segments.
     origin : array_like of int, shape (n,), optional
         Index of each point in the mesh it was evolved from, -1 for a new point.
 
@@ -219,8 +252,15 @@ class Mesh:
             given_on_segment = kinds <= PointKind.BOUNDARY
             if (on_segment != given_on_segment).any():
                 bad = int(np.argmax(on_segment != given_on_segment))
-                raise ValueError(f"kind of point {bad} says corner/boundary exactly when the point lies on a segment")
-            kinds = kinds.astype(np.uint8)
+                where = "lies" if on_segment[bad] else "does not lie"
+                raise ValueError(
+                    f"kind of point {bad} is {PointKind(int(kinds[bad])).name} but the point {where} on a segment: "
+                    "the kinds corner/boundary are for exactly the points on segments"
+                )
+            # A kind can add corners, never remove one: every corner of the
+            # geometry (where the boundary turns, chain ends) stays a corner, so
+            # a stale or wrong kind cannot change the domain (issue 9).
+            kinds = np.where(computed_kind == PointKind.CORNER, np.uint8(PointKind.CORNER), kinds.astype(np.uint8))
         if origin is None:
             org = np.full(n, -1, dtype=np.int64)
         else:
@@ -253,6 +293,21 @@ class Mesh:
 
     def __setattr__(self, name: str, value: Any) -> None:
         raise AttributeError("Mesh is immutable; evolve() returns a new mesh")
+
+    def __reduce__(self):
+        # Pickle and deepcopy round-trip every array bit for bit (checkpoints).
+        return (
+            _unpickle_mesh,
+            (self.points, self.triangles, self.segments, self.segment_is_boundary, self.kind, self.origin,
+             dict(self.stats)),
+        )
+
+    def __copy__(self) -> "Mesh":
+        return self  # immutable
+
+    def __deepcopy__(self, memo: dict) -> "Mesh":
+        return _unpickle_mesh(self.points, self.triangles, self.segments, self.segment_is_boundary, self.kind,
+                              self.origin, dict(self.stats))
 
     @property
     def n_points(self) -> int:
@@ -290,3 +345,7 @@ class Mesh:
         counts = np.bincount(self.kind, minlength=5)
         by_kind = ", ".join(f"{k.name.lower()}={int(c)}" for k, c in zip(PointKind, counts) if c)
         return f"Mesh(n_points={self.n_points}, n_triangles={self.n_triangles}, segments={len(self.segments)}, {by_kind})"
+
+
+def _unpickle_mesh(points, triangles, segments, segment_is_boundary, kind, origin, stats) -> Mesh:
+    return Mesh._trusted(points, triangles, segments, segment_is_boundary, kind, origin, stats)

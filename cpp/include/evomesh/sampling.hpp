@@ -2,6 +2,7 @@
 #pragma once
 
 #include <cstdint>
+#include <limits>
 #include <vector>
 
 #include "evomesh/types.hpp"
@@ -26,7 +27,8 @@ struct Sample_set {
 };
 
 // Interior samples. Cell side = cell_factor * f(q) / (2 sqrt 2), q the vertex of the
-// triangle with the smallest f. Every interior sample is strictly inside its triangle
+// triangle with the smallest f, or larger where f's Lipschitz bound from the
+// vertices allows (sampling.cpp: adaptive cells). Every interior sample is strictly inside its triangle
 // (checked with exact orientation predicates). Triangles with skip[t] != 0 get none.
 // Edges that are segments are never sampled here (see sample_segments).
 // A sample strictly inside the disc cover[v] of a vertex v of its triangle is
@@ -49,9 +51,11 @@ Sample_set sample_segments(const Mesh_arrays& mesh, const std::vector<double>& v
 bool in_cover(const std::vector<Disc>& cover, const Triangle& t, const Vec2& x);
 
 // Upper bound on the number of samples sample_triangles/sample_segments would
-// produce, computed in O(n) so callers can refuse inputs that would exhaust memory.
-double estimate_sample_count(const Mesh_arrays& mesh, const std::vector<double>& vertex_f,
-                             double cell_factor);
+// produce, so callers can refuse inputs that would exhaust memory: O(n) plus the
+// cells of the triangles whose grid adapts, and it stops as soon as the count
+// passes `limit` (infinite when a triangle would need more than 2^50 cells a side).
+double estimate_sample_count(const Mesh_arrays& mesh, const std::vector<double>& vertex_f, double cell_factor,
+                             double limit = std::numeric_limits<double>::infinity());
 
 // Counter-based random numbers: the same (seed, stream) always gives the same sequence.
 struct Random_stream {

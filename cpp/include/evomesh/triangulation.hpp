@@ -38,8 +38,18 @@ std::size_t orient_triangles(const std::vector<Vec2>& points, std::vector<Triang
 // more than two triangles, or inconsistently oriented neighbours, throw).
 void build_segments(Mesh_arrays& mesh, const std::vector<Edge>& segments);
 
+// Whether a chain of segments u - p - w runs straight through p: u and w lie on
+// opposite sides of p and p is on the line uw up to rounding, kStraightUlps units
+// in the last place of the largest coordinate (points placed on a segment as
+// a + t (b - a) are off its line by an ulp or two; exact collinearity would make
+// every such point a corner). Decides which points are corners, in Mesh() and in
+// every step alike (issue 9).
+constexpr double kStraightUlps = 32;
+bool runs_straight_through(const Vec2& u, const Vec2& p, const Vec2& w);
+
 // Kinds for a user mesh: corner (a segment end, a vertex where segments meet
-// other than two, or where the boundary turns: exact orientation), boundary (other
+// other than two, where an interior constraint meets the boundary, or where the
+// chain does not run straight through: runs_straight_through), boundary (other
 // points on segments), original (interior).
 std::vector<Point_kind> classify_points(const Mesh_arrays& mesh);
 
