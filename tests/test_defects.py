@@ -54,7 +54,7 @@ def test_the_core_finds_the_corners_itself_whatever_the_kinds():
     mesh = Mesh(SQUARE, SQUARE_TRIANGLES)
     result = evomesh._core.frfc(
         mesh.points, mesh.triangles, mesh.segments, mesh.segment_is_boundary.astype(np.uint8),
-        np.full(4, PointKind.BOUNDARY, dtype=np.uint8), np.full(4, 50.0), quality=True,
+        np.full(4, PointKind.BOUNDARY, dtype=np.uint8), np.full(4, 50.0), evomesh.FrfcOptions(),
     )
     assert len(result["points"]) == 4
 

@@ -87,16 +87,10 @@ Mesh_arrays structured_grid(Index k) {
 }
 
 Frfc_options bench_options(int threads, double max_samples, bool quality = false) {
-  Frfc_options options;  // python/evomesh/evolve.py FRFC_DEFAULTS, quality pass off unless asked
-  options.cell_factor = 2.0;
-  options.exact_radius = true;
-  options.radius_scale = 0.75;
-  options.boundary_radius_scale = 0.8;  // "boundary_scale"
-  options.sample_mode = Sample_mode::random_grid;
-  options.seed = 0;
+  Frfc_options options = Frfc_options::recommended();  // evolve's defaults, quality pass off unless asked
   options.threads = threads;
   options.max_samples = max_samples;
-  options.quality = quality;  // min_angle 20 by default, as in Python
+  options.quality = quality;
   return options;
 }
 

@@ -9,6 +9,7 @@
 
 #include "evomesh/drfc.hpp"
 #include "evomesh/frfc.hpp"
+#include "evomesh/options.hpp"
 #include "evomesh/packing.hpp"
 #include "evomesh/spacing.hpp"
 #include "evomesh/triangulation.hpp"
@@ -133,14 +134,93 @@ py::dict evolve_result_dict(const Evolve_result& r) {
   return out;
 }
 
-Quality_options quality_options(double min_angle, double crowding_angle, double max_inserted_fraction,
-                                double max_inserted_extra) {
-  Quality_options q;
-  q.min_angle = min_angle;
-  q.crowding_angle = crowding_angle;
-  q.max_inserted_fraction = max_inserted_fraction;
-  q.max_inserted_extra = max_inserted_extra;
-  return q;
+// The option types, with the same field names as in C++ (one list per type).
+#define EVOMESH_FRFC_FIELDS(X)                                                                                  \
+  X(cell_factor) X(radius) X(radius_scale) X(boundary_scale) X(ring_samples) X(repair_ratio) X(samples)          \
+  X(adaptive_cells) X(skip_coarse) X(filter_samples) X(max_samples) X(threads) X(seed) X(quality) X(min_angle)   \
+  X(crowding_angle) X(quality_max_fraction) X(quality_max_extra)
+#define EVOMESH_DRFC_FIELDS(X)                                                                                  \
+  X(min_angle) X(radius_scale) X(threads) X(max_samples) X(quality) X(crowding_angle) X(quality_max_fraction)    \
+  X(quality_max_extra)
+
+template <class Options>
+void bind_option_type(py::class_<Options>& cls, const py::tuple& fields, const char* doc) {
+  cls.doc() = doc;
+  cls.def(py::init<>())
+      .def_static("paper", &Options::paper, "The paper's algorithm exactly.")
+      .def_static("recommended", &Options::recommended, "The defaults of evolve().")
+      .def("validate", &Options::validate, "Raise ValueError naming the first field out of range.")
+      .def_property_readonly_static("fields", [fields](py::object) { return fields; })
+      .def("__copy__", [](const Options& o) { return Options(o); })
+      .def("__deepcopy__", [](const Options& o, py::dict) { return Options(o); })
+      .def("__eq__", [fields](py::object self, py::object other) {
+        if (!py::isinstance<Options>(other)) return false;
+        for (auto name : fields) {
+          if (!self.attr(name).equal(other.attr(name))) return false;
+        }
+        return true;
+      })
+      .def(py::pickle(
+          [fields](py::object self) {
+            py::dict state;
+            for (auto name : fields) state[name] = self.attr(name);
+            return state;
+          },
+          [](py::dict state) {
+            py::object o = py::cast(Options());
+            for (auto item : state) o.attr(item.first) = item.second;
+            return o.cast<Options>();
+          }))
+      .def("__repr__", [fields](py::object self) {
+        std::string out = py::str(py::type::of(self).attr("__name__"));
+        out += "(";
+        bool first = true;
+        for (auto name : fields) {
+          if (!first) out += ", ";
+          first = false;
+          out += std::string(py::str(name)) + "=" + std::string(py::repr(self.attr(name)));
+        }
+        return out + ")";
+      });
+}
+
+void bind_options(py::module_& m) {
+  py::enum_<Sample_mode>(m, "SampleMode", "Where samples are drawn (Section 3.2 step 2; Section 5's variations).")
+      .value("random", Sample_mode::random_grid)
+      .value("barycentre", Sample_mode::barycentre)
+      .value("midpoints", Sample_mode::midpoints)
+      .value("barycentre_midpoints", Sample_mode::barycentre_midpoints);
+  py::enum_<Radius_rule>(m, "RadiusRule", "Sample sphere radius: exact f(x)/2, or the paper's cheap bound.")
+      .value("exact", Radius_rule::exact)
+      .value("cheap", Radius_rule::cheap);
+  // Point kinds as (name, value) pairs; Python makes its IntEnum PointKind from them
+  // (an IntEnum compares with numpy arrays, a pybind11 enum does not).
+  m.attr("POINT_KINDS") = py::make_tuple(
+      py::make_tuple("CORNER", static_cast<int>(Point_kind::corner)),
+      py::make_tuple("BOUNDARY", static_cast<int>(Point_kind::boundary)),
+      py::make_tuple("ORIGINAL", static_cast<int>(Point_kind::original)),
+      py::make_tuple("STEINER", static_cast<int>(Point_kind::steiner)),
+      py::make_tuple("SAMPLED", static_cast<int>(Point_kind::sampled)));
+  m.attr("MAX_MIN_ANGLE") = kMaxMinAngle;
+
+#define EVOMESH_NAME(field) #field,
+#define EVOMESH_BIND(field) cls.def_readwrite(#field, &Type::field);
+  {
+    using Type = Frfc_options;
+    py::class_<Type> cls(m, "FrfcOptions");
+    bind_option_type(cls, py::tuple(py::cast(std::vector<std::string>{EVOMESH_FRFC_FIELDS(EVOMESH_NAME)})),
+                     "Options of FRFC (evolve(method='frfc')); fields as in C++ evomesh::Frfc_options.");
+    EVOMESH_FRFC_FIELDS(EVOMESH_BIND)
+  }
+  {
+    using Type = Drfc_options;
+    py::class_<Type> cls(m, "DrfcOptions");
+    bind_option_type(cls, py::tuple(py::cast(std::vector<std::string>{EVOMESH_DRFC_FIELDS(EVOMESH_NAME)})),
+                     "Options of DRFC (evolve(method='drfc')); fields as in C++ evomesh::Drfc_options.");
+    EVOMESH_DRFC_FIELDS(EVOMESH_BIND)
+  }
+#undef EVOMESH_BIND
+#undef EVOMESH_NAME
 }
 
 }  // namespace
@@ -235,32 +315,15 @@ PYBIND11_MODULE(_core, m) {
       },
       py::arg("classes"), py::arg("radii"));
 
+  bind_options(m);
+
   m.def(
       "frfc",
       [](const Float_array& points, const Int_array& triangles, const Int_array& segments,
          const Byte_array& segment_is_boundary, const Byte_array& kind, const Float_array& delta,
-         std::uint64_t seed, double cell_factor, bool exact_radius, int sample_mode, bool skip_coarse_triangles,
-         int threads, double max_samples, double radius_scale, double boundary_radius_scale, bool ring_samples, double repair_ratio,
-         bool quality, double min_angle, double crowding_angle, double quality_max_fraction, double quality_max_extra,
-         bool filter_samples) {
+         const Frfc_options& options) {
         Mesh_arrays mesh = to_mesh(points, triangles, segments, segment_is_boundary, kind);
         auto d = to_vector<double>(delta);
-        if (sample_mode < 0 || sample_mode > 3) throw Input_error("unknown sample mode");
-        Frfc_options options;
-        options.filter_samples = filter_samples;
-        options.seed = seed;
-        options.cell_factor = cell_factor;
-        options.exact_radius = exact_radius;
-        options.sample_mode = static_cast<Sample_mode>(sample_mode);
-        options.skip_coarse_triangles = skip_coarse_triangles;
-        options.threads = threads;
-        options.max_samples = max_samples;
-        options.radius_scale = radius_scale;
-        options.boundary_radius_scale = boundary_radius_scale;
-        options.ring_samples = ring_samples;
-        options.repair_ratio = repair_ratio;
-        options.quality = quality;
-        options.quality_options = quality_options(min_angle, crowding_angle, quality_max_fraction, quality_max_extra);
         Evolve_result r;
         {
           py::gil_scoped_release release;
@@ -269,27 +332,16 @@ PYBIND11_MODULE(_core, m) {
         return evolve_result_dict(r);
       },
       py::arg("points"), py::arg("triangles"), py::arg("segments"), py::arg("segment_is_boundary"),
-      py::arg("kind"), py::arg("delta"), py::arg("seed") = 0, py::arg("cell_factor") = 1.0,
-      py::arg("exact_radius") = true, py::arg("sample_mode") = 0, py::arg("skip_coarse_triangles") = false,
-      py::arg("threads") = 0, py::arg("max_samples") = 5e7, py::arg("radius_scale") = 1.0, py::arg("boundary_radius_scale") = 1.0, py::arg("ring_samples") = true, py::arg("repair_ratio") = 1.75,
-      py::arg("quality") = false, py::arg("min_angle") = 20.0, py::arg("crowding_angle") = 120.0,
-      py::arg("quality_max_fraction") = 0.5, py::arg("quality_max_extra") = 1000.0, py::arg("filter_samples") = true);
+      py::arg("kind"), py::arg("delta"), py::arg("options") = Frfc_options::recommended(),
+      "Functional-Refining-Functional-Coarsening (Section 3.2): one step; returns a dict of arrays and stats.");
 
   m.def(
       "drfc",
       [](const Float_array& points, const Int_array& triangles, const Int_array& segments,
-         const Byte_array& segment_is_boundary, const Byte_array& kind, const Float_array& delta, double min_angle,
-         double radius_scale, int threads, double max_samples, bool quality, double crowding_angle,
-         double quality_max_fraction, double quality_max_extra) {
+         const Byte_array& segment_is_boundary, const Byte_array& kind, const Float_array& delta,
+         const Drfc_options& options) {
         Mesh_arrays mesh = to_mesh(points, triangles, segments, segment_is_boundary, kind);
         auto d = to_vector<double>(delta);
-        Drfc_options options;
-        options.min_angle = min_angle;
-        options.radius_scale = radius_scale;
-        options.threads = threads;
-        options.max_samples = max_samples;
-        options.quality = quality;
-        options.quality_options = quality_options(min_angle, crowding_angle, quality_max_fraction, quality_max_extra);
         Evolve_result r;
         {
           py::gil_scoped_release release;
@@ -298,23 +350,16 @@ PYBIND11_MODULE(_core, m) {
         return evolve_result_dict(r);
       },
       py::arg("points"), py::arg("triangles"), py::arg("segments"), py::arg("segment_is_boundary"),
-      py::arg("kind"), py::arg("delta"), py::arg("min_angle") = 20.0, py::arg("radius_scale") = 1.0,
-      py::arg("threads") = 0, py::arg("max_samples") = 5e7, py::arg("quality") = false,
-      py::arg("crowding_angle") = 120.0, py::arg("quality_max_fraction") = 0.5,
-      py::arg("quality_max_extra") = 1000.0,
+      py::arg("kind"), py::arg("delta"), py::arg("options") = Drfc_options::recommended(),
       "Delaunay-Refining-Functional-Coarsening (Section 5); returns the same dict as frfc.");
 
   m.def(
       "drfc_refine",
       [](const Float_array& points, const Int_array& triangles, const Int_array& segments,
-         const Byte_array& segment_is_boundary, const Byte_array& kind, const Float_array& delta, double min_angle,
-         int threads, double max_samples) {
+         const Byte_array& segment_is_boundary, const Byte_array& kind, const Float_array& delta,
+         const Drfc_options& options) {
         Mesh_arrays mesh = to_mesh(points, triangles, segments, segment_is_boundary, kind);
         auto d = to_vector<double>(delta);
-        Drfc_options options;
-        options.min_angle = min_angle;
-        options.threads = threads;
-        options.max_samples = max_samples;
         Refined_mesh r;
         {
           py::gil_scoped_release release;
@@ -337,8 +382,7 @@ PYBIND11_MODULE(_core, m) {
         return out;
       },
       py::arg("points"), py::arg("triangles"), py::arg("segments"), py::arg("segment_is_boundary"),
-      py::arg("kind"), py::arg("delta"), py::arg("min_angle") = 20.0, py::arg("threads") = 0,
-      py::arg("max_samples") = 5e7,
+      py::arg("kind"), py::arg("delta"), py::arg("options") = Drfc_options::recommended(),
       "DRFC step 1 alone: Delaunay refinement with Ruppert's rules and rule 4 (Section 5).");
 
   m.def(

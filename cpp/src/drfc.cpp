@@ -39,9 +39,7 @@ void check_options(const Mesh_arrays& mesh, const std::vector<double>& delta, co
   for (double d : delta) {
     if (!std::isfinite(d) || !(d > 0)) throw Input_error("delta must be finite and > 0");
   }
-  if (!(options.min_angle > 0 && options.min_angle < 60)) throw Input_error("min_angle must be in (0, 60)");
-  if (!(options.radius_scale > 0 && options.radius_scale <= 1)) throw Input_error("radius_scale must be in (0, 1]");
-  if (!(options.max_samples > 0)) throw Input_error("max_samples must be > 0");
+  options.validate();
 }
 
 Refinement_stage refinement_stage(const Mesh_arrays& mesh, const std::vector<double>& delta,
@@ -156,8 +154,8 @@ Evolve_result drfc(const Mesh_arrays& mesh, const std::vector<double>& delta, co
       pieces.push_back(piece);
     }
   }
-  triangulate_selection(std::move(out), std::move(origin), pieces,
-                        options.quality ? &options.quality_options : nullptr, result);
+  const Quality_options quality = options.quality_settings();
+  triangulate_selection(std::move(out), std::move(origin), pieces, options.quality ? &quality : nullptr, result);
   timer.lap(options.quality ? "quality" : "cdt");
 
   double seconds = 0;

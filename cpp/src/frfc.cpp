@@ -453,12 +453,7 @@ Evolve_result frfc(const Mesh_arrays& mesh, const std::vector<double>& delta, co
   for (double d : delta) {
     if (!std::isfinite(d) || !(d > 0)) throw Input_error("delta must be finite and > 0");
   }
-  if (!(options.cell_factor > 0) || !std::isfinite(options.cell_factor)) {
-    throw Input_error("cell_factor must be finite and > 0");
-  }
-  if (!(options.radius_scale > 0 && options.radius_scale <= 1)) {
-    throw Input_error("radius_scale must be in (0, 1]");
-  }
+  options.validate();
   Evolve_result result;
   auto& stats = result.stats;
   Stage_timer timer(stats);
@@ -493,7 +488,7 @@ Evolve_result frfc(const Mesh_arrays& mesh, const std::vector<double>& delta, co
   timer.lap("spacing_at_points");
 
   // Step 2a: samples on segments, with the ring candidates of R-points on them.
-  const double estimate = estimate_sample_count(mesh, f, options.cell_factor, options.max_samples);
+  const double estimate = estimate_sample_count(mesh, f, options.cell_factor, options.max_samples, options.adaptive_cells);
   if (estimate > options.max_samples) {
     throw Input_error("delta asks for too much refinement in one step: sampling would create about " +
                       format_count(estimate) + " points (max_samples is " +
@@ -501,7 +496,8 @@ Evolve_result frfc(const Mesh_arrays& mesh, const std::vector<double>& delta, co
                       "); delta is relative (the new spacing is delta times the current one): raise it, refine over "
                       "several steps, or raise max_samples");
   }
-  Sample_set on_segments = sample_segments(mesh, f, options.cell_factor, options.sample_mode, options.seed);
+  Sample_set on_segments = sample_segments(mesh, f, options.cell_factor, options.samples, options.seed,
+                                           options.adaptive_cells);
   std::vector<std::int8_t> segment_round(on_segments.points.size(), -1);
   std::vector<Index> segment_owner(on_segments.points.size(), -1);
   if (options.ring_samples) {
@@ -516,7 +512,7 @@ Evolve_result frfc(const Mesh_arrays& mesh, const std::vector<double>& delta, co
   // (f(q) + |x - q|) / 2 with q the vertex of smallest f (Section 3.2, step 2).
   auto sample_radii = [&](const Sample_set& samples, bool on_segment, double* out) {
     const std::size_t m = samples.points.size();
-    if (options.exact_radius) {
+    if (options.radius == Radius_rule::exact) {
       spacing.evaluate(samples.points.data(), m, out, nullptr, options.threads, /*certified=*/false);
     } else {
       for (std::size_t j = 0; j < m; ++j) {
@@ -534,7 +530,7 @@ Evolve_result frfc(const Mesh_arrays& mesh, const std::vector<double>& delta, co
         out[j] = f[q] + std::hypot(x[0] - mesh.points[q][0], x[1] - mesh.points[q][1]);
       }
     }
-    for (std::size_t j = 0; j < m; ++j) out[j] *= 0.5 * options.radius_scale * (on_segment ? options.boundary_radius_scale : 1.0);
+    for (std::size_t j = 0; j < m; ++j) out[j] *= 0.5 * options.radius_scale * (on_segment ? options.boundary_scale : 1.0);
   };
   // Candidates of the boundary and old-point classes: input points, then segment samples.
   std::vector<Vec2> centers;
@@ -544,7 +540,7 @@ Evolve_result frfc(const Mesh_arrays& mesh, const std::vector<double>& delta, co
   std::vector<double> radius(n + n_seg);
   for (std::size_t i = 0; i < n; ++i) {
     radius[i] = 0.5 * options.radius_scale * f[i];
-    if (mesh.kind[i] == Point_kind::corner || mesh.kind[i] == Point_kind::boundary) radius[i] *= options.boundary_radius_scale;
+    if (mesh.kind[i] == Point_kind::corner || mesh.kind[i] == Point_kind::boundary) radius[i] *= options.boundary_scale;
   }
   sample_radii(on_segments, true, radius.data() + n);
   timer.lap("sample_radii");
@@ -616,7 +612,7 @@ Evolve_result frfc(const Mesh_arrays& mesh, const std::vector<double>& delta, co
     }
   }
   std::vector<std::uint8_t> skip;
-  if (options.skip_coarse_triangles) {
+  if (options.skip_coarse) {
     skip.resize(mesh.triangles.size());
     for (std::size_t t = 0; t < mesh.triangles.size(); ++t) {
       const auto& tri = mesh.triangles[t];
@@ -624,8 +620,8 @@ Evolve_result frfc(const Mesh_arrays& mesh, const std::vector<double>& delta, co
     }
   }
   std::size_t n_drawn = 0;
-  Sample_set inside = sample_triangles(mesh, f, options.cell_factor, options.sample_mode, options.seed, skip, cover,
-                                       options.threads, &n_drawn);
+  Sample_set inside = sample_triangles(mesh, f, options.cell_factor, options.samples, options.seed, skip, cover,
+                                       options.threads, &n_drawn, options.adaptive_cells);
   std::vector<std::int8_t> inside_round(inside.points.size(), -1);
   const Triangle_fans fans(mesh);
   const double reach = ring_reach(options.radius_scale);
@@ -782,9 +778,10 @@ Evolve_result frfc(const Mesh_arrays& mesh, const std::vector<double>& delta, co
     }
   }
   std::vector<Index> origin = std::move(result.origin);
+  const Quality_options quality = options.quality_settings();
   early_work.wait();
   triangulate_selection(std::move(out), std::move(origin), pieces,
-                        options.quality ? &options.quality_options : nullptr, result, options.quality ? &early : nullptr);
+                        options.quality ? &quality : nullptr, result, options.quality ? &early : nullptr);
   timer.lap(options.quality ? "quality" : "cdt");
 
   double seconds = 0;

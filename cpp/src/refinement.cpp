@@ -480,12 +480,6 @@ std::pair<double, Vec2> smallest_angle(const std::vector<Vec2>& points, const st
 
 namespace {
 
-void check_quality_options(const Quality_options& options) {
-  if (!(options.min_angle >= 0 && options.min_angle < 60)) throw Input_error("min_angle must be in [0, 60)");
-  if (!(options.crowding_angle == 0 || (options.crowding_angle >= 90 && options.crowding_angle < 180))) {
-    throw Input_error("crowding_angle must be 0 (off) or in [90, 180)");
-  }
-}
 
 // The quality pass on `cdt`, which holds all points (handles by point index).
 Refined_mesh quality_pass(Cdt& cdt, const std::vector<Vertex_handle>& handles, const Scaling& scaling,
@@ -530,7 +524,7 @@ bool scales_exactly(const Vec2* begin, const Vec2* end, const Scaling& s) {
 
 Refined_mesh quality_triangulate(const std::vector<Vec2>& points, const std::vector<Point_kind>& kind,
                                  const std::vector<Constraint_piece>& pieces, const Quality_options& options) {
-  check_quality_options(options);
+  options.validate();
   Cdt cdt;
   const Scaling scaling = unit_scaling(points);
   const auto handles = insert_points(cdt, points, scaling);
@@ -558,7 +552,7 @@ void Early_triangulation::insert_first(const std::vector<Vec2>& first) {
 Refined_mesh Early_triangulation::finish(const std::vector<Vec2>& points, const std::vector<Point_kind>& kind,
                                          const std::vector<Constraint_piece>& pieces, const Quality_options& options) {
   Impl& impl = *impl_;
-  check_quality_options(options);
+  options.validate();
   if (!impl.started || impl.n_first > points.size() ||
       !scales_exactly(points.data() + impl.n_first, points.data() + points.size(), impl.scaling) ||
       unit_scaling(points).to_unit != impl.scaling.to_unit) {

@@ -119,10 +119,17 @@ double farthest_distance(const Vec2& v, double x0, double y0, double x1, double 
 // stops (returns false) once more than `limit` cells were found.
 bool adaptive_cells(const std::array<Vec2, 3>& corners, const std::array<double, 3>& fv, double xmin, double ymin,
                     double xmax, double ymax, double s, double cell_factor, std::int64_t nx, std::int64_t ny,
-                    double limit, std::vector<Dyadic_cell>& cells) {
+                    double limit, bool adaptive, std::vector<Dyadic_cell>& cells) {
   const double f_min = std::min({fv[0], fv[1], fv[2]});
   std::int64_t top = 1;
-  while (top < std::max(nx, ny)) top *= 2;
+  while (adaptive && top < std::max(nx, ny)) top *= 2;
+  if (!adaptive) {  // the fine grid itself, row by row
+    for (std::int64_t iy = 0; iy < ny; ++iy) {
+      for (std::int64_t ix = 0; ix < nx; ++ix) cells.push_back({ix, iy, 1});
+      if (static_cast<double>(cells.size()) > limit) return false;
+    }
+    return true;
+  }
   std::vector<Dyadic_cell> stack{{0, 0, top}};
   while (!stack.empty()) {
     const Dyadic_cell block = stack.back();
@@ -166,8 +173,12 @@ bool adaptive_cells(const std::array<Vec2, 3>& corners, const std::array<double,
 // The same for the 1-D cells of a segment of the given length (`cells` fine
 // cells), with f(a) and f(b) at its ends: the blocks as [first, size) pairs.
 void adaptive_segment_cells(double length, double fa, double fb, double cell_factor, std::int64_t n_cells,
-                            std::vector<std::array<std::int64_t, 2>>& out) {
+                            bool adaptive, std::vector<std::array<std::int64_t, 2>>& out) {
   const double fine = length / static_cast<double>(n_cells);
+  if (!adaptive) {
+    for (std::int64_t j = 0; j < n_cells; ++j) out.push_back({j, 1});
+    return;
+  }
   std::int64_t top = 1;
   while (top < n_cells) top *= 2;
   std::vector<std::array<std::int64_t, 2>> stack{{0, top}};
@@ -210,7 +221,7 @@ bool in_cover(const std::vector<Disc>& cover, const Triangle& t, const Vec2& x) 
 }
 
 double estimate_sample_count(const Mesh_arrays& mesh, const std::vector<double>& vertex_f, double cell_factor,
-                             double limit) {
+                             double limit, bool adaptive) {
   // The fine grid's count bounds the adaptive grid's; only triangles whose fine
   // grid is large are counted cell by cell (and only up to the limit).
   constexpr double kCountCells = 4096;
@@ -225,13 +236,14 @@ double estimate_sample_count(const Mesh_arrays& mesh, const std::vector<double>&
     const double fx = std::ceil((xmax - xmin) / s), fy = std::ceil((ymax - ymin) / s);
     if (!(fx <= kMaxCellsPerSide && fy <= kMaxCellsPerSide)) return std::numeric_limits<double>::infinity();
     const double fine = std::max(fx, 1.0) * std::max(fy, 1.0);
-    if (fine <= kCountCells) {
+    if (!adaptive || fine <= kCountCells) {
       total += fine;
     } else {
       cells.clear();
       const bool complete = adaptive_cells({a, b, c}, {vertex_f[t[0]], vertex_f[t[1]], vertex_f[t[2]]}, xmin, ymin, xmax,
                                            ymax, s, cell_factor, std::max<std::int64_t>(static_cast<std::int64_t>(fx), 1),
-                                           std::max<std::int64_t>(static_cast<std::int64_t>(fy), 1), limit - total, cells);
+                                           std::max<std::int64_t>(static_cast<std::int64_t>(fy), 1), limit - total,
+                                           adaptive, cells);
       total += static_cast<double>(cells.size());
       if (!complete) return total;
     }
@@ -245,11 +257,12 @@ double estimate_sample_count(const Mesh_arrays& mesh, const std::vector<double>&
     const double length = std::hypot(b[0] - a[0], b[1] - a[1]);
     const double fine = std::ceil(length / s);
     if (!(fine <= kMaxCellsPerSide)) return std::numeric_limits<double>::infinity();
-    if (fine <= kCountCells) {
+    if (!adaptive || fine <= kCountCells) {
       total += fine + 1;
     } else {
       blocks.clear();
-      adaptive_segment_cells(length, vertex_f[e[0]], vertex_f[e[1]], cell_factor, static_cast<std::int64_t>(fine), blocks);
+      adaptive_segment_cells(length, vertex_f[e[0]], vertex_f[e[1]], cell_factor, static_cast<std::int64_t>(fine),
+                             adaptive, blocks);
       total += static_cast<double>(blocks.size()) + 1;
     }
     if (total > limit) return total;
@@ -263,7 +276,7 @@ namespace {
 void sample_one_triangle(const Mesh_arrays& mesh, std::size_t ti, const std::vector<double>& vertex_f,
                          double cell_factor, Sample_mode mode, std::uint64_t seed,
                          const std::unordered_set<std::uint64_t>& segment_edges, const std::vector<Disc>& cover,
-                         Sample_set& out, std::size_t& n_drawn) {
+                         bool adaptive, Sample_set& out, std::size_t& n_drawn) {
   const auto& P = mesh.points;
   const std::size_t n = P.size();
   const Triangle& t = mesh.triangles[ti];
@@ -303,7 +316,7 @@ void sample_one_triangle(const Mesh_arrays& mesh, std::size_t ti, const std::vec
   const auto ny = std::max<std::int64_t>(static_cast<std::int64_t>(std::ceil((ymax - ymin) / s)), 1);
   std::vector<Dyadic_cell> cells;
   adaptive_cells({a, b, c}, {vertex_f[t[0]], vertex_f[t[1]], vertex_f[t[2]]}, xmin, ymin, xmax, ymax, s, cell_factor,
-                 nx, ny, std::numeric_limits<double>::infinity(), cells);
+                 nx, ny, std::numeric_limits<double>::infinity(), adaptive, cells);
   Polygon poly, clipped;
   std::array<double, 8> cumulative{};
   for (const Dyadic_cell& cell : cells) {
@@ -343,7 +356,7 @@ void sample_one_triangle(const Mesh_arrays& mesh, std::size_t ti, const std::vec
 Sample_set sample_triangles(const Mesh_arrays& mesh, const std::vector<double>& vertex_f,
                             double cell_factor, Sample_mode mode, std::uint64_t seed,
                             const std::vector<std::uint8_t>& skip, const std::vector<Disc>& cover, int threads,
-                            std::size_t* n_drawn) {
+                            std::size_t* n_drawn, bool adaptive) {
   std::unordered_set<std::uint64_t> segment_edges;
   if (mode == Sample_mode::midpoints || mode == Sample_mode::barycentre_midpoints) {
     segment_edges.reserve(mesh.segments.size() * 2);
@@ -359,7 +372,8 @@ Sample_set sample_triangles(const Mesh_arrays& mesh, const std::vector<double>& 
   parallel_for(n_blocks, threads, [&](std::size_t k) {
     for (std::size_t ti = k * kBlock; ti < std::min(n_triangles, (k + 1) * kBlock); ++ti) {
       if (!skip.empty() && skip[ti]) continue;
-      sample_one_triangle(mesh, ti, vertex_f, cell_factor, mode, seed, segment_edges, cover, blocks[k], drawn[k]);
+      sample_one_triangle(mesh, ti, vertex_f, cell_factor, mode, seed, segment_edges, cover, adaptive, blocks[k],
+                          drawn[k]);
     }
   });
   Sample_set out;
@@ -380,7 +394,7 @@ Sample_set sample_triangles(const Mesh_arrays& mesh, const std::vector<double>& 
 }
 
 Sample_set sample_segments(const Mesh_arrays& mesh, const std::vector<double>& vertex_f,
-                           double cell_factor, Sample_mode mode, std::uint64_t seed) {
+                           double cell_factor, Sample_mode mode, std::uint64_t seed, bool adaptive) {
   Sample_set out;
   std::vector<std::array<std::int64_t, 2>> blocks;
   for (std::size_t k = 0; k < mesh.segments.size(); ++k) {
@@ -399,7 +413,7 @@ Sample_set sample_segments(const Mesh_arrays& mesh, const std::vector<double>& v
     // Stream ids for segments follow the triangles' so the two never share one.
     Random_stream rng(seed, (std::uint64_t{1} << 62) + k);
     blocks.clear();
-    adaptive_segment_cells(length, vertex_f[e[0]], vertex_f[e[1]], cell_factor, cells, blocks);
+    adaptive_segment_cells(length, vertex_f[e[0]], vertex_f[e[1]], cell_factor, cells, adaptive, blocks);
     for (const auto& [first, size] : blocks) {
       const double t = (static_cast<double>(first) + static_cast<double>(size) * rng.uniform()) / static_cast<double>(cells);
       if (!(t > 0 && t < 1)) continue;

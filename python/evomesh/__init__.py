@@ -6,7 +6,16 @@ coarsens where delta > 1, keeping the mesh well shaped and as many old points
 as it can.
 """
 
-from evomesh.evolve import DRFC_DEFAULTS, FRFC_DEFAULTS, delaunay_refine, evolve
+from evomesh.evolve import (
+    DRFC_DEFAULTS,
+    FRFC_DEFAULTS,
+    DrfcOptions,
+    FrfcOptions,
+    RadiusRule,
+    SampleMode,
+    delaunay_refine,
+    evolve,
+)
 from evomesh.mesh import Mesh, PointKind
 from evomesh.packing import lexical_first_mis
 from evomesh.quality import Quality, quality
@@ -19,6 +28,10 @@ __all__ = [
     "delaunay_refine",
     "FRFC_DEFAULTS",
     "DRFC_DEFAULTS",
+    "FrfcOptions",
+    "DrfcOptions",
+    "SampleMode",
+    "RadiusRule",
     "nn_spacing",
     "spacing",
     "SpacingFunction",

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import copy
 import numbers
 from typing import Any
 
@@ -11,105 +12,106 @@ from evomesh import _core
 from evomesh.mesh import Mesh, check_mesh_limits
 from evomesh.spacing import _require_mesh, as_delta
 
-__all__ = ["evolve", "delaunay_refine", "FRFC_DEFAULTS", "DRFC_DEFAULTS"]
+__all__ = ["evolve", "delaunay_refine", "make_options", "FRFC_DEFAULTS", "DRFC_DEFAULTS", "FrfcOptions", "DrfcOptions",
+           "SampleMode", "RadiusRule"]
 
-_SAMPLE_MODES = {"random": 0, "barycentre": 1, "midpoints": 2, "barycentre+midpoints": 3}
-_RADII = ("exact", "cheap")
+FrfcOptions = _core.FrfcOptions
+DrfcOptions = _core.DrfcOptions
+SampleMode = _core.SampleMode
+RadiusRule = _core.RadiusRule
 
-#: Options of method="frfc" and their defaults.
-FRFC_DEFAULTS: dict[str, Any] = {
-    "cell_factor": 2.0,
-    "radius": "exact",
-    "radius_scale": 0.75,
-    "boundary_scale": 0.8,
-    "repair_ratio": 1.75,
-    "samples": "random",
-    "skip_coarse": False,
-    "filter_samples": True,
-    "max_samples": 5e7,
-    "threads": None,
-    "quality": True,
-    "min_angle": 20.0,
+# Option values as Python users write them (and as FRFC_DEFAULTS shows them).
+_SAMPLE_NAMES = {
+    "random": SampleMode.random,
+    "barycentre": SampleMode.barycentre,
+    "midpoints": SampleMode.midpoints,
+    "barycentre+midpoints": SampleMode.barycentre_midpoints,
 }
-
-#: Options of method="drfc" and their defaults.
-DRFC_DEFAULTS: dict[str, Any] = {
-    "min_angle": 20.0,
-    "radius_scale": 0.75,
-    "quality": True,
-    "max_samples": 5e7,
-    "threads": None,
-}
-
-# Angles above this make Ruppert's refinement rely on its bound on inserted points.
-_MAX_MIN_ANGLE = 30.0
+_RADIUS_NAMES = {"exact": RadiusRule.exact, "cheap": RadiusRule.cheap}
+_ENUMS: dict[str, tuple[type, dict[str, Any]]] = {"samples": (SampleMode, _SAMPLE_NAMES), "radius": (RadiusRule, _RADIUS_NAMES)}
+# Options that are not keyword overrides of evolve (evolve has its own seed argument).
+_NOT_KEYWORDS = ("seed",)
 
 
-def _check_real(o: dict[str, Any], name: str) -> None:
-    value = o[name]
-    if isinstance(value, bool) or not isinstance(value, numbers.Real):
-        raise TypeError(f"{name} must be a real number, got {type(value).__name__}")
-    if not np.isfinite(value) or value <= 0:
-        raise ValueError(f"{name} must be finite and > 0, got {value}")
+def _python_value(name: str, value: Any) -> Any:
+    """An option field as FRFC_DEFAULTS shows it (strings for enums, None for "off"/"default")."""
+    if name in _ENUMS:
+        return next(key for key, member in _ENUMS[name][1].items() if member == value)
+    if name == "threads":
+        return value or None
+    if name == "repair_ratio":
+        return value or None
+    return value
 
 
-def _check_common(o: dict[str, Any]) -> None:
-    """Options shared by both methods: min_angle, quality, threads."""
-    _check_real(o, "min_angle")
-    if o["min_angle"] > _MAX_MIN_ANGLE:
-        raise ValueError(f"min_angle must be in (0, {_MAX_MIN_ANGLE:g}], got {o['min_angle']}")
-    if not isinstance(o["quality"], (bool, np.bool_)):
-        raise TypeError("quality must be a bool")
-    threads = o["threads"]
-    if threads is not None and (
-        isinstance(threads, bool) or not isinstance(threads, numbers.Integral) or not 1 <= threads < 2**31
-    ):
-        raise ValueError(f"threads must be None or an integer in [1, 2**31), got {threads!r}")
+def _as_dict(options: Any) -> dict[str, Any]:
+    return {name: _python_value(name, getattr(options, name)) for name in type(options).fields if name not in _NOT_KEYWORDS}
 
 
-def _drfc_options(options: dict[str, Any]) -> dict[str, Any]:
-    unknown = sorted(set(options) - set(DRFC_DEFAULTS))
-    if unknown:
-        raise TypeError(f"unknown option(s) for method 'drfc': {', '.join(unknown)}; known: {', '.join(DRFC_DEFAULTS)}")
-    o = {**DRFC_DEFAULTS, **options}
-    for name in ("radius_scale", "max_samples"):
-        _check_real(o, name)
-    if o["radius_scale"] > 1:
-        raise ValueError(f"radius_scale must be in (0, 1], got {o['radius_scale']}")
-    _check_common(o)
-    return o
+#: Options of method="frfc" and their defaults (FrfcOptions.recommended(); read-only view).
+FRFC_DEFAULTS: dict[str, Any] = _as_dict(FrfcOptions.recommended())
+#: Options of method="drfc" and their defaults (DrfcOptions.recommended()).
+DRFC_DEFAULTS: dict[str, Any] = _as_dict(DrfcOptions.recommended())
 
 
-def _frfc_options(options: dict[str, Any]) -> dict[str, Any]:
-    unknown = sorted(set(options) - set(FRFC_DEFAULTS))
-    if unknown:
-        raise TypeError(f"unknown option(s) for method 'frfc': {', '.join(unknown)}; known: {', '.join(FRFC_DEFAULTS)}")
-    o = {**FRFC_DEFAULTS, **options}
-    for name in ("cell_factor", "radius_scale", "boundary_scale", "max_samples"):
-        value = o[name]
-        if isinstance(value, bool) or not isinstance(value, numbers.Real):
+def _set_field(options: Any, name: str, value: Any) -> None:
+    """options.name = value, with the type checks and conversions of the Python API
+    (range checks are the core's: Options.validate())."""
+    default = getattr(type(options)(), name)
+    if name in _ENUMS:
+        enum, names = _ENUMS[name]
+        if not isinstance(value, enum):
+            if value not in names:
+                raise ValueError(f"{name} must be one of {', '.join(map(repr, names))}, got {value!r}")
+            value = names[value]
+    elif name == "threads":
+        if value is None:
+            value = 0
+        elif isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Integral) or not 1 <= value < 2**31:
+            raise ValueError(f"threads must be None or an integer in [1, 2**31), got {value!r}")
+    elif name == "repair_ratio" and value is None:
+        value = 0.0
+    elif isinstance(default, bool):
+        if not isinstance(value, (bool, np.bool_)):
+            raise TypeError(f"{name} must be a bool, got {type(value).__name__}")
+        value = bool(value)
+    elif isinstance(default, float):
+        if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real):
             raise TypeError(f"{name} must be a real number, got {type(value).__name__}")
-        if not np.isfinite(value) or value <= 0:
-            raise ValueError(f"{name} must be finite and > 0, got {value}")
-    for name in ("radius_scale", "boundary_scale"):
-        if o[name] > 1:
-            raise ValueError(f"{name} must be in (0, 1], got {o[name]}")
-    repair = o["repair_ratio"]
-    if repair is None:
-        o["repair_ratio"] = repair = 0.0
-    if isinstance(repair, bool) or not isinstance(repair, numbers.Real):
-        raise TypeError(f"repair_ratio must be a real number or None, got {type(repair).__name__}")
-    if not (repair == 0 or (np.isfinite(repair) and repair >= 1)):
-        raise ValueError(f"repair_ratio must be None, 0 or a finite number >= 1, got {repair}")
-    if o["samples"] not in _SAMPLE_MODES:
-        raise ValueError(f"samples must be one of {', '.join(_SAMPLE_MODES)}, got {o['samples']!r}")
-    if o["radius"] not in _RADII:
-        raise ValueError(f"radius must be 'exact' or 'cheap', got {o['radius']!r}")
-    for name in ("skip_coarse", "filter_samples"):
-        if not isinstance(o[name], (bool, np.bool_)):
-            raise TypeError(f"{name} must be a bool")
-    _check_common(o)
-    return o
+        value = float(value)
+    elif isinstance(default, int):
+        if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Integral):
+            raise TypeError(f"{name} must be an integer, got {type(value).__name__}")
+        value = int(value)
+    setattr(options, name, value)
+
+
+def make_options(method: str, options: Any = None, **overrides: Any) -> Any:
+    """The validated option object of a method: ``options`` (an
+    :class:`FrfcOptions`/:class:`DrfcOptions`, copied; default ``recommended()``)
+    with keyword ``overrides`` applied. Raises TypeError for an unknown option or
+    a value of the wrong type, ValueError for one out of range."""
+    types = {"frfc": FrfcOptions, "drfc": DrfcOptions}
+    if method not in types:
+        raise ValueError(f"unknown method {method!r}; available: 'frfc', 'drfc'")
+    kind = types[method]
+    if options is None:
+        result = kind.recommended()
+    elif isinstance(options, kind):
+        result = copy.copy(options)
+    else:
+        raise TypeError(f"options of method {method!r} must be a {kind.__name__}, got {type(options).__name__}")
+    known = [name for name in kind.fields if name not in _NOT_KEYWORDS]
+    unknown = sorted(set(overrides) - set(known))
+    if unknown:
+        raise TypeError(f"unknown option(s) for method {method!r}: {', '.join(unknown)}; known: {', '.join(known)}")
+    for name, value in overrides.items():
+        _set_field(result, name, value)
+    try:
+        result.validate()
+    except ValueError as error:
+        raise ValueError(f"{error} (method {method!r})") from None
+    return result
 
 
 def _check_seed(seed: Any) -> int:
@@ -120,7 +122,8 @@ def _check_seed(seed: Any) -> int:
     return int(seed)
 
 
-def evolve(mesh: Mesh, delta: Any, *, method: str = "frfc", seed: int = 0, **options: Any) -> Mesh:
+def evolve(mesh: Mesh, delta: Any, *, method: str = "frfc", seed: int | None = None, options: Any = None,
+           **overrides: Any) -> Mesh:
     """Evolve a mesh one step: new spacing delta(p) * nn_M(p) at every point p.
 
     Parameters
@@ -236,47 +239,11 @@ def evolve(mesh: Mesh, delta: Any, *, method: str = "frfc", seed: int = 0, **opt
     """
     _require_mesh(mesh)
     d = as_delta(mesh, delta)
-    seed = _check_seed(seed)
-    if method == "drfc":
-        o = _drfc_options(options)
-        result = _core.drfc(
-            mesh.points,
-            mesh.triangles,
-            mesh.segments,
-            mesh.segment_is_boundary.astype(np.uint8),
-            mesh.kind,
-            d,
-            min_angle=float(o["min_angle"]),
-            radius_scale=float(o["radius_scale"]),
-            threads=o["threads"] or 0,
-            max_samples=float(o["max_samples"]),
-            quality=bool(o["quality"]),
-        )
-        return _wrap(result)
-    if method != "frfc":
-        raise ValueError(f"unknown method {method!r}; available: 'frfc', 'drfc'")
-    o = _frfc_options(options)
-    result = _core.frfc(
-        mesh.points,
-        mesh.triangles,
-        mesh.segments,
-        mesh.segment_is_boundary.astype(np.uint8),
-        mesh.kind,
-        d,
-        seed=seed,
-        cell_factor=float(o["cell_factor"]),
-        exact_radius=o["radius"] == "exact",
-        sample_mode=_SAMPLE_MODES[o["samples"]],
-        skip_coarse_triangles=bool(o["skip_coarse"]),
-        filter_samples=bool(o["filter_samples"]),
-        threads=o["threads"] or 0,
-        max_samples=float(o["max_samples"]),
-        radius_scale=float(o["radius_scale"]),
-        boundary_radius_scale=float(o["boundary_scale"]),
-        repair_ratio=float(o["repair_ratio"]),
-        quality=bool(o["quality"]),
-        min_angle=float(o["min_angle"]),
-    )
+    o = make_options(method, options, **overrides)
+    if method == "frfc" and seed is not None:
+        o.seed = _check_seed(seed)
+    core = _core.frfc if method == "frfc" else _core.drfc
+    result = core(mesh.points, mesh.triangles, mesh.segments, mesh.segment_is_boundary.astype(np.uint8), mesh.kind, d, o)
     return _wrap(result)
 
 
@@ -335,18 +302,8 @@ def delaunay_refine(mesh: Mesh, delta: Any, *, min_angle: float = 20.0, max_samp
     """
     _require_mesh(mesh)
     d = as_delta(mesh, delta)
-    o = {"min_angle": min_angle, "quality": True, "threads": threads, "max_samples": max_samples}
-    _check_common(o)
-    _check_real(o, "max_samples")
+    o = make_options("drfc", min_angle=min_angle, max_samples=max_samples, threads=threads)
     result = _core.drfc_refine(
-        mesh.points,
-        mesh.triangles,
-        mesh.segments,
-        mesh.segment_is_boundary.astype(np.uint8),
-        mesh.kind,
-        d,
-        min_angle=float(min_angle),
-        threads=threads or 0,
-        max_samples=float(max_samples),
+        mesh.points, mesh.triangles, mesh.segments, mesh.segment_is_boundary.astype(np.uint8), mesh.kind, d, o
     )
     return _wrap(result)

@@ -23,20 +23,15 @@ _MAX_COORDINATE = 1e75
 _MIN_POINT_DISTANCE = 1e-75
 
 
-class PointKind(IntEnum):
-    """Per-point label; the value is the packing priority (paper, Section 6).
+PointKind = IntEnum("PointKind", dict(_core.POINT_KINDS), module=__name__)
+PointKind.__doc__ = """Per-point label; the value is the packing priority (paper, Section 6).
 
-    CORNER points (ends of segment chains, and boundary points where the
-    boundary turns) are always kept. BOUNDARY points lie on a segment.
-    ORIGINAL points are interior points of the first mesh, STEINER points were
-    sampled in an earlier step, SAMPLED points in the step that made the mesh.
-    """
-
-    CORNER = 0
-    BOUNDARY = 1
-    ORIGINAL = 2
-    STEINER = 3
-    SAMPLED = 4
+CORNER points (ends of segment chains, and boundary points where the
+boundary turns) are always kept. BOUNDARY points lie on a segment.
+ORIGINAL points are interior points of the first mesh, STEINER points were
+sampled in an earlier step, SAMPLED points in the step that made the mesh.
+Names and values come from the C++ core (evomesh::Point_kind).
+"""
 
 
 def _frozen(array: np.ndarray) -> np.ndarray:

@@ -7,6 +7,7 @@
 #include <utility>
 #include <vector>
 
+#include "evomesh/options.hpp"
 #include "evomesh/refinement.hpp"
 #include "evomesh/sampling.hpp"
 #include "evomesh/triangulation.hpp"
@@ -14,34 +15,6 @@
 
 namespace evomesh {
 
-struct Frfc_options {
-  double cell_factor = 1.0;          // c in the cell side c f(q) / (2 sqrt 2)
-  bool exact_radius = true;          // f(x)/2 from the Apollonius graph; else (f(q)+|x-q|)/2
-  // Spheres are B(x, radius_scale * f(x) / 2). 1 is the paper's choice; a smaller
-  // scale packs tighter (radius_scale * f is still a valid, Lipschitz spacing).
-  double radius_scale = 1.0;
-  // Extra factor for spheres centred on segments (corners, boundary points and
-  // segment samples): the boundary is a 1-D packing, which leaves larger gaps.
-  double boundary_radius_scale = 1.0;
-  // Offer candidates on a ring just outside every R-point's sphere (see frfc.cpp).
-  bool ring_samples = true;
-  // Spacing repair: a kept R-point p with no kept point within
-  // repair_ratio * delta(p) nn_M(p) gets its best ring candidate. 0 disables.
-  double repair_ratio = 1.75;
-  Sample_mode sample_mode = Sample_mode::random_grid;
-  bool skip_coarse_triangles = false;  // no samples where all three vertices have delta > 1
-  // Interior samples that certainly overlap a kept sphere at a vertex of their
-  // triangle are dropped before their radius is computed (frfc.cpp). The kept
-  // spheres are the same either way; on is faster and smaller.
-  bool filter_samples = true;
-  std::uint64_t seed = 0;
-  int threads = 0;                   // 0: hardware concurrency (capped at 2 chunks per core)
-  double max_samples = 5e7;          // refuse inputs whose sampling would exceed this
-  // The quality pass of Section 6 (refinement.hpp). Off here, so frfc() is the paper's
-  // algorithm; Python's evolve turns it on by default.
-  bool quality = false;
-  Quality_options quality_options;
-};
 
 struct Evolve_result {
   Mesh_arrays mesh;

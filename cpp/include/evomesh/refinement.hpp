@@ -9,23 +9,11 @@
 
 #include "evomesh/spacing.hpp"
 #include "evomesh/triangulation.hpp"
+#include "evomesh/options.hpp"
 #include "evomesh/types.hpp"
 
 namespace evomesh {
 
-struct Quality_options {
-  // Triangles with a smaller angle (degrees) are split at their circumcentre (Ruppert's
-  // rule 3). Up to about 20.7 Ruppert's algorithm provably ends when the domain has no
-  // angle below 60 degrees; beyond that only the bound on inserted points stops it.
-  double min_angle = 20.0;
-  // Section 6: a point that sees a segment under more than crowding_angle degrees is
-  // dropped and the segment is split at its midpoint instead. 0 turns it off.
-  double crowding_angle = 120.0;
-  // The pass stops after max_inserted_fraction * n + max_inserted_extra insertions
-  // (n: points handed in), so small input angles cannot make it run long.
-  double max_inserted_fraction = 0.5;
-  double max_inserted_extra = 1000;
-};
 
 struct Refinement_report {
   std::size_t n_inserted = 0;              // points inserted (inside and on segments)

@@ -5,16 +5,11 @@
 #include <limits>
 #include <vector>
 
+#include "evomesh/options.hpp"
 #include "evomesh/types.hpp"
 
 namespace evomesh {
 
-enum class Sample_mode : std::uint8_t {
-  random_grid = 0,  // one random point in each grid cell's part inside the triangle (the paper)
-  barycentre = 1,   // the barycentre of every triangle
-  midpoints = 2,    // the midpoint of every edge
-  barycentre_midpoints = 3,
-};
 
 struct Disc {
   Vec2 center;
@@ -28,7 +23,8 @@ struct Sample_set {
 
 // Interior samples. Cell side = cell_factor * f(q) / (2 sqrt 2), q the vertex of the
 // triangle with the smallest f, or larger where f's Lipschitz bound from the
-// vertices allows (sampling.cpp: adaptive cells). Every interior sample is strictly inside its triangle
+// vertices allows (sampling.cpp: adaptive cells; `adaptive` false: the paper's
+// uniform cells). Every interior sample is strictly inside its triangle
 // (checked with exact orientation predicates). Triangles with skip[t] != 0 get none.
 // Edges that are segments are never sampled here (see sample_segments).
 // A sample strictly inside the disc cover[v] of a vertex v of its triangle is
@@ -39,13 +35,13 @@ struct Sample_set {
 Sample_set sample_triangles(const Mesh_arrays& mesh, const std::vector<double>& vertex_f,
                             double cell_factor, Sample_mode mode, std::uint64_t seed,
                             const std::vector<std::uint8_t>& skip, const std::vector<Disc>& cover = {},
-                            int threads = 0, std::size_t* n_drawn = nullptr);
+                            int threads = 0, std::size_t* n_drawn = nullptr, bool adaptive = true);
 
 // Samples on the segments, strictly between their endpoints, sorted along each
 // segment from a to b: one random point per 1-D cell of side cell_factor * min f / (2 sqrt 2),
 // or, in every deterministic mode (barycentre and/or midpoints), the midpoint.
 Sample_set sample_segments(const Mesh_arrays& mesh, const std::vector<double>& vertex_f,
-                           double cell_factor, Sample_mode mode, std::uint64_t seed);
+                           double cell_factor, Sample_mode mode, std::uint64_t seed, bool adaptive = true);
 
 // Whether x lies strictly inside the cover disc of a vertex of t (cover empty: no).
 bool in_cover(const std::vector<Disc>& cover, const Triangle& t, const Vec2& x);
@@ -55,7 +51,7 @@ bool in_cover(const std::vector<Disc>& cover, const Triangle& t, const Vec2& x);
 // cells of the triangles whose grid adapts, and it stops as soon as the count
 // passes `limit` (infinite when a triangle would need more than 2^50 cells a side).
 double estimate_sample_count(const Mesh_arrays& mesh, const std::vector<double>& vertex_f, double cell_factor,
-                             double limit = std::numeric_limits<double>::infinity());
+                             double limit = std::numeric_limits<double>::infinity(), bool adaptive = true);
 
 // Counter-based random numbers: the same (seed, stream) always gives the same sequence.
 struct Random_stream {

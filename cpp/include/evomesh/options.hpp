@@ -1,0 +1,109 @@
+// Options of a step, in one place: one type per method, with the paper's
+// algorithm and the recommended defaults as named presets, and the only range
+// checks (validate()). Python binds these types with the same field names
+// (evomesh.FrfcOptions, evomesh.DrfcOptions); the benchmarks use them too.
+#pragma once
+
+#include <cstdint>
+
+#include "evomesh/types.hpp"
+
+namespace evomesh {
+
+// Interior and segment samples (Section 3.2 step 2, and Section 5's variations).
+enum class Sample_mode : std::uint8_t {
+  random_grid = 0,  // one random point in each grid cell's part inside the triangle (the paper)
+  barycentre = 1,   // the barycentre of every triangle
+  midpoints = 2,    // the midpoint of every edge
+  barycentre_midpoints = 3,
+};
+
+// Radius of a sample's sphere: f(x)/2 from the Apollonius graph, or the paper's
+// cheaper (f(q) + |x - q|)/2 with q the triangle's vertex of smallest f.
+enum class Radius_rule : std::uint8_t { exact = 0, cheap = 1 };
+
+// The quality pass of Section 6 (refinement.hpp): Delaunay refinement of the
+// selected points to an angle bound, after crowded segments are split.
+struct Quality_options {
+  // Triangles with a smaller angle (degrees) are split at their circumcentre (Ruppert's
+  // rule 3). Up to about 20.7 Ruppert's algorithm provably ends when the domain has no
+  // angle below 60 degrees; beyond that only the bound on inserted points stops it.
+  double min_angle = 20.0;
+  // A point that sees a segment under more than crowding_angle degrees is dropped
+  // and the segment is split at its midpoint instead. 0 turns it off.
+  double crowding_angle = 120.0;
+  // The pass stops after max_inserted_fraction * n + max_inserted_extra insertions
+  // (n: points handed in), so small input angles cannot make it run long.
+  double max_inserted_fraction = 0.5;
+  double max_inserted_extra = 1000;
+
+  // Throws Input_error naming the first field out of range.
+  void validate() const;
+};
+
+// The largest min_angle accepted (degrees).
+constexpr double kMaxMinAngle = 30.0;
+
+struct Frfc_options {
+  double cell_factor = 2.0;    // c in the cell side c f(q) / (2 sqrt 2); the paper's c5 <= 1
+  Radius_rule radius = Radius_rule::exact;
+  // Spheres are B(x, radius_scale f(x) / 2); 1 is the paper's choice, smaller packs tighter.
+  double radius_scale = 0.75;
+  // Extra factor for spheres centred on segments (a 1-D packing leaves larger gaps).
+  double boundary_scale = 0.8;
+  // Candidates on a ring just outside every R-point's sphere (frfc.cpp).
+  bool ring_samples = true;
+  // Spacing repair: a kept R-point p with no kept point within
+  // repair_ratio * delta(p) nn_M(p) gets its best ring candidate. 0 disables.
+  double repair_ratio = 1.75;
+  Sample_mode samples = Sample_mode::random_grid;
+  // Grid cells grow where f's Lipschitz bound from the triangle's vertices
+  // allows (sampling.cpp); false: the paper's uniform cells of side c f(q)/(2 sqrt 2).
+  bool adaptive_cells = true;
+  bool skip_coarse = false;     // no samples where all three vertices have delta > 1
+  // Interior samples that certainly overlap a kept sphere are dropped before
+  // their radius is computed; the output is the same either way.
+  bool filter_samples = true;
+  double max_samples = 5e7;     // refuse steps whose sampling would exceed this
+  int threads = 0;              // 0: the default thread count (parallel.hpp)
+  std::uint64_t seed = 0;
+  bool quality = true;          // the quality pass of Section 6
+  double min_angle = 20.0;      // its angle bound (degrees)
+  double crowding_angle = 120.0;
+  double quality_max_fraction = 0.5;
+  double quality_max_extra = 1000;
+
+  // The paper's FRFC exactly: spheres B(x, f(x)/2) everywhere, cells of side
+  // f(q)/(2 sqrt 2) (c5 = 1), exact radii, no ring candidates, no repair, no
+  // quality pass.
+  static Frfc_options paper();
+  // The defaults (what a default-constructed Frfc_options holds).
+  static Frfc_options recommended() { return {}; }
+  Quality_options quality_settings() const;
+  void validate() const;
+};
+
+struct Drfc_options {
+  // Step 1: Delaunay refinement with Ruppert's rules 1 and 3 for this angle
+  // (degrees) and rule 4 for the spacing function f; also the quality pass's bound.
+  double min_angle = 20.0;
+  // Step 2: spheres B(p, radius_scale f(p) / 2) on the refined points; 1 is the
+  // one-level coarsening of Miller, Talmor and Teng.
+  double radius_scale = 0.75;
+  int threads = 0;
+  // Refuse a step whose refinement would need more points than this (estimated
+  // from f as FRFC's sampling is), and stop refining at twice the estimate.
+  double max_samples = 5e7;
+  bool quality = true;  // the quality pass of Section 6 on the coarsened points
+  double crowding_angle = 120.0;
+  double quality_max_fraction = 0.5;
+  double quality_max_extra = 1000;
+
+  // Section 5's DRFC exactly: Miller-Talmor-Teng spheres, no quality pass.
+  static Drfc_options paper();
+  static Drfc_options recommended() { return {}; }
+  Quality_options quality_settings() const;
+  void validate() const;
+};
+
+}  // namespace evomesh

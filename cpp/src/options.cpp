@@ -1,0 +1,79 @@
+#include "evomesh/options.hpp"
+
+#include <cmath>
+#include <string>
+
+namespace evomesh {
+
+namespace {
+
+void require(bool ok, const char* name, const char* range) {
+  if (!ok) throw Input_error(std::string(name) + " must be " + range);
+}
+
+bool positive(double x) { return std::isfinite(x) && x > 0; }
+
+void validate_common(double radius_scale, double max_samples, int threads) {
+  require(radius_scale > 0 && radius_scale <= 1, "radius_scale", "in (0, 1]");
+  require(positive(max_samples), "max_samples", "finite and > 0");
+  require(threads >= 0, "threads", "0 (the default count) or a positive integer");
+}
+
+}  // namespace
+
+void Quality_options::validate() const {
+  require(min_angle > 0 && min_angle <= kMaxMinAngle, "min_angle", "in (0, 30] degrees");
+  require(crowding_angle == 0 || (crowding_angle >= 90 && crowding_angle < 180), "crowding_angle",
+          "0 (off) or in [90, 180) degrees");
+  require(std::isfinite(max_inserted_fraction) && max_inserted_fraction >= 0, "quality_max_fraction",
+          "finite and >= 0");
+  require(std::isfinite(max_inserted_extra) && max_inserted_extra >= 0, "quality_max_extra", "finite and >= 0");
+}
+
+Frfc_options Frfc_options::paper() {
+  Frfc_options o;
+  o.cell_factor = 1.0;
+  o.radius = Radius_rule::exact;
+  o.radius_scale = 1.0;
+  o.boundary_scale = 1.0;
+  o.ring_samples = false;
+  o.repair_ratio = 0.0;
+  o.samples = Sample_mode::random_grid;
+  o.adaptive_cells = false;
+  o.skip_coarse = false;
+  o.quality = false;
+  return o;
+}
+
+Quality_options Frfc_options::quality_settings() const {
+  return {min_angle, crowding_angle, quality_max_fraction, quality_max_extra};
+}
+
+void Frfc_options::validate() const {
+  require(positive(cell_factor), "cell_factor", "finite and > 0");
+  require(boundary_scale > 0 && boundary_scale <= 1, "boundary_scale", "in (0, 1]");
+  require(repair_ratio == 0 || (std::isfinite(repair_ratio) && repair_ratio >= 1), "repair_ratio",
+          "None, 0 or a finite number >= 1");
+  require(static_cast<int>(samples) <= 3, "samples", "a Sample_mode");
+  require(static_cast<int>(radius) <= 1, "radius", "'exact' or 'cheap'");
+  validate_common(radius_scale, max_samples, threads);
+  quality_settings().validate();
+}
+
+Drfc_options Drfc_options::paper() {
+  Drfc_options o;
+  o.radius_scale = 1.0;
+  o.quality = false;
+  return o;
+}
+
+Quality_options Drfc_options::quality_settings() const {
+  return {min_angle, crowding_angle, quality_max_fraction, quality_max_extra};
+}
+
+void Drfc_options::validate() const {
+  validate_common(radius_scale, max_samples, threads);
+  quality_settings().validate();
+}
+
+}  // namespace evomesh
