@@ -1,0 +1,150 @@
+"""Regression tests for the Python-side defects of issue 9 (transfer far from
+the origin, partial runs, write_run / read_mesh validation)."""
+
+import importlib
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from strategies import grid_mesh, meshes
+
+import evomesh
+from evomesh import _core, transfer
+
+# evomesh.transfer is the function (the package re-exports it): the module by name
+transfer_mod = importlib.import_module("evomesh.transfer")
+
+
+# ---------------------------------------------------------------------------
+# (5) transfer far from the origin; nearest boundary edge in O((q + b) log b)
+
+FAR = 1e9
+
+
+def rotated_far_mesh(nx=21, seed=1, angle_deg=30.0, offset=(FAR, FAR)):
+    """A jittered unit-square grid rotated by angle_deg and moved to offset."""
+    base = grid_mesh(nx, nx, jitter=0.25, seed=seed)
+    th = np.deg2rad(angle_deg)
+    rotation = np.array([[np.cos(th), -np.sin(th)], [np.sin(th), np.cos(th)]])
+    return evomesh.Mesh(base.points @ rotation.T + np.asarray(offset), base.triangles)
+
+
+def local_linear(points):
+    x = points[:, 0] - FAR
+    y = points[:, 1] - FAR
+    return 3.0 * x - 2.0 * y + 0.5
+
+
+def test_transfer_of_evolve_output_far_from_the_origin():
+    mesh = rotated_far_mesh()
+    values = local_linear(mesh.points)
+    fallback = 0
+    for k, delta in enumerate((0.05, 20.0, 0.05, 20.0)):
+        new = evomesh.evolve(mesh, delta, seed=k)
+        located, _ = _core.locate_points(mesh.points, mesh.triangles, new.points[new.origin < 0])
+        fallback += int((located < 0).sum())
+        out = transfer(mesh, new, values)
+        # a linear field stays linear (up to the rounding of coordinates near 1e9)
+        assert np.allclose(out, local_linear(new.points), rtol=0, atol=1e-4)
+        kept = new.origin >= 0
+        assert np.array_equal(out[kept], values[new.origin[kept]])
+        mesh, values = new, out
+    assert fallback > 0, "the test needs new points that rounding put outside the old mesh"
+
+
+def test_run_with_fields_far_from_the_origin():
+    mesh = rotated_far_mesh()
+
+    def law(m, distance):  # refine the coarse mesh, coarsen the fine one
+        return np.full(m.n_points, 0.05 if m.n_points < 1000 else 20.0)
+
+    result = evomesh.run(mesh, None, law, [1, 2, 3, 4], fields={"u": local_linear(mesh.points)}, progress=False)
+    assert len(result.steps) == 4
+    for step in result.steps:
+        assert np.allclose(step.fields["u"], local_linear(step.mesh.points), rtol=0, atol=1e-4)
+
+
+def test_outside_tolerance_is_in_ulps_of_the_coordinates():
+    mesh = rotated_far_mesh(nx=5)
+    eps = np.finfo(np.float64).eps
+    tolerance = transfer_mod._outside_tolerance(mesh, mesh.points[:0])
+    magnitude = np.abs(mesh.points).max()
+    assert tolerance >= 8 * eps * magnitude  # several ulps of |x| ~ 1e9
+    assert tolerance <= 64 * eps * magnitude + 1e-11  # but still rounding, not a fraction of the extent
+    near = grid_mesh(5, 5)
+    assert transfer_mod._outside_tolerance(near, near.points[:0]) < 1e-11
+
+
+def brute_force_nearest_boundary_edge(old, queries):
+    """The former O(q b) search: every query against every boundary edge."""
+    edges = old.segments[old.segment_is_boundary]
+    a = old.points[edges[:, 0]]
+    d = old.points[edges[:, 1]] - a
+    dd = np.einsum("ij,ij->i", d, d)
+    q = queries[:, None, :]
+    t = np.clip(np.einsum("qkj,kj->qk", q - a[None], d) / dd[None], 0.0, 1.0)
+    gap = np.linalg.norm(q - (a[None] + t[..., None] * d[None]), axis=2)
+    best = gap.argmin(axis=1)
+    rows = np.arange(len(best))
+    edge = edges[best]
+    weights = np.zeros((len(queries), 3))
+    weights[:, 0] = 1.0 - t[rows, best]
+    weights[:, 1] = t[rows, best]
+    return np.c_[edge, edge[:, 0]], weights, gap[rows, best]
+
+
+def points_on_the_boundary(mesh, rng, count, ulps):
+    """Random points of boundary edges (including their end points), moved by
+    up to ``ulps`` ulps of the largest coordinate in each direction."""
+    edges = mesh.segments[mesh.segment_is_boundary]
+    pick = rng.integers(0, len(edges), count)
+    t = rng.choice([0.0, 0.5, 1.0, rng.uniform()], count)
+    t = np.where(rng.uniform(size=count) < 0.5, rng.uniform(size=count), t)
+    a = mesh.points[edges[pick, 0]]
+    b = mesh.points[edges[pick, 1]]
+    x = a + t[:, None] * (b - a)
+    scale = np.finfo(np.float64).eps * np.abs(mesh.points).max()
+    return x + rng.uniform(-ulps, ulps, x.shape) * scale
+
+
+@settings(max_examples=20)
+@given(meshes(max_side=10), st.integers(0, 2**16), st.sampled_from([0.0, 1.0, 4.0]),
+       st.sampled_from([0.0, 1e6]))
+def test_nearest_boundary_edge_is_the_brute_force_one(mesh, seed, ulps, far):
+    # far from the origin in units of the mesh's extent (coarse coordinates)
+    extent = np.ptp(mesh.points, axis=0).max()
+    mesh = evomesh.Mesh(mesh.points + far * extent * np.array([1.0, -0.3]), mesh.triangles)
+    rng = np.random.default_rng(seed)
+    queries = points_on_the_boundary(mesh, rng, 200, ulps)
+    vertices, weights = transfer_mod._nearest_boundary_edge(mesh, queries)
+    expected_vertices, expected_weights, _ = brute_force_nearest_boundary_edge(mesh, queries)
+    assert np.array_equal(vertices, expected_vertices)
+    assert np.array_equal(weights, expected_weights)
+
+
+def test_nearest_boundary_edge_compares_few_edges_per_query(monkeypatch):
+    # 4 * 199 boundary edges; the former search compared every query with all of them
+    mesh = grid_mesh(200, 200)
+    queries = points_on_the_boundary(mesh, np.random.default_rng(0), 3000, 2.0)
+    compared = []
+    original = transfer_mod._to_segments
+
+    def counting(q, a, d, dd):
+        compared.append(max(len(q), len(a)))
+        return original(q, a, d, dd)
+
+    monkeypatch.setattr(transfer_mod, "_to_segments", counting)
+    vertices, _ = transfer_mod._nearest_boundary_edge(mesh, queries)
+    assert sum(compared) <= 4 * len(queries)
+    monkeypatch.undo()
+    assert np.array_equal(vertices, brute_force_nearest_boundary_edge(mesh, queries)[0])
+
+
+def test_points_beyond_rounding_are_refused_far_from_the_origin():
+    mesh = rotated_far_mesh(nx=6)
+    center = mesh.points.mean(axis=0)
+    # 1e-3 of the extent outside: far more than rounding even at 1e9
+    grown = evomesh.Mesh((mesh.points - center) * 1.001 + center, mesh.triangles)
+    with pytest.raises(ValueError, match="outside the old mesh"):
+        transfer(mesh, grown, local_linear(mesh.points))
