@@ -148,3 +148,94 @@ def test_points_beyond_rounding_are_refused_far_from_the_origin():
     grown = evomesh.Mesh((mesh.points - center) * 1.001 + center, mesh.triangles)
     with pytest.raises(ValueError, match="outside the old mesh"):
         transfer(mesh, grown, local_linear(mesh.points))
+
+
+# ---------------------------------------------------------------------------
+# (7) run() keeps the finished steps when a step fails
+
+from invariants import check_evolved, check_valid_mesh  # noqa: E402
+
+from evomesh.io import read_mesh, write_run  # noqa: E402
+
+
+class FailingLaw:
+    """delta 0.7 then 1.3 ...; at call ``fail_at`` (1-based) it returns what
+    ``bad`` gives (e.g. NaN, which evolve's delta check refuses) or raises."""
+
+    def __init__(self, fail_at, bad):
+        self.fail_at = fail_at
+        self.bad = bad
+        self.calls = 0
+
+    def __call__(self, mesh, distance):
+        self.calls += 1
+        if self.calls == self.fail_at:
+            return self.bad(mesh)
+        return np.full(mesh.n_points, 0.7 if self.calls % 2 else 1.3)
+
+
+def nan_delta(mesh):
+    return np.full(mesh.n_points, np.nan)
+
+
+def raise_lookup(mesh):
+    raise LookupError("no spacing table for this mesh")
+
+
+@pytest.mark.parametrize("bad, error_type", [(nan_delta, ValueError), (raise_lookup, LookupError)])
+def test_a_failing_step_keeps_the_finished_steps(bad, error_type, tmp_path):
+    mesh = grid_mesh(9, 9, jitter=0.2, seed=2)
+    fields = {"u": mesh.points[:, 0].copy()}
+    with pytest.raises(error_type) as caught:
+        evomesh.run(mesh, None, FailingLaw(3, bad), [1, 2, 3, 4, 5], fields=fields, progress=False)
+    error = caught.value
+    partial = error.run
+    assert isinstance(partial, evomesh.Run)
+    assert [s.iteration for s in partial.steps] == [1, 2]
+    assert [s.time for s in partial.steps] == [1.0, 2.0]
+    assert partial.meshes[0] is mesh
+    for old, new in zip(partial.meshes[:-1], partial.meshes[1:]):
+        check_valid_mesh(new)
+        check_evolved(old, new)
+    assert all(set(f) == {"u"} for f in partial.fields)
+    if hasattr(error, "add_note"):
+        assert any("2 of 5 steps" in note and "error.run" in note for note in error.__notes__)
+    written = write_run(partial, tmp_path, figures=True, dpi=30)
+    assert sorted(p.name for p in tmp_path.iterdir()) == [
+        "mesh_000.vtu", "mesh_001.vtu", "mesh_002.vtu", "meshes.pvd", "step_001.png", "step_002.png", "table.csv"]
+    assert len(written["meshes"]) == 3
+    assert len((tmp_path / "table.csv").read_text().strip().splitlines()) == 1 + 2
+    again, data = read_mesh(tmp_path / "mesh_002.vtu")
+    assert np.array_equal(again.points, partial.mesh.points)
+    assert np.array_equal(data["u"], partial.steps[-1].fields["u"])
+
+
+def test_a_failing_first_step_gives_an_empty_partial_run(tmp_path):
+    mesh = grid_mesh(6, 6)
+    with pytest.raises(ValueError) as caught:
+        evomesh.run(mesh, None, FailingLaw(1, nan_delta), [1, 2], progress=False)
+    assert caught.value.run.steps == [] and caught.value.run.mesh is mesh
+    write_run(caught.value.run, tmp_path, figures=False)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["mesh_000.vtu", "meshes.pvd", "table.csv"]
+
+
+def test_a_failing_callback_keeps_its_step_and_keep_meshes_false():
+    mesh = grid_mesh(7, 7, jitter=0.1, seed=1)
+
+    def callback(step):
+        if step.iteration == 2:
+            raise RuntimeError("stop")
+
+    with pytest.raises(RuntimeError, match="stop") as caught:
+        evomesh.run(mesh, None, lambda m, d: np.full(m.n_points, 0.8), [1, 2, 3], callback=callback,
+                    keep_meshes=False, progress=False)
+    partial = caught.value.run
+    assert len(partial.steps) == 2  # the step that the callback saw had finished
+    assert partial.steps[0].mesh is None and partial.steps[1].mesh is not None
+
+
+def test_argument_errors_carry_no_partial_run():
+    mesh = grid_mesh(6, 6)
+    with pytest.raises(ValueError) as caught:
+        evomesh.run(mesh, None, lambda m, d: np.ones(m.n_points), [])
+    assert not hasattr(caught.value, "run")
