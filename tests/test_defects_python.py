@@ -3,14 +3,17 @@ the origin, partial runs, write_run / read_mesh validation)."""
 
 import importlib
 
+import meshio
 import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from invariants import check_evolved, check_valid_mesh
 from strategies import grid_mesh, meshes
 
 import evomesh
-from evomesh import _core, transfer
+from evomesh import _core, io, transfer
+from evomesh.io import read_mesh, write_run
 
 # evomesh.transfer is the function (the package re-exports it): the module by name
 transfer_mod = importlib.import_module("evomesh.transfer")
@@ -153,10 +156,6 @@ def test_points_beyond_rounding_are_refused_far_from_the_origin():
 # ---------------------------------------------------------------------------
 # (7) run() keeps the finished steps when a step fails
 
-from invariants import check_evolved, check_valid_mesh  # noqa: E402
-
-from evomesh.io import read_mesh, write_run  # noqa: E402
-
 
 class FailingLaw:
     """delta 0.7 then 1.3 ...; at call ``fail_at`` (1-based) it returns what
@@ -239,3 +238,159 @@ def test_argument_errors_carry_no_partial_run():
     with pytest.raises(ValueError) as caught:
         evomesh.run(mesh, None, lambda m, d: np.ones(m.n_points), [])
     assert not hasattr(caught.value, "run")
+
+
+# ---------------------------------------------------------------------------
+# (8) write_run / read_mesh: validation before writing, planar files, integral
+# kind / origin, stale files of an earlier series, the packing scale
+
+
+def small_run(steps, fields=None, **kwargs):
+    mesh = grid_mesh(7, 7, jitter=0.15, seed=3)
+    fields = fields(mesh) if callable(fields) else fields
+    law = lambda m, d: np.full(m.n_points, 0.8)  # noqa: E731
+    return evomesh.run(mesh, None, law, np.arange(1.0, steps + 1), fields=fields, progress=False, **kwargs)
+
+
+def folder_listing(folder):
+    return sorted(p.name for p in folder.iterdir()) if folder.exists() else None
+
+
+def test_write_run_splits_complex_fields(tmp_path):
+    result = small_run(2, lambda m: {"psi": np.exp(1j * m.points[:, 0]), "c64": (m.points[:, 1] * 1j).astype(np.complex64)})
+    io.write_run(result, tmp_path, figures=False)
+    for k, fields in enumerate(result.fields):
+        _, data = io.read_mesh(tmp_path / f"mesh_{k:03d}.vtu")
+        assert "psi" not in data
+        assert np.array_equal(data["psi_real"], fields["psi"].real)
+        assert np.array_equal(data["psi_imag"], fields["psi"].imag)
+        assert data["c64_imag"].dtype == np.float32
+        assert np.array_equal(data["c64_imag"], fields["c64"].imag)
+
+
+FIELD_DTYPES = [np.float64, np.float32, np.float16, np.int8, np.int32, np.int64, np.uint16, np.uint64, np.bool_,
+                np.complex128, np.dtype(">f8"), np.dtype(">i4")]
+
+
+@settings(max_examples=25)
+@given(st.sampled_from(FIELD_DTYPES), st.sampled_from([(), (1,), (3,), (2, 2)]), st.integers(0, 2**16))
+def test_point_data_round_trip_as_documented(tmp_path_factory, dtype, components, seed):
+    mesh = grid_mesh(5, 5)
+    rng = np.random.default_rng(seed)
+    values = (rng.standard_normal((mesh.n_points,) + components) * 50).astype(dtype)
+    if np.dtype(dtype).kind == "c":
+        values = values + 1j * rng.standard_normal(values.shape)
+    before = values.copy()
+    path = tmp_path_factory.mktemp("rt") / "m.vtu"
+    io.write_mesh(path, mesh, {"f": values})
+    assert np.array_equal(values, before) and values.dtype == before.dtype  # not modified
+    _, data = io.read_mesh(path)
+    flat = values.reshape(mesh.n_points, -1) if len(components) > 1 else values
+    parts = {"f_real": flat.real, "f_imag": flat.imag} if values.dtype.kind == "c" else {"f": flat}
+    assert sorted(data) == sorted(parts)
+    for name, expected in parts.items():
+        assert data[name].shape == expected.shape
+        assert np.array_equal(data[name], expected)  # no value is lost
+
+
+def test_write_run_refuses_a_bad_late_field_before_writing_anything(tmp_path):
+    result = small_run(3, lambda m: {"u": m.points[:, 0].copy()})
+    folder = tmp_path / "out"
+    # the field of the last step only: before the fix table.csv and the first meshes were written
+    bad_fields = [
+        ({"u": np.zeros(result.mesh.n_points, dtype=np.longdouble)}, ValueError, "float128|longdouble|precision"),
+        ({"delta": np.zeros(result.mesh.n_points)}, ValueError, "clashes"),
+        ({"a<b": np.zeros(result.mesh.n_points)}, ValueError, "a<b"),
+        ({"": np.zeros(result.mesh.n_points)}, ValueError, "empty"),
+        ({"u": np.zeros(result.mesh.n_points, dtype=complex), "u_imag": np.zeros(result.mesh.n_points)},
+         ValueError, "u_imag"),
+        ({"u": np.array(["x"] * result.mesh.n_points)}, TypeError, "numeric"),
+        ({"u": np.zeros(result.mesh.n_points + 1)}, ValueError, "one row per point"),
+        ({7: np.zeros(result.mesh.n_points)}, TypeError, "strings"),
+    ]
+    good = result.steps[-1].fields
+    for fields, error_type, message in bad_fields:
+        if fields.get("u") is not None and fields["u"].dtype == np.longdouble and np.finfo(np.longdouble).bits <= 64:
+            continue  # long double is float64 on this platform: nothing to refuse
+        result.steps[-1].fields = fields
+        with pytest.raises(error_type, match=message) as caught:
+            io.write_run(result, folder, figures=True)
+        assert "step 3" in str(caught.value)
+        assert folder_listing(folder) is None, f"{fields} left files behind"
+    result.steps[-1].fields = good
+    io.write_run(result, folder, figures=False)
+    assert len(folder_listing(folder)) == 6
+
+
+def test_write_run_refuses_a_bad_field_without_touching_an_earlier_series(tmp_path):
+    first = small_run(2)
+    io.write_run(first, tmp_path, figures=False)
+    before = {p.name: p.read_bytes() for p in tmp_path.iterdir()}
+    second = small_run(1)
+    second.steps[0].fields = {"nn_spacing": np.zeros(second.mesh.n_points)}
+    with pytest.raises(ValueError, match="nn_spacing"):
+        io.write_run(second, tmp_path)
+    assert {p.name: p.read_bytes() for p in tmp_path.iterdir()} == before
+
+
+def write_vtu(path, points3, triangles, **point_data):
+    meshio.Mesh(points3, [("triangle", np.asarray(triangles))], point_data=point_data).write(path)
+    return path
+
+
+def test_read_mesh_refuses_a_non_planar_mesh(tmp_path):
+    mesh = grid_mesh(4, 4)
+    z = np.zeros(mesh.n_points)
+    flat = write_vtu(tmp_path / "flat.vtu", np.c_[mesh.points, z], mesh.triangles)
+    again, _ = io.read_mesh(flat)  # an all-zero z is fine
+    assert np.array_equal(again.points, mesh.points)
+    z[[3, 7]] = [0.25, -1e-300]
+    lifted = write_vtu(tmp_path / "lifted.vtu", np.c_[mesh.points, z], mesh.triangles)
+    with pytest.raises(ValueError, match=r"2 of 16 points have z != 0: points 3 \(z = 0.25\), 7"):
+        io.read_mesh(lifted)
+
+
+@pytest.mark.parametrize("name", ["origin", "kind"])
+def test_read_mesh_integral_floats_only(tmp_path, name):
+    mesh = grid_mesh(4, 4)
+    points3 = np.c_[mesh.points, np.zeros(mesh.n_points)]
+    truth = {"origin": np.arange(mesh.n_points) - 1, "kind": mesh.kind}[name]
+    good = write_vtu(tmp_path / "good.vtu", points3, mesh.triangles, **{name: truth.astype(np.float64)})
+    again, data = io.read_mesh(good)
+    assert np.array_equal(getattr(again, name), truth) and name not in data
+    for bad_value in (0.5, np.nan, 1e300):
+        values = truth.astype(np.float64)
+        values[5] += bad_value
+        bad = write_vtu(tmp_path / "bad.vtu", points3, mesh.triangles, **{name: values})
+        with pytest.raises(ValueError, match=rf"'{name}' must hold integers.*point 5"):
+            io.read_mesh(bad)
+
+
+def test_write_run_replaces_an_earlier_series(tmp_path):
+    longer = small_run(4)
+    io.write_run(longer, tmp_path, figures=True, dpi=30)
+    assert "mesh_004.vtu" in folder_listing(tmp_path) and "step_004.png" in folder_listing(tmp_path)
+    user_files = ["notes.txt", "mesh_final.vtu", "step_1.png", "mesh_001.vtu.bak", "table.csv.old", "MESH_001.VTU"]
+    for name in user_files:
+        (tmp_path / name).write_text("mine")
+    (tmp_path / "mesh_005.vtu").mkdir()  # a folder, even with a series name, is the user's
+    (tmp_path / "mesh_1234.vtu").write_text("old series beyond 999 steps")
+    shorter = small_run(2)
+    written = io.write_run(shorter, tmp_path, figures=True, dpi=30)
+    series = ["mesh_000.vtu", "mesh_001.vtu", "mesh_002.vtu", "meshes.pvd", "step_001.png", "step_002.png",
+              "table.csv"]
+    assert folder_listing(tmp_path) == sorted(series + user_files + ["mesh_005.vtu"])
+    assert all((tmp_path / name).read_text() == "mine" for name in user_files)
+    assert [p.name for p in written["meshes"]] == series[:3]
+    assert "mesh_003" not in (tmp_path / "meshes.pvd").read_text()
+    # without figures, the earlier run's figures go too (they would not match the meshes)
+    io.write_run(small_run(1), tmp_path, figures=False)
+    assert not [n for n in folder_listing(tmp_path) if n.startswith("step_0")]
+
+
+def test_packing_scale_is_the_method_default():
+    assert io._packing_scale({}) == evomesh.FRFC_DEFAULTS["radius_scale"] == 0.75
+    assert io._packing_scale({"method": "frfc"}) == 0.75
+    assert io._packing_scale({"method": "drfc"}) == evomesh.DRFC_DEFAULTS["radius_scale"]
+    assert io._packing_scale({"method": "frfc", "radius_scale": 0.6}) == 0.6
+    assert io._packing_scale(small_run(1).options) == 0.75
