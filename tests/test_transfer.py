@@ -88,14 +88,17 @@ def test_transfer_to_an_unrelated_mesh_of_the_same_domain():
 
 def test_points_outside_by_rounding_use_the_boundary():
     old = grid_mesh(6, 6)
-    # a copy of the mesh blown up by 1e-9 around the centre: boundary points lie just outside
-    other = evomesh.Mesh((old.points - 0.5) * (1 + 1e-9) + 0.5, old.triangles)
+    # a copy of the mesh blown up by 4 ulps around the centre: boundary points lie just outside
+    eps = np.finfo(np.float64).eps
+    other = evomesh.Mesh((old.points - 0.5) * (1 + 4 * eps) + 0.5, old.triangles)
     triangle, _ = _core.locate_points(old.points, old.triangles, other.points)
     assert (triangle < 0).sum() > 0, "the test needs points that the core does not locate"
-    assert np.allclose(transfer(old, other, linear(old.points)), linear(other.points), atol=1e-8)
-    far = evomesh.Mesh((old.points - 0.5) * 1.01 + 0.5, old.triangles)
-    with pytest.raises(ValueError, match="outside"):
-        transfer(old, far, linear(old.points))
+    assert np.allclose(transfer(old, other, linear(old.points)), linear(other.points), atol=1e-12)
+    # 1e-9 outside a unit mesh near the origin is not rounding (millions of ulps)
+    for factor in (1e-9, 1e-2):
+        far = evomesh.Mesh((old.points - 0.5) * (1 + factor) + 0.5, old.triangles)
+        with pytest.raises(ValueError, match="outside"):
+            transfer(old, far, linear(old.points))
 
 
 def test_bad_input(evolved):

@@ -463,6 +463,26 @@ def run(
     Returns
     -------
     Run
+
+    Raises
+    ------
+    Exception
+        Whatever a step raises (e.g. ValueError from the law or from
+        :func:`evomesh.evolve`, KeyboardInterrupt), re-raised unchanged in type,
+        message and traceback, so ``except ValueError`` still catches it. The
+        steps finished before it are not lost: the exception carries them as
+        ``error.run``, a :class:`Run` with those steps (its ``next_delta`` is
+        None), which :func:`evomesh.io.write_run` writes like any run; on
+        Python >= 3.11 a note on the exception says so. Errors in the
+        arguments (raised before the first step) carry no ``run``.
+
+    Examples
+    --------
+    >>> try:  # doctest: +SKIP
+    ...     result = run(mesh, front, law, times)
+    ... except ValueError as error:
+    ...     result = error.run  # the finished steps
+    ...     write_run(result, "partial")
     """
     from tqdm.auto import tqdm
 
@@ -499,11 +519,31 @@ def run(
             bar.update(1)
             if callback is not None:
                 callback(step)
+    except BaseException as error:
+        _attach_partial_run(error, result, len(times))
+        raise
     finally:
         bar.close()
     if front is not None:
         result.next_delta = driver.delta(front, float(times[-1]))
     return result
+
+
+def _attach_partial_run(error: BaseException, result: Run, planned: int) -> None:
+    """Give ``error`` the partial run as ``error.run`` and, where exceptions
+    take notes (Python >= 3.11), a note saying so; the type, message and
+    traceback are left alone. Exceptions that take no attributes are left
+    alone too."""
+    try:
+        error.run = result  # type: ignore[attr-defined]
+    except (AttributeError, TypeError):  # exceptions with __slots__ or read-only attributes
+        return
+    if hasattr(error, "add_note"):
+        finished = len(result.steps)
+        error.add_note(
+            f"evomesh.run: {finished} of {planned} steps finished before this error; "
+            f"error.run holds them (a Run; evomesh.io.write_run writes it)"
+        )
 
 
 #: Defaults of :func:`growing_circle` (the calibration reported in README).

@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
+import importlib
 import math
+import numbers
+import re
 from pathlib import Path
 from typing import Any, Mapping, Sequence
 from xml.sax.saxutils import quoteattr
@@ -18,23 +21,117 @@ __all__ = ["to_meshio", "write_mesh", "read_mesh", "write_pvd", "write_run", "RE
 RESERVED_POINT_DATA = ("kind", "origin", "nn_spacing", "delta")
 
 
+#: numpy dtypes that VTU stores (Float32/64, Int8..64, UInt8..64).
+_VTU_DTYPES = frozenset(
+    np.dtype(t)
+    for t in (np.float32, np.float64, np.int8, np.int16, np.int32, np.int64, np.uint8, np.uint16, np.uint32, np.uint64)
+)
+#: Characters meshio writes unescaped into the VTU's XML (the file then cannot
+#: be read) or turns into spaces: <, & and ", and control characters.
+_BAD_NAME_CHARACTER = re.compile(r'[<&"\x00-\x1f\x7f]')
+
+
+def _check_point_data(point_data: Mapping[str, Any] | None, n_points: int, reserved: Sequence[str]) -> list[str]:
+    """Check the point data :func:`to_meshio` would write, without converting
+    anything; returns the names of the arrays it writes (a complex field gives
+    two). Raises TypeError / ValueError naming the offending field."""
+    if point_data is None:
+        return []
+    if not isinstance(point_data, Mapping):
+        raise TypeError(f"point data must be a mapping of name -> per-point array, got {type(point_data).__name__}")
+    written: dict[str, str] = {}
+    for name, values in point_data.items():
+        if not isinstance(name, str):
+            raise TypeError(f"point data names must be strings, got {name!r}")
+        if not name:
+            raise ValueError("point data names must not be empty")
+        bad = _BAD_NAME_CHARACTER.search(name)
+        if bad:
+            raise ValueError(
+                f"point data name {name!r} contains {bad.group()!r}: VTU files cannot hold <, &, \" or control "
+                "characters in names"
+            )
+        if name in reserved:
+            raise ValueError(f"field name {name!r} clashes with evomesh's point data {tuple(reserved)}")
+        try:
+            array = values if isinstance(values, np.ndarray) else np.asarray(values)
+        except ValueError as error:  # ragged nesting
+            raise ValueError(f"point data {name!r} must be a rectangular array: {error}") from None
+        dtype = array.dtype
+        if dtype == object or dtype.kind not in "biufc":
+            raise TypeError(f"point data {name!r} must be numeric, got dtype {dtype}")
+        if (dtype.kind == "f" and dtype.itemsize > 8) or (dtype.kind == "c" and dtype.itemsize > 16):
+            raise ValueError(
+                f"point data {name!r} has dtype {dtype}, which VTU cannot hold without losing precision "
+                "(at most 64-bit floats): convert it to float64 / complex128 first"
+            )
+        if array.ndim == 0 or array.shape[0] != n_points:
+            raise ValueError(f"point data {name!r} must have one row per point ({n_points}), got shape {array.shape}")
+        if array.ndim > 1 and math.prod(array.shape[1:]) == 0:
+            raise ValueError(f"point data {name!r} has no components (shape {array.shape})")
+        for out in (f"{name}_real", f"{name}_imag") if dtype.kind == "c" else (name,):
+            if out in reserved or out in written:
+                clash = out if out in reserved else written[out]
+                raise ValueError(
+                    f"point data {name!r} would be written as {out!r}, which is also the name of {clash!r} "
+                    "(complex fields are written as <name>_real and <name>_imag)"
+                )
+            written[out] = name
+    return list(written)
+
+
+def _vtu_arrays(name: str, values: Any) -> list[tuple[str, np.ndarray]]:
+    """The arrays VTU stores for one checked field (:func:`_check_point_data`):
+    native byte order, bool as uint8, float16 as float32, extra axes flattened
+    into components, and a complex field split into ``<name>_real`` and
+    ``<name>_imag``."""
+    array = np.asarray(values)
+    if array.ndim > 2:
+        array = array.reshape(array.shape[0], -1)
+    if array.dtype.kind == "c":
+        return _vtu_arrays(f"{name}_real", array.real) + _vtu_arrays(f"{name}_imag", array.imag)
+    if array.dtype.kind == "b":
+        array = array.astype(np.uint8)
+    elif array.dtype.kind == "f" and array.dtype.itemsize < 4:
+        array = array.astype(np.float32)
+    array = array.astype(array.dtype.newbyteorder("="), copy=False)
+    assert array.dtype in _VTU_DTYPES, array.dtype
+    return [(name, array)]
+
+
 def to_meshio(mesh: Mesh, point_data: Mapping[str, Any] | None = None):
     """A meshio.Mesh: points with z = 0, a "triangle" block, and a "line" block
     for the interior constraint segments (boundary segments are implied by the
-    triangles). Point data always includes ``kind`` and ``origin``."""
+    triangles).
+
+    Point data always includes ``kind`` and ``origin``, then the arrays of
+    ``point_data`` (each shape (n,) or (n, ...)), stored as VTU can hold them:
+    extra axes are flattened into components ((n, 2, 2) -> (n, 4)), bool becomes
+    uint8 and float16 float32, and a complex field ``u`` becomes two real arrays
+    ``u_real`` and ``u_imag``.
+
+    Raises
+    ------
+    TypeError
+        A name that is not a string, or a field that is not numeric.
+    ValueError
+        A name that is empty, contains <, &, " or a control character, or
+        clashes with ``kind``/``origin`` or another array (also via the
+        ``_real``/``_imag`` names of a complex field); a field without one row
+        per point or without components; a float / complex dtype wider than
+        64-bit parts (VTU would lose precision).
+    """
     import meshio
 
     _require_mesh(mesh)
+    _check_point_data(point_data, mesh.n_points, ("kind", "origin"))
     cells = [("triangle", np.asarray(mesh.triangles, dtype=np.int64))]
     interior = mesh.segments[~mesh.segment_is_boundary]
     if len(interior):
         cells.append(("line", np.asarray(interior, dtype=np.int64)))
     data: dict[str, np.ndarray] = {"kind": mesh.kind.astype(np.int32), "origin": mesh.origin.astype(np.int64)}
     for name, values in (point_data or {}).items():
-        array = np.asarray(values)
-        if array.shape[:1] != (mesh.n_points,):
-            raise ValueError(f"point data {name!r} must have one row per point ({mesh.n_points}), got {array.shape}")
-        data[name] = array
+        data.update(_vtu_arrays(name, values))
     points = np.c_[mesh.points, np.zeros(mesh.n_points)]
     return meshio.Mesh(points, cells, point_data=data)
 
@@ -43,7 +140,9 @@ def write_mesh(path: str | Path, mesh: Mesh, point_data: Mapping[str, Any] | Non
     """Write a mesh with meshio (format from the suffix; ``.vtu`` for ParaView).
 
     Per-point data: ``kind``, ``origin`` and the arrays of ``point_data``
-    (each shape (n,) or (n, c)).
+    (each shape (n,) or (n, ...)), converted and checked as in
+    :func:`to_meshio` (complex fields become ``<name>_real`` and
+    ``<name>_imag``); nothing is written if they are refused.
     """
     path = Path(path)
     to_meshio(mesh, point_data).write(path)
@@ -51,8 +150,33 @@ def write_mesh(path: str | Path, mesh: Mesh, point_data: Mapping[str, Any] | Non
 
 
 def read_mesh(path: str | Path) -> tuple[Mesh, dict[str, np.ndarray]]:
-    """Read a mesh written by :func:`write_mesh`: the Mesh (with its kind,
-    origin and interior segments) and the other point data."""
+    """Read a mesh written by :func:`write_mesh`.
+
+    Parameters
+    ----------
+    path : str or Path
+        Any format meshio reads; points may have a z coordinate, which must
+        then be 0 everywhere.
+
+    Returns
+    -------
+    mesh : Mesh
+        With the file's kind, origin and interior segments (line cells).
+    point_data : dict of ndarray
+        The other point data, as stored (a complex field written by
+        :func:`write_mesh` comes back as ``<name>_real`` and ``<name>_imag``).
+
+    Raises
+    ------
+    FileNotFoundError
+        If there is no such file.
+    ValueError
+        If the file cannot be read, has no triangles, has a point with z != 0
+        (the mesh is not planar: dropping z would change it), has ``kind`` or
+        ``origin`` values that are not integers (floats are accepted when
+        integral: some writers store them as floats), or does not hold a
+        valid mesh.
+    """
     import meshio
 
     path = Path(path)
@@ -76,13 +200,47 @@ def read_mesh(path: str | Path) -> tuple[Mesh, dict[str, np.ndarray]]:
     kind = data.pop("kind", None)
     origin = data.pop("origin", None)
     mesh = Mesh(
-        np.asarray(m.points)[:, :2],
+        _planar_points(np.asarray(m.points), path),
         triangles,
         segments,
-        kind=None if kind is None else kind.astype(np.int64),
-        origin=None if origin is None else origin.astype(np.int64),
+        kind=None if kind is None else _integral(kind, "kind", path),
+        origin=None if origin is None else _integral(origin, "origin", path),
     )
     return mesh, data
+
+
+def _planar_points(points: np.ndarray, path: Path) -> np.ndarray:
+    """The (n, 2) points of a file's (n, 2) or (n, 3) points; z must be 0."""
+    if points.ndim != 2 or points.shape[1] not in (2, 3):
+        raise ValueError(f"mesh file {path} has points of shape {points.shape}; expected (n, 2) or (n, 3)")
+    if points.shape[1] == 3:
+        z = points[:, 2]
+        lifted = np.flatnonzero(~(z == 0))  # NaN counts as lifted
+        if len(lifted):
+            first = ", ".join(f"{int(k)} (z = {z[k]:g})" for k in lifted[:5])
+            more = f" and {len(lifted) - 5} more" if len(lifted) > 5 else ""
+            raise ValueError(
+                f"mesh file {path} is not a planar mesh: {len(lifted)} of {len(z)} points have z != 0: "
+                f"points {first}{more}"
+            )
+    return points[:, :2]
+
+
+def _integral(values: np.ndarray, name: str, path: Path) -> np.ndarray:
+    """Integer point data that a file may store as floats: integral floats
+    become int64, other floats are an error; other dtypes go to Mesh's checks."""
+    if values.dtype.kind != "f":
+        return values
+    with np.errstate(invalid="ignore"):
+        integral = np.isfinite(values) & (values == np.round(values)) & (np.abs(values) < 2.0**63)
+    if not integral.all():
+        bad = np.flatnonzero(~integral.reshape(len(values), -1).all(axis=1))
+        k = int(bad[0])
+        raise ValueError(
+            f"mesh file {path}: point data {name!r} must hold integers, but {len(bad)} points do not "
+            f"(first: point {k}, {name} = {values[k]!r})"
+        )
+    return values.astype(np.int64)
 
 
 def write_pvd(path: str | Path, files: Sequence[str | Path], times: Sequence[float]) -> Path:
@@ -112,6 +270,11 @@ def _pvd_times(run) -> list[float]:
     return [first] + times
 
 
+#: Files of a run's output series (:func:`write_run`): removed from the folder
+#: before a new series is written there, so none of an older run is left behind.
+_SERIES_FILE = re.compile(r"table\.csv|meshes\.pvd|mesh_\d{3,}\.vtu|step_\d{3,}\.png")
+
+
 def write_run(run, folder: str | Path, *, figures: bool = True, dpi: int = 110) -> dict[str, Any]:
     """Write the outputs of a :class:`evomesh.Run` into ``folder`` (created).
 
@@ -123,23 +286,66 @@ def write_run(run, folder: str | Path, *, figures: bool = True, dpi: int = 110) 
       on mesh k the delta applied to it to make mesh k + 1; on the final mesh
       the delta of the front at the final time (what the next step would
       apply), NaN if the run had no front. The run's fields are added under
-      their own names.
+      their own names, stored as :func:`to_meshio` describes: a complex field
+      ``u`` becomes the real arrays ``u_real`` and ``u_imag`` (VTU has no
+      complex type), extra axes become components.
     - ``step_NNN.png`` (``figures=True``): the three panels of
       :func:`evomesh.plotting.plot_step` for every step.
 
-    Meshes a run did not keep (``keep_meshes=False``) are skipped.
+    Meshes a run did not keep (``keep_meshes=False``) are skipped. A partial
+    run (``error.run`` of a failed :func:`evomesh.run`) is written like any
+    other.
+
+    Every field of every mesh is checked before anything is written: a run
+    that cannot be written leaves the folder as it was. Then the files of an
+    earlier series in the folder (``table.csv``, ``meshes.pvd``,
+    ``mesh_NNN.vtu``, ``step_NNN.png``; no other file) are removed, so that
+    none of them is mistaken for part of this run.
+
+    Parameters
+    ----------
+    run : Run
+    folder : str or Path
+    figures : bool
+    dpi : int
+        Resolution of the figures.
 
     Returns
     -------
     dict
         Paths: "table", "meshes" (list), "pvd", "figures" (list).
+
+    Raises
+    ------
+    TypeError, ValueError
+        A field that VTU cannot hold or whose name cannot be written (see
+        :func:`to_meshio`), or that clashes with :data:`RESERVED_POINT_DATA`;
+        a bad ``dpi``. Nothing is written or removed then.
     """
     from evomesh.driver import front_at
 
+    if figures and (isinstance(dpi, bool) or not isinstance(dpi, numbers.Real) or not (math.isfinite(dpi) and dpi > 0)):
+        raise ValueError(f"dpi must be a positive number, got {dpi!r}")
     folder = Path(folder)
-    folder.mkdir(parents=True, exist_ok=True)
-    written: dict[str, Any] = {"table": run.to_csv(folder / "table.csv"), "meshes": [], "figures": []}
     meshes, deltas, fields = run.meshes, run.deltas, run.fields
+    # 1. everything that can be refused, before any file is touched
+    for k, mesh in enumerate(meshes):
+        if mesh is None:
+            continue
+        where = "initial mesh" if k == 0 else f"mesh of step {k}"
+        try:
+            _check_point_data(fields[k], mesh.n_points, RESERVED_POINT_DATA)
+        except (TypeError, ValueError) as error:
+            raise type(error)(f"{where}: {error}") from None
+        if deltas[k] is not None and np.shape(deltas[k]) != (mesh.n_points,):
+            raise ValueError(f"{where}: delta must have shape ({mesh.n_points},), got {np.shape(deltas[k])}")
+    # 2. the files of an earlier series
+    folder.mkdir(parents=True, exist_ok=True)
+    for old in folder.iterdir():
+        if _SERIES_FILE.fullmatch(old.name) and (old.is_file() or old.is_symlink()):
+            old.unlink()
+    # 3. this run's files
+    written: dict[str, Any] = {"table": run.to_csv(folder / "table.csv"), "meshes": [], "figures": []}
     pvd_times = _pvd_times(run)
     listed, listed_times = [], []
     for k, mesh in enumerate(meshes):
@@ -147,10 +353,7 @@ def write_run(run, folder: str | Path, *, figures: bool = True, dpi: int = 110) 
             continue
         delta = deltas[k] if deltas[k] is not None else np.full(mesh.n_points, np.nan)
         data: dict[str, Any] = {"nn_spacing": nn_spacing(mesh), "delta": np.asarray(delta, dtype=np.float64)}
-        for name, values in (fields[k] or {}).items():
-            if name in RESERVED_POINT_DATA:
-                raise ValueError(f"field name {name!r} clashes with evomesh's point data {RESERVED_POINT_DATA}")
-            data[name] = values
+        data.update(fields[k] or {})
         path = write_mesh(folder / f"mesh_{k:03d}.vtu", mesh, data)
         written["meshes"].append(path)
         listed.append(path)
@@ -180,8 +383,9 @@ def write_run(run, folder: str | Path, *, figures: bool = True, dpi: int = 110) 
 def _packing_scale(options: Mapping[str, Any]) -> float:
     """Radius scale of the packing spheres used by evolve: the run's
     ``radius_scale`` option, else the method's default (``<METHOD>_DEFAULTS``)."""
-    from evomesh import evolve as evolve_module
-
+    # The module by name: the package re-exports the function evolve as
+    # evomesh.evolve, which hides the module of the same name.
+    evolve_module = importlib.import_module("evomesh.evolve")
     method = str(options.get("method", "frfc"))
     defaults = getattr(evolve_module, f"{method.upper()}_DEFAULTS", {})
     return float(options.get("radius_scale", defaults.get("radius_scale", 1.0)))

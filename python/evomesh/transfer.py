@@ -5,6 +5,7 @@ from __future__ import annotations
 from typing import Any, Mapping
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 from evomesh import _core
 from evomesh.mesh import Mesh
@@ -12,10 +13,29 @@ from evomesh.spacing import _require_mesh
 
 __all__ = ["transfer", "Interpolation"]
 
-# A new point farther than this (relative to the old mesh's extent) from the
-# old domain is an error, not rounding.
-_OUTSIDE_TOLERANCE = 1e-9
-_CHUNK = 4096
+# A new point that the core does not locate in the old mesh is accepted on the
+# nearest old boundary edge if it lies within _outside_tolerance of it:
+#  - rounding: evolve's points on boundary segments (a + t (b - a), projections,
+#    midpoints) and the point-segment distance computed here each carry a few
+#    roundings of a coordinate, i.e. a few eps * max|x| (absolute, not relative
+#    to the extent: far from the origin one ulp of x is much more than eps times
+#    the extent). _ROUNDING_ULPS of them is a margin of several times that.
+#  - the core's FRFC projects samples on a "straight" boundary chain onto the
+#    line through the chain's end corners A, B when every chain vertex lies within
+#    1e-12 |AB| of that line (snap_to_straight_chains in cpp/src/frfc.cpp), so such
+#    a sample may lie off the old boundary segments by up to 1e-12 |AB|, and |AB|
+#    is at most the diameter of the old mesh. Keep in step with the C++ constant.
+_ROUNDING_ULPS = 16
+_STRAIGHT_CHAIN_TOLERANCE = 1e-12
+
+
+def _outside_tolerance(old: Mesh, queries: np.ndarray) -> float:
+    """Largest distance from the old domain that is accepted as rounding (see above)."""
+    magnitude = float(np.abs(old.points).max())
+    if len(queries):
+        magnitude = max(magnitude, float(np.abs(queries).max()))
+    diameter = float(np.hypot(*np.ptp(old.points, axis=0)))
+    return _ROUNDING_ULPS * float(np.finfo(np.float64).eps) * magnitude + _STRAIGHT_CHAIN_TOLERANCE * diameter
 
 
 class Interpolation:
@@ -24,7 +44,11 @@ class Interpolation:
     Kept points (``new.origin >= 0``) copy the value at their origin exactly;
     every other point interpolates linearly in the old triangle containing it,
     located by the C++ core (CGAL, O(log n) per point). Points that rounding put
-    just outside the old domain interpolate on the nearest old boundary edge.
+    just outside the old domain interpolate on the nearest old boundary edge:
+    "just" is a few ulps of the largest coordinate (16 eps max|x|, whatever
+    the extent: a mesh far from the origin has coarser coordinates) plus the
+    1e-12 relative slack with which evolve straightens boundary chains; a
+    point farther out is an error.
 
     Attributes
     ----------
@@ -86,34 +110,106 @@ class Interpolation:
 
 def _nearest_boundary_edge(old: Mesh, queries: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Linear interpolation on the nearest boundary edge, for points that lie
-    outside the old domain by rounding only."""
+    outside the old domain by rounding only.
+
+    Parameters
+    ----------
+    old : Mesh
+    queries : ndarray, shape (q, 2)
+
+    Returns
+    -------
+    vertices : ndarray of int, shape (q, 3)
+        The nearest boundary edge's end points (the first repeated).
+    weights : ndarray, shape (q, 3)
+        Weights of the closest point of that edge (the third is 0).
+
+    Raises
+    ------
+    ValueError
+        If a query lies farther than :func:`_outside_tolerance` from every
+        boundary edge.
+
+    Notes
+    -----
+    The nearest edge is the one a comparison with every boundary edge would
+    choose (smallest distance, then lowest index), but only edges that can lie
+    within the tolerance are compared: boundary edges are grouped by length
+    (one group per power of two), and in a group whose half-lengths are at most
+    H an edge within distance tol of q has its midpoint within tol + H of q,
+    found with a k-d tree of the group's midpoints. O((q + b) log b) for b
+    boundary edges in a mesh whose boundary edge lengths span a bounded ratio
+    (the number of groups is log2 of that ratio), instead of O(q b).
+    """
     edges = old.segments[old.segment_is_boundary]
     a = old.points[edges[:, 0]]
-    b = old.points[edges[:, 1]]
-    d = b - a
+    d = old.points[edges[:, 1]] - a
     dd = np.einsum("ij,ij->i", d, d)
-    scale = float(np.ptp(old.points, axis=0).max())
-    vertices = np.empty((len(queries), 3), dtype=np.int64)
+    tolerance = _outside_tolerance(old, queries)
+    half = 0.5 * np.sqrt(dd)
+    _, exponent = np.frexp(half)
+    pair_query, pair_edge = [], []
+    for level in np.unique(exponent):  # one pass per length scale, not per point
+        members = np.flatnonzero(exponent == level)
+        tree = cKDTree(a[members] + 0.5 * d[members])
+        # 2 tolerances: one for the distance, one for the rounding of midpoints and distances
+        q, item = _pairs_within(tree, queries, float(half[members].max()) + 2.0 * tolerance)
+        pair_query.append(q)
+        pair_edge.append(members[item])
+    pair_query = np.concatenate(pair_query)
+    pair_edge = np.concatenate(pair_edge)
+    t, gap = _to_segments(queries[pair_query], a[pair_edge], d[pair_edge], dd[pair_edge])
+    # per query, the smallest gap, then the lowest edge index (as argmin over all edges)
+    order = np.lexsort((pair_edge, gap, pair_query))
+    first = order[np.r_[True, pair_query[order][1:] != pair_query[order][:-1]]] if len(order) else order
+    best_gap = np.full(len(queries), np.inf)
+    best_gap[pair_query[first]] = gap[first]
+    bad = np.flatnonzero(~(best_gap <= tolerance))
+    if len(bad):
+        k = int(bad[0])
+        _, gaps = _to_segments(queries[k][None, :], a, d, dd)
+        raise ValueError(
+            f"point {queries[k].tolist()} of the new mesh lies outside the old mesh (by {float(gaps.min()):.3g}, "
+            f"more than the rounding tolerance {tolerance:.3g}): transfer needs the new mesh to cover the same domain"
+        )
+    chosen = np.empty(len(queries), dtype=np.int64)
+    chosen[pair_query[first]] = first
+    edge = edges[pair_edge[chosen]]
+    tb = t[chosen]
+    vertices = np.c_[edge, edge[:, 0]]
     weights = np.zeros((len(queries), 3))
-    for start in range(0, len(queries), _CHUNK):
-        q = queries[start : start + _CHUNK, None, :]
-        t = np.clip(np.einsum("qkj,kj->qk", q - a[None], d) / dd[None], 0.0, 1.0)
-        gap = np.linalg.norm(q - (a[None] + t[..., None] * d[None]), axis=2)
-        best = gap.argmin(axis=1)
-        rows = np.arange(len(best))
-        worst = gap[rows, best].max()
-        if worst > _OUTSIDE_TOLERANCE * scale:
-            k = start + int(np.argmax(gap[rows, best]))
-            raise ValueError(
-                f"point {queries[k].tolist()} of the new mesh lies outside the old mesh (by {worst:.3g}): "
-                "transfer needs the new mesh to cover the same domain"
-            )
-        tb = t[rows, best]
-        edge = edges[best]
-        vertices[start : start + len(best)] = np.c_[edge, edge[:, 0]]
-        weights[start : start + len(best), 0] = 1.0 - tb
-        weights[start : start + len(best), 1] = tb
+    weights[:, 0] = 1.0 - tb
+    weights[:, 1] = tb
     return vertices, weights
+
+
+def _to_segments(q: np.ndarray, a: np.ndarray, d: np.ndarray, dd: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Parameter of the closest point of each segment a + t d (t in [0, 1]) to
+    the matching query, and the distance; rows broadcast."""
+    t = np.clip(np.einsum("kj,kj->k", *np.broadcast_arrays(q - a, d)) / dd, 0.0, 1.0)
+    gap = np.linalg.norm(q - (a + t[:, None] * d), axis=1)
+    return t, gap
+
+
+def _pairs_within(tree: cKDTree, queries: np.ndarray, radius: float) -> tuple[np.ndarray, np.ndarray]:
+    """All (query index, tree item) pairs closer than ``radius``: k-nearest
+    queries with k doubled for the queries whose k-th neighbour is still within
+    the radius (vectorised; no per-query Python loop)."""
+    rows = np.arange(len(queries))
+    k = min(8, tree.n)
+    out_query, out_item = [], []
+    while len(rows):
+        dist, item = tree.query(queries[rows], k=k, distance_upper_bound=radius)
+        dist = dist.reshape(len(rows), k)
+        item = item.reshape(len(rows), k)
+        found = np.isfinite(dist)
+        more = found[:, -1] & (k < tree.n)  # the k-th is within the radius: there may be more
+        take = found & ~more[:, None]
+        out_query.append(np.broadcast_to(rows[:, None], found.shape)[take])
+        out_item.append(item[take])
+        rows = rows[more]
+        k = min(2 * k, tree.n)
+    return np.concatenate(out_query), np.concatenate(out_item)
 
 
 def transfer(old: Mesh, new: Mesh, values: Any) -> Any:
