@@ -202,6 +202,7 @@ void bind_options(py::module_& m) {
       py::make_tuple("STEINER", static_cast<int>(Point_kind::steiner)),
       py::make_tuple("SAMPLED", static_cast<int>(Point_kind::sampled)));
   m.attr("MAX_MIN_ANGLE") = kMaxMinAngle;
+  m.attr("STRAIGHT_ULPS") = kStraightUlps;
 
 #define EVOMESH_NAME(field) #field,
 #define EVOMESH_BIND(field) cls.def_readwrite(#field, &Type::field);

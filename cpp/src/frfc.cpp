@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <limits>
 #include <stdexcept>
 #include <string>
 #include <thread>
@@ -237,8 +238,9 @@ void add_segment_ring_samples(const Mesh_arrays& mesh, const std::vector<double>
   }
 }
 
-// Samples on a straight chain (all its vertices within 1e-12 |AB| of the line
-// through its end corners A, B) are projected onto that line. Chain points
+// Samples on a straight chain (all its vertices within kStraightUlps units of
+// rounding of the line through its end corners A, B: the tolerance that decides
+// corners, triangulation.hpp) are projected onto that line. Chain points
 // kept from earlier steps are rounded; sampling between them would let new
 // boundary points drift by a rounding per step, while the projection keeps
 // every boundary point within a rounding or two of the original side for any
@@ -255,10 +257,13 @@ void snap_to_straight_chains(const Mesh_arrays& mesh, const std::vector<Segment_
     const double dx = b[0] - a[0], dy = b[1] - a[1];
     const double length2 = dx * dx + dy * dy;
     bool ok = length2 > 0;
+    double reach = std::max({std::abs(a[0]), std::abs(a[1]), std::abs(b[0]), std::abs(b[1])});
+    for (Index v : chain.vertices) reach = std::max({reach, std::abs(mesh.points[v][0]), std::abs(mesh.points[v][1])});
+    const double tolerance = kStraightUlps * std::numeric_limits<double>::epsilon() * reach * std::sqrt(length2);
     for (std::size_t k = 1; ok && k + 1 < chain.vertices.size(); ++k) {
       const Vec2& v = mesh.points[chain.vertices[k]];
       const double cross = dx * (v[1] - a[1]) - dy * (v[0] - a[0]);
-      ok = std::abs(cross) <= 1e-12 * length2;  // distance <= 1e-12 |AB|
+      ok = std::abs(cross) <= tolerance;  // distance from AB within kStraightUlps roundings
     }
     if (!ok) continue;
     straight[c] = 1;

@@ -20,13 +20,11 @@ __all__ = ["transfer", "Interpolation"]
 #    roundings of a coordinate, i.e. a few eps * max|x| (absolute, not relative
 #    to the extent: far from the origin one ulp of x is much more than eps times
 #    the extent). _ROUNDING_ULPS of them is a margin of several times that.
-#  - the core's FRFC projects samples on a "straight" boundary chain onto the
-#    line through the chain's end corners A, B when every chain vertex lies within
-#    1e-12 |AB| of that line (snap_to_straight_chains in cpp/src/frfc.cpp), so such
-#    a sample may lie off the old boundary segments by up to 1e-12 |AB|, and |AB|
-#    is at most the diameter of the old mesh. Keep in step with the C++ constant.
-_ROUNDING_ULPS = 16
-_STRAIGHT_CHAIN_TOLERANCE = 1e-12
+#  - a boundary chain that runs straight up to _core.STRAIGHT_ULPS roundings
+#    (the core's test for corners; FRFC projects its samples onto the line through
+#    its end corners) may be replaced by a straight piece: the new boundary is
+#    then off the old one by up to that many roundings.
+_ROUNDING_ULPS = 16 + _core.STRAIGHT_ULPS
 
 
 def _outside_tolerance(old: Mesh, queries: np.ndarray) -> float:
@@ -34,8 +32,7 @@ def _outside_tolerance(old: Mesh, queries: np.ndarray) -> float:
     magnitude = float(np.abs(old.points).max())
     if len(queries):
         magnitude = max(magnitude, float(np.abs(queries).max()))
-    diameter = float(np.hypot(*np.ptp(old.points, axis=0)))
-    return _ROUNDING_ULPS * float(np.finfo(np.float64).eps) * magnitude + _STRAIGHT_CHAIN_TOLERANCE * diameter
+    return _ROUNDING_ULPS * float(np.finfo(np.float64).eps) * magnitude
 
 
 class Interpolation:
@@ -45,7 +42,7 @@ class Interpolation:
     every other point interpolates linearly in the old triangle containing it,
     located by the C++ core (CGAL, O(log n) per point). Points that rounding put
     just outside the old domain interpolate on the nearest old boundary edge:
-    "just" is a few ulps of the largest coordinate (16 eps max|x|, whatever
+    "just" is a few ulps of the largest coordinate (_ROUNDING_ULPS eps max|x|, whatever
     the extent: a mesh far from the origin has coarser coordinates) plus the
     1e-12 relative slack with which evolve straightens boundary chains; a
     point farther out is an error.
