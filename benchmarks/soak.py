@@ -35,7 +35,6 @@ from __future__ import annotations
 import argparse
 import ctypes
 import csv
-import importlib
 import resource
 import sys
 import time
@@ -175,7 +174,7 @@ def main(argv=None) -> int:
 
     options = {"threads": args.threads}
     # the quality target of the method: its min_angle when its quality pass is on
-    defaults = getattr(importlib.import_module("evomesh.evolve"), f"{args.method.upper()}_DEFAULTS", {})
+    defaults = getattr(evomesh, f"{args.method.upper()}_DEFAULTS", {})
     target = float(defaults.get("min_angle", 0.0)) if defaults.get("quality", False) else 0.0
     square = unit_square_mesh(args.points, seed=args.seed)
     transform, scale = (SLANTED, 5.0) if args.slanted else (np.eye(2), 1.0)

@@ -16,7 +16,7 @@ from evomesh import _core, io, transfer
 from evomesh.io import read_mesh, write_run
 
 # evomesh.transfer is the function (the package re-exports it): the module by name
-transfer_mod = importlib.import_module("evomesh.transfer")
+transfer_mod = importlib.import_module("evomesh.field_transfer")
 
 
 # ---------------------------------------------------------------------------

@@ -8,7 +8,7 @@ from hypothesis import strategies as st
 
 import evomesh
 from evomesh import PointKind
-from evomesh.evolve import DRFC_DEFAULTS, delaunay_refine
+from evomesh.evolution import DRFC_DEFAULTS, delaunay_refine
 from invariants import check_evolved, nn_in, spacing_ratio
 from strategies import grid_mesh, mesh_and_delta
 

@@ -19,7 +19,7 @@ from strategies import grid_mesh
 
 import evomesh
 from evomesh import PointKind
-from evomesh.spacing import DELTA_MAX, DELTA_MIN
+from evomesh.spacing_function import DELTA_MAX, DELTA_MIN
 
 # The unit square as two triangles, and a 3x3 grid (an interior point 4).
 SQUARE_POINTS = np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0], [1.0, 1.0]])

@@ -10,7 +10,7 @@ from hypothesis import strategies as st
 
 import evomesh
 from evomesh import PointKind
-from evomesh.evolve import FRFC_DEFAULTS
+from evomesh.evolution import FRFC_DEFAULTS
 from invariants import check_evolved, spacing_ratio
 from strategies import grid_mesh, mesh_and_delta
 

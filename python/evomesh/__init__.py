@@ -6,7 +6,7 @@ coarsens where delta > 1, keeping the mesh well shaped and as many old points
 as it can.
 """
 
-from evomesh.evolve import (
+from evomesh.evolution import (
     DRFC_DEFAULTS,
     FRFC_DEFAULTS,
     DrfcOptions,
@@ -18,8 +18,8 @@ from evomesh.evolve import (
 )
 from evomesh.mesh import Mesh, PointKind
 from evomesh.packing import lexical_first_mis
-from evomesh.quality import Quality, quality
-from evomesh.spacing import SpacingFunction, nn_spacing, spacing
+from evomesh.mesh_quality import Quality, quality
+from evomesh.spacing_function import SpacingFunction, nn_spacing, spacing
 
 __all__ = [
     "Mesh",
@@ -44,7 +44,7 @@ __version__ = "0.1.0"
 
 # Moving-front workflow.
 from evomesh.fronts import CircleFront, Front, LevelSetFront, PointFront, SpacingLaw  # noqa: E402
-from evomesh.transfer import transfer  # noqa: E402
+from evomesh.field_transfer import transfer  # noqa: E402
 from evomesh.driver import Driver, Run, Step, growing_circle, run, step_statistics  # noqa: E402
 from evomesh.meshgen import unit_square_mesh  # noqa: E402
 

@@ -16,12 +16,12 @@ from typing import Any, Callable, Mapping, Sequence
 import numpy as np
 from scipy.spatial import cKDTree
 
-from evomesh.evolve import evolve
+from evomesh.evolution import evolve
 from evomesh.fronts import CircleFront, Front, SpacingLaw
 from evomesh.mesh import Mesh
-from evomesh.quality import quality
-from evomesh.spacing import _require_mesh, as_delta, nn_spacing
-from evomesh.transfer import Interpolation
+from evomesh.mesh_quality import quality
+from evomesh.spacing_function import _require_mesh, as_delta, nn_spacing
+from evomesh.field_transfer import Interpolation
 
 __all__ = [
     "Step",

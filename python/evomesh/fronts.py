@@ -18,7 +18,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from evomesh.mesh import _MAX_COORDINATE, Mesh
-from evomesh.spacing import _require_mesh, nn_spacing
+from evomesh.spacing_function import _require_mesh, nn_spacing
 
 __all__ = ["Front", "CircleFront", "PointFront", "LevelSetFront", "SpacingLaw", "as_query_points"]
 

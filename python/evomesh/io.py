@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import importlib
 import math
 import numbers
 import re
@@ -13,7 +12,7 @@ from xml.sax.saxutils import quoteattr
 import numpy as np
 
 from evomesh.mesh import Mesh
-from evomesh.spacing import _require_mesh, nn_spacing
+from evomesh.spacing_function import _require_mesh, nn_spacing
 
 __all__ = ["to_meshio", "write_mesh", "read_mesh", "write_pvd", "write_run", "RESERVED_POINT_DATA"]
 
@@ -383,9 +382,8 @@ def write_run(run, folder: str | Path, *, figures: bool = True, dpi: int = 110) 
 def _packing_scale(options: Mapping[str, Any]) -> float:
     """Radius scale of the packing spheres used by evolve: the run's
     ``radius_scale`` option, else the method's default (``<METHOD>_DEFAULTS``)."""
-    # The module by name: the package re-exports the function evolve as
-    # evomesh.evolve, which hides the module of the same name.
-    evolve_module = importlib.import_module("evomesh.evolve")
+    from evomesh.evolution import DRFC_DEFAULTS, FRFC_DEFAULTS
+
     method = str(options.get("method", "frfc"))
-    defaults = getattr(evolve_module, f"{method.upper()}_DEFAULTS", {})
+    defaults = {"frfc": FRFC_DEFAULTS, "drfc": DRFC_DEFAULTS}.get(method, {})
     return float(options.get("radius_scale", defaults.get("radius_scale", 1.0)))

@@ -9,7 +9,7 @@ import numpy as np
 
 from evomesh.fronts import LevelSetFront
 from evomesh.mesh import Mesh
-from evomesh.spacing import _require_mesh, as_delta, spacing
+from evomesh.spacing_function import _require_mesh, as_delta, spacing
 
 __all__ = ["plot_step", "plot_mesh", "draw_front"]
 
@@ -128,7 +128,7 @@ def plot_step(
     a2.set_title(f"selected packing: {int(kept.sum())} kept (grey), {int((~kept).sum())} new (orange)", fontsize=10)
     a3.triplot(new.points[:, 0], new.points[:, 1], new.triangles, color="0.15", linewidth=0.35)
     a3.plot(new.points[~kept, 0], new.points[~kept, 1], ".", color=_NEW_COLOR, markersize=2.0)
-    from evomesh.quality import quality
+    from evomesh.mesh_quality import quality
 
     q = quality(new)
     a3.set_title(f"mesh: {new.n_points} points, {new.n_triangles} triangles\nmin angle {q.min_angle:.2f} deg", fontsize=10)

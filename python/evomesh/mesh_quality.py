@@ -7,7 +7,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from evomesh.mesh import Mesh
-from evomesh.spacing import _require_mesh
+from evomesh.spacing_function import _require_mesh
 
 __all__ = ["quality", "Quality", "triangle_angles"]
 

@@ -10,7 +10,7 @@ import numpy as np
 
 from evomesh import _core
 from evomesh.mesh import Mesh, check_mesh_limits
-from evomesh.spacing import _require_mesh, as_delta
+from evomesh.spacing_function import _require_mesh, as_delta
 
 __all__ = ["evolve", "delaunay_refine", "make_options", "FRFC_DEFAULTS", "DRFC_DEFAULTS", "FrfcOptions", "DrfcOptions",
            "SampleMode", "RadiusRule"]
@@ -132,8 +132,8 @@ def evolve(mesh: Mesh, delta: Any, *, method: str = "frfc", seed: int | None = N
         The current mesh.
     delta : array_like, shape (n,), or a scalar
         Per-point factor: < 1 refines (R-points), > 1 coarsens (C-points).
-        Every value must be finite and in [:data:`~evomesh.spacing.DELTA_MIN`,
-        :data:`~evomesh.spacing.DELTA_MAX`] = [1e-6, 1e6] (the paper's bounds
+        Every value must be finite and in [:data:`~evomesh.spacing_function.DELTA_MIN`,
+        :data:`~evomesh.spacing_function.DELTA_MAX`] = [1e-6, 1e6] (the paper's bounds
         l <= delta <= L); in addition a step whose sampling would create more
         than ``max_samples`` candidate points is refused (refine over several
         steps instead).
@@ -145,11 +145,17 @@ def evolve(mesh: Mesh, delta: Any, *, method: str = "frfc", seed: int | None = N
         points (lexical-first MIS of B(p, radius_scale f(p)/2), boundary first,
         then original, Steiner and new points) and a constrained Delaunay
         triangulation; no samples are added in the coarsening.
-    seed : int
-        Seed of the sampling; the same mesh, delta, options and seed give a
-        bit-identical result. ("drfc" draws no random numbers.)
-    **options
-        For "frfc" (defaults in :data:`FRFC_DEFAULTS`):
+    seed : int, optional
+        Seed of the sampling (default: ``options.seed``, 0); the same mesh,
+        delta, options and seed give a bit-identical result. ("drfc" draws no
+        random numbers.)
+    options : FrfcOptions or DrfcOptions, optional
+        All options of the method at once (copied, never modified); default
+        ``recommended()``. ``FrfcOptions.paper()`` / ``DrfcOptions.paper()``
+        run the paper's algorithms exactly. The fields are those of the C++
+        core (``cpp/include/evomesh/options.hpp``), which also validates them.
+    **overrides
+        Single options on top of ``options``, by field name. For "frfc" (defaults in :data:`FRFC_DEFAULTS`):
 
         cell_factor : float, default 2.0
             c in the sampling cell side c f(q) / (2 sqrt 2). Smaller samples

@@ -9,7 +9,7 @@ from scipy.spatial import cKDTree
 
 from evomesh import _core
 from evomesh.mesh import Mesh
-from evomesh.spacing import _require_mesh
+from evomesh.spacing_function import _require_mesh
 
 __all__ = ["transfer", "Interpolation"]
 
