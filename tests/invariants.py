@@ -84,6 +84,25 @@ def check_evolved(old: evomesh.Mesh, new: evomesh.Mesh, *, rel_area: float = 1e-
         assert dist.max() <= rel_distance * scale, dist.max()
 
 
+def rounding_tolerances(mesh: evomesh.Mesh, steps: int = 1) -> dict[str, float]:
+    """Rounding tolerances of check_evolved after `steps` steps. A point sampled
+    on a slanted boundary segment is on it only up to ulp(|x|) ~ eps max|x|,
+    and a chain straight up to STRAIGHT_ULPS roundings may be straightened
+    (its vertices are not corners), which moves the boundary by that much and
+    the area by that times the perimeter: large for meshes far from the origin
+    or thin (perimeter^2 >> area)."""
+    eps = np.finfo(float).eps
+    ulps = 4 * steps + evomesh._core.STRAIGHT_ULPS
+    reach = float(np.abs(mesh.points).max())
+    size = float(np.ptp(mesh.points, axis=0).max())
+    b = mesh.segments[mesh.segment_is_boundary]
+    perimeter = float(np.linalg.norm(mesh.points[b[:, 1]] - mesh.points[b[:, 0]], axis=1).sum())
+    return {
+        "rel_area": 1e-12 + ulps * eps * reach * perimeter / mesh.area,
+        "rel_distance": 1e-12 + ulps * eps * reach / size,
+    }
+
+
 def nn_in(mesh_points: np.ndarray, probes: np.ndarray) -> np.ndarray:
     """nn_M(x) for probe points x: distance to the nearest mesh point other than x."""
     d, _ = cKDTree(mesh_points).query(probes, k=2)

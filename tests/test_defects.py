@@ -14,7 +14,7 @@ from hypothesis import strategies as st
 import evomesh
 import evomesh.io
 from evomesh import Mesh, PointKind
-from invariants import check_evolved, check_valid_mesh
+from invariants import check_evolved, check_valid_mesh, rounding_tolerances
 from strategies import grid_mesh, random_meshes
 
 SQUARE = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
@@ -61,7 +61,7 @@ def test_the_core_finds_the_corners_itself_whatever_the_kinds():
 
 def evolve_checked(mesh: Mesh, delta, **options) -> Mesh:
     new = evomesh.evolve(mesh, delta, **options)
-    check_evolved(mesh, new)
+    check_evolved(mesh, new, **rounding_tolerances(mesh))
     return new
 
 

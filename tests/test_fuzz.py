@@ -22,7 +22,7 @@ import numpy as np
 import pytest
 from hypothesis import event, given, settings
 from hypothesis import strategies as st
-from invariants import check_evolved, check_valid_mesh
+from invariants import check_evolved, check_valid_mesh, rounding_tolerances
 from strategies import any_meshes, bad_deltas, deltas, mutated_mesh_arrays
 
 import evomesh
@@ -99,22 +99,6 @@ def survives_pathological_inputs():
                     "fix test_pathological_inputs_do_not_crash first")
 
 
-def _tolerances(mesh: evomesh.Mesh, steps: int = 1) -> dict[str, float]:
-    """Rounding tolerances of check_evolved after `steps` steps. A point sampled
-    on a slanted boundary segment is on it only up to ulp(|x|) ~ eps max|x|,
-    which moves the boundary by that much and the area by that times the
-    perimeter: large for meshes far from the origin or thin (perimeter^2 >> area)."""
-    eps = np.finfo(float).eps
-    reach = float(np.abs(mesh.points).max())
-    size = float(np.ptp(mesh.points, axis=0).max())
-    b = mesh.segments[mesh.segment_is_boundary]
-    perimeter = float(np.linalg.norm(mesh.points[b[:, 1]] - mesh.points[b[:, 0]], axis=1).sum())
-    return {
-        "rel_area": 1e-12 + 4 * steps * eps * reach * perimeter / mesh.area,
-        "rel_distance": 1e-12 + 4 * steps * eps * reach / size,
-    }
-
-
 def _evolve_checked(mesh: evomesh.Mesh, delta: np.ndarray, **kwargs) -> evomesh.Mesh | None:
     """evolve, then check the output (None: the step was refused by max_samples)."""
     before = (mesh.points.copy(), mesh.triangles.copy(), delta.copy())
@@ -126,7 +110,7 @@ def _evolve_checked(mesh: evomesh.Mesh, delta: np.ndarray, **kwargs) -> evomesh.
         event("refused: more than max_samples samples")
         new = None
     else:
-        check_evolved(mesh, new, **_tolerances(mesh))
+        check_evolved(mesh, new, **rounding_tolerances(mesh))
     assert np.array_equal(mesh.points, before[0]) and np.array_equal(mesh.triangles, before[1])
     assert np.array_equal(delta, before[2])
     return new
@@ -219,7 +203,7 @@ def test_chains_of_steps_stay_valid(mesh, steps, seed, method):
         current = new
         done += 1
     event(f"chain steps done: {done}")
-    assert abs(current.area - first.area) <= _tolerances(first, steps=max(done, 1))["rel_area"] * first.area
+    assert abs(current.area - first.area) <= rounding_tolerances(first, steps=max(done, 1))["rel_area"] * first.area
     assert current.euler_characteristic() == first.euler_characteristic()
     # corners survive every step, so they are all still there
     corners = first.points[first.kind == PointKind.CORNER]
