@@ -128,6 +128,12 @@ py::dict evolve_result_dict(const Evolve_result& r) {
   out["origin"] = vector_array(r.origin);
   out["input_f"] = vector_array(r.input_f);
   out["input_nn"] = vector_array(r.input_nn);
+  out["parent_triangle"] = vector_array(r.parents.triangle);
+  Float_array bary({static_cast<py::ssize_t>(r.parents.barycentric.size()), py::ssize_t{3}});
+  if (!r.parents.barycentric.empty()) {
+    std::memcpy(bary.mutable_data(), r.parents.barycentric.data(), r.parents.barycentric.size() * sizeof(r.parents.barycentric[0]));
+  }
+  out["barycentric"] = bary;
   py::dict stats;
   for (const auto& s : r.stats) stats[py::str(s.first)] = s.second;
   out["stats"] = stats;

@@ -157,12 +157,7 @@ Evolve_result drfc(const Mesh_arrays& mesh, const std::vector<double>& delta, co
   const Quality_options quality = options.quality_settings();
   triangulate_selection(std::move(out), std::move(origin), pieces, options.quality ? &quality : nullptr, result);
   timer.lap(options.quality ? "quality" : "cdt");
-
-  double seconds = 0;
-  for (const auto& s : stats) {
-    if (s.first.rfind("seconds_", 0) == 0) seconds += s.second;
-  }
-  stats.emplace_back("seconds_total", seconds);
+  finish_step(mesh, result, timer);
   const auto& report = stage.refined.report;
   stats.emplace_back("n_input_points", static_cast<double>(mesh.points.size()));
   stats.emplace_back("n_refined_points", static_cast<double>(m));

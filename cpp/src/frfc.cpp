@@ -788,12 +788,7 @@ Evolve_result frfc(const Mesh_arrays& mesh, const std::vector<double>& delta, co
   triangulate_selection(std::move(out), std::move(origin), pieces,
                         options.quality ? &quality : nullptr, result, options.quality ? &early : nullptr);
   timer.lap(options.quality ? "quality" : "cdt");
-
-  double seconds = 0;
-  for (const auto& s : stats) {
-    if (s.first.rfind("seconds_", 0) == 0) seconds += s.second;
-  }
-  stats.emplace_back("seconds_total", seconds);
+  finish_step(mesh, result, timer);
   stats.emplace_back("n_input_points", static_cast<double>(n));
   stats.emplace_back("n_segment_samples", static_cast<double>(n_seg));
   stats.emplace_back("n_interior_samples", static_cast<double>(n_in));
@@ -804,6 +799,19 @@ Evolve_result frfc(const Mesh_arrays& mesh, const std::vector<double>& delta, co
   stats.emplace_back("n_output_points", static_cast<double>(result.mesh.points.size()));
   stats.emplace_back("n_output_triangles", static_cast<double>(result.mesh.triangles.size()));
   return result;
+}
+
+void finish_step(const Mesh_arrays& input, Evolve_result& result, Stage_timer& timer) {
+  result.parents = parent_map(input, result.mesh, result.origin);
+  timer.lap("parent_map");
+  auto& stats = result.stats;
+  double seconds = 0;
+  for (const auto& s : stats) {
+    if (s.first.rfind("seconds_", 0) == 0) seconds += s.second;
+  }
+  stats.emplace_back("seconds_total", seconds);
+  stats.emplace_back("parent_walk_steps", static_cast<double>(result.parents.n_walk_steps));
+  stats.emplace_back("parent_located_globally", static_cast<double>(result.parents.n_located_globally));
 }
 
 void triangulate_selection(Mesh_arrays selected, std::vector<Index> origin,

@@ -8,6 +8,7 @@
 #include <vector>
 
 #include "evomesh/options.hpp"
+#include "evomesh/parent_map.hpp"
 #include "evomesh/refinement.hpp"
 #include "evomesh/sampling.hpp"
 #include "evomesh/triangulation.hpp"
@@ -21,6 +22,7 @@ struct Evolve_result {
   std::vector<Index> origin;   // index in the input mesh, -1 for a new point
   std::vector<double> input_f; // f at the input points
   std::vector<double> input_nn;
+  Parent_map parents;          // where every new point lies in the input mesh
   std::vector<std::pair<std::string, double>> stats;  // stage timings (s) and counts
 };
 
@@ -47,6 +49,16 @@ std::vector<Segment_chain> segment_chains(const Mesh_arrays& mesh);
 void triangulate_selection(Mesh_arrays selected, std::vector<Index> origin,
                            const std::vector<Constraint_piece>& pieces, const Quality_options* quality,
                            Evolve_result& result, Early_triangulation* early = nullptr);
+
+namespace detail {
+
+class Stage_timer;
+
+}  // namespace detail
+
+// Shared by FRFC and DRFC, after triangulate_selection: the parent map of the new
+// mesh in `input` (timed as "parent_map") and the step's total time.
+void finish_step(const Mesh_arrays& input, Evolve_result& result, detail::Stage_timer& timer);
 
 namespace detail {
 

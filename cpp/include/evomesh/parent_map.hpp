@@ -1,0 +1,34 @@
+// Where every point of an evolved mesh lies in the mesh it was evolved from (the
+// step's parent map), so fields move from the old mesh to the new one without a
+// global point location, and an intersection of the two meshes stays local.
+#pragma once
+
+#include <array>
+#include <vector>
+
+#include "evomesh/types.hpp"
+
+namespace evomesh {
+
+struct Parent_map {
+  // Per new point: the old triangle containing it, -1 for a kept point (its old
+  // index is the step's origin) and for a point that no old triangle contains.
+  std::vector<Index> triangle;
+  // The barycentric coordinates of the point in that triangle (with respect to its
+  // vertices in order; they sum to 1, and reproduce linear functions exactly).
+  // A point outside the old domain by rounding gets its boundary triangle, with a
+  // coordinate negative by rounding.
+  std::vector<std::array<double, 3>> barycentric;
+  std::size_t n_walk_steps = 0;        // triangles crossed by all walks
+  std::size_t n_located_globally = 0;  // points a walk did not reach (located by a search)
+};
+
+// The parent map of `new_mesh` in `old_mesh`; origin[i] is the old index of new
+// point i or -1. Points are located in breadth-first order over the new mesh's
+// edges, from the kept points: each walk starts in the old triangle of a new
+// neighbour already placed, a few triangles away (a visibility walk with exact
+// orientation tests). Points a walk cannot reach (across a hole, or a walk longer
+// than its bound) are located by a search over the whole old mesh. O(n) walks.
+Parent_map parent_map(const Mesh_arrays& old_mesh, const Mesh_arrays& new_mesh, const std::vector<Index>& origin);
+
+}  // namespace evomesh
