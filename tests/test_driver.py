@@ -10,7 +10,8 @@ from strategies import grid_mesh
 
 import evomesh
 from evomesh import CircleFront, Driver, LevelSetFront, PointFront, SpacingLaw
-from evomesh.driver import PAPER_TABLE1, STATISTICS_COLUMNS
+from evomesh.reporting import PAPER_TABLE1
+from evomesh.statistics import STATISTICS_COLUMNS
 from evomesh.io import read_mesh, write_run
 from evomesh.plotting import plot_step
 

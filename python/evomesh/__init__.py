@@ -45,7 +45,9 @@ __version__ = "0.1.0"
 # Moving-front workflow.
 from evomesh.fronts import CircleFront, Front, LevelSetFront, PointFront, SpacingLaw  # noqa: E402
 from evomesh.field_transfer import transfer  # noqa: E402
-from evomesh.driver import Driver, Run, Step, growing_circle, run, step_statistics  # noqa: E402
+from evomesh.time_loop import Driver, Run, Step, run  # noqa: E402
+from evomesh.statistics import step_statistics  # noqa: E402
+from evomesh.experiments.growing_circle import growing_circle  # noqa: E402
 from evomesh.meshgen import unit_square_mesh  # noqa: E402
 
 __all__ += [

@@ -18,7 +18,7 @@ def _positive_int(text: str) -> int:
 
 def build_parser() -> argparse.ArgumentParser:
     from evomesh import __version__
-    from evomesh.driver import GROWING_CIRCLE_DEFAULTS as D
+    from evomesh.experiments.growing_circle import GROWING_CIRCLE_DEFAULTS as D
 
     parser = argparse.ArgumentParser(
         prog="evomesh", description="Simultaneous refinement and coarsening of triangle meshes (Li, Teng, Ungor)."
@@ -56,7 +56,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _growing_circle(args: argparse.Namespace) -> int:
-    from evomesh.driver import growing_circle
+    from evomesh.experiments.growing_circle import growing_circle
 
     result = growing_circle(
         steps=args.steps,

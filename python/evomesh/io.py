@@ -13,6 +13,7 @@ import numpy as np
 
 from evomesh.mesh import Mesh
 from evomesh.spacing_function import _require_mesh, nn_spacing
+from evomesh.time_loop import Run, front_at
 
 __all__ = ["to_meshio", "write_mesh", "read_mesh", "write_pvd", "write_run", "RESERVED_POINT_DATA"]
 
@@ -261,7 +262,7 @@ def write_pvd(path: str | Path, files: Sequence[str | Path], times: Sequence[flo
     return path
 
 
-def _pvd_times(run) -> list[float]:
+def _pvd_times(run: Run) -> list[float]:
     times = [s.time for s in run.steps]
     if not times or not all(math.isfinite(t) for t in times):
         return [float(k) for k in range(len(times) + 1)]
@@ -274,7 +275,7 @@ def _pvd_times(run) -> list[float]:
 _SERIES_FILE = re.compile(r"table\.csv|meshes\.pvd|mesh_\d{3,}\.vtu|step_\d{3,}\.png")
 
 
-def write_run(run, folder: str | Path, *, figures: bool = True, dpi: int = 110) -> dict[str, Any]:
+def write_run(run: Run, folder: str | Path, *, figures: bool = True, dpi: int = 110) -> dict[str, Any]:
     """Write the outputs of a :class:`evomesh.Run` into ``folder`` (created).
 
     - ``table.csv``: the statistics (:data:`evomesh.driver.STATISTICS_COLUMNS`).
@@ -321,8 +322,6 @@ def write_run(run, folder: str | Path, *, figures: bool = True, dpi: int = 110) 
         :func:`to_meshio`), or that clashes with :data:`RESERVED_POINT_DATA`;
         a bad ``dpi``. Nothing is written or removed then.
     """
-    from evomesh.driver import front_at
-
     if figures and (isinstance(dpi, bool) or not isinstance(dpi, numbers.Real) or not (math.isfinite(dpi) and dpi > 0)):
         raise ValueError(f"dpi must be a positive number, got {dpi!r}")
     folder = Path(folder)
