@@ -2,14 +2,13 @@
 
 from __future__ import annotations
 
-from typing import Any
-
 import numpy as np
 from scipy.spatial import cKDTree
 
 from evomesh.mesh import Mesh
 from evomesh.mesh_quality import quality
 from evomesh.spacing_function import _require_mesh, as_delta, nn_spacing
+from evomesh.typing import ArrayLike, FloatArray
 
 __all__ = ["STATISTICS_COLUMNS", "nn_at", "step_statistics"]
 
@@ -29,7 +28,7 @@ STATISTICS_COLUMNS = (
 )
 
 
-def nn_at(points: np.ndarray, probes: np.ndarray, tree: cKDTree | None = None) -> np.ndarray:
+def nn_at(points: np.ndarray, probes: np.ndarray, tree: cKDTree | None = None) -> FloatArray:
     """nn_M(x) at probe points: distance to the nearest mesh point other than x
     itself (x may or may not be a mesh point), shape (k,)."""
     tree = cKDTree(points) if tree is None else tree
@@ -37,7 +36,7 @@ def nn_at(points: np.ndarray, probes: np.ndarray, tree: cKDTree | None = None) -
     return np.where(d[:, 0] == 0, d[:, 1], d[:, 0])
 
 
-def step_statistics(old: Mesh, new: Mesh, delta: Any, *, nn_old: np.ndarray | None = None) -> dict[str, float]:
+def step_statistics(old: Mesh, new: Mesh, delta: ArrayLike, *, nn_old: np.ndarray | None = None) -> dict[str, float]:
     """Statistics of one evolution step, as in the paper's Table 1 plus ours.
 
     Parameters

@@ -10,7 +10,7 @@ import numbers
 import time as _time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Mapping
+from typing import Any, Callable, Mapping, cast
 
 import numpy as np
 
@@ -21,6 +21,7 @@ from evomesh.mesh import Mesh
 from evomesh.reporting import format_table, write_csv
 from evomesh.spacing_function import _require_mesh, as_delta, nn_spacing
 from evomesh.statistics import STATISTICS_COLUMNS, step_statistics
+from evomesh.typing import ArrayLike, Fields, FloatArray, FrontLike, Law
 
 __all__ = ["Step", "Run", "Driver", "run", "front_at"]
 
@@ -71,7 +72,14 @@ class Run:
         method, seed and evolve options used.
     """
 
-    def __init__(self, initial: Mesh, initial_fields: dict[str, np.ndarray], front: Any, law: Any, options: dict[str, Any]):
+    def __init__(
+        self,
+        initial: Mesh,
+        initial_fields: dict[str, np.ndarray],
+        front: FrontLike,
+        law: Law,
+        options: dict[str, Any],
+    ) -> None:
         self.initial = initial
         self.initial_fields = initial_fields
         self.front = front
@@ -88,7 +96,8 @@ class Run:
     @property
     def mesh(self) -> Mesh:
         """The final mesh."""
-        return self.steps[-1].mesh if self.steps else self.initial
+        # run() and Driver.step() never drop the final step's mesh (keep_meshes=False drops earlier ones)
+        return cast(Mesh, self.steps[-1].mesh) if self.steps else self.initial
 
     @property
     def fields(self) -> list[dict[str, np.ndarray] | None]:
@@ -132,7 +141,7 @@ def _step_seed(seed: int, iteration: int) -> int:
     return int(np.random.SeedSequence([seed, iteration]).generate_state(1, np.uint64)[0])
 
 
-def _as_fields(fields: Any, mesh: Mesh) -> dict[str, np.ndarray]:
+def _as_fields(fields: Fields | None, mesh: Mesh) -> dict[str, np.ndarray]:
     if fields is None:
         return {}
     if not isinstance(fields, Mapping):
@@ -181,27 +190,38 @@ class Driver:
         Steps done so far.
     """
 
-    def __init__(self, mesh: Mesh, law: Any, *, fields: Any = None, method: str = "frfc", seed: int = 0, **options: Any):
+    def __init__(
+        self,
+        mesh: Mesh,
+        law: Law,
+        *,
+        fields: Fields | None = None,
+        method: str = "frfc",
+        seed: int = 0,
+        **options: Any,
+    ) -> None:
         _require_mesh(mesh)
         if not callable(law):
-            raise TypeError(f"law must be a SpacingLaw or a callable law(mesh, distance) -> delta, got {type(law).__name__}")
+            raise TypeError(
+                f"law must be a SpacingLaw or a callable law(mesh, distance) -> delta, got {type(law).__name__}"
+            )
         if isinstance(seed, bool) or not isinstance(seed, numbers.Integral) or not 0 <= int(seed) < 2**64:
             raise ValueError(f"seed must be an integer in [0, 2**64), got {seed!r}")
-        self.mesh = mesh
-        self.law = law
-        self.fields = _as_fields(fields, mesh)
-        self.method = method
-        self.seed = int(seed)
-        self.options = dict(options)
-        self.iteration = 0
+        self.mesh: Mesh = mesh
+        self.law: Law = law
+        self.fields: dict[str, np.ndarray] = _as_fields(fields, mesh)
+        self.method: str = method
+        self.seed: int = int(seed)
+        self.options: dict[str, Any] = dict(options)
+        self.iteration: int = 0
 
-    def delta(self, front: Any, t: Any = None, mesh: Mesh | None = None) -> np.ndarray:
+    def delta(self, front: FrontLike, t: float | None = None, mesh: Mesh | None = None) -> FloatArray:
         """delta on ``mesh`` (default: the current mesh) for the front at time t."""
         mesh = self.mesh if mesh is None else mesh
         distance = _front_distance(front, mesh.points, t)
         return as_delta(mesh, self.law(mesh, distance))
 
-    def step(self, front: Any = None, t: Any = None, *, delta: Any = None) -> Step:
+    def step(self, front: FrontLike = None, t: float | None = None, *, delta: ArrayLike | None = None) -> Step:
         """Evolve the current mesh once.
 
         Parameters
@@ -222,10 +242,14 @@ class Driver:
         nn_old = nn_spacing(old)
         if delta is None:
             distance = _front_distance(front, old.points, t)
-            d = self.law.delta(old, distance, nn=nn_old) if isinstance(self.law, SpacingLaw) else self.law(old, distance)
+            raw: ArrayLike
+            if isinstance(self.law, SpacingLaw):
+                raw = self.law.delta(old, distance, nn=nn_old)
+            else:
+                raw = self.law(old, distance)
         else:
-            d = delta
-        d = as_delta(old, d)
+            raw = delta
+        d = as_delta(old, raw)
         iteration = self.iteration + 1
         start = _time.perf_counter()
         new = evolve(old, d, method=self.method, seed=_step_seed(self.seed, iteration), **self.options)
@@ -244,11 +268,12 @@ class Driver:
         return Step(iteration, stats["time"], new, d, fields, stats)
 
 
-def _front_distance(front: Any, points: np.ndarray, t: Any) -> np.ndarray | None:
+def _front_distance(front: FrontLike, points: np.ndarray, t: float | None) -> FloatArray | None:
     if front is None:
         return None
     if not isinstance(front, Front) and callable(front):
-        front = front(t)
+        # a step without a time passes t=None on to the user's callable, as it always did
+        front = front(t)  # type: ignore[arg-type]
     if not hasattr(front, "distance"):
         raise TypeError(f"front must be a Front, a callable t -> Front, or None; got {type(front).__name__}")
     distance = np.asarray(front.distance(points, t), dtype=np.float64)
@@ -261,24 +286,24 @@ def _front_distance(front: Any, points: np.ndarray, t: Any) -> np.ndarray | None
     return distance
 
 
-def front_at(front: Any, t: Any) -> Any:
+def front_at(front: FrontLike, t: float | None) -> Front | None:
     """The Front object for time t (a callable front is called with t)."""
     if front is None or isinstance(front, Front) or not callable(front):
         return front
-    return front(t)
+    return front(t)  # type: ignore[arg-type]  # as in _front_distance: t=None is passed on
 
 
 def run(
     mesh: Mesh,
-    front: Any,
-    law: Any,
-    times: Any,
+    front: FrontLike,
+    law: Law,
+    times: ArrayLike,
     *,
-    fields: Any = None,
+    fields: Fields | None = None,
     method: str = "frfc",
     seed: int = 0,
     progress: bool | None = None,
-    callback: Callable[[Step], Any] | None = None,
+    callback: Callable[[Step], object] | None = None,
     keep_meshes: bool = True,
     **options: Any,
 ) -> Run:
