@@ -58,7 +58,7 @@ def _check_point_data(point_data: Mapping[str, Any] | None, n_points: int, reser
         except ValueError as error:  # ragged nesting
             raise ValueError(f"point data {name!r} must be a rectangular array: {error}") from None
         dtype = array.dtype
-        if dtype == object or dtype.kind not in "biufc":
+        if dtype == object or dtype.kind not in "biufc":  # noqa: E721 -- a numpy dtype comparison, not of types
             raise TypeError(f"point data {name!r} must be numeric, got dtype {dtype}")
         if (dtype.kind == "f" and dtype.itemsize > 8) or (dtype.kind == "c" and dtype.itemsize > 16):
             raise ValueError(
@@ -249,7 +249,11 @@ def write_pvd(path: str | Path, files: Sequence[str | Path], times: Sequence[flo
     path = Path(path)
     if len(files) != len(times):
         raise ValueError(f"files and times must have the same length, got {len(files)} and {len(times)}")
-    lines = ['<?xml version="1.0"?>', '<VTKFile type="Collection" version="0.1" byte_order="LittleEndian">', "  <Collection>"]
+    lines = [
+        '<?xml version="1.0"?>',
+        '<VTKFile type="Collection" version="0.1" byte_order="LittleEndian">',
+        "  <Collection>",
+    ]
     for name, t in zip(files, times):
         name = Path(name)
         try:
@@ -335,8 +339,9 @@ def write_run(run: Run, folder: str | Path, *, figures: bool = True, dpi: int = 
             _check_point_data(fields[k], mesh.n_points, RESERVED_POINT_DATA)
         except (TypeError, ValueError) as error:
             raise type(error)(f"{where}: {error}") from None
-        if deltas[k] is not None and np.shape(deltas[k]) != (mesh.n_points,):
-            raise ValueError(f"{where}: delta must have shape ({mesh.n_points},), got {np.shape(deltas[k])}")
+        delta_k = deltas[k]
+        if delta_k is not None and np.shape(delta_k) != (mesh.n_points,):
+            raise ValueError(f"{where}: delta must have shape ({mesh.n_points},), got {np.shape(delta_k)}")
     # 2. the files of an earlier series
     folder.mkdir(parents=True, exist_ok=True)
     for old in folder.iterdir():

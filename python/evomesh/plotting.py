@@ -43,7 +43,13 @@ def _circles(ax, centers: np.ndarray, radii: np.ndarray, **style: Any) -> None:
     diameters = 2.0 * radii
     ax.add_collection(
         EllipseCollection(
-            diameters, diameters, np.zeros(len(radii)), units="xy", offsets=centers, offset_transform=ax.transData, **style
+            diameters,
+            diameters,
+            np.zeros(len(radii)),
+            units="xy",
+            offsets=centers,
+            offset_transform=ax.transData,
+            **style,
         )
     )
 
@@ -131,7 +137,9 @@ def plot_step(
     from evomesh.mesh_quality import quality
 
     q = quality(new)
-    a3.set_title(f"mesh: {new.n_points} points, {new.n_triangles} triangles\nmin angle {q.min_angle:.2f} deg", fontsize=10)
+    a3.set_title(
+        f"mesh: {new.n_points} points, {new.n_triangles} triangles\nmin angle {q.min_angle:.2f} deg", fontsize=10
+    )
     for ax in (a1, a2, a3):
         draw_front(ax, front, t, new)
     if title:
