@@ -2,9 +2,10 @@
 
 from __future__ import annotations
 
-from typing import Any, Mapping
+from typing import Any, Mapping, overload
 
 import numpy as np
+from numpy.typing import ArrayLike
 from scipy.spatial import cKDTree
 
 from evomesh import _core
@@ -210,7 +211,13 @@ def _pairs_within(tree: cKDTree, queries: np.ndarray, radius: float) -> tuple[np
     return np.concatenate(out_query), np.concatenate(out_item)
 
 
-def transfer(old: Mesh, new: Mesh, values: Any) -> Any:
+@overload
+def transfer(old: Mesh, new: Mesh, values: Mapping[str, ArrayLike]) -> dict[str, np.ndarray]: ...
+@overload
+def transfer(old: Mesh, new: Mesh, values: ArrayLike) -> np.ndarray: ...
+def transfer(
+    old: Mesh, new: Mesh, values: ArrayLike | Mapping[str, ArrayLike]
+) -> np.ndarray | dict[str, np.ndarray]:
     """Per-vertex field(s) of ``old`` at the points of ``new``.
 
     Exact copy at kept points (``new.origin >= 0``), linear interpolation in

@@ -6,14 +6,18 @@ import math
 import numbers
 import re
 from pathlib import Path
-from typing import Any, Mapping, Sequence
+from typing import TYPE_CHECKING, Any, Mapping, Sequence
 from xml.sax.saxutils import quoteattr
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from evomesh.mesh import Mesh
 from evomesh.spacing_function import _require_mesh, nn_spacing
 from evomesh.time_loop import Run, front_at
+
+if TYPE_CHECKING:
+    import meshio
 
 __all__ = ["to_meshio", "write_mesh", "read_mesh", "write_pvd", "write_run", "RESERVED_POINT_DATA"]
 
@@ -99,7 +103,7 @@ def _vtu_arrays(name: str, values: Any) -> list[tuple[str, np.ndarray]]:
     return [(name, array)]
 
 
-def to_meshio(mesh: Mesh, point_data: Mapping[str, Any] | None = None):
+def to_meshio(mesh: Mesh, point_data: Mapping[str, ArrayLike] | None = None) -> meshio.Mesh:
     """A meshio.Mesh: points with z = 0, a "triangle" block, and a "line" block
     for the interior constraint segments (boundary segments are implied by the
     triangles).
@@ -136,7 +140,7 @@ def to_meshio(mesh: Mesh, point_data: Mapping[str, Any] | None = None):
     return meshio.Mesh(points, cells, point_data=data)
 
 
-def write_mesh(path: str | Path, mesh: Mesh, point_data: Mapping[str, Any] | None = None) -> Path:
+def write_mesh(path: str | Path, mesh: Mesh, point_data: Mapping[str, ArrayLike] | None = None) -> Path:
     """Write a mesh with meshio (format from the suffix; ``.vtu`` for ParaView).
 
     Per-point data: ``kind``, ``origin`` and the arrays of ``point_data``
