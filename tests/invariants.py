@@ -59,7 +59,9 @@ def check_valid_mesh(mesh: evomesh.Mesh) -> None:
     assert ((mesh.kind <= PointKind.BOUNDARY) == on_segment).all(), "kind disagrees with segments"
 
 
-def check_evolved(old: evomesh.Mesh, new: evomesh.Mesh, *, rel_area: float = 1e-12, rel_distance: float = 1e-12) -> None:
+def check_evolved(
+    old: evomesh.Mesh, new: evomesh.Mesh, *, rel_area: float = 1e-12, rel_distance: float = 1e-12
+) -> None:
     """Output of evolve against its input: domain, boundary, corners, origins.
 
     Points sampled on a slanted boundary segment are rounded to doubles, so they

@@ -48,7 +48,9 @@ def deltas(mesh: evomesh.Mesh) -> dict[str, np.ndarray]:
 
 CASES: dict[str, dict] = {
     "frfc": {"method": "frfc"},
-    "frfc-plain": {"method": "frfc", "radius_scale": 1.0, "boundary_scale": 1.0, "repair_ratio": None, "quality": False},
+    "frfc-plain": {
+        "method": "frfc", "radius_scale": 1.0, "boundary_scale": 1.0, "repair_ratio": None, "quality": False
+    },
     "frfc-barycentre": {"method": "frfc", "samples": "barycentre", "cell_factor": 1.0},
     "drfc": {"method": "drfc"},
     "drfc-plain": {"method": "drfc", "quality": False},

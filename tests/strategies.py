@@ -31,7 +31,8 @@ def grid_mesh(nx: int, ny: int, *, jitter: float = 0.0, seed: int = 0, scale: fl
         lo_x, hi_x = xs[nx // 3], xs[(2 * nx) // 3]
         lo_y, hi_y = ys[ny // 3], ys[(2 * ny) // 3]
         # keep the hole's boundary points unjittered so the hole is a rectangle
-        inside = (centroids[:, 0] > lo_x) & (centroids[:, 0] < hi_x) & (centroids[:, 1] > lo_y) & (centroids[:, 1] < hi_y)
+        cx, cy = centroids[:, 0], centroids[:, 1]
+        inside = (cx > lo_x) & (cx < hi_x) & (cy > lo_y) & (cy < hi_y)
         keep &= ~inside
     if notch:
         keep &= ~((centroids[:, 0] > xs[nx // 2]) & (centroids[:, 1] > ys[ny // 2]))
@@ -279,9 +280,9 @@ def mutated_mesh_arrays(draw, invalid: bool = True):
             w = int(inner[rng.integers(len(inner))])
             link = np.unique(tris[(tris == w).any(axis=1)])
             link = link[link != w]
-            l = int(link[rng.integers(len(link))])
+            u = int(link[rng.integers(len(link))])
             # beyond a link vertex on the ray from w: outside the star polygon
-            pts[w] = pts[l] + rng.uniform(0.1, 2.0) * (pts[l] - pts[w])
+            pts[w] = pts[u] + rng.uniform(0.1, 2.0) * (pts[u] - pts[w])
     elif mutation == "float-triangles":
         tris = tris.astype(float)
     elif mutation == "string-points":

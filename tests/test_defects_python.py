@@ -8,12 +8,12 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from invariants import check_evolved, check_valid_mesh
-from strategies import grid_mesh, meshes
 
 import evomesh
 from evomesh import _core, io, transfer
 from evomesh.io import read_mesh, write_run
+from invariants import check_evolved, check_valid_mesh
+from strategies import grid_mesh, meshes
 
 # evomesh.transfer is the function (the package re-exports it): the module by name
 transfer_mod = importlib.import_module("evomesh.field_transfer")
@@ -257,7 +257,9 @@ def folder_listing(folder):
 
 
 def test_write_run_splits_complex_fields(tmp_path):
-    result = small_run(2, lambda m: {"psi": np.exp(1j * m.points[:, 0]), "c64": (m.points[:, 1] * 1j).astype(np.complex64)})
+    result = small_run(
+        2, lambda m: {"psi": np.exp(1j * m.points[:, 0]), "c64": (m.points[:, 1] * 1j).astype(np.complex64)}
+    )
     io.write_run(result, tmp_path, figures=False)
     for k, fields in enumerate(result.fields):
         _, data = io.read_mesh(tmp_path / f"mesh_{k:03d}.vtu")

@@ -38,7 +38,8 @@ def test_rule_4_holds_after_the_refinement_stage(case):
     assert np.array_equal(refined.points[:n], mesh.points)
     f = evomesh.spacing(mesh, delta)
     nn = nn_in(refined.points, refined.points)
-    bound = np.minimum(f(refined.points), np.r_[delta * evomesh.nn_spacing(mesh), np.full(refined.n_points - n, np.inf)])
+    old_bound = np.r_[delta * evomesh.nn_spacing(mesh), np.full(refined.n_points - n, np.inf)]
+    bound = np.minimum(f(refined.points), old_bound)
     assert (nn <= bound * (1 + RTOL)).all(), (nn / bound).max()
     refine_points = delta <= 1
     target = delta * evomesh.nn_spacing(mesh)

@@ -5,14 +5,15 @@ import xml.etree.ElementTree as ET
 
 import numpy as np
 import pytest
-from invariants import check_evolved, spacing_ratio
-from strategies import grid_mesh
 
 import evomesh
 from evomesh import CircleFront, Driver, LevelSetFront, PointFront, SpacingLaw
-from evomesh.driver import PAPER_TABLE1, STATISTICS_COLUMNS
 from evomesh.io import read_mesh, write_run
 from evomesh.plotting import plot_step
+from evomesh.reporting import PAPER_TABLE1
+from evomesh.statistics import STATISTICS_COLUMNS
+from invariants import check_evolved, spacing_ratio
+from strategies import grid_mesh
 
 LAW = SpacingLaw(0.03, 0.1, 0.05, grade=0.5)
 

@@ -4,11 +4,11 @@ import numpy as np
 import pytest
 from hypothesis import given
 from hypothesis import strategies as st
-from invariants import distance_to_segments
-from strategies import grid_mesh
 
 import evomesh
 from evomesh import CircleFront, LevelSetFront, PointFront, SpacingLaw
+from invariants import distance_to_segments
+from strategies import grid_mesh
 
 
 def probes(n=3000, seed=0, lo=-0.5, hi=1.5):

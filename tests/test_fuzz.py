@@ -22,11 +22,11 @@ import numpy as np
 import pytest
 from hypothesis import event, given, settings
 from hypothesis import strategies as st
-from invariants import check_evolved, check_valid_mesh, rounding_tolerances
-from strategies import any_meshes, bad_deltas, deltas, mutated_mesh_arrays
 
 import evomesh
 from evomesh import PointKind
+from invariants import check_evolved, check_valid_mesh, rounding_tolerances
+from strategies import any_meshes, bad_deltas, deltas, mutated_mesh_arrays
 
 # The chain test stops refining once a mesh has this many points.
 CHAIN_MAX_POINTS = 4000
@@ -172,7 +172,10 @@ _DRFC_OPTIONS = st.fixed_dictionaries(
 
 
 @pytest.mark.usefixtures("survives_pathological_inputs")
-@given(mesh_with_delta(low=0.2, high=5.0), st.one_of(_FRFC_OPTIONS.map(lambda o: ("frfc", o)), _DRFC_OPTIONS.map(lambda o: ("drfc", o))))
+@given(
+    mesh_with_delta(low=0.2, high=5.0),
+    st.one_of(_FRFC_OPTIONS.map(lambda o: ("frfc", o)), _DRFC_OPTIONS.map(lambda o: ("drfc", o))),
+)
 def test_valid_input_with_any_options_gives_valid_output(case, method_options):
     mesh, delta = case
     method, options = method_options

@@ -76,7 +76,9 @@ def convex_mesh_and_delta(draw):
 @st.composite
 def nonconvex_mesh_and_delta(draw):
     """Holes and notches: reflex corners, no angle below 90 degrees."""
-    mesh = draw(meshes(max_side=12).filter(lambda m: m.euler_characteristic() == 0 or (m.kind == PointKind.CORNER).sum() > 4))
+    mesh = draw(
+        meshes(max_side=12).filter(lambda m: m.euler_characteristic() == 0 or (m.kind == PointKind.CORNER).sum() > 4)
+    )
     return mesh, draw(delta_for(mesh))
 
 

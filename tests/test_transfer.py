@@ -3,10 +3,10 @@
 import numpy as np
 import pytest
 from hypothesis import given, settings
-from strategies import grid_mesh, mesh_and_delta
 
 import evomesh
 from evomesh import _core, transfer
+from strategies import grid_mesh, mesh_and_delta
 
 
 def linear(points, a=3.0, b=-2.0, c=0.5):

@@ -14,12 +14,12 @@ import textwrap
 
 import numpy as np
 import pytest
-from invariants import check_evolved, check_valid_mesh
-from strategies import grid_mesh
 
 import evomesh
 from evomesh import PointKind
 from evomesh.spacing_function import DELTA_MAX, DELTA_MIN
+from invariants import check_evolved, check_valid_mesh
+from strategies import grid_mesh
 
 # The unit square as two triangles, and a 3x3 grid (an interior point 4).
 SQUARE_POINTS = np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0], [1.0, 1.0]])

@@ -17,8 +17,8 @@ from evomesh.evolution import (
     evolve,
 )
 from evomesh.mesh import Mesh, PointKind
-from evomesh.packing import lexical_first_mis
 from evomesh.mesh_quality import Quality, quality
+from evomesh.packing import lexical_first_mis
 from evomesh.spacing_function import SpacingFunction, nn_spacing, spacing
 
 __all__ = [
@@ -43,10 +43,12 @@ __all__ = [
 __version__ = "0.1.0"
 
 # Moving-front workflow.
-from evomesh.fronts import CircleFront, Front, LevelSetFront, PointFront, SpacingLaw  # noqa: E402
+from evomesh.experiments.growing_circle import growing_circle  # noqa: E402
 from evomesh.field_transfer import transfer  # noqa: E402
-from evomesh.driver import Driver, Run, Step, growing_circle, run, step_statistics  # noqa: E402
+from evomesh.fronts import CircleFront, Front, LevelSetFront, PointFront, SpacingLaw  # noqa: E402
 from evomesh.meshgen import unit_square_mesh  # noqa: E402
+from evomesh.statistics import step_statistics  # noqa: E402
+from evomesh.time_loop import Driver, Run, Step, run  # noqa: E402
 
 __all__ += [
     "Front",

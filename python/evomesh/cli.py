@@ -18,7 +18,7 @@ def _positive_int(text: str) -> int:
 
 def build_parser() -> argparse.ArgumentParser:
     from evomesh import __version__
-    from evomesh.driver import GROWING_CIRCLE_DEFAULTS as D
+    from evomesh.experiments.growing_circle import GROWING_CIRCLE_DEFAULTS as D
 
     parser = argparse.ArgumentParser(
         prog="evomesh", description="Simultaneous refinement and coarsening of triangle meshes (Li, Teng, Ungor)."
@@ -35,13 +35,21 @@ def build_parser() -> argparse.ArgumentParser:
             "and one PNG per step into the output folder."
         ),
     )
-    gc.add_argument("--steps", type=_positive_int, default=D["steps"], help="number of steps (default %(default)s)")
-    gc.add_argument("--points", type=_positive_int, default=D["n_points"], help="initial mesh size (default %(default)s)")
-    gc.add_argument("--band", type=float, default=D["band"], help="full width of the band where h = h_min (default %(default)s)")
+    gc.add_argument(
+        "--steps", type=_positive_int, default=D["steps"], help="number of steps (default %(default)s)"
+    )
+    gc.add_argument(
+        "--points", type=_positive_int, default=D["n_points"], help="initial mesh size (default %(default)s)"
+    )
+    gc.add_argument(
+        "--band", type=float, default=D["band"], help="full width of the band where h = h_min (default %(default)s)"
+    )
     gc.add_argument("--h-min", type=float, default=D["h_min"], help="spacing at the front (default %(default)s)")
     gc.add_argument("--h-max", type=float, default=D["h_max"],
                     help="far-field spacing (default: the median nn spacing of the initial mesh)")
-    gc.add_argument("--grade", type=float, default=D["grade"], help="growth dh/dd outside the band (default %(default)s)")
+    gc.add_argument(
+        "--grade", type=float, default=D["grade"], help="growth dh/dd outside the band (default %(default)s)"
+    )
     gc.add_argument("--r0", type=float, default=D["r0"], help="radius at time 0 (default %(default)s)")
     gc.add_argument("--r-end", type=float, default=D["r_end"],
                     help="radius at the last step (default: the circle touches the box)")
@@ -56,7 +64,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _growing_circle(args: argparse.Namespace) -> int:
-    from evomesh.driver import growing_circle
+    from evomesh.experiments.growing_circle import growing_circle
 
     result = growing_circle(
         steps=args.steps,

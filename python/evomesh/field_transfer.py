@@ -2,9 +2,10 @@
 
 from __future__ import annotations
 
-from typing import Any, Mapping
+from typing import Any, Mapping, overload
 
 import numpy as np
+from numpy.typing import ArrayLike
 from scipy.spatial import cKDTree
 
 from evomesh import _core
@@ -145,16 +146,17 @@ def _nearest_boundary_edge(old: Mesh, queries: np.ndarray) -> tuple[np.ndarray, 
     tolerance = _outside_tolerance(old, queries)
     half = 0.5 * np.sqrt(dd)
     _, exponent = np.frexp(half)
-    pair_query, pair_edge = [], []
+    query_parts: list[np.ndarray] = []
+    edge_parts: list[np.ndarray] = []
     for level in np.unique(exponent):  # one pass per length scale, not per point
         members = np.flatnonzero(exponent == level)
         tree = cKDTree(a[members] + 0.5 * d[members])
         # 2 tolerances: one for the distance, one for the rounding of midpoints and distances
         q, item = _pairs_within(tree, queries, float(half[members].max()) + 2.0 * tolerance)
-        pair_query.append(q)
-        pair_edge.append(members[item])
-    pair_query = np.concatenate(pair_query)
-    pair_edge = np.concatenate(pair_edge)
+        query_parts.append(q)
+        edge_parts.append(members[item])
+    pair_query = np.concatenate(query_parts)
+    pair_edge = np.concatenate(edge_parts)
     t, gap = _to_segments(queries[pair_query], a[pair_edge], d[pair_edge], dd[pair_edge])
     # per query, the smallest gap, then the lowest edge index (as argmin over all edges)
     order = np.lexsort((pair_edge, gap, pair_query))
@@ -209,7 +211,13 @@ def _pairs_within(tree: cKDTree, queries: np.ndarray, radius: float) -> tuple[np
     return np.concatenate(out_query), np.concatenate(out_item)
 
 
-def transfer(old: Mesh, new: Mesh, values: Any) -> Any:
+@overload
+def transfer(old: Mesh, new: Mesh, values: Mapping[str, ArrayLike]) -> dict[str, np.ndarray]: ...
+@overload
+def transfer(old: Mesh, new: Mesh, values: ArrayLike) -> np.ndarray: ...
+def transfer(
+    old: Mesh, new: Mesh, values: ArrayLike | Mapping[str, ArrayLike]
+) -> np.ndarray | dict[str, np.ndarray]:
     """Per-vertex field(s) of ``old`` at the points of ``new``.
 
     Exact copy at kept points (``new.origin >= 0``), linear interpolation in

@@ -15,6 +15,7 @@ import numbers
 from typing import Any, Callable
 
 import numpy as np
+from numpy.typing import ArrayLike
 from scipy.spatial import cKDTree
 
 from evomesh.mesh import _MAX_COORDINATE, Mesh
@@ -26,7 +27,7 @@ __all__ = ["Front", "CircleFront", "PointFront", "LevelSetFront", "SpacingLaw", 
 _CHUNK = 65536
 
 
-def as_query_points(x: Any, name: str = "x") -> np.ndarray:
+def as_query_points(x: ArrayLike, name: str = "x") -> np.ndarray:
     """Validate query points: real, shape (k, 2), finite; returns a float64 copy."""
     array = np.asarray(x)
     if array.dtype == object or array.dtype.kind not in "fiu":
@@ -50,7 +51,7 @@ def _real(value: Any, name: str) -> float:
     return value
 
 
-def _time(t: Any) -> float:
+def _time(t: float | None) -> float:
     return 0.0 if t is None else _real(t, "t")
 
 
@@ -59,10 +60,10 @@ class Front(abc.ABC):
     each point of x, shape (k, 2), to the front at time t, shape (k,)."""
 
     @abc.abstractmethod
-    def distance(self, x: Any, t: Any = None) -> np.ndarray:
+    def distance(self, x: ArrayLike, t: float | None = None) -> np.ndarray:
         """Unsigned distance from each point of x, shape (k, 2), to the front at time t."""
 
-    def polylines(self, t: Any = None) -> list[np.ndarray]:
+    def polylines(self, t: float | None = None) -> list[np.ndarray]:
         """The front at time t as polylines (for drawing); empty if not explicit."""
         return []
 
@@ -82,7 +83,7 @@ class CircleFront(Front):
     The distance is exact: ``| |x - center| - radius(t) |``.
     """
 
-    def __init__(self, center: Any, radius: float | Callable[[float], float]):
+    def __init__(self, center: ArrayLike, radius: float | Callable[[float], float]):
         c = np.asarray(center)
         if c.dtype == object or c.dtype.kind not in "fiu":
             raise TypeError(f"center must be a real numeric array, got dtype {c.dtype}")
@@ -98,7 +99,7 @@ class CircleFront(Front):
                 raise ValueError(f"radius must be >= 0, got {r}")
         self._radius = radius
 
-    def radius(self, t: Any = None) -> float:
+    def radius(self, t: float | None = None) -> float:
         """The radius at time t (t is ignored for a constant radius)."""
         if not callable(self._radius):
             return float(self._radius)
@@ -107,15 +108,15 @@ class CircleFront(Front):
             raise ValueError(f"radius(t) must be >= 0, got {r} at t = {t}")
         return r
 
-    def signed_distance(self, x: Any, t: Any = None) -> np.ndarray:
+    def signed_distance(self, x: ArrayLike, t: float | None = None) -> np.ndarray:
         """Distance with sign: negative inside the circle, shape (k,)."""
         x = as_query_points(x)
         return np.hypot(x[:, 0] - self.center[0], x[:, 1] - self.center[1]) - self.radius(t)
 
-    def distance(self, x: Any, t: Any = None) -> np.ndarray:
+    def distance(self, x: ArrayLike, t: float | None = None) -> np.ndarray:
         return np.abs(self.signed_distance(x, t))
 
-    def polylines(self, t: Any = None) -> list[np.ndarray]:
+    def polylines(self, t: float | None = None) -> list[np.ndarray]:
         angle = np.linspace(0.0, 2.0 * np.pi, 257)
         r = self.radius(t)
         return [self.center + r * np.c_[np.cos(angle), np.sin(angle)]]
@@ -162,13 +163,14 @@ class PointFront(Front):
     the answer.
     """
 
-    def __init__(self, points: Any, closed: bool = True, *, spacing: float | None = None):
+    def __init__(self, points: ArrayLike, closed: bool = True, *, spacing: float | None = None):
         if not isinstance(closed, (bool, np.bool_)):
             raise TypeError("closed must be a bool")
         pts = as_query_points(points, "points")
         need = 3 if closed else 2
         if len(pts) < need:
-            raise ValueError(f"a {'closed' if closed else 'open'} PointFront needs at least {need} points, got {len(pts)}")
+            kind = "closed" if closed else "open"
+            raise ValueError(f"a {kind} PointFront needs at least {need} points, got {len(pts)}")
         self.closed = bool(closed)
         self.spacing = None if spacing is None else _real(spacing, "spacing")
         if self.spacing is not None:
@@ -194,17 +196,17 @@ class PointFront(Front):
         """Arc length of the polyline."""
         return float(np.hypot(*(self._b - self._a).T).sum())
 
-    def resampled(self, spacing: float) -> "PointFront":
+    def resampled(self, spacing: float) -> PointFront:
         """The same curve through evenly spaced points (arc-length spacing about
         ``spacing``, exactly length / round(length / spacing))."""
         return PointFront(self.points, self.closed, spacing=spacing)
 
-    def moved(self, new_points: Any) -> "PointFront":
+    def moved(self, new_points: ArrayLike) -> PointFront:
         """The front at its next position: same closedness and spacing; if this
         front has a spacing the new points are re-sampled evenly."""
         return PointFront(new_points, self.closed, spacing=self.spacing)
 
-    def polylines(self, t: Any = None) -> list[np.ndarray]:
+    def polylines(self, t: float | None = None) -> list[np.ndarray]:
         return [np.vstack([self.points, self.points[:1]]) if self.closed else self.points.copy()]
 
     def _segments_at(self, vertex: np.ndarray) -> np.ndarray:
@@ -220,7 +222,7 @@ class PointFront(Front):
             after = np.where(after >= n_seg, n_seg - 1, after)
         return np.stack([before, after], axis=-1)
 
-    def distance(self, x: Any, t: Any = None) -> np.ndarray:
+    def distance(self, x: ArrayLike, t: float | None = None) -> np.ndarray:
         x = as_query_points(x)
         out = np.empty(len(x))
         n = len(self.points)
@@ -302,7 +304,13 @@ class LevelSetFront(Front):
     | |x| - r |). Where the gradient vanishes and phi != 0 the distance is inf.
     """
 
-    def __init__(self, phi: Callable[[np.ndarray, float], Any], *, signed_distance: bool = False, step: float | None = None):
+    def __init__(
+        self,
+        phi: Callable[[np.ndarray, float], ArrayLike],
+        *,
+        signed_distance: bool = False,
+        step: float | None = None,
+    ):
         if not callable(phi):
             raise TypeError(f"phi must be callable phi(x, t), got {type(phi).__name__}")
         if not isinstance(signed_distance, (bool, np.bool_)):
@@ -324,11 +332,11 @@ class LevelSetFront(Front):
             raise ValueError(f"phi(x, t) returned NaN (first at row {int(np.argmax(np.isnan(value)))})")
         return value
 
-    def value(self, x: Any, t: Any = None) -> np.ndarray:
+    def value(self, x: ArrayLike, t: float | None = None) -> np.ndarray:
         """phi(x, t), validated, shape (k,)."""
         return self._phi(as_query_points(x), _time(t))
 
-    def distance(self, x: Any, t: Any = None) -> np.ndarray:
+    def distance(self, x: ArrayLike, t: float | None = None) -> np.ndarray:
         x = as_query_points(x)
         t = _time(t)
         value = self._phi(x, t)
@@ -375,7 +383,9 @@ class SpacingLaw:
         The clip bounds l and L of delta.
     """
 
-    def __init__(self, h_min: float, h_max: float, band: float, *, grade: float = 0.3, lower: float = 0.1, upper: float = 10.0):
+    def __init__(
+        self, h_min: float, h_max: float, band: float, *, grade: float = 0.3, lower: float = 0.1, upper: float = 10.0
+    ):
         self.h_min = _real(h_min, "h_min")
         self.h_max = _real(h_max, "h_max")
         self.band = _real(band, "band")
@@ -395,7 +405,7 @@ class SpacingLaw:
         if not self.upper > 1:
             raise ValueError(f"upper must be > 1 (the paper's L > 1), got {self.upper}")
 
-    def h(self, distance: Any) -> np.ndarray:
+    def h(self, distance: ArrayLike) -> np.ndarray:
         """Target spacing h(d) for distances d >= 0 (array or scalar), same shape."""
         d = np.asarray(distance)
         if d.dtype == object or d.dtype.kind not in "fiu":
@@ -407,7 +417,7 @@ class SpacingLaw:
             raise ValueError("distance must be >= 0")
         return np.minimum(self.h_max, self.h_min + self.grade * np.maximum(0.0, d - 0.5 * self.band))
 
-    def delta(self, mesh: Mesh, distance: Any, *, nn: np.ndarray | None = None) -> np.ndarray:
+    def delta(self, mesh: Mesh, distance: ArrayLike | None, *, nn: np.ndarray | None = None) -> np.ndarray:
         """delta(p) = clip(h(d(p)) / nn_M(p), lower, upper) for every mesh point.
 
         Parameters
@@ -433,7 +443,7 @@ class SpacingLaw:
             nn = nn_spacing(mesh)
         return np.clip(h / nn, self.lower, self.upper)
 
-    def __call__(self, mesh: Mesh, distance: Any) -> np.ndarray:
+    def __call__(self, mesh: Mesh, distance: ArrayLike | None) -> np.ndarray:
         return self.delta(mesh, distance)
 
     def __repr__(self) -> str:

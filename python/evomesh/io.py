@@ -6,13 +6,18 @@ import math
 import numbers
 import re
 from pathlib import Path
-from typing import Any, Mapping, Sequence
+from typing import TYPE_CHECKING, Any, Mapping, Sequence
 from xml.sax.saxutils import quoteattr
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from evomesh.mesh import Mesh
 from evomesh.spacing_function import _require_mesh, nn_spacing
+from evomesh.time_loop import Run, front_at
+
+if TYPE_CHECKING:
+    import meshio
 
 __all__ = ["to_meshio", "write_mesh", "read_mesh", "write_pvd", "write_run", "RESERVED_POINT_DATA"]
 
@@ -57,7 +62,7 @@ def _check_point_data(point_data: Mapping[str, Any] | None, n_points: int, reser
         except ValueError as error:  # ragged nesting
             raise ValueError(f"point data {name!r} must be a rectangular array: {error}") from None
         dtype = array.dtype
-        if dtype == object or dtype.kind not in "biufc":
+        if dtype == object or dtype.kind not in "biufc":  # noqa: E721 -- a numpy dtype comparison, not of types
             raise TypeError(f"point data {name!r} must be numeric, got dtype {dtype}")
         if (dtype.kind == "f" and dtype.itemsize > 8) or (dtype.kind == "c" and dtype.itemsize > 16):
             raise ValueError(
@@ -98,7 +103,7 @@ def _vtu_arrays(name: str, values: Any) -> list[tuple[str, np.ndarray]]:
     return [(name, array)]
 
 
-def to_meshio(mesh: Mesh, point_data: Mapping[str, Any] | None = None):
+def to_meshio(mesh: Mesh, point_data: Mapping[str, ArrayLike] | None = None) -> meshio.Mesh:
     """A meshio.Mesh: points with z = 0, a "triangle" block, and a "line" block
     for the interior constraint segments (boundary segments are implied by the
     triangles).
@@ -135,7 +140,7 @@ def to_meshio(mesh: Mesh, point_data: Mapping[str, Any] | None = None):
     return meshio.Mesh(points, cells, point_data=data)
 
 
-def write_mesh(path: str | Path, mesh: Mesh, point_data: Mapping[str, Any] | None = None) -> Path:
+def write_mesh(path: str | Path, mesh: Mesh, point_data: Mapping[str, ArrayLike] | None = None) -> Path:
     """Write a mesh with meshio (format from the suffix; ``.vtu`` for ParaView).
 
     Per-point data: ``kind``, ``origin`` and the arrays of ``point_data``
@@ -248,7 +253,11 @@ def write_pvd(path: str | Path, files: Sequence[str | Path], times: Sequence[flo
     path = Path(path)
     if len(files) != len(times):
         raise ValueError(f"files and times must have the same length, got {len(files)} and {len(times)}")
-    lines = ['<?xml version="1.0"?>', '<VTKFile type="Collection" version="0.1" byte_order="LittleEndian">', "  <Collection>"]
+    lines = [
+        '<?xml version="1.0"?>',
+        '<VTKFile type="Collection" version="0.1" byte_order="LittleEndian">',
+        "  <Collection>",
+    ]
     for name, t in zip(files, times):
         name = Path(name)
         try:
@@ -261,7 +270,7 @@ def write_pvd(path: str | Path, files: Sequence[str | Path], times: Sequence[flo
     return path
 
 
-def _pvd_times(run) -> list[float]:
+def _pvd_times(run: Run) -> list[float]:
     times = [s.time for s in run.steps]
     if not times or not all(math.isfinite(t) for t in times):
         return [float(k) for k in range(len(times) + 1)]
@@ -274,7 +283,7 @@ def _pvd_times(run) -> list[float]:
 _SERIES_FILE = re.compile(r"table\.csv|meshes\.pvd|mesh_\d{3,}\.vtu|step_\d{3,}\.png")
 
 
-def write_run(run, folder: str | Path, *, figures: bool = True, dpi: int = 110) -> dict[str, Any]:
+def write_run(run: Run, folder: str | Path, *, figures: bool = True, dpi: int = 110) -> dict[str, Any]:
     """Write the outputs of a :class:`evomesh.Run` into ``folder`` (created).
 
     - ``table.csv``: the statistics (:data:`evomesh.driver.STATISTICS_COLUMNS`).
@@ -321,8 +330,6 @@ def write_run(run, folder: str | Path, *, figures: bool = True, dpi: int = 110) 
         :func:`to_meshio`), or that clashes with :data:`RESERVED_POINT_DATA`;
         a bad ``dpi``. Nothing is written or removed then.
     """
-    from evomesh.driver import front_at
-
     if figures and (isinstance(dpi, bool) or not isinstance(dpi, numbers.Real) or not (math.isfinite(dpi) and dpi > 0)):
         raise ValueError(f"dpi must be a positive number, got {dpi!r}")
     folder = Path(folder)
@@ -336,8 +343,9 @@ def write_run(run, folder: str | Path, *, figures: bool = True, dpi: int = 110) 
             _check_point_data(fields[k], mesh.n_points, RESERVED_POINT_DATA)
         except (TypeError, ValueError) as error:
             raise type(error)(f"{where}: {error}") from None
-        if deltas[k] is not None and np.shape(deltas[k]) != (mesh.n_points,):
-            raise ValueError(f"{where}: delta must have shape ({mesh.n_points},), got {np.shape(deltas[k])}")
+        delta_k = deltas[k]
+        if delta_k is not None and np.shape(delta_k) != (mesh.n_points,):
+            raise ValueError(f"{where}: delta must have shape ({mesh.n_points},), got {np.shape(delta_k)}")
     # 2. the files of an earlier series
     folder.mkdir(parents=True, exist_ok=True)
     for old in folder.iterdir():

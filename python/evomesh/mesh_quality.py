@@ -20,7 +20,8 @@ def triangle_angles(points: np.ndarray, triangles: np.ndarray) -> np.ndarray:
     e2 = p[:, 1] - p[:, 0]
     l0, l1, l2 = (np.linalg.norm(e, axis=1) for e in (e0, e1, e2))
 
-    def angle(a, b, c):  # angle opposite a, law of cosines, clipped for rounding
+    # angle opposite a, law of cosines, clipped for rounding
+    def angle(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
         return np.degrees(np.arccos(np.clip((b * b + c * c - a * a) / (2 * b * c), -1.0, 1.0)))
 
     return np.stack([angle(l0, l1, l2), angle(l1, l2, l0), angle(l2, l0, l1)], axis=1)

@@ -27,7 +27,7 @@ def _lattice_shape(n_points: int) -> tuple[int, int]:
     ny0 = np.sqrt(n_points / _ROW_RATIO)
     best = None
     for ny in range(max(3, int(ny0 * 0.7)), int(ny0 * 1.3) + 3):
-        def valid(nx: int) -> bool:
+        def valid(nx: int, ny: int = ny) -> bool:  # ny bound now (ruff B023); used in this iteration only
             return abs((nx - 1) / ((ny - 1) * _ROW_RATIO) - 1.0) <= 0.05
 
         # the nx with a near-equilateral ratio form a range [lo, hi]

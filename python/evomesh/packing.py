@@ -2,16 +2,17 @@
 
 from __future__ import annotations
 
-from typing import Any
-
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 
 from evomesh import _core
 
 __all__ = ["lexical_first_mis"]
 
 
-def lexical_first_mis(centers: Any, radii: Any, order: Any = None, *, n_forced: int = 0) -> np.ndarray:
+def lexical_first_mis(
+    centers: ArrayLike, radii: ArrayLike, order: ArrayLike | None = None, *, n_forced: int = 0
+) -> NDArray[np.bool_]:
     """Lexical-first maximal independent set of the sphere conflict graph.
 
     Two spheres conflict when their interiors overlap, |c1 - c2| < r1 + r2.

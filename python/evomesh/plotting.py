@@ -3,22 +3,27 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 
-from evomesh.fronts import LevelSetFront
+from evomesh.fronts import Front, LevelSetFront
 from evomesh.mesh import Mesh
 from evomesh.spacing_function import _require_mesh, as_delta, spacing
 
+if TYPE_CHECKING:
+    from matplotlib.axes import Axes
+    from matplotlib.figure import Figure, SubFigure
+
 __all__ = ["plot_step", "plot_mesh", "draw_front"]
 
-_FRONT_STYLE = {"color": "crimson", "linewidth": 1.4, "linestyle": "--", "zorder": 5}
+_FRONT_STYLE: dict[str, Any] = {"color": "crimson", "linewidth": 1.4, "linestyle": "--", "zorder": 5}
 _KEPT_COLOR = "0.55"
 _NEW_COLOR = "darkorange"
 
 
-def _figure(panels: int, size: float = 5.0):
+def _figure(panels: int, size: float = 5.0) -> tuple[Figure, np.ndarray]:
     # Figure without pyplot: no global state, works with any backend (Agg here).
     from matplotlib.figure import Figure
 
@@ -27,7 +32,7 @@ def _figure(panels: int, size: float = 5.0):
     return fig, axes
 
 
-def _frame(ax, mesh: Mesh) -> None:
+def _frame(ax: Axes, mesh: Mesh) -> None:
     lo, hi = mesh.points.min(axis=0), mesh.points.max(axis=0)
     pad = 0.02 * float((hi - lo).max())
     ax.set_xlim(lo[0] - pad, hi[0] + pad)
@@ -37,18 +42,24 @@ def _frame(ax, mesh: Mesh) -> None:
     ax.set_yticks([])
 
 
-def _circles(ax, centers: np.ndarray, radii: np.ndarray, **style: Any) -> None:
+def _circles(ax: Axes, centers: np.ndarray, radii: np.ndarray, **style: Any) -> None:
     from matplotlib.collections import EllipseCollection
 
     diameters = 2.0 * radii
     ax.add_collection(
         EllipseCollection(
-            diameters, diameters, np.zeros(len(radii)), units="xy", offsets=centers, offset_transform=ax.transData, **style
+            diameters,
+            diameters,
+            np.zeros(len(radii)),
+            units="xy",
+            offsets=centers,
+            offset_transform=ax.transData,
+            **style,
         )
     )
 
 
-def draw_front(ax, front: Any, t: Any = None, mesh: Mesh | None = None) -> None:
+def draw_front(ax: Axes, front: Front | None, t: float | None = None, mesh: Mesh | None = None) -> None:
     """Draw a front on a matplotlib axes: its polylines, or the zero contour of a
     level set (sampled on a 256 x 256 grid over the mesh's bounding box)."""
     if front is None:
@@ -70,14 +81,14 @@ def draw_front(ax, front: Any, t: Any = None, mesh: Mesh | None = None) -> None:
 def plot_step(
     old: Mesh,
     new: Mesh,
-    delta: Any,
+    delta: ArrayLike,
     *,
-    front: Any = None,
-    t: Any = None,
+    front: Front | None = None,
+    t: float | None = None,
     packing_scale: float = 1.0,
     title: str | None = None,
     size: float = 5.0,
-):
+) -> Figure:
     """One step in three panels, like a row of the paper's Figure 4.
 
     1. The new spacing function as spheres: at every old point p a circle of
@@ -131,7 +142,9 @@ def plot_step(
     from evomesh.mesh_quality import quality
 
     q = quality(new)
-    a3.set_title(f"mesh: {new.n_points} points, {new.n_triangles} triangles\nmin angle {q.min_angle:.2f} deg", fontsize=10)
+    a3.set_title(
+        f"mesh: {new.n_points} points, {new.n_triangles} triangles\nmin angle {q.min_angle:.2f} deg", fontsize=10
+    )
     for ax in (a1, a2, a3):
         draw_front(ax, front, t, new)
     if title:
@@ -139,9 +152,12 @@ def plot_step(
     return fig
 
 
-def plot_mesh(mesh: Mesh, *, front: Any = None, t: Any = None, ax=None, title: str | None = None):
+def plot_mesh(
+    mesh: Mesh, *, front: Front | None = None, t: float | None = None, ax: Axes | None = None, title: str | None = None
+) -> Figure | SubFigure:
     """The mesh (and a front); returns the Figure (new unless ``ax`` is given)."""
     _require_mesh(mesh)
+    fig: Figure | SubFigure
     if ax is None:
         fig, (ax,) = _figure(1)
     else:
@@ -154,7 +170,7 @@ def plot_mesh(mesh: Mesh, *, front: Any = None, t: Any = None, ax=None, title: s
     return fig
 
 
-def save(fig, path: str | Path, dpi: int = 110) -> Path:
+def save(fig: Figure, path: str | Path, dpi: int = 110) -> Path:
     """Save a figure (PNG by suffix) and release it."""
     path = Path(path)
     fig.savefig(path, dpi=dpi)

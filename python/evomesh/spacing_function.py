@@ -5,6 +5,7 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 
 from evomesh import _core
 from evomesh.mesh import _MAX_COORDINATE, Mesh, _as_array
@@ -33,7 +34,7 @@ def nn_spacing(mesh: Mesh) -> np.ndarray:
     return _core.nn_spacing(mesh.points)
 
 
-def as_delta(mesh: Mesh, delta: Any) -> np.ndarray:
+def as_delta(mesh: Mesh, delta: ArrayLike) -> NDArray[np.float64]:
     """Validate a per-point factor delta: shape (n,) (or a scalar), finite, in
     [DELTA_MIN, DELTA_MAX]; returns a float64 copy."""
     array = _as_array(delta, "delta")
@@ -119,7 +120,7 @@ class SpacingFunction:
         """f at points x, shape (k, 2) -> (k,) (a single point (2,) gives a float)."""
         return self._query(x)[0]
 
-    def nearest_site(self, x: Any) -> np.ndarray:
+    def nearest_site(self, x: ArrayLike) -> NDArray[np.int64]:
         """Index of the point p whose cone delta(p) nn(p) + |x - p| is lowest at x."""
         return self._query(x)[1]
 
@@ -127,7 +128,7 @@ class SpacingFunction:
         return f"SpacingFunction(n_sites={len(self.sites)}, n_hidden={self.n_hidden})"
 
 
-def spacing(mesh: Mesh, delta: Any) -> SpacingFunction:
+def spacing(mesh: Mesh, delta: ArrayLike) -> SpacingFunction:
     """The new spacing function of the evolving mesh problem (Eq. 2-3).
 
     Parameters

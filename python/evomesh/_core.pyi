@@ -1,0 +1,197 @@
+"""Type stubs of the compiled module evomesh._core (cpp/bindings/module.cpp).
+
+Array arguments are converted by pybind11 (``forcecast``, C order): any array
+like of the right shape is accepted. Returned arrays are new numpy arrays of
+the dtypes given here; indices are int64, flags and point kinds uint8.
+"""
+
+from typing import ClassVar, TypedDict
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+POINT_KINDS: tuple[tuple[str, int], ...]
+MAX_MIN_ANGLE: float
+STRAIGHT_ULPS: float
+
+class SampleMode:
+    """Where samples are drawn (Section 3.2 step 2; Section 5's variations)."""
+
+    random: ClassVar[SampleMode]
+    barycentre: ClassVar[SampleMode]
+    midpoints: ClassVar[SampleMode]
+    barycentre_midpoints: ClassVar[SampleMode]
+    __members__: ClassVar[dict[str, SampleMode]]
+    def __init__(self, value: int) -> None: ...
+    def __int__(self) -> int: ...
+    def __index__(self) -> int: ...
+    def __eq__(self, other: object) -> bool: ...
+    def __ne__(self, other: object) -> bool: ...
+    def __hash__(self) -> int: ...
+    @property
+    def name(self) -> str: ...
+    @property
+    def value(self) -> int: ...
+
+class RadiusRule:
+    """Sample sphere radius: exact f(x)/2, or the paper's cheap bound."""
+
+    exact: ClassVar[RadiusRule]
+    cheap: ClassVar[RadiusRule]
+    __members__: ClassVar[dict[str, RadiusRule]]
+    def __init__(self, value: int) -> None: ...
+    def __int__(self) -> int: ...
+    def __index__(self) -> int: ...
+    def __eq__(self, other: object) -> bool: ...
+    def __ne__(self, other: object) -> bool: ...
+    def __hash__(self) -> int: ...
+    @property
+    def name(self) -> str: ...
+    @property
+    def value(self) -> int: ...
+
+class FrfcOptions:
+    """Options of FRFC (evolve(method='frfc')); fields as in C++ evomesh::Frfc_options."""
+
+    fields: ClassVar[tuple[str, ...]]
+    cell_factor: float
+    radius: RadiusRule
+    radius_scale: float
+    boundary_scale: float
+    ring_samples: bool
+    repair_ratio: float
+    samples: SampleMode
+    adaptive_cells: bool
+    skip_coarse: bool
+    filter_samples: bool
+    max_samples: float
+    threads: int
+    seed: int
+    quality: bool
+    min_angle: float
+    crowding_angle: float
+    quality_max_fraction: float
+    quality_max_extra: float
+    def __init__(self) -> None: ...
+    @staticmethod
+    def paper() -> FrfcOptions: ...
+    @staticmethod
+    def recommended() -> FrfcOptions: ...
+    def validate(self) -> None: ...
+    def __copy__(self) -> FrfcOptions: ...
+    def __deepcopy__(self, memo: dict[int, object]) -> FrfcOptions: ...
+    def __eq__(self, other: object) -> bool: ...
+    def __getstate__(self) -> dict[str, object]: ...
+    def __setstate__(self, state: dict[str, object]) -> None: ...
+
+class DrfcOptions:
+    """Options of DRFC (evolve(method='drfc')); fields as in C++ evomesh::Drfc_options."""
+
+    fields: ClassVar[tuple[str, ...]]
+    min_angle: float
+    radius_scale: float
+    threads: int
+    max_samples: float
+    quality: bool
+    crowding_angle: float
+    quality_max_fraction: float
+    quality_max_extra: float
+    def __init__(self) -> None: ...
+    @staticmethod
+    def paper() -> DrfcOptions: ...
+    @staticmethod
+    def recommended() -> DrfcOptions: ...
+    def validate(self) -> None: ...
+    def __copy__(self) -> DrfcOptions: ...
+    def __deepcopy__(self, memo: dict[int, object]) -> DrfcOptions: ...
+    def __eq__(self, other: object) -> bool: ...
+    def __getstate__(self) -> dict[str, object]: ...
+    def __setstate__(self, state: dict[str, object]) -> None: ...
+
+class EvolveResult(TypedDict):
+    """What :func:`frfc` and :func:`drfc` return (a plain dict at run time)."""
+
+    points: NDArray[np.float64]  # (n, 2)
+    triangles: NDArray[np.int64]  # (t, 3)
+    segments: NDArray[np.int64]  # (s, 2)
+    segment_is_boundary: NDArray[np.uint8]  # (s,)
+    kind: NDArray[np.uint8]  # (n,)
+    origin: NDArray[np.int64]  # (n,), -1 for a new point
+    input_f: NDArray[np.float64]  # (n_input,)
+    input_nn: NDArray[np.float64]  # (n_input,)
+    stats: dict[str, float]
+
+class RefineResult(TypedDict):
+    """What :func:`drfc_refine` returns (a plain dict at run time)."""
+
+    points: NDArray[np.float64]
+    triangles: NDArray[np.int64]
+    segments: NDArray[np.int64]
+    segment_is_boundary: NDArray[np.uint8]
+    kind: NDArray[np.uint8]
+    origin: NDArray[np.int64]
+    f: NDArray[np.float64]
+    stats: dict[str, float]
+
+class SpacingFunction:
+    def __init__(self, sites: ArrayLike, weights: ArrayLike, min_sites_per_part: int = 0) -> None: ...
+    def evaluate(
+        self, x: ArrayLike, threads: int = 0, certified: bool = True
+    ) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
+        """(f, site): f at the (k, 2) points x and the index of the site attaining it."""
+    @property
+    def n_sites(self) -> int: ...
+    @property
+    def n_hidden(self) -> int: ...
+    @property
+    def n_parts(self) -> int: ...
+
+def prepare_mesh(
+    points: ArrayLike, triangles: ArrayLike, segments: ArrayLike | None = None, check_planar: bool = True
+) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.uint8], NDArray[np.uint8], int]:
+    """Orient triangles CCW, build segments, check planarity, classify points.
+    Returns (triangles, segments, segment_is_boundary, kind, n_flipped)."""
+
+def nn_spacing(points: ArrayLike) -> NDArray[np.float64]: ...
+def lexical_first_mis(
+    centers: ArrayLike, radii: ArrayLike, order: ArrayLike, n_forced: int = 0
+) -> NDArray[np.uint8]: ...
+def packing_order(classes: ArrayLike, radii: ArrayLike) -> NDArray[np.int64]: ...
+def frfc(
+    points: ArrayLike,
+    triangles: ArrayLike,
+    segments: ArrayLike,
+    segment_is_boundary: ArrayLike,
+    kind: ArrayLike,
+    delta: ArrayLike,
+    options: FrfcOptions = ...,
+) -> EvolveResult:
+    """Functional-Refining-Functional-Coarsening (Section 3.2): one step; returns a dict of arrays and stats."""
+
+def drfc(
+    points: ArrayLike,
+    triangles: ArrayLike,
+    segments: ArrayLike,
+    segment_is_boundary: ArrayLike,
+    kind: ArrayLike,
+    delta: ArrayLike,
+    options: DrfcOptions = ...,
+) -> EvolveResult:
+    """Delaunay-Refining-Functional-Coarsening (Section 5); returns the same dict as frfc."""
+
+def drfc_refine(
+    points: ArrayLike,
+    triangles: ArrayLike,
+    segments: ArrayLike,
+    segment_is_boundary: ArrayLike,
+    kind: ArrayLike,
+    delta: ArrayLike,
+    options: DrfcOptions = ...,
+) -> RefineResult:
+    """DRFC step 1 alone: Delaunay refinement with Ruppert's rules and rule 4 (Section 5)."""
+
+def constrained_delaunay(points: ArrayLike, pieces: ArrayLike, boundary: ArrayLike) -> NDArray[np.int64]: ...
+def locate_points(
+    points: ArrayLike, triangles: ArrayLike, queries: ArrayLike
+) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
+    """(triangle index per query, -1 if outside; barycentric coordinates (k, 3))."""
