@@ -176,9 +176,9 @@ def test_public_names_of_the_package_are_kept():
         "DrfcOptions", "SampleMode", "RadiusRule", "nn_spacing", "spacing", "SpacingFunction",
         "lexical_first_mis", "quality", "Quality", "Front", "CircleFront", "PointFront", "LevelSetFront",
         "SpacingLaw", "transfer", "run", "Run", "Step", "Driver", "step_statistics", "growing_circle",
-        "unit_square_mesh",
+        "unit_square_mesh", "Lineage",
     }  # fmt: skip
-    assert set(evomesh.__all__) == names
+    assert names <= set(evomesh.__all__)  # names stay; new ones may join
     for name in names:
         assert hasattr(evomesh, name), name
     from evomesh import time_loop

@@ -16,7 +16,7 @@ from evomesh.evolution import (
     delaunay_refine,
     evolve,
 )
-from evomesh.mesh import Mesh, PointKind
+from evomesh.mesh import Lineage, Mesh, PointKind
 from evomesh.mesh_quality import Quality, quality
 from evomesh.packing import lexical_first_mis
 from evomesh.spacing_function import SpacingFunction, nn_spacing, spacing
@@ -24,6 +24,7 @@ from evomesh.spacing_function import SpacingFunction, nn_spacing, spacing
 __all__ = [
     "Mesh",
     "PointKind",
+    "Lineage",
     "evolve",
     "delaunay_refine",
     "FRFC_DEFAULTS",

@@ -9,7 +9,7 @@ from typing import Any
 import numpy as np
 
 from evomesh import _core
-from evomesh.mesh import Mesh, check_mesh_limits
+from evomesh.mesh import Lineage, Mesh, check_mesh_limits
 from evomesh.spacing_function import _require_mesh, as_delta
 
 __all__ = ["evolve", "delaunay_refine", "make_options", "FRFC_DEFAULTS", "DRFC_DEFAULTS", "FrfcOptions", "DrfcOptions",
@@ -250,20 +250,24 @@ def evolve(mesh: Mesh, delta: Any, *, method: str = "frfc", seed: int | None = N
         o.seed = _check_seed(seed)
     core = _core.frfc if method == "frfc" else _core.drfc
     result = core(mesh.points, mesh.triangles, mesh.segments, mesh.segment_is_boundary.astype(np.uint8), mesh.kind, d, o)
-    return _wrap(result)
+    return _wrap(result, mesh)
 
 
-def _wrap(result: dict[str, Any]) -> Mesh:
+def _wrap(result: dict[str, Any], old: Mesh | None = None) -> Mesh:
     # Every output satisfies the limits Mesh() puts on inputs, or the step fails
     # here, saying why (issue 9: a square of side 1e-70 refined step after step).
     try:
-        check_mesh_limits(result["points"], result["triangles"])
+        nn = check_mesh_limits(result["points"], result["triangles"])
     except ValueError as error:
         raise ValueError(
             f"the step's output is not a valid mesh in float64: {error}. The requested spacing is beyond what "
             "float64 resolves at these coordinates; rescale the mesh (or translate it towards the origin) or "
             "refine less"
         ) from None
+    lineage = None
+    if old is not None and "parent_triangle" in result:
+        lineage = Lineage(old.n_points, old.n_triangles, result["parent_triangle"], result["barycentric"],
+                          result["input_nn"], result["input_f"])
     return Mesh._trusted(
         result["points"],
         result["triangles"],
@@ -272,6 +276,8 @@ def _wrap(result: dict[str, Any]) -> Mesh:
         result["kind"],
         result["origin"],
         dict(result["stats"]),
+        lineage,
+        nn,
     )
 
 

@@ -26,6 +26,9 @@ __all__ = ["transfer", "Interpolation"]
 #    its end corners) may be replaced by a straight piece: the new boundary is
 #    then off the old one by up to that many roundings.
 _ROUNDING_ULPS = 16 + _core.STRAIGHT_ULPS
+# Barycentric coordinates rebuild a point up to their own rounding, amplified in
+# thin triangles: a lineage is accepted within this many outside tolerances.
+_LINEAGE_SLACK = 1024.0
 
 
 def _outside_tolerance(old: Mesh, queries: np.ndarray) -> float:
@@ -40,8 +43,9 @@ class Interpolation:
     """How each point of ``new`` takes its value from ``old``; reusable for many fields.
 
     Kept points (``new.origin >= 0``) copy the value at their origin exactly;
-    every other point interpolates linearly in the old triangle containing it,
-    located by the C++ core (CGAL, O(log n) per point). Points that rounding put
+    every other point interpolates linearly in the old triangle containing it:
+    from ``new.lineage`` (the step's parent map, no search) when ``new`` was
+    evolved from ``old``, else located by the C++ core (CGAL, O(log n) per point). Points that rounding put
     just outside the old domain interpolate on the nearest old boundary edge:
     "just" is a few ulps of the largest coordinate (_ROUNDING_ULPS eps max|x|, whatever
     the extent: a mesh far from the origin has coarser coordinates) plus the
@@ -76,7 +80,25 @@ class Interpolation:
         self.origin = origin
         self.located = np.flatnonzero(~kept)
         queries = new.points[self.located]
-        triangle, weights = _core.locate_points(old.points, old.triangles, queries)
+        lineage = new.lineage
+        if lineage is not None and lineage.matches(old):
+            # The step's parent map: no point location (issue 10); checked by
+            # rebuilding the points from it, which a mismatched old mesh fails.
+            triangle = lineage.parent_triangle[self.located]
+            weights = lineage.barycentric[self.located]
+            rebuilt = np.einsum("kj,kjc->kc", weights, old.points[old.triangles[np.maximum(triangle, 0)]])
+            gap = np.where(triangle >= 0, np.abs(rebuilt - queries).max(axis=1, initial=0.0), 0.0)
+            if gap.size and gap.max() > _LINEAGE_SLACK * _outside_tolerance(old, queries):
+                raise ValueError("new.lineage does not fit old (its points are elsewhere): new was not evolved from old")
+            unknown = np.flatnonzero(triangle < 0)
+            if len(unknown):
+                triangle = triangle.copy()
+                weights = weights.copy()
+                triangle[unknown], weights[unknown] = _core.locate_points(old.points, old.triangles, queries[unknown])
+            self.used_lineage = True
+        else:
+            triangle, weights = _core.locate_points(old.points, old.triangles, queries)
+            self.used_lineage = False
         vertices = old.triangles[np.maximum(triangle, 0)]
         outside = np.flatnonzero(triangle < 0)
         if len(outside):

@@ -10,7 +10,7 @@ import numpy as np
 
 from evomesh import _core
 
-__all__ = ["Mesh", "PointKind"]
+__all__ = ["Mesh", "PointKind", "Lineage"]
 
 # The core evaluates polynomials of degree up to 4 in the coordinates, in double
 # (squared cosines in CGAL's mesher, areas times lengths in the quality
@@ -106,7 +106,8 @@ def _check_topology(points: np.ndarray, triangles: np.ndarray) -> None:
         raise ValueError(f"points {a} and {b} are duplicates")
 
 
-def _check_point_distances(points: np.ndarray) -> None:
+def _check_point_distances(points: np.ndarray) -> np.ndarray:
+    """nn_M at every point (returned); raises when two points are too close."""
     nn = _core.nn_spacing(points)
     if nn.min() < _MIN_POINT_DISTANCE:
         k = int(np.argmin(nn))
@@ -114,6 +115,7 @@ def _check_point_distances(points: np.ndarray) -> None:
             f"point {k} is {nn[k]:.3g} from its nearest point, below {_MIN_POINT_DISTANCE:g}: products of "
             "coordinates would underflow; rescale the mesh"
         )
+    return nn
 
 
 # A triangle whose height is below this fraction of its longest edge (smallest
@@ -150,15 +152,16 @@ def _check_not_flat(points: np.ndarray, triangles: np.ndarray) -> None:
         )
 
 
-def check_mesh_limits(points: np.ndarray, triangles: np.ndarray) -> None:
+def check_mesh_limits(points: np.ndarray, triangles: np.ndarray) -> np.ndarray:
     """Raise ValueError unless points and counter-clockwise triangles satisfy the
     numeric limits of :class:`Mesh`: coordinates within 1e75, no two points closer
-    than 1e-75, every triangle positively oriented and not flat. O(n log n)."""
+    than 1e-75, every triangle positively oriented and not flat. O(n log n).
+    Returns nn_M at the points (computed on the way)."""
     if points.size and not np.isfinite(points).all():
         raise ValueError("points contain NaN or infinite coordinates")
     if points.size and np.abs(points).max() > _MAX_COORDINATE:
         raise ValueError(f"point coordinates must be below {_MAX_COORDINATE:g} in magnitude")
-    _check_point_distances(points)
+    nn = _check_point_distances(points)
     p = points[triangles]
     d1 = p[:, 1] - p[:, 0]
     d2 = p[:, 2] - p[:, 0]
@@ -166,6 +169,7 @@ def check_mesh_limits(points: np.ndarray, triangles: np.ndarray) -> None:
     if inverted.any():
         raise ValueError(f"triangle {int(np.argmax(inverted))} has zero or negative area")
     _check_not_flat(points, triangles)
+    return nn
 
 
 class Mesh:
@@ -210,7 +214,7 @@ class Mesh:
         The caller's arrays are never modified.
     """
 
-    __slots__ = ("points", "triangles", "segments", "segment_is_boundary", "kind", "origin", "stats")
+    __slots__ = ("points", "triangles", "segments", "segment_is_boundary", "kind", "origin", "stats", "lineage", "_nn")
 
     points: np.ndarray
     triangles: np.ndarray
@@ -219,6 +223,7 @@ class Mesh:
     kind: np.ndarray
     origin: np.ndarray
     stats: Mapping[str, float]
+    lineage: "Lineage | None"
 
     def __init__(self, points: Any, triangles: Any, segments: Any = None, *, kind: Any = None, origin: Any = None):
         pts = _as_points(points)
@@ -230,7 +235,7 @@ class Mesh:
             raise ValueError("a mesh needs at least one triangle")
         segs = None if segments is None else _as_indices(segments, 2, "segments", n)
         _check_topology(pts, tris)
-        _check_point_distances(pts)
+        nn = _check_point_distances(pts)
         tris, segs, boundary, computed_kind, _ = _core.prepare_mesh(pts, tris, segs, True)
         _check_not_flat(pts, tris)
         if kind is None:
@@ -267,9 +272,9 @@ class Mesh:
             if (org < -1).any() or (org.dtype.kind == "u" and (org > np.iinfo(np.int64).max).any()):
                 raise ValueError("origin values must be point indices >= 0, or -1 for a new point")
             org = org.astype(np.int64)
-        self._assign(pts, tris, segs, boundary, kinds, org, {})
+        self._assign(pts, tris, segs, boundary, kinds, org, {}, None, nn)
 
-    def _assign(self, points, triangles, segments, segment_is_boundary, kind, origin, stats) -> None:
+    def _assign(self, points, triangles, segments, segment_is_boundary, kind, origin, stats, lineage, nn) -> None:
         set_ = object.__setattr__
         set_(self, "points", _frozen(np.asarray(points, dtype=np.float64)))
         set_(self, "triangles", _frozen(np.asarray(triangles, dtype=np.int64)))
@@ -278,13 +283,24 @@ class Mesh:
         set_(self, "kind", _frozen(np.asarray(kind, dtype=np.uint8)))
         set_(self, "origin", _frozen(np.asarray(origin, dtype=np.int64)))
         set_(self, "stats", MappingProxyType(dict(stats)))
+        set_(self, "lineage", lineage)
+        set_(self, "_nn", None if nn is None else _frozen(np.asarray(nn, dtype=np.float64)))
 
     @classmethod
-    def _trusted(cls, points, triangles, segments, segment_is_boundary, kind, origin, stats=None) -> "Mesh":
+    def _trusted(cls, points, triangles, segments, segment_is_boundary, kind, origin, stats=None, lineage=None,
+                 nn=None) -> "Mesh":
         """Wrap arrays that evomesh itself produced (already valid); no checks."""
         mesh = cls.__new__(cls)
-        mesh._assign(points, triangles, segments, segment_is_boundary, kind, origin, stats or {})
+        mesh._assign(points, triangles, segments, segment_is_boundary, kind, origin, stats or {}, lineage, nn)
         return mesh
+
+    @property
+    def nn_spacing(self) -> np.ndarray:
+        """nn_M(p) at every point, shape (n,): the distance to the nearest other
+        point (computed once, when the mesh is made; read-only)."""
+        if self._nn is None:
+            object.__setattr__(self, "_nn", _frozen(_core.nn_spacing(self.points)))
+        return self._nn
 
     def __setattr__(self, name: str, value: Any) -> None:
         raise AttributeError("Mesh is immutable; evolve() returns a new mesh")
@@ -294,15 +310,14 @@ class Mesh:
         return (
             _unpickle_mesh,
             (self.points, self.triangles, self.segments, self.segment_is_boundary, self.kind, self.origin,
-             dict(self.stats)),
+             dict(self.stats), self.lineage, self._nn),
         )
 
     def __copy__(self) -> "Mesh":
         return self  # immutable
 
     def __deepcopy__(self, memo: dict) -> "Mesh":
-        return _unpickle_mesh(self.points, self.triangles, self.segments, self.segment_is_boundary, self.kind,
-                              self.origin, dict(self.stats))
+        return _unpickle_mesh(*self.__reduce__()[1])
 
     @property
     def n_points(self) -> int:
@@ -342,5 +357,53 @@ class Mesh:
         return f"Mesh(n_points={self.n_points}, n_triangles={self.n_triangles}, segments={len(self.segments)}, {by_kind})"
 
 
-def _unpickle_mesh(points, triangles, segments, segment_is_boundary, kind, origin, stats) -> Mesh:
-    return Mesh._trusted(points, triangles, segments, segment_is_boundary, kind, origin, stats)
+def _unpickle_mesh(points, triangles, segments, segment_is_boundary, kind, origin, stats, lineage=None,
+                   nn=None) -> Mesh:
+    return Mesh._trusted(points, triangles, segments, segment_is_boundary, kind, origin, stats, lineage, nn)
+
+
+class Lineage:
+    """How a mesh made by :func:`evomesh.evolve` lies in the mesh it was evolved
+    from (``new.lineage``; None for a mesh built by :class:`Mesh`). Read-only.
+
+    Attributes
+    ----------
+    n_old_points, n_old_triangles : int
+        Sizes of the old mesh (checked against the mesh a caller pairs it with).
+    parent_triangle : ndarray of int, shape (n_new,)
+        For every point not kept (``origin == -1``), the old triangle that
+        contains it; -1 for kept points (their old index is ``origin``) and for
+        the rare point no old triangle contains.
+    barycentric : ndarray, shape (n_new, 3)
+        Its barycentric coordinates in that triangle (vertex order of
+        ``old.triangles``); they sum to 1 and reproduce linear functions.
+    old_nn, old_f : ndarray, shape (n_old,)
+        nn_M and the spacing function f at the old points, as the step used them.
+    """
+
+    __slots__ = ("n_old_points", "n_old_triangles", "parent_triangle", "barycentric", "old_nn", "old_f")
+
+    def __init__(self, n_old_points: int, n_old_triangles: int, parent_triangle: np.ndarray, barycentric: np.ndarray,
+                 old_nn: np.ndarray, old_f: np.ndarray) -> None:
+        set_ = object.__setattr__
+        set_(self, "n_old_points", int(n_old_points))
+        set_(self, "n_old_triangles", int(n_old_triangles))
+        set_(self, "parent_triangle", _frozen(np.asarray(parent_triangle, dtype=np.int64)))
+        set_(self, "barycentric", _frozen(np.asarray(barycentric, dtype=np.float64).reshape(-1, 3)))
+        set_(self, "old_nn", _frozen(np.asarray(old_nn, dtype=np.float64)))
+        set_(self, "old_f", _frozen(np.asarray(old_f, dtype=np.float64)))
+
+    def __setattr__(self, name: str, value: Any) -> None:
+        raise AttributeError("Lineage is immutable")
+
+    def __reduce__(self):
+        return (Lineage, (self.n_old_points, self.n_old_triangles, self.parent_triangle, self.barycentric, self.old_nn,
+                          self.old_f))
+
+    def matches(self, old: "Mesh") -> bool:
+        """Whether ``old`` has the sizes of the mesh this lineage refers to."""
+        return old.n_points == self.n_old_points and old.n_triangles == self.n_old_triangles
+
+    def __repr__(self) -> str:
+        located = int((self.parent_triangle >= 0).sum())
+        return f"Lineage(n_old_points={self.n_old_points}, located={located})"

@@ -31,7 +31,7 @@ def nn_spacing(mesh: Mesh) -> np.ndarray:
     ndarray, shape (n,)
     """
     _require_mesh(mesh)
-    return _core.nn_spacing(mesh.points)
+    return np.array(mesh.nn_spacing)  # cached on the mesh; a writable copy for the caller
 
 
 def as_delta(mesh: Mesh, delta: ArrayLike) -> NDArray[np.float64]:
