@@ -12,6 +12,9 @@ if [ "$(id -u)" -ne 0 ]; then sudo_cmd=(sudo); fi
 missing=()
 dpkg -s libcgal-dev >/dev/null 2>&1 || missing+=(libcgal-dev)
 command -v g++ >/dev/null 2>&1 || missing+=(g++)
+# For the C++ tests and benchmarks that tools/run-tests.sh builds.
+command -v cmake >/dev/null 2>&1 || missing+=(cmake)
+command -v ninja >/dev/null 2>&1 || command -v make >/dev/null 2>&1 || missing+=(make)
 command -v python3 >/dev/null 2>&1 || missing+=(python3)
 if command -v python3 >/dev/null 2>&1; then
   python3 -c 'import ensurepip, venv' >/dev/null 2>&1 || missing+=(python3-venv)
