@@ -12,6 +12,9 @@ if [ "$(id -u)" -ne 0 ]; then sudo_cmd=(sudo); fi
 missing=()
 dpkg -s libcgal-dev >/dev/null 2>&1 || missing+=(libcgal-dev)
 command -v g++ >/dev/null 2>&1 || missing+=(g++)
+# For the C++ tests and benchmarks that tools/run-tests.sh builds.
+command -v cmake >/dev/null 2>&1 || missing+=(cmake)
+command -v ninja >/dev/null 2>&1 || command -v make >/dev/null 2>&1 || missing+=(make)
 command -v python3 >/dev/null 2>&1 || missing+=(python3)
 if command -v python3 >/dev/null 2>&1; then
   python3 -c 'import ensurepip, venv' >/dev/null 2>&1 || missing+=(python3-venv)
@@ -27,7 +30,26 @@ fi
 if [ ! -x .venv/bin/python ]; then
   python3 -m venv .venv
 fi
+# The install is skipped when the sources it is built from are the ones installed
+# last time (a content hash, kept in the venv with the installed module's file
+# and mtime, so an in-place developer rebuild since then counts as a change) and
+# the module still imports: a wheel build compiles everything again.
+# EVOMESH_REINSTALL=1 forces it.
+stamp=.venv/.evomesh-installed
+source_hash="$(find CMakeLists.txt pyproject.toml cpp/include cpp/src cpp/bindings python -type f \
+  ! -path '*/__pycache__/*' -print0 | LC_ALL=C sort -z | xargs -0 sha256sum | sha256sum | cut -d' ' -f1)"
+installed_module() {
+  .venv/bin/python -c 'import os, evomesh._core as m, pytest, hypothesis
+print(m.__file__, os.stat(m.__file__).st_mtime_ns)' 2>/dev/null
+}
+if [ "${EVOMESH_REINSTALL:-0}" != 1 ] && [ -f "$stamp" ] &&
+  [ "$(cat "$stamp")" = "$source_hash $(installed_module || echo none)" ]; then
+  echo "evomesh: up to date in $(pwd)/.venv"
+  exit 0
+fi
+rm -f "$stamp"
 .venv/bin/python -m pip install -q --upgrade pip
 # The package (C++ extension built against Debian's CGAL) and the test tools.
 .venv/bin/python -m pip install -q ".[test]"
+echo "$source_hash $(installed_module)" >"$stamp"
 echo "evomesh: installed in $(pwd)/.venv"

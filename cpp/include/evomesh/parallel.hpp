@@ -1,19 +1,22 @@
 // A minimal deterministic parallel loop: work items are fixed in advance, so the
-// result never depends on how many threads run them.
+// result never depends on how many threads run them, nor on which threads.
 #pragma once
 
 #include <algorithm>
-#include <atomic>
 #include <cstddef>
-#include <exception>
-#include <mutex>
-#include <thread>
-#include <vector>
+#include <string>
 
 namespace evomesh {
 
+// The thread count of parallel_for(..., 0, ...) when no Thread_limit is set:
+// the environment variable EVOMESH_NUM_THREADS, else OMP_NUM_THREADS (its first
+// entry), else the CPUs this process may use (on Linux the smaller of its CPU
+// affinity mask and its cgroup CPU quota; elsewhere hardware concurrency).
+// Invalid values are ignored. At least 1; read once, on first use.
+int default_thread_count();
+
 // The thread count that parallel_for uses when asked for 0 threads, on the
-// calling thread (0: hardware concurrency). Set for a scope with Thread_limit.
+// calling thread (0: default_thread_count()). Set for a scope with Thread_limit.
 inline int& default_threads() {
   thread_local int threads = 0;
   return threads;
@@ -31,36 +34,50 @@ class Thread_limit {
   int saved_;
 };
 
+// The number of threads parallel_for(..., threads, ...) would use for many items.
+inline int resolve_threads(int threads) {
+  if (threads > 0) return threads;
+  if (default_threads() > 0) return default_threads();
+  return default_thread_count();
+}
+
+namespace detail {
+
+// Parses a thread-count variable: the first entry of a comma-separated list
+// (OMP_NUM_THREADS may hold one per nesting level), a positive integer that fits
+// an int, surrounding blanks allowed. 0 when absent or invalid.
+int parse_thread_count(const char* text);
+// CPUs granted by a cgroup quota: ceil(quota / period), 0 for no limit
+// (quota <= 0, as v1's -1) or nonsense.
+int quota_cpus(long long quota, long long period);
+// The same from the text of cgroup v2's cpu.max ("max 100000", "150000 100000").
+int parse_cpu_max(const std::string& text);
+
+// Whether the calling thread is running parallel_for work items: a nested
+// parallel_for then runs inline (the outer loop already has the threads).
+bool in_parallel_region();
+
+using Item_function = void (*)(void* context, std::size_t i);
+// Runs item(context, i) for i in [0, n) on the caller and threads - 1 helpers
+// (threads >= 2), then rethrows the first exception an item threw. Helpers come
+// from a persistent pool; while another thread's loop holds the pool, or when
+// the pool cannot supply that many, they are threads started for the call.
+void run_parallel(std::size_t n, std::size_t threads, Item_function item, void* context);
+
+}  // namespace detail
+
 // Calls body(i) for i in [0, n) on up to `threads` threads (0: default_threads(),
-// or hardware concurrency). The first exception thrown by a body is rethrown in
-// the caller.
+// else default_thread_count()). The first exception thrown by a body is rethrown
+// in the caller. Nested calls (from inside a body) run on the calling thread.
 template <class Body>
 void parallel_for(std::size_t n, int threads, Body body) {
-  if (threads <= 0) threads = default_threads();
-  std::size_t t = threads > 0 ? static_cast<std::size_t>(threads)
-                              : std::max(1u, std::thread::hardware_concurrency());
-  t = std::min(t, n);
-  if (t <= 1) {
+  const std::size_t t = std::min(static_cast<std::size_t>(std::max(1, resolve_threads(threads))), n);
+  if (t <= 1 || detail::in_parallel_region()) {
     for (std::size_t i = 0; i < n; ++i) body(i);
     return;
   }
-  std::atomic<std::size_t> next{0};
-  std::exception_ptr error;
-  std::mutex error_mutex;
-  auto worker = [&]() {
-    try {
-      for (std::size_t i = next++; i < n; i = next++) body(i);
-    } catch (...) {
-      std::lock_guard<std::mutex> lock(error_mutex);
-      if (!error) error = std::current_exception();
-      next = n;
-    }
-  };
-  std::vector<std::thread> pool;
-  for (std::size_t k = 1; k < t; ++k) pool.emplace_back(worker);
-  worker();
-  for (auto& th : pool) th.join();
-  if (error) std::rethrow_exception(error);
+  detail::run_parallel(
+      n, t, [](void* context, std::size_t i) { (*static_cast<Body*>(context))(i); }, &body);
 }
 
 }  // namespace evomesh

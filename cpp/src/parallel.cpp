@@ -1,0 +1,309 @@
+#include "evomesh/parallel.hpp"
+
+#include <atomic>
+#include <cerrno>
+#include <climits>
+#include <condition_variable>
+#include <cstdint>
+#include <cstdlib>
+#include <exception>
+#include <fstream>
+#include <mutex>
+#include <sstream>
+#include <thread>
+#include <vector>
+
+#if defined(__linux__)
+#include <sched.h>
+#endif
+#if defined(__unix__) || defined(__APPLE__)
+#include <pthread.h>
+#endif
+
+namespace evomesh {
+
+namespace detail {
+
+namespace {
+
+bool is_blank(char c) { return c == ' ' || c == '\t' || c == '\n' || c == '\r'; }
+
+// A positive int in text[begin, end) (blanks around it allowed), else 0.
+int parse_positive(const std::string& text) {
+  std::size_t begin = 0, end = text.size();
+  while (begin < end && is_blank(text[begin])) ++begin;
+  while (end > begin && is_blank(text[end - 1])) --end;
+  if (begin == end) return 0;
+  long long value = 0;
+  for (std::size_t k = begin; k < end; ++k) {
+    if (text[k] < '0' || text[k] > '9') return 0;
+    value = 10 * value + (text[k] - '0');
+    if (value > INT_MAX) return 0;
+  }
+  return static_cast<int>(value);
+}
+
+}  // namespace
+
+int parse_thread_count(const char* text) {
+  if (text == nullptr) return 0;
+  std::string value(text);
+  const std::size_t comma = value.find(',');
+  if (comma != std::string::npos) value.resize(comma);
+  return parse_positive(value);
+}
+
+int quota_cpus(long long quota, long long period) {
+  if (quota <= 0 || period <= 0) return 0;
+  const long long cpus = quota / period + (quota % period != 0);
+  return cpus > INT_MAX ? INT_MAX : static_cast<int>(cpus);
+}
+
+int parse_cpu_max(const std::string& text) {
+  std::istringstream in(text);
+  long long quota = 0, period = 0;
+  if (!(in >> quota >> period)) return 0;  // also "max ...": no limit
+  return quota_cpus(quota, period);
+}
+
+}  // namespace detail
+
+namespace {
+
+#if defined(__linux__)
+
+// CPUs in this process's affinity mask (0: unknown). The mask may be larger than
+// cpu_set_t on machines with more than 1024 CPUs, hence the growing buffer.
+int affinity_cpus() {
+  for (int n_cpus = 1024; n_cpus <= (1 << 20); n_cpus *= 2) {
+    cpu_set_t* set = CPU_ALLOC(n_cpus);
+    if (set == nullptr) return 0;
+    const std::size_t size = CPU_ALLOC_SIZE(n_cpus);
+    CPU_ZERO_S(size, set);
+    const int status = sched_getaffinity(0, size, set);
+    const int error = errno;
+    const int count = status == 0 ? CPU_COUNT_S(size, set) : 0;
+    CPU_FREE(set);
+    if (status == 0) return count;
+    if (error != EINVAL) return 0;
+  }
+  return 0;
+}
+
+std::string read_file(const std::string& path) {
+  std::ifstream in(path);
+  std::stringstream text;
+  if (in) text << in.rdbuf();
+  return text.str();
+}
+
+// The cgroup directories whose quota applies: `path` (this process's cgroup
+// under `mount`) and its ancestors up to the mount point itself. Without a
+// cgroup namespace the path names the host's hierarchy and may not exist under
+// the container's mount; the mount point is then the container's own cgroup.
+std::vector<std::string> cgroup_dirs(const std::string& mount, std::string path) {
+  std::vector<std::string> dirs;
+  while (!path.empty() && path[0] == '/' && path != "/") {
+    dirs.push_back(mount + path);
+    path.resize(path.rfind('/'));
+  }
+  dirs.push_back(mount);
+  return dirs;
+}
+
+// The smallest CPU quota among the cgroups of this process, v2 (cpu.max) or v1
+// (cpu.cfs_quota_us / cpu.cfs_period_us); 0 when none is set.
+int cgroup_cpus() {
+  int best = 0;
+  auto take = [&best](int cpus) {
+    if (cpus > 0 && (best == 0 || cpus < best)) best = cpus;
+  };
+  std::istringstream lines(read_file("/proc/self/cgroup"));
+  std::string v2_path, v1_path;
+  for (std::string line; std::getline(lines, line);) {
+    // "hierarchy-id:controller,list:path"; v2's line is "0::path".
+    const std::size_t a = line.find(':');
+    const std::size_t b = a == std::string::npos ? a : line.find(':', a + 1);
+    if (b == std::string::npos) continue;
+    const std::string controllers = "," + line.substr(a + 1, b - a - 1) + ",";
+    if (line.compare(0, a, "0") == 0 && controllers == ",,") v2_path = line.substr(b + 1);
+    if (controllers.find(",cpu,") != std::string::npos) v1_path = line.substr(b + 1);
+  }
+  for (const auto& dir : cgroup_dirs("/sys/fs/cgroup", v2_path)) {
+    take(detail::parse_cpu_max(read_file(dir + "/cpu.max")));
+  }
+  for (const char* mount : {"/sys/fs/cgroup/cpu", "/sys/fs/cgroup/cpu,cpuacct", "/sys/fs/cgroup/cpuacct,cpu"}) {
+    for (const auto& dir : cgroup_dirs(mount, v1_path)) {
+      long long quota = 0, period = 0;
+      std::istringstream q(read_file(dir + "/cpu.cfs_quota_us")), p(read_file(dir + "/cpu.cfs_period_us"));
+      if (q >> quota && p >> period) take(detail::quota_cpus(quota, period));
+    }
+  }
+  return best;
+}
+
+#endif
+
+int compute_default_thread_count() {
+  if (const int n = detail::parse_thread_count(std::getenv("EVOMESH_NUM_THREADS"))) return n;
+  if (const int n = detail::parse_thread_count(std::getenv("OMP_NUM_THREADS"))) return n;
+  int cpus = static_cast<int>(std::thread::hardware_concurrency());
+#if defined(__linux__)
+  if (const int affinity = affinity_cpus()) cpus = affinity;
+  if (const int quota = cgroup_cpus()) cpus = cpus > 0 ? std::min(cpus, quota) : quota;
+#endif
+  return std::max(cpus, 1);
+}
+
+// ---- The pool ----
+
+thread_local bool t_in_region = false;
+
+// Marks the calling thread as running work items for its lifetime.
+class Region_guard {
+ public:
+  Region_guard() : saved_(t_in_region) { t_in_region = true; }
+  ~Region_guard() { t_in_region = saved_; }
+  Region_guard(const Region_guard&) = delete;
+  Region_guard& operator=(const Region_guard&) = delete;
+
+ private:
+  bool saved_;
+};
+
+// One parallel_for call: threads take the next item until none is left.
+struct Job {
+  Job(std::size_t n_items, detail::Item_function function, void* data) : n(n_items), item(function), context(data) {}
+  std::size_t n;
+  detail::Item_function item;
+  void* context;
+  std::atomic<std::size_t> next{0};
+  std::mutex error_mutex;
+  std::exception_ptr error;
+
+  void run() noexcept {
+    const Region_guard guard;
+    try {
+      for (std::size_t i = next++; i < n; i = next++) item(context, i);
+    } catch (...) {
+      std::lock_guard<std::mutex> lock(error_mutex);
+      if (!error) error = std::current_exception();
+      next = n;
+    }
+  }
+};
+
+// Persistent workers, started on demand and kept until the process exits. One
+// caller at a time holds the pool (busy_); helpers 0 .. k-1 run its job.
+class Pool {
+ public:
+  // More helpers than this are threads started for the call.
+  static constexpr std::size_t kMaxWorkers = 256;
+
+  // Runs `job` on the caller and up to `helpers` workers; false (nothing run)
+  // when another caller holds the pool.
+  bool try_run(Job& job, std::size_t helpers) {
+    std::unique_lock<std::mutex> busy(busy_, std::try_to_lock);
+    if (!busy.owns_lock()) return false;
+    // Only the holder of busy_ writes generation_, so reading it here is safe.
+    while (workers_.size() < helpers) {
+      try {
+        workers_.emplace_back(&Pool::work, this, workers_.size(), generation_);
+      } catch (...) {
+        break;  // no more threads to be had: run with those there are
+      }
+    }
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      job_ = &job;
+      helpers_ = std::min(helpers, workers_.size());
+      finished_ = 0;
+      ++generation_;
+    }
+    wake_.notify_all();
+    job.run();
+    std::unique_lock<std::mutex> lock(mutex_);
+    done_.wait(lock, [this] { return finished_ == helpers_; });
+    job_ = nullptr;
+    return true;
+  }
+
+ private:
+  // A helper of generation g is counted in finished_ before generation g + 1
+  // can start, so no helper misses the job it is part of.
+  void work(std::size_t id, std::uint64_t seen) {
+    std::unique_lock<std::mutex> lock(mutex_);
+    for (;;) {
+      wake_.wait(lock, [&] { return generation_ != seen; });
+      seen = generation_;
+      if (id >= helpers_) continue;
+      Job* job = job_;
+      lock.unlock();
+      job->run();
+      lock.lock();
+      if (++finished_ == helpers_) done_.notify_one();
+    }
+  }
+
+  std::mutex busy_;
+  std::mutex mutex_;  // guards the fields below
+  std::condition_variable wake_, done_;
+  std::uint64_t generation_ = 0;
+  Job* job_ = nullptr;
+  std::size_t helpers_ = 0, finished_ = 0;
+  std::vector<std::thread> workers_;  // touched only by the holder of busy_
+};
+
+// Never destroyed: workers blocked in a wait are simply ended with the process
+// (joining them from a static destructor could hang at exit or in a DLL unload).
+std::atomic<Pool*> g_pool{nullptr};
+
+#if defined(__unix__) || defined(__APPLE__)
+// A forked child has none of the parent's workers (and maybe a pool held by a
+// thread that does not exist there): it starts a fresh pool, leaking the old one.
+void forget_pool_in_child() { g_pool.store(nullptr); }
+#endif
+
+Pool& pool() {
+  Pool* current = g_pool.load(std::memory_order_acquire);
+  if (current != nullptr) return *current;
+#if defined(__unix__) || defined(__APPLE__)
+  static const bool registered = (pthread_atfork(nullptr, nullptr, forget_pool_in_child), true);
+  (void)registered;
+#endif
+  Pool* fresh = new Pool;  // no threads yet, so losing the race below costs nothing
+  if (g_pool.compare_exchange_strong(current, fresh, std::memory_order_acq_rel)) return *fresh;
+  delete fresh;
+  return *current;
+}
+
+}  // namespace
+
+int default_thread_count() {
+  static const int count = compute_default_thread_count();
+  return count;
+}
+
+namespace detail {
+
+bool in_parallel_region() { return t_in_region; }
+
+void run_parallel(std::size_t n, std::size_t threads, Item_function item, void* context) {
+  Job job(n, item, context);
+  const std::size_t helpers = threads - 1;
+  if (helpers > Pool::kMaxWorkers || !pool().try_run(job, helpers)) {
+    std::vector<std::thread> extra;
+    try {
+      for (std::size_t k = 0; k < helpers; ++k) extra.emplace_back([&job] { job.run(); });
+    } catch (...) {
+      // No more threads to be had: the items still all run, on those there are.
+    }
+    job.run();
+    for (auto& thread : extra) thread.join();
+  }
+  if (job.error) std::rethrow_exception(job.error);
+}
+
+}  // namespace detail
+
+}  // namespace evomesh

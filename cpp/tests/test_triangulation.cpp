@@ -1,0 +1,167 @@
+// The domain of constrained_delaunay (a square with a square hole), and the
+// corner decisions of classify_points / runs_straight_through.
+#include <cmath>
+#include <cstdio>
+#include <limits>
+#include <random>
+#include <vector>
+
+#include "check.hpp"
+#include "evomesh/triangulation.hpp"
+
+using namespace evomesh;
+
+namespace {
+
+double signed_area(const std::vector<Vec2>& p, const Triangle& t) {
+  const Vec2 &a = p[t[0]], &b = p[t[1]], &c = p[t[2]];
+  return 0.5 * ((b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0]));
+}
+
+// Adds the closed loop through `corners`, each side split into `per_side` pieces,
+// as boundary pieces in the given order (domain on the left).
+void add_loop(std::vector<Vec2>& points, std::vector<Constraint_piece>& pieces, const std::vector<Vec2>& corners,
+              int per_side) {
+  const Index first = static_cast<Index>(points.size());
+  for (std::size_t c = 0; c < corners.size(); ++c) {
+    const Vec2 &a = corners[c], &b = corners[(c + 1) % corners.size()];
+    for (int k = 0; k < per_side; ++k) {
+      const double t = static_cast<double>(k) / per_side;
+      points.push_back({a[0] + t * (b[0] - a[0]), a[1] + t * (b[1] - a[1])});
+    }
+  }
+  const Index count = static_cast<Index>(points.size()) - first;
+  for (Index k = 0; k < count; ++k) pieces.push_back({first + k, first + (k + 1) % count, true});
+}
+
+void check_square_with_hole(int per_side, int n_interior, std::uint64_t seed) {
+  std::vector<Vec2> points;
+  std::vector<Constraint_piece> pieces;
+  add_loop(points, pieces, {{0, 0}, {4, 0}, {4, 4}, {0, 4}}, per_side);  // outer, counter-clockwise
+  add_loop(points, pieces, {{1, 1}, {1, 3}, {3, 3}, {3, 1}}, per_side);  // hole, clockwise
+  std::mt19937_64 rng(seed);
+  std::uniform_real_distribution<double> u(0.05, 3.95);
+  std::size_t in_hole = 0;
+  while (static_cast<int>(points.size()) < 8 * per_side + n_interior) {
+    const Vec2 p{u(rng), u(rng)};
+    const bool hole = p[0] > 0.95 && p[0] < 3.05 && p[1] > 0.95 && p[1] < 3.05;
+    const bool ring = p[0] > 0.9 && p[0] < 3.1 && p[1] > 0.9 && p[1] < 3.1;
+    if (ring && !hole) continue;  // keep clear of the hole's boundary
+    in_hole += hole;              // points in the hole are triangulated, then dropped with it
+    points.push_back(p);
+  }
+  const std::vector<Triangle> triangles = constrained_delaunay(points, pieces);
+  double area = 0;
+  std::size_t clockwise = 0, centroid_in_hole = 0;
+  for (const auto& t : triangles) {
+    const double a = signed_area(points, t);
+    if (!(a > 0)) ++clockwise;
+    area += a;
+    const double cx = (points[t[0]][0] + points[t[1]][0] + points[t[2]][0]) / 3;
+    const double cy = (points[t[0]][1] + points[t[1]][1] + points[t[2]][1]) / 3;
+    if (cx > 1 && cx < 3 && cy > 1 && cy < 3) ++centroid_in_hole;
+  }
+  CHECK(std::abs(area - 12.0) <= 1e-12 * 12) << "area " << area << " instead of 12, per_side " << per_side;
+  CHECK(clockwise == 0) << clockwise << " triangles not counter-clockwise";
+  CHECK(centroid_in_hole == 0) << centroid_in_hole << " triangles in the hole";
+  CHECK(!triangles.empty());
+  // Every piece is an edge of the output: the triangulation is conforming.
+  std::size_t missing = 0;
+  for (const auto& piece : pieces) {
+    bool found = false;
+    for (const auto& t : triangles) {
+      for (int k = 0; k < 3 && !found; ++k) found = t[k] == piece.a && t[(k + 1) % 3] == piece.b;
+    }
+    if (!found) ++missing;
+  }
+  CHECK(missing == 0) << missing << " boundary pieces are not edges with the domain on their left";
+  check_planar_mesh(points, triangles);  // throws if triangles overlap
+  std::printf("square with hole: %zu points (%zu in the hole), %zu triangles, area %.17g\n", points.size(), in_hole,
+              triangles.size(), area);
+}
+
+// A 3 x 3 grid of the square [0, 2]^2 (points row by row), CCW triangles.
+Mesh_arrays grid_mesh() {
+  Mesh_arrays mesh;
+  for (int y = 0; y < 3; ++y) {
+    for (int x = 0; x < 3; ++x) mesh.points.push_back({static_cast<double>(x), static_cast<double>(y)});
+  }
+  for (int y = 0; y < 2; ++y) {
+    for (int x = 0; x < 2; ++x) {
+      const Index a = 3 * y + x, b = a + 1, c = a + 4, d = a + 3;
+      mesh.triangles.push_back({a, b, c});
+      mesh.triangles.push_back({a, c, d});
+    }
+  }
+  return mesh;
+}
+
+void check_classification() {
+  // runs_straight_through
+  CHECK(runs_straight_through({0, 0}, {1, 0}, {2, 0}));
+  CHECK(!runs_straight_through({0, 0}, {1, 1e-3}, {2, 0})) << "a bend";
+  CHECK(!runs_straight_through({0, 0}, {1, 0}, {0.5, 0})) << "u and w on one side of p";
+  CHECK(!runs_straight_through({0, 0}, {0, 0}, {2, 0})) << "p at u";
+  {
+    // A point placed on a segment as a + t (b - a) is off the line by rounding only.
+    const Vec2 a{0.1, 0.7}, b{3.3, -1.9};
+    std::size_t bent = 0;
+    for (int k = 1; k < 100; ++k) {
+      const double t = k / 100.0;
+      if (!runs_straight_through(a, {a[0] + t * (b[0] - a[0]), a[1] + t * (b[1] - a[1])}, b)) ++bent;
+    }
+    CHECK(bent == 0) << bent << " points on a segment taken for corners";
+    // ... but a displacement well above rounding is a corner, at any scale.
+    for (const double scale : {1e-6, 1.0, 1e6}) {
+      const Vec2 u{0, 0}, w{2 * scale, 0}, p{scale, 1e-9 * scale};
+      CHECK(!runs_straight_through(u, p, w)) << "bend of 1e-9 relative at scale " << scale;
+    }
+  }
+
+  // classify_points on a 3 x 3 grid: 4 corners, 4 side midpoints, 1 interior point.
+  Mesh_arrays mesh = grid_mesh();
+  build_segments(mesh, {});
+  CHECK(mesh.segments.size() == 8) << mesh.segments.size() << " boundary segments";
+  std::vector<Point_kind> kind = classify_points(mesh);
+  const Point_kind C = Point_kind::corner, B = Point_kind::boundary, O = Point_kind::original;
+  CHECK(kind == std::vector<Point_kind>({C, B, C, B, O, B, C, B, C})) << "plain square";
+
+  // An interior constraint from the bottom midpoint (1) to the centre (4): where
+  // it meets the boundary and where it ends are corners.
+  mesh = grid_mesh();
+  build_segments(mesh, {{0, 1}, {1, 2}, {2, 5}, {5, 8}, {8, 7}, {7, 6}, {6, 3}, {3, 0}, {1, 4}});
+  kind = classify_points(mesh);
+  CHECK(kind == std::vector<Point_kind>({C, C, C, B, C, B, C, B, C})) << "interior constraint";
+  std::size_t n_interior = 0;
+  for (auto b : mesh.segment_is_boundary) n_interior += b == 0;
+  CHECK(n_interior == 1) << n_interior << " interior segments";
+
+  // The right side's midpoint moved outwards: the boundary bends there.
+  mesh = grid_mesh();
+  mesh.points[5] = {2.25, 1};
+  build_segments(mesh, {});
+  kind = classify_points(mesh);
+  CHECK(kind[5] == C) << "bent side";
+  CHECK(kind[3] == B && kind[1] == B && kind[7] == B) << "straight sides";
+
+  // A segment that is not a mesh edge throws.
+  mesh = grid_mesh();
+  bool threw = false;
+  try {
+    build_segments(mesh, {{0, 8}});
+  } catch (const Input_error&) {
+    threw = true;
+  }
+  CHECK(threw) << "segment (0, 8) is not an edge";
+}
+
+}  // namespace
+
+int main() {
+  return evomesh_test::run([] {
+    check_square_with_hole(1, 0, 1);
+    check_square_with_hole(1, 40, 2);
+    check_square_with_hole(5, 300, 3);
+    check_classification();
+  });
+}

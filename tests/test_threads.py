@@ -1,0 +1,48 @@
+"""The parallel stages' threads seen from Python (issue 10): the default count
+comes from EVOMESH_NUM_THREADS / OMP_NUM_THREADS (invalid values ignored), the
+results never depend on it, and the persistent workers do not outlive a fork
+(a forked child starts its own)."""
+import hashlib
+import multiprocessing
+import os
+import subprocess
+import sys
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import evomesh
+from strategies import grid_mesh
+
+
+def _step(threads):
+    """A digest of one evolution step of a fixed mesh."""
+    mesh = grid_mesh(60, 60, jitter=0.2, seed=3)
+    delta = np.exp(np.random.default_rng(0).uniform(np.log(0.3), np.log(3), mesh.n_points))
+    new = evomesh.evolve(mesh, delta, seed=5, threads=threads)
+    return hashlib.sha256(new.points.tobytes() + new.triangles.tobytes() + new.kind.tobytes()).hexdigest()
+
+
+@pytest.mark.skipif(not hasattr(os, "fork"), reason="needs fork()")
+def test_forked_child_runs_the_parallel_stages():
+    parent = _step(2)  # the worker pool now has a thread, which a forked child lacks
+    with warnings.catch_warnings():
+        # Python >= 3.12 warns about fork() in a multi-threaded process.
+        warnings.simplefilter("ignore", DeprecationWarning)
+        with multiprocessing.get_context("fork").Pool(1) as pool:
+            child = pool.apply_async(_step, (3,)).get(timeout=120)
+    assert child == parent
+
+
+def test_thread_environment_variables_do_not_change_results():
+    reference = _step(1)
+    tests = Path(__file__).parent
+    script = f"import sys; sys.path.insert(0, {str(tests)!r}); import test_threads; print(test_threads._step(None))"
+    for variables in ({"EVOMESH_NUM_THREADS": "1"}, {"EVOMESH_NUM_THREADS": "abc", "OMP_NUM_THREADS": "3,1"}):
+        env = {k: v for k, v in os.environ.items() if k not in ("EVOMESH_NUM_THREADS", "OMP_NUM_THREADS")}
+        env.update(variables)
+        out = subprocess.run([sys.executable, "-c", script], env=env, capture_output=True, text=True, timeout=120)
+        assert out.returncode == 0, out.stderr
+        assert out.stdout.split()[-1] == reference, variables
