@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Sets everything up (tools/bootstrap.sh), builds and runs the C++ tests (ctest,
-# cpp/tests/) and builds the benchmarks, then runs the Python test suite.
+# cpp/tests/) and builds the benchmarks, then runs ruff, mypy and the Python test suite.
 # Arguments go to pytest. The C++ build dir build/ctest is kept, so later runs
 # rebuild only what changed; EVOMESH_SKIP_CPP_TESTS=1 skips that part.
 set -euo pipefail
@@ -30,4 +30,6 @@ if [ "${EVOMESH_SKIP_CPP_TESTS:-0}" != 1 ]; then
   (cd "$build" && "$ctest" --output-on-failure)
 fi
 
+# ruff and mypy (tools/lint.sh), then the Python suite.
+bash tools/lint.sh
 .venv/bin/python -m pytest -p no:cacheprovider "$@"

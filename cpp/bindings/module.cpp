@@ -11,6 +11,7 @@
 #include "evomesh/frfc.hpp"
 #include "evomesh/options.hpp"
 #include "evomesh/packing.hpp"
+#include "evomesh/parallel.hpp"
 #include "evomesh/spacing.hpp"
 #include "evomesh/triangulation.hpp"
 
@@ -209,6 +210,9 @@ void bind_options(py::module_& m) {
       py::make_tuple("SAMPLED", static_cast<int>(Point_kind::sampled)));
   m.attr("MAX_MIN_ANGLE") = kMaxMinAngle;
   m.attr("STRAIGHT_ULPS") = kStraightUlps;
+  m.def("default_thread_count", &default_thread_count,
+        "Threads a step uses by default: EVOMESH_NUM_THREADS, else OMP_NUM_THREADS, else the CPUs this process "
+        "may use (affinity and cgroup quota).");
 
 #define EVOMESH_NAME(field) #field,
 #define EVOMESH_BIND(field) cls.def_readwrite(#field, &Type::field);

@@ -593,7 +593,7 @@ Evolve_result frfc(const Mesh_arrays& mesh, const std::vector<double>& delta, co
   Early_triangulation early;
   Background early_work;
   if (options.quality) {
-    early_work.start([&]() { early.insert_first(first_points); }, options.threads != 1);
+    early_work.start([&]() { early.insert_first(first_points); }, resolve_threads(options.threads) > 1);
   }
   timer.lap("lfmis");
 

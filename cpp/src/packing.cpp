@@ -6,6 +6,7 @@
 #include <limits>
 #include <numeric>
 
+#include "evomesh/detail/bits.hpp"
 #include "evomesh/parallel.hpp"
 
 namespace evomesh {
@@ -102,10 +103,10 @@ class Kept_sphere_tree {
 
   // Fetches what a query at `position` reads first, ahead of time.
   void prefetch(std::size_t position) const {
-    __builtin_prefetch(&slots_[position]);
+    detail::prefetch(&slots_[position]);
     const std::size_t node = n_leaves_ + leaf_of(position);
-    __builtin_prefetch(&kept_in_leaf_[node - n_leaves_]);
-    __builtin_prefetch(&nodes_[node ^ 1]);
+    detail::prefetch(&kept_in_leaf_[node - n_leaves_]);
+    detail::prefetch(&nodes_[node ^ 1]);
   }
 
   static constexpr std::size_t kNone = ~std::size_t{0};
@@ -204,7 +205,7 @@ class Kept_sphere_tree {
     const std::size_t begin = leaf_begin(leaf);
     const Slot* first = &slots_[begin];
     for (std::uint64_t mask = kept_in_leaf_[leaf]; mask != 0; mask &= mask - 1) {
-      const Slot& s = first[__builtin_ctzll(mask)];
+      const Slot& s = first[detail::count_trailing_zeros(mask)];
       const double ex = s.x - cx;
       const double ey = s.y - cy;
       const double sum = r + s.radius;

@@ -25,6 +25,7 @@ __all__ = [
     "Mesh",
     "PointKind",
     "Lineage",
+    "default_thread_count",
     "evolve",
     "delaunay_refine",
     "FRFC_DEFAULTS",
@@ -42,6 +43,8 @@ __all__ = [
 ]
 
 __version__ = "0.1.0"
+
+from evomesh._core import default_thread_count  # noqa: E402
 
 # Moving-front workflow.
 from evomesh.experiments.growing_circle import growing_circle  # noqa: E402

@@ -119,6 +119,8 @@ class EvolveResult(TypedDict):
     origin: NDArray[np.int64]  # (n,), -1 for a new point
     input_f: NDArray[np.float64]  # (n_input,)
     input_nn: NDArray[np.float64]  # (n_input,)
+    parent_triangle: NDArray[np.int64]  # (n,), input triangle of a new point, -1 for kept ones
+    barycentric: NDArray[np.float64]  # (n, 3), its coordinates there
     stats: dict[str, float]
 
 class RefineResult(TypedDict):
@@ -153,6 +155,7 @@ def prepare_mesh(
     Returns (triangles, segments, segment_is_boundary, kind, n_flipped)."""
 
 def nn_spacing(points: ArrayLike) -> NDArray[np.float64]: ...
+def default_thread_count() -> int: ...
 def lexical_first_mis(
     centers: ArrayLike, radii: ArrayLike, order: ArrayLike, n_forced: int = 0
 ) -> NDArray[np.uint8]: ...

@@ -195,7 +195,9 @@ def evolve(mesh: Mesh, delta: Any, *, method: str = "frfc", seed: int | None = N
         threads : int or None
             Threads of the parallel stages (nn, Apollonius graph parts,
             sampling, spacing queries, the MIS tree, and the triangulation
-            started beside the packing); None: all cores, 1: everything on
+            started beside the packing); None: evomesh.default_thread_count()
+            (EVOMESH_NUM_THREADS, else OMP_NUM_THREADS, else the CPUs this
+            process may use: affinity and cgroup quota), 1: everything on
             the calling thread. Results do not depend on it.
         quality : bool, default True
             The quality pass (Section 6's suggestion, for both methods): a

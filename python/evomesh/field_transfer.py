@@ -89,7 +89,7 @@ class Interpolation:
             rebuilt = np.einsum("kj,kjc->kc", weights, old.points[old.triangles[np.maximum(triangle, 0)]])
             gap = np.where(triangle >= 0, np.abs(rebuilt - queries).max(axis=1, initial=0.0), 0.0)
             if gap.size and gap.max() > _LINEAGE_SLACK * _outside_tolerance(old, queries):
-                raise ValueError("new.lineage does not fit old (its points are elsewhere): new was not evolved from old")
+                raise ValueError("new.lineage does not fit old: new was not evolved from old")
             unknown = np.flatnonzero(triangle < 0)
             if len(unknown):
                 triangle = triangle.copy()

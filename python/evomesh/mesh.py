@@ -383,6 +383,13 @@ class Lineage:
 
     __slots__ = ("n_old_points", "n_old_triangles", "parent_triangle", "barycentric", "old_nn", "old_f")
 
+    n_old_points: int
+    n_old_triangles: int
+    parent_triangle: np.ndarray
+    barycentric: np.ndarray
+    old_nn: np.ndarray
+    old_f: np.ndarray
+
     def __init__(self, n_old_points: int, n_old_triangles: int, parent_triangle: np.ndarray, barycentric: np.ndarray,
                  old_nn: np.ndarray, old_f: np.ndarray) -> None:
         set_ = object.__setattr__

@@ -65,7 +65,7 @@ struct Frfc_options {
   // their radius is computed; the output is the same either way.
   bool filter_samples = true;
   double max_samples = 5e7;     // refuse steps whose sampling would exceed this
-  int threads = 0;              // 0: the default thread count (parallel.hpp)
+  int threads = 0;              // 0: default_thread_count() (parallel.hpp: EVOMESH_NUM_THREADS, OMP_NUM_THREADS, CPUs)
   std::uint64_t seed = 0;
   bool quality = true;          // the quality pass of Section 6
   double min_angle = 20.0;      // its angle bound (degrees)
