@@ -19,7 +19,7 @@ from numpy.typing import ArrayLike
 from scipy.spatial import cKDTree
 
 from evomesh.mesh import _MAX_COORDINATE, Mesh
-from evomesh.spacing_function import _require_mesh, nn_spacing
+from evomesh.spacing_function import _require_mesh
 
 __all__ = ["Front", "CircleFront", "PointFront", "LevelSetFront", "SpacingLaw", "as_query_points"]
 
@@ -440,7 +440,7 @@ class SpacingLaw:
             raise ValueError(f"distance must have one value per mesh point: shape ({mesh.n_points},), got {d.shape}")
         h = self.h(d)
         if nn is None:
-            nn = nn_spacing(mesh)
+            nn = mesh.nn_spacing  # cached on the mesh
         return np.clip(h / nn, self.lower, self.upper)
 
     def __call__(self, mesh: Mesh, distance: ArrayLike | None) -> np.ndarray:

@@ -7,10 +7,10 @@ from scipy.spatial import cKDTree
 
 from evomesh.mesh import Mesh
 from evomesh.mesh_quality import quality
-from evomesh.spacing_function import _require_mesh, as_delta, nn_spacing
+from evomesh.spacing_function import _require_mesh, as_delta
 from evomesh.typing import ArrayLike, FloatArray
 
-__all__ = ["STATISTICS_COLUMNS", "nn_at", "step_statistics"]
+__all__ = ["STATISTICS_COLUMNS", "new_spacing_at_old_points", "nn_at", "step_statistics"]
 
 #: Columns of the per-step statistics; the first six are the paper's Table 1.
 STATISTICS_COLUMNS = (
@@ -34,6 +34,26 @@ def nn_at(points: np.ndarray, probes: np.ndarray, tree: cKDTree | None = None) -
     tree = cKDTree(points) if tree is None else tree
     d, _ = tree.query(probes, k=2)
     return np.where(d[:, 0] == 0, d[:, 1], d[:, 0])
+
+
+def new_spacing_at_old_points(old: Mesh, new: Mesh) -> FloatArray:
+    """nn_M'(p) for every old point p: the distance from p to its nearest other
+    point of the new mesh, shape (old.n_points,). Kept points read the new mesh's
+    cached nn spacing; only the removed ones are searched for (a k-d tree of the
+    new points), so a step that keeps most points costs O(n) here."""
+    _require_mesh(old)
+    _require_mesh(new)
+    out = np.empty(old.n_points)
+    kept = np.flatnonzero(new.origin >= 0)
+    origin = new.origin[kept]
+    if len(origin) and origin.max() >= old.n_points:
+        raise ValueError("new.origin does not index old: new was not evolved from old")
+    out[origin] = new.nn_spacing[kept]
+    removed = np.ones(old.n_points, dtype=bool)
+    removed[origin] = False
+    if removed.any():
+        out[removed] = nn_at(new.points, old.points[removed])
+    return out
 
 
 def step_statistics(old: Mesh, new: Mesh, delta: ArrayLike, *, nn_old: np.ndarray | None = None) -> dict[str, float]:
@@ -61,8 +81,8 @@ def step_statistics(old: Mesh, new: Mesh, delta: ArrayLike, *, nn_old: np.ndarra
     _require_mesh(old)
     _require_mesh(new)
     d = as_delta(old, delta)
-    nn_old = nn_spacing(old) if nn_old is None else nn_old
-    ratio = nn_at(new.points, old.points) / (d * nn_old)
+    nn_old = old.nn_spacing if nn_old is None else nn_old
+    ratio = new_spacing_at_old_points(old, new) / (d * nn_old)
     q = quality(new)
     original = int((new.origin >= 0).sum())
     return {

@@ -19,7 +19,7 @@ from evomesh.field_transfer import Interpolation
 from evomesh.fronts import Front, SpacingLaw
 from evomesh.mesh import Mesh
 from evomesh.reporting import format_table, write_csv
-from evomesh.spacing_function import _require_mesh, as_delta, nn_spacing
+from evomesh.spacing_function import _require_mesh, as_delta
 from evomesh.statistics import STATISTICS_COLUMNS, step_statistics
 from evomesh.typing import ArrayLike, Fields, FloatArray, FrontLike, Law
 
@@ -239,7 +239,7 @@ class Driver:
             the statistics row.
         """
         old = self.mesh
-        nn_old = nn_spacing(old)
+        nn_old = old.nn_spacing  # cached on the mesh (the step that made it computed it)
         if delta is None:
             distance = _front_distance(front, old.points, t)
             raw: ArrayLike
