@@ -165,3 +165,29 @@ def test_spacing_repair_brings_every_kept_r_point_a_neighbour(seed):
     assert worst_ratio(repaired) <= 1.75
     added = repaired.n_points - plain.n_points
     assert added == repaired.stats["n_spacing_repairs"]
+
+
+def test_absolute_size_equals_the_relative_delta_it_stands_for():
+    mesh = grid_mesh(12, 12, jitter=0.2, seed=5)
+    h = 0.04 + 0.1 * mesh.points[:, 0]
+    by_size = evomesh.evolve(mesh, size=h, seed=3)
+    by_delta = evomesh.evolve(mesh, h / evomesh.nn_spacing(mesh), seed=3)
+    assert by_size.points.tobytes() == by_delta.points.tobytes()
+    by_callable = evomesh.evolve(mesh, size=lambda x: 0.04 + 0.1 * x[:, 0], seed=3)
+    assert by_callable.points.tobytes() == by_size.points.tobytes()
+    uniform = evomesh.evolve(mesh, size=0.05, seed=3)
+    assert np.median(evomesh.nn_spacing(uniform)) == pytest.approx(0.05, rel=0.35)
+
+
+def test_size_and_delta_errors_say_which_is_which():
+    mesh = grid_mesh(6, 6)
+    with pytest.raises(TypeError, match="exactly one of delta"):
+        evomesh.evolve(mesh, 0.5, size=0.1)
+    with pytest.raises(TypeError, match="exactly one of delta"):
+        evomesh.evolve(mesh)
+    with pytest.raises(ValueError, match="delta is relative.*size="):
+        evomesh.evolve(mesh, 1e-9)
+    with pytest.raises(ValueError, match="times its current spacing"):
+        evomesh.evolve(mesh, size=1e-12)
+    with pytest.raises(ValueError, match="size.*finite and > 0"):
+        evomesh.evolve(mesh, size=lambda x: -x[:, 0])

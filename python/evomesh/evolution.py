@@ -10,7 +10,7 @@ import numpy as np
 
 from evomesh import _core
 from evomesh.mesh import Lineage, Mesh, check_mesh_limits
-from evomesh.spacing_function import _require_mesh, as_delta
+from evomesh.spacing_function import _require_mesh, as_delta, delta_from_size
 
 __all__ = ["evolve", "delaunay_refine", "make_options", "FRFC_DEFAULTS", "DRFC_DEFAULTS", "FrfcOptions", "DrfcOptions",
            "SampleMode", "RadiusRule"]
@@ -122,9 +122,10 @@ def _check_seed(seed: Any) -> int:
     return int(seed)
 
 
-def evolve(mesh: Mesh, delta: Any, *, method: str = "frfc", seed: int | None = None, options: Any = None,
-           **overrides: Any) -> Mesh:
-    """Evolve a mesh one step: new spacing delta(p) * nn_M(p) at every point p.
+def evolve(mesh: Mesh, delta: Any = None, *, size: Any = None, method: str = "frfc", seed: int | None = None,
+           options: Any = None, **overrides: Any) -> Mesh:
+    """Evolve a mesh one step: new spacing delta(p) * nn_M(p) at every point p
+    (or the absolute spacing ``size``).
 
     Parameters
     ----------
@@ -137,6 +138,12 @@ def evolve(mesh: Mesh, delta: Any, *, method: str = "frfc", seed: int | None = N
         l <= delta <= L); in addition a step whose sampling would create more
         than ``max_samples`` candidate points is refused (refine over several
         steps instead).
+    size : float, array_like of shape (n,), or callable, optional
+        Absolute target spacing h instead of ``delta`` (exactly one of the
+        two): a number, one value per point, or a function h(x) of an (k, 2)
+        array of coordinates returning (k,) values. Equivalent to
+        ``delta = h(p) / nn_M(p)``; one step still changes the spacing by at
+        most the factors above.
     method : {"frfc", "drfc"}
         "frfc": Functional-Refining-Functional-Coarsening (paper, Section 3.2).
         "drfc": Delaunay-Refining-Functional-Coarsening (Section 5): Delaunay
@@ -246,7 +253,9 @@ def evolve(mesh: Mesh, delta: Any, *, method: str = "frfc", seed: int | None = N
         would need more than ``max_samples`` samples. The input is never modified.
     """
     _require_mesh(mesh)
-    d = as_delta(mesh, delta)
+    if (delta is None) == (size is None):
+        raise TypeError("evolve needs exactly one of delta (relative to the current spacing) and size (absolute)")
+    d = as_delta(mesh, delta) if size is None else delta_from_size(mesh, size)
     o = make_options(method, options, **overrides)
     if method == "frfc" and seed is not None:
         o.seed = _check_seed(seed)

@@ -443,6 +443,16 @@ class SpacingLaw:
             nn = mesh.nn_spacing  # cached on the mesh
         return np.clip(h / nn, self.lower, self.upper)
 
+    def size(self, mesh: Mesh, distance: ArrayLike | None) -> np.ndarray:
+        """The absolute spacing h(d) at the mesh points, shape (n,), for
+        ``evolve(mesh, size=law.size(mesh, distance))`` (not clipped)."""
+        if distance is None:
+            raise ValueError("a SpacingLaw needs the distance to a front: pass a front")
+        d = np.asarray(distance)
+        if d.shape != (mesh.n_points,):
+            raise ValueError(f"distance must have one value per mesh point: shape ({mesh.n_points},), got {d.shape}")
+        return np.asarray(self.h(d), dtype=np.float64)
+
     def __call__(self, mesh: Mesh, distance: ArrayLike | None) -> np.ndarray:
         return self.delta(mesh, distance)
 

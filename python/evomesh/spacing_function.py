@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, Callable
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -10,7 +10,7 @@ from numpy.typing import ArrayLike, NDArray
 from evomesh import _core
 from evomesh.mesh import _MAX_COORDINATE, Mesh, _as_array
 
-__all__ = ["nn_spacing", "spacing", "SpacingFunction", "as_delta", "DELTA_MIN", "DELTA_MAX"]
+__all__ = ["nn_spacing", "spacing", "SpacingFunction", "as_delta", "delta_from_size", "DELTA_MIN", "DELTA_MAX"]
 
 #: Accepted range of the per-point factor delta: the paper's l <= delta <= L
 #: (Definition 2.6). Below DELTA_MIN one step would need more than ~1e12 samples
@@ -51,8 +51,43 @@ def as_delta(mesh: Mesh, delta: ArrayLike) -> NDArray[np.float64]:
     bad = (array < DELTA_MIN) | (array > DELTA_MAX)
     if bad.any():
         k = int(np.argmax(bad))
-        raise ValueError(f"delta must be in [{DELTA_MIN:g}, {DELTA_MAX:g}]; delta[{k}] = {array[k]:g}")
+        raise ValueError(
+            f"delta must be in [{DELTA_MIN:g}, {DELTA_MAX:g}]; delta[{k}] = {array[k]:g}. delta is relative: the new "
+            "spacing at p is delta(p) times the current one, nn_M(p); for an absolute spacing pass size= instead"
+        )
     return array
+
+
+def delta_from_size(mesh: Mesh, size: ArrayLike | Callable[[np.ndarray], ArrayLike]) -> NDArray[np.float64]:
+    """The relative factor delta(p) = h(p) / nn_M(p) for an absolute target
+    spacing h: a number, an array with one value per point, or a callable
+    h(x) on (k, 2) arrays of coordinates returning (k,) values."""
+    _require_mesh(mesh)
+    if callable(size):
+        values = _as_array(size(np.array(mesh.points)), "size(x)")
+        what = "size(x)"
+    else:
+        values = _as_array(size, "size")
+        what = "size"
+    if values.dtype == object or values.dtype.kind not in "fiu":
+        raise TypeError(f"{what} must be real numbers, got dtype {values.dtype}")
+    with np.errstate(over="ignore"):
+        h = np.array(np.broadcast_to(values, (mesh.n_points,)) if values.ndim == 0 else values, dtype=np.float64)
+    if h.shape != (mesh.n_points,):
+        raise ValueError(f"{what} must give one value per point: shape ({mesh.n_points},), got {h.shape}")
+    bad = ~np.isfinite(h) | (h <= 0)
+    if bad.any():
+        k = int(np.argmax(bad))
+        raise ValueError(f"{what} must be finite and > 0; at point {k} it is {h[k]}")
+    delta = h / mesh.nn_spacing
+    bad = (delta < DELTA_MIN) | (delta > DELTA_MAX)
+    if bad.any():
+        k = int(np.argmax(bad))
+        raise ValueError(
+            f"size {h[k]:g} at point {k} is {delta[k]:g} times its current spacing {mesh.nn_spacing[k]:g}; one step "
+            f"changes the spacing by a factor in [{DELTA_MIN:g}, {DELTA_MAX:g}]"
+        )
+    return delta
 
 
 def _as_sites(x: Any, name: str) -> np.ndarray:
