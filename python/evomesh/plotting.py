@@ -23,6 +23,12 @@ _KEPT_COLOR = "0.55"
 _NEW_COLOR = "darkorange"
 
 
+#: Above this many triangles a panel shows fields (delta, share of new points,
+#: spacing) with colour bars instead of single elements, which would blur into a
+#: grey texture and make multi-megabyte PNGs.
+DENSE_TRIANGLES = 20000
+
+
 def _figure(panels: int, size: float = 5.0) -> tuple[Figure, np.ndarray]:
     # Figure without pyplot: no global state, works with any backend (Agg here).
     from matplotlib.figure import Figure
@@ -119,29 +125,47 @@ def plot_step(
     _require_mesh(old)
     _require_mesh(new)
     d = as_delta(old, delta)
-    f = spacing(old, d)
-    f_old = f(old.points)
-    f_new = f(new.points)
     fig, (a1, a2, a3) = _figure(3, size)
     for ax in (a1, a2, a3):
         _frame(ax, new)
     lo, hi = min(d.min(), 1 / d.max(), 0.5), max(d.max(), 1 / d.min(), 2.0)
     norm = LogNorm(vmin=lo, vmax=hi)  # symmetric around delta = 1
     from matplotlib import colormaps
+    from matplotlib.cm import ScalarMappable
 
-    colors = colormaps["coolwarm"](norm(d))
-    colors[:, 3] = 0.35
-    _circles(a1, old.points, 0.5 * f_old, facecolors=colors, edgecolors="0.25", linewidths=0.3)
-    a1.set_title(f"spacing spheres: {old.n_points} old points\n(blue: refine, red: coarsen)", fontsize=10)
     kept = new.origin >= 0
-    face = np.where(kept[:, None], np.array([0.55, 0.55, 0.55, 0.45]), np.array([1.0, 0.55, 0.0, 0.6]))
-    _circles(a2, new.points, 0.5 * packing_scale * f_new, facecolors=face, edgecolors="0.2", linewidths=0.3)
-    a2.set_title(f"selected packing: {int(kept.sum())} kept (grey), {int((~kept).sum())} new (orange)", fontsize=10)
-    a3.triplot(new.points[:, 0], new.points[:, 1], new.triangles, color="0.15", linewidth=0.35)
-    a3.plot(new.points[~kept, 0], new.points[~kept, 1], ".", color=_NEW_COLOR, markersize=2.0)
+    fig.colorbar(ScalarMappable(norm=norm, cmap="coolwarm"), ax=a1, shrink=0.8, label="delta (<1 refine, >1 coarsen)")
     from evomesh.mesh_quality import quality
 
     q = quality(new)
+    if max(old.n_triangles, new.n_triangles) > DENSE_TRIANGLES:
+        # Too many elements to see one by one: fields, rasterised, with colour bars.
+        a1.tripcolor(old.points[:, 0], old.points[:, 1], old.triangles, d, shading="gouraud", cmap="coolwarm",
+                     norm=norm, rasterized=True)
+        a1.set_title(f"delta at {old.n_points} old points", fontsize=10)
+        share_new = (~kept)[new.triangles].mean(axis=1)
+        shown = a2.tripcolor(new.points[:, 0], new.points[:, 1], new.triangles, facecolors=share_new, cmap="Oranges",
+                             vmin=0, vmax=1, rasterized=True)
+        fig.colorbar(shown, ax=a2, shrink=0.8, label="share of new vertices")
+        a2.set_title(f"{int(kept.sum())} kept, {int((~kept).sum())} new points", fontsize=10)
+        spacing_new = new.nn_spacing
+        shown = a3.tripcolor(new.points[:, 0], new.points[:, 1], new.triangles, spacing_new, shading="gouraud",
+                             cmap="viridis", norm=LogNorm(vmin=spacing_new.min(), vmax=spacing_new.max()),
+                             rasterized=True)
+        fig.colorbar(shown, ax=a3, shrink=0.8, label="spacing nn")
+    else:
+        f = spacing(old, d)
+        f_old, f_new = f(old.points), f(new.points)
+        colors = colormaps["coolwarm"](norm(d))
+        colors[:, 3] = 0.35
+        _circles(a1, old.points, 0.5 * f_old, facecolors=colors, edgecolors="0.25", linewidths=0.3)
+        a1.set_title(f"spacing spheres: {old.n_points} old points\n(blue: refine, red: coarsen)", fontsize=10)
+        face = np.where(kept[:, None], np.array([0.55, 0.55, 0.55, 0.45]), np.array([1.0, 0.55, 0.0, 0.6]))
+        _circles(a2, new.points, 0.5 * packing_scale * f_new, facecolors=face, edgecolors="0.2", linewidths=0.3)
+        a2.set_title(f"selected packing: {int(kept.sum())} kept (grey), {int((~kept).sum())} new (orange)",
+                     fontsize=10)
+        a3.triplot(new.points[:, 0], new.points[:, 1], new.triangles, color="0.15", linewidth=0.35)
+        a3.plot(new.points[~kept, 0], new.points[~kept, 1], ".", color=_NEW_COLOR, markersize=2.0)
     a3.set_title(
         f"mesh: {new.n_points} points, {new.n_triangles} triangles\nmin angle {q.min_angle:.2f} deg", fontsize=10
     )
@@ -163,7 +187,19 @@ def plot_mesh(
     else:
         fig = ax.figure
     _frame(ax, mesh)
-    ax.triplot(mesh.points[:, 0], mesh.points[:, 1], mesh.triangles, color="0.15", linewidth=0.35)
+    if mesh.n_triangles > DENSE_TRIANGLES:
+        spacing_nn = mesh.nn_spacing
+        from matplotlib.colors import LogNorm
+
+        from matplotlib.tri import Triangulation
+
+        shown = ax.tripcolor(Triangulation(mesh.points[:, 0], mesh.points[:, 1], mesh.triangles), spacing_nn,
+                             shading="gouraud", cmap="viridis",
+                             norm=LogNorm(vmin=float(spacing_nn.min()), vmax=float(spacing_nn.max())))
+        shown.set_rasterized(True)
+        fig.colorbar(shown, ax=ax, shrink=0.8, label="spacing nn")
+    else:
+        ax.triplot(mesh.points[:, 0], mesh.points[:, 1], mesh.triangles, color="0.15", linewidth=0.35)
     draw_front(ax, front, t, mesh)
     if title:
         ax.set_title(title, fontsize=10)
