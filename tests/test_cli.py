@@ -94,3 +94,75 @@ def test_installed_command(tmp_path):
     bad = subprocess.run([command, "growing-circle", "--band", "-1", "--out", str(tmp_path / "y")],
                          capture_output=True, text=True, timeout=60)
     assert bad.returncode == 2 and bad.stderr.startswith("evomesh: error: band")
+
+
+@pytest.fixture
+def mesh_file(tmp_path):
+
+    import evomesh
+    import evomesh.io
+
+    mesh = evomesh.unit_square_mesh(800, seed=2)
+    path = tmp_path / "in.vtu"
+    evomesh.io.write_mesh(path, mesh, {"h": 0.02 + 0.05 * mesh.points[:, 0], "u": mesh.points @ [1.0, 3.0]})
+    return mesh, path
+
+
+@pytest.mark.parametrize("target", [["--size", "h"], ["--size-expr", "0.02 + 0.05*x"], ["--delta", "h"]])
+def test_adapt_writes_a_valid_mesh_with_its_point_data(mesh_file, tmp_path, target, capsys):
+    import numpy as np
+
+    import evomesh.io
+
+    mesh, path = mesh_file
+    out = tmp_path / "out.vtu"
+    assert main(["adapt", str(path), str(out), *target, "--option", "min_angle=22"]) == 0
+    assert "wrote" in capsys.readouterr().out
+    new, data = evomesh.io.read_mesh(out)
+    assert abs(new.area - mesh.area) < 1e-12
+    assert np.allclose(data["u"], new.points @ [1.0, 3.0], atol=1e-12)  # linear field carried over
+    assert evomesh.quality(new).min_angle >= 22 - 1e-9
+
+
+def test_adapt_size_expression_equals_the_size_field(mesh_file, tmp_path):
+    import evomesh.io
+
+    _, path = mesh_file
+    assert main(["adapt", str(path), str(tmp_path / "a.vtu"), "--size", "h", "--quiet"]) == 0
+    assert main(["adapt", str(path), str(tmp_path / "b.vtu"), "--size-expr", "0.02 + 0.05*x", "--quiet"]) == 0
+    a, _ = evomesh.io.read_mesh(tmp_path / "a.vtu")
+    b, _ = evomesh.io.read_mesh(tmp_path / "b.vtu")
+    assert a.points.tobytes() == b.points.tobytes()
+
+
+@pytest.mark.parametrize(
+    "arguments, message",
+    [
+        (["--size", "nope"], "no point data 'nope'"),
+        (["--size-expr", "__import__('os')"], "unknown name"),
+        (["--size-expr", "x +"], "not a valid expression"),
+        (["--size", "h", "--option", "colour=red"], "unknown option"),
+        (["--size", "h", "--option", "min_angle"], "NAME=VALUE"),
+    ],
+)
+def test_adapt_bad_arguments_exit_2_with_one_line(mesh_file, tmp_path, arguments, message, capsys):
+    _, path = mesh_file
+    out = tmp_path / "out.vtu"
+    assert main(["adapt", str(path), str(out), *arguments]) == 2
+    error = capsys.readouterr().err.strip()
+    assert message in error and len(error.splitlines()) == 1
+    assert not out.exists()
+
+
+def test_adapt_finds_an_unwritable_output_before_reading(tmp_path, capsys):
+    missing = tmp_path / "missing.vtu"  # not even read: the output is checked first
+    assert main(["adapt", str(missing), str(tmp_path / "no-such-folder" / "out.vtu"), "--size", "h"]) == 2
+    assert "output folder" in capsys.readouterr().err
+    assert main(["adapt", str(missing), str(tmp_path / "out.unknownsuffix"), "--size", "h"]) == 2
+
+
+def test_info_prints_the_mesh(mesh_file, capsys):
+    mesh, path = mesh_file
+    assert main(["info", str(path)]) == 0
+    printed = capsys.readouterr().out
+    assert f"points     {mesh.n_points}" in printed and "min angle" in printed and "point data h, u" in printed

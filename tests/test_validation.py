@@ -516,11 +516,19 @@ def test_corrupt_mesh_file_raises_value_error(tmp_path, name, content):
 def test_mesh_file_with_a_malformed_mesh_raises_value_error(tmp_path):
     """A well-formed file holding an invalid mesh goes through Mesh's checks."""
     points = np.c_[SQUARE_POINTS, np.zeros(4)]
-    for triangles in ([[0, 1, 2], [1, 3, 2], [0, 1, 3]], [[0, 1, 2]]):  # overlapping; orphan point 3
-        path = tmp_path / "bad.vtu"
-        meshio.Mesh(points, [("triangle", np.array(triangles))]).write(path)
-        with pytest.raises(ValueError):
-            io.read_mesh(path)
+    path = tmp_path / "bad.vtu"
+    meshio.Mesh(points, [("triangle", np.array([[0, 1, 2], [1, 3, 2], [0, 1, 3]]))]).write(path)  # overlapping
+    with pytest.raises(ValueError):
+        io.read_mesh(path)
+
+
+def test_mesh_file_with_an_orphan_point_is_read_without_it(tmp_path):
+    path = tmp_path / "orphan.vtu"
+    points = np.c_[SQUARE_POINTS, np.zeros(4)]
+    meshio.Mesh(points, [("triangle", np.array([[0, 1, 2]]))], point_data={"u": np.arange(4.0)}).write(path)
+    with pytest.warns(UserWarning, match="removed 1 points used by no triangle"):
+        mesh, data = io.read_mesh(path)
+    assert mesh.n_points == 3 and np.array_equal(data["u"], [0.0, 1.0, 2.0])
 
 
 def test_cli_errors_are_one_line_and_exit_non_zero(tmp_path, capsys):

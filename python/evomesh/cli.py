@@ -6,6 +6,8 @@ import argparse
 import sys
 from typing import Sequence
 
+import numpy as np
+
 __all__ = ["main", "build_parser"]
 
 
@@ -60,7 +62,155 @@ def build_parser() -> argparse.ArgumentParser:
                     help="switch off the quality pass (the paper's plain algorithm)")
     gc.add_argument("--no-figures", action="store_true", help="do not draw the PNG figures")
     gc.add_argument("--quiet", action="store_true", help="no table, no progress bar")
+
+    adapt = commands.add_parser(
+        "adapt",
+        help="one adaptation step of a mesh file: refine and coarsen to a size or a factor",
+        description=(
+            "Read a triangle mesh (any format meshio reads: .msh, .vtu, .xdmf, ...), evolve it once towards an "
+            "absolute spacing (--size FIELD or --size-expr EXPR) or a factor of its current spacing (--delta "
+            "FIELD), carry its point data over (linear interpolation, exact at kept points) and write it (format "
+            "from OUT's suffix)."
+        ),
+    )
+    adapt.add_argument("input", metavar="IN", help="input mesh file")
+    adapt.add_argument("output", metavar="OUT", help="output mesh file")
+    target = adapt.add_mutually_exclusive_group(required=True)
+    target.add_argument("--size", metavar="FIELD", help="point data of IN holding the absolute target spacing")
+    target.add_argument("--delta", metavar="FIELD", help="point data of IN holding the factor delta (<1 refine)")
+    target.add_argument("--size-expr", metavar="EXPR",
+                        help="absolute spacing as a numpy expression in x and y, e.g. '0.02 + 0.1*x'")
+    adapt.add_argument("--method", choices=("frfc", "drfc"), default="frfc", help="default %(default)s")
+    adapt.add_argument("--seed", type=int, default=0, help="seed of the sampling (default %(default)s)")
+    adapt.add_argument("--paper", action="store_true", help="the paper's algorithm exactly (options preset paper())")
+    adapt.add_argument("--option", action="append", default=[], metavar="NAME=VALUE",
+                       help="any evolve option, e.g. --option min_angle=25 --option quality=False (repeatable)")
+    adapt.add_argument("--quiet", action="store_true", help="no progress bar, no summary")
+
+    info = commands.add_parser("info", help="points, triangles, segments, kinds and quality of a mesh file")
+    info.add_argument("input", metavar="IN", help="mesh file")
     return parser
+
+
+# Names an --size-expr may use: x, y and numpy's elementwise functions.
+_EXPR_NAMES = ("abs", "sqrt", "exp", "log", "log10", "sin", "cos", "tan", "arctan2", "hypot", "minimum", "maximum",
+               "clip", "where", "tanh", "pi", "e")
+
+
+def _size_expression(text: str):
+    """A checked function h(points) from an --size-expr text (refused before any work)."""
+    import ast
+
+    import numpy as np
+
+    try:
+        tree = ast.parse(text, mode="eval")
+    except SyntaxError as error:
+        raise ValueError(f"--size-expr is not a valid expression: {error.msg}") from None
+    allowed_nodes = (ast.Expression, ast.BinOp, ast.UnaryOp, ast.Call, ast.Name, ast.Load, ast.Constant, ast.operator,
+                     ast.unaryop, ast.Compare, ast.cmpop, ast.keyword)
+    for node in ast.walk(tree):
+        if not isinstance(node, allowed_nodes):
+            raise ValueError(
+                f"--size-expr may use numbers, x, y, arithmetic and numpy functions; not {type(node).__name__}"
+            )
+        if isinstance(node, ast.Name) and node.id not in ("x", "y") + _EXPR_NAMES:
+            raise ValueError(f"--size-expr uses unknown name {node.id!r}; allowed: x, y, {', '.join(_EXPR_NAMES)}")
+    code = compile(tree, "<size-expr>", "eval")
+    namespace = {name: getattr(np, name) for name in _EXPR_NAMES}
+
+    def size(points):
+        values = eval(code, {"__builtins__": {}}, {**namespace, "x": points[:, 0], "y": points[:, 1]})  # noqa: S307
+        return np.broadcast_to(np.asarray(values, dtype=float), (len(points),))
+
+    return size
+
+
+def _parse_options(items: Sequence[str]) -> dict:
+    import ast
+
+    options = {}
+    for item in items:
+        name, sep, value = item.partition("=")
+        if not sep or not name:
+            raise ValueError(f"--option must be NAME=VALUE, got {item!r}")
+        try:
+            options[name] = ast.literal_eval(value)
+        except (ValueError, SyntaxError):
+            options[name] = value  # a bare word: a string option such as samples=barycentre
+    return options
+
+
+def _check_output(path: str) -> None:
+    import os
+    from pathlib import Path
+
+    import meshio
+
+    out = Path(path)
+    if out.suffix.lower() not in meshio.extension_to_filetypes:
+        raise ValueError(f"cannot tell the format of {path} from its suffix {out.suffix!r}")
+    folder = out.parent if str(out.parent) else Path(".")
+    if not folder.is_dir():
+        raise ValueError(f"output folder {folder} does not exist")
+    if not os.access(folder, os.W_OK) or (out.exists() and not os.access(out, os.W_OK)):
+        raise ValueError(f"cannot write {path}")
+
+
+def _adapt(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    from tqdm.auto import tqdm
+
+    import evomesh
+    from evomesh.evolution import make_options
+    from evomesh.io import read_mesh, write_mesh
+
+    # Everything checkable without reading the mesh is checked first.
+    _check_output(args.output)
+    if not Path(args.input).is_file():
+        raise ValueError(f"input mesh file not found: {args.input}")
+    size_function = _size_expression(args.size_expr) if args.size_expr else None
+    overrides = _parse_options(args.option)
+    base = (evomesh.FrfcOptions if args.method == "frfc" else evomesh.DrfcOptions).paper() if args.paper else None
+    make_options(args.method, base, **overrides)
+    with tqdm(total=3, desc="evomesh adapt", unit="stage", disable=True if args.quiet else None, leave=False) as bar:
+        mesh, data = read_mesh(args.input)
+        bar.update(1)
+        field = args.size or args.delta
+        if field is not None and field not in data:
+            raise ValueError(f"{args.input} has no point data {field!r}; it has: {', '.join(data) or 'none'}")
+        target = {"size": size_function} if size_function else {"size": data[field]} if args.size else {}
+        new = evomesh.evolve(mesh, data[field] if args.delta else None, method=args.method, seed=args.seed,
+                             options=base, **target, **overrides)
+        bar.update(1)
+        fields = {name: values for name, values in data.items() if np.asarray(values).dtype.kind in "biufc"}
+        write_mesh(args.output, new, evomesh.transfer(mesh, new, fields) if fields else None)
+        bar.update(1)
+    if not args.quiet:
+        q = evomesh.quality(new)
+        print(f"{mesh.n_points} -> {new.n_points} points ({int((new.origin >= 0).sum())} kept), "
+              f"{new.n_triangles} triangles, min angle {q.min_angle:.2f} deg; wrote {args.output}")
+    return 0
+
+
+def _info(args: argparse.Namespace) -> int:
+    import evomesh
+    from evomesh.io import read_mesh
+
+    mesh, data = read_mesh(args.input)
+    q = evomesh.quality(mesh)
+    counts = np.bincount(mesh.kind, minlength=5)
+    nn = mesh.nn_spacing
+    print(f"{args.input}")
+    kinds = ", ".join(f"{k.name.lower()} {int(c)}" for k, c in zip(evomesh.PointKind, counts) if c)
+    print(f"  points     {mesh.n_points}  ({kinds})")
+    print(f"  triangles  {mesh.n_triangles}, area {mesh.area:.6g}, holes {1 - mesh.euler_characteristic()}")
+    print(f"  segments   {len(mesh.segments)} ({int(mesh.segment_is_boundary.sum())} boundary)")
+    print(f"  spacing    nn min {nn.min():.4g}, median {np.median(nn):.4g}, max {nn.max():.4g}")
+    print(f"  quality    min angle {q.min_angle:.2f} deg, max radius/edge {q.max_radius_edge:.3f}")
+    print(f"  point data {', '.join(data) or 'none'}")
+    return 0
 
 
 def _growing_circle(args: argparse.Namespace) -> int:
@@ -98,6 +248,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         if args.command == "growing-circle":
             return _growing_circle(args)
+        if args.command == "adapt":
+            return _adapt(args)
+        if args.command == "info":
+            return _info(args)
     except (ValueError, TypeError, OSError) as error:
         lines = str(error).strip().splitlines()
         print(f"evomesh: error: {lines[0] if lines else type(error).__name__}", file=sys.stderr)

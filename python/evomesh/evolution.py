@@ -254,7 +254,10 @@ def evolve(mesh: Mesh, delta: Any = None, *, size: Any = None, method: str = "fr
     """
     _require_mesh(mesh)
     if (delta is None) == (size is None):
-        raise TypeError("evolve needs exactly one of delta (relative to the current spacing) and size (absolute)")
+        raise TypeError(
+            "evolve needs exactly one of delta (a real numeric factor per point, relative to the current spacing) "
+            "and size (an absolute spacing)"
+        )
     d = as_delta(mesh, delta) if size is None else delta_from_size(mesh, size)
     o = make_options(method, options, **overrides)
     if method == "frfc" and seed is not None:

@@ -194,57 +194,12 @@ def read_mesh(path: str | Path) -> tuple[Mesh, dict[str, np.ndarray]]:
         raise ValueError(f"cannot read mesh file {path}: {error}") from error
     except Exception as error:  # parsers of the many formats raise many things
         raise ValueError(f"cannot read mesh file {path}: {type(error).__name__}: {error}") from error
-    tri_blocks = [c.data for c in m.cells if c.type == "triangle"]
-    if not tri_blocks:
-        raise ValueError(f"mesh file {path} has no triangles")
-    triangles = np.concatenate(tri_blocks)
-    lines = [c.data for c in m.cells if c.type == "line"]
-    segments = np.concatenate(lines) if lines else None
-    data = {name: np.asarray(v) for name, v in m.point_data.items()}
-    kind = data.pop("kind", None)
-    origin = data.pop("origin", None)
-    mesh = Mesh(
-        _planar_points(np.asarray(m.points), path),
-        triangles,
-        segments,
-        kind=None if kind is None else _integral(kind, "kind", path),
-        origin=None if origin is None else _integral(origin, "origin", path),
-    )
+    try:
+        mesh, used = Mesh._from_meshio(m)
+    except ValueError as error:
+        raise ValueError(f"mesh file {path}: {error}") from None
+    data = {name: np.asarray(v)[used] for name, v in m.point_data.items() if name not in ("kind", "origin")}
     return mesh, data
-
-
-def _planar_points(points: np.ndarray, path: Path) -> np.ndarray:
-    """The (n, 2) points of a file's (n, 2) or (n, 3) points; z must be 0."""
-    if points.ndim != 2 or points.shape[1] not in (2, 3):
-        raise ValueError(f"mesh file {path} has points of shape {points.shape}; expected (n, 2) or (n, 3)")
-    if points.shape[1] == 3:
-        z = points[:, 2]
-        lifted = np.flatnonzero(~(z == 0))  # NaN counts as lifted
-        if len(lifted):
-            first = ", ".join(f"{int(k)} (z = {z[k]:g})" for k in lifted[:5])
-            more = f" and {len(lifted) - 5} more" if len(lifted) > 5 else ""
-            raise ValueError(
-                f"mesh file {path} is not a planar mesh: {len(lifted)} of {len(z)} points have z != 0: "
-                f"points {first}{more}"
-            )
-    return points[:, :2]
-
-
-def _integral(values: np.ndarray, name: str, path: Path) -> np.ndarray:
-    """Integer point data that a file may store as floats: integral floats
-    become int64, other floats are an error; other dtypes go to Mesh's checks."""
-    if values.dtype.kind != "f":
-        return values
-    with np.errstate(invalid="ignore"):
-        integral = np.isfinite(values) & (values == np.round(values)) & (np.abs(values) < 2.0**63)
-    if not integral.all():
-        bad = np.flatnonzero(~integral.reshape(len(values), -1).all(axis=1))
-        k = int(bad[0])
-        raise ValueError(
-            f"mesh file {path}: point data {name!r} must hold integers, but {len(bad)} points do not "
-            f"(first: point {k}, {name} = {values[k]!r})"
-        )
-    return values.astype(np.int64)
 
 
 def write_pvd(path: str | Path, files: Sequence[str | Path], times: Sequence[float]) -> Path:

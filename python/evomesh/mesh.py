@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import warnings
 from enum import IntEnum
 from types import MappingProxyType
 from typing import Any, Mapping
@@ -319,6 +320,77 @@ class Mesh:
     def __deepcopy__(self, memo: dict) -> "Mesh":
         return _unpickle_mesh(*self.__reduce__()[1])
 
+    @classmethod
+    def from_meshio(cls, m: Any) -> "Mesh":
+        """A Mesh from a ``meshio.Mesh`` (any format meshio reads).
+
+        Triangle blocks are concatenated; line cells become segments; a z
+        column is dropped when it is 0 everywhere (a non-zero one is refused:
+        dropping it would change the mesh); point data ``kind`` and ``origin``
+        are used when present (integral floats accepted). Points used by no
+        triangle (a Gmsh circle's centre, an isolated physical point) are removed
+        with a warning that says how many. Other cells (vertex cells) are
+        ignored; quadrilaterals, polygons and higher-order cells are refused.
+        """
+        return cls._from_meshio(m)[0]
+
+    @classmethod
+    def _from_meshio(cls, m: Any) -> "tuple[Mesh, np.ndarray]":
+        """The Mesh and the mask of the meshio points it kept."""
+        points = np.asarray(m.points)
+        if points.ndim != 2 or points.shape[1] not in (2, 3):
+            raise ValueError(f"meshio mesh has points of shape {points.shape}; expected (n, 2) or (n, 3)")
+        if points.shape[1] == 3:
+            lifted = np.flatnonzero(~(points[:, 2] == 0))  # NaN counts as lifted
+            if len(lifted):
+                first = ", ".join(f"{int(k)} (z = {points[k, 2]:g})" for k in lifted[:5])
+                more = f" and {len(lifted) - 5} more" if len(lifted) > 5 else ""
+                raise ValueError(
+                    f"not a planar mesh: {len(lifted)} of {len(points)} points have z != 0: points {first}{more}"
+                )
+            points = points[:, :2]
+        triangles, lines = [], []
+        for block in m.cells:
+            if block.type == "triangle":
+                triangles.append(np.asarray(block.data))
+            elif block.type == "line":
+                lines.append(np.asarray(block.data))
+            elif block.type != "vertex":
+                raise ValueError(f"cells of type {block.type!r} are not supported: evomesh meshes are linear triangles")
+        if not triangles:
+            raise ValueError("meshio mesh has no triangle cells")
+        tris = np.concatenate(triangles)
+        segs = np.concatenate(lines) if lines else None
+        data = {name: np.asarray(values) for name, values in m.point_data.items()}
+        kind, origin = data.get("kind"), data.get("origin")
+        used = np.zeros(len(points), dtype=bool)
+        if tris.size and tris.min() >= 0 and tris.max() < len(points):
+            used[tris.ravel()] = True
+        if tris.size and not used.all() and tris.min() >= 0 and tris.max() < len(points):
+            if segs is not None and segs.size and not used[segs.ravel()].all():
+                raise ValueError("a line cell uses a point that no triangle uses")
+            remap = np.cumsum(used) - 1
+            warnings.warn(f"removed {int((~used).sum())} points used by no triangle", UserWarning, stacklevel=2)
+            points, tris = points[used], remap[tris]
+            segs = None if segs is None else remap[segs]
+            kind = None if kind is None else kind[used]
+            origin = None if origin is None else origin[used]
+        mesh = cls(points, tris, segs, kind=None if kind is None else _integral_values(kind, "kind"),
+                   origin=None if origin is None else _integral_values(origin, "origin"))
+        return mesh, used
+
+    def to_meshio(self) -> Any:
+        """A ``meshio.Mesh``: points with z = 0, one "triangle" block and one
+        "line" block for the segments, point data ``kind`` and ``origin``."""
+        import meshio
+
+        points = np.c_[self.points, np.zeros(self.n_points)]
+        cells = [("triangle", np.array(self.triangles))]
+        if len(self.segments):
+            cells.append(("line", np.array(self.segments)))
+        point_data = {"kind": np.array(self.kind, dtype=np.int32), "origin": np.array(self.origin)}
+        return meshio.Mesh(points, cells, point_data=point_data)
+
     @property
     def n_points(self) -> int:
         return len(self.points)
@@ -360,6 +432,22 @@ class Mesh:
 def _unpickle_mesh(points, triangles, segments, segment_is_boundary, kind, origin, stats, lineage=None,
                    nn=None) -> Mesh:
     return Mesh._trusted(points, triangles, segments, segment_is_boundary, kind, origin, stats, lineage, nn)
+
+
+def _integral_values(values: np.ndarray, name: str) -> np.ndarray:
+    """Integer data that files may store as floats: integral floats become
+    int64, other floats are an error naming the first bad point."""
+    if values.dtype.kind != "f":
+        return values
+    with np.errstate(invalid="ignore"):
+        integral = np.isfinite(values) & (values == np.round(values)) & (np.abs(values) < 2.0**63)
+    if not integral.all():
+        bad = np.flatnonzero(~integral.reshape(len(values), -1).all(axis=1))
+        raise ValueError(
+            f"point data {name!r} must hold integers, but {len(bad)} points do not (first: point {int(bad[0])}, "
+            f"{name} = {values[int(bad[0])]!r})"
+        )
+    return values.astype(np.int64)
 
 
 class Lineage:

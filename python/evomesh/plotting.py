@@ -190,7 +190,6 @@ def plot_mesh(
     if mesh.n_triangles > DENSE_TRIANGLES:
         spacing_nn = mesh.nn_spacing
         from matplotlib.colors import LogNorm
-
         from matplotlib.tri import Triangulation
 
         shown = ax.tripcolor(Triangulation(mesh.points[:, 0], mesh.points[:, 1], mesh.triangles), spacing_nn,
