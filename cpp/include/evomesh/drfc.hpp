@@ -3,7 +3,7 @@
 
 #include <vector>
 
-#include "evomesh/refinement.hpp"
+#include "evomesh/drfc_refinement.hpp"
 #include "evomesh/options.hpp"
 #include "evomesh/step.hpp"
 #include "evomesh/types.hpp"

@@ -12,7 +12,7 @@
 
 #include "evomesh/options.hpp"
 #include "evomesh/parent_map.hpp"
-#include "evomesh/refinement.hpp"
+#include "evomesh/quality_pass.hpp"
 #include "evomesh/spacing.hpp"
 #include "evomesh/triangulation.hpp"
 #include "evomesh/types.hpp"
