@@ -98,6 +98,70 @@ std::vector<Constraint_piece> pieces_along_chains(const Mesh_arrays& mesh, const
   return constraint_pieces(chains, out_index, begin, out_index);
 }
 
+// Step 2a: candidates on segments (grid samples and ring candidates, snapped
+// to straight chains) and their spheres.
+Candidates segment_stage(const Mesh_arrays& mesh, const std::vector<double>& delta, const Step_spacing& spacing,
+                         const std::vector<Segment_chain>& chains, const Frfc_options& options, Stage_timer& timer) {
+  const std::vector<double>& f = spacing.f;
+  check_sample_budget(estimate_sample_count(mesh, f, options.cell_factor, options.max_samples, options.adaptive_cells),
+                      options.max_samples, "sampling");
+  Candidates on_segments = segment_candidates(mesh, delta, f, chains, options);
+  timer.lap("sampling");
+  candidate_radii(mesh, *spacing.function, f, options, /*on_segment=*/true, on_segments);
+  timer.lap("sample_radii");
+  return on_segments;
+}
+
+// The points the first packing pass keeps are final: the quality pass's
+// triangulation of them starts at once, on a second thread, beside the
+// interior sampling and packing (members destroyed in reverse: the thread is
+// joined before the points it reads go).
+struct Early_start {
+  std::vector<Vec2> points;
+  Early_triangulation triangulation;
+  Background work;
+  Early_start(const Packing& packing, const Frfc_options& options) {
+    if (!options.quality) return;
+    for (std::size_t c = 0; c < packing.kept_first.size(); ++c) {
+      if (packing.kept_first[c]) points.push_back(packing.centers[c]);
+    }
+    work.start([this]() { triangulation.insert_first(points); }, resolve_threads(options.threads) > 1);
+  }
+};
+
+// Step 2b: interior candidates (grid samples and ring candidates, less those
+// the first pass certainly blocks) and their spheres.
+Candidates interior_stage(const Mesh_arrays& mesh, const Triangle_fans& fans, const std::vector<double>& delta,
+                          const Step_spacing& spacing, const Packing& packing, const Frfc_options& options,
+                          Stage_timer& timer, std::size_t& n_drawn) {
+  const std::vector<double>& f = spacing.f;
+  std::vector<Disc> cover;
+  if (options.filter_samples) {
+    cover = cover_discs(mesh, f, packing.radius, packing.kept, packing.blocker, options.radius_scale);
+  }
+  Candidates inside = interior_candidates(mesh, fans, delta, f, cover, options, n_drawn);
+  timer.lap("sampling");
+  candidate_radii(mesh, *spacing.function, f, options, /*on_segment=*/false, inside);
+  timer.lap("sample_radii");
+  if (options.filter_samples) {
+    drop_blocked_candidates(mesh, packing.centers, packing.radius, packing.kept, packing.blocker, options.threads,
+                            inside);
+    timer.lap("lfmis");
+  }
+  return inside;
+}
+
+// The spacing repair (spacing_repair.hpp), when asked for and ring candidates were offered.
+std::vector<Vec2> spacing_repair_stage(const Mesh_arrays& mesh, const Triangle_fans& fans,
+                                       const std::vector<double>& delta, const Step_spacing& spacing,
+                                       const Candidates& on_segments, const Frfc_options& options, Packing& packing,
+                                       std::size_t& n_repairs) {
+  if (!(options.repair_ratio > 0 && options.ring_samples)) return {};
+  return repair_spacing(mesh, fans, delta, spacing.nn, spacing.f, ring_reach(options.radius_scale), options.seed,
+                        packing.centers, on_segments.owner, options.repair_ratio, options.threads, packing.kept,
+                        n_repairs);
+}
+
 }  // namespace
 
 Evolve_result frfc(const Mesh_arrays& mesh, const std::vector<double>& delta, const Frfc_options& options) {
@@ -109,54 +173,21 @@ Evolve_result frfc(const Mesh_arrays& mesh, const std::vector<double>& delta, co
 
   // Step 1: nn_M and the spacing function f (Section 3.1).
   Step_spacing spacing = step_spacing(mesh, delta, F_at_points::lemma_3_1, options.threads, timer);
-  const std::vector<double>& f = spacing.f;
-
-  // Step 2a: candidates on segments, their spheres, and the first packing pass.
-  check_sample_budget(estimate_sample_count(mesh, f, options.cell_factor, options.max_samples, options.adaptive_cells),
-                      options.max_samples, "sampling");
+  // Steps 2-5: candidates on segments, first packing pass; interior candidates, second pass.
   const auto chains = segment_chains(mesh);
-  Candidates on_segments = segment_candidates(mesh, delta, f, chains, options);
-  timer.lap("sampling");
-  candidate_radii(mesh, *spacing.function, f, options, /*on_segment=*/true, on_segments);
-  timer.lap("sample_radii");
+  const Candidates on_segments = segment_stage(mesh, delta, spacing, chains, options, timer);
   std::size_t n_forced = 0;
   const auto forced = forced_corners(mesh, chains, n_forced);
-  Packing packing = first_packing_pass(mesh, f, on_segments, forced, n_forced, options);
-  // The points it keeps are final: the quality pass's triangulation of them
-  // starts now, on a second thread, beside the interior sampling and packing.
-  std::vector<Vec2> first_points;
-  for (std::size_t c = 0; c < packing.kept_first.size(); ++c) {
-    if (packing.kept_first[c]) first_points.push_back(packing.centers[c]);
-  }
-  Early_triangulation early;
-  Background early_work;
-  if (options.quality) early_work.start([&]() { early.insert_first(first_points); }, resolve_threads(options.threads) > 1);
+  Packing packing = first_packing_pass(mesh, spacing.f, on_segments, forced, n_forced, options);
+  Early_start early(packing, options);
   timer.lap("lfmis");
-
-  // Step 2b: interior candidates (those the first pass certainly blocks left
-  // out), their spheres, and the second packing pass.
-  std::vector<Disc> cover;
-  if (options.filter_samples) cover = cover_discs(mesh, f, packing.radius, packing.kept, packing.blocker, options.radius_scale);
   const Triangle_fans fans(mesh);
   std::size_t n_drawn = 0;
-  Candidates inside = interior_candidates(mesh, fans, delta, f, cover, options, n_drawn);
-  timer.lap("sampling");
-  candidate_radii(mesh, *spacing.function, f, options, /*on_segment=*/false, inside);
-  timer.lap("sample_radii");
-  if (options.filter_samples) {
-    drop_blocked_candidates(mesh, packing.centers, packing.radius, packing.kept, packing.blocker, options.threads, inside);
-    timer.lap("lfmis");
-  }
+  const Candidates inside = interior_stage(mesh, fans, delta, spacing, packing, options, timer, n_drawn);
   second_packing_pass(inside, packing);
   timer.lap("lfmis");
-
   std::size_t n_repairs = 0;
-  std::vector<Vec2> repair_points;
-  if (options.repair_ratio > 0 && options.ring_samples) {
-    repair_points = repair_spacing(mesh, fans, delta, spacing.nn, f, ring_reach(options.radius_scale), options.seed,
-                                   packing.centers, on_segments.owner, options.repair_ratio, options.threads,
-                                   packing.kept, n_repairs);
-  }
+  const auto repair_points = spacing_repair_stage(mesh, fans, delta, spacing, on_segments, options, packing, n_repairs);
   timer.lap("spacing_repair");
 
   // Step 6: the kept points, the constraint pieces between them, their triangulation.
@@ -164,9 +195,9 @@ Evolve_result frfc(const Mesh_arrays& mesh, const std::vector<double>& delta, co
   Selection selection = select_output(mesh, forced, packing, on_segments.size(), repair_points, out_index);
   const auto pieces = pieces_along_chains(mesh, chains, on_segments, out_index);
   const Quality_options quality = options.quality_settings();
-  early_work.wait();
+  early.work.wait();
   triangulate_selection(std::move(selection), pieces, options.quality ? &quality : nullptr, result,
-                        options.quality ? &early : nullptr);
+                        options.quality ? &early.triangulation : nullptr);
   timer.lap(options.quality ? "quality" : "cdt");
   finish_step(mesh, result, timer);
   add_step_counts(result, {{"n_input_points", mesh.points.size()},
