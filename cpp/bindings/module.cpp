@@ -119,14 +119,20 @@ Mesh_arrays to_mesh(const Float_array& points, const Int_array& triangles, const
   return mesh;
 }
 
-py::dict evolve_result_dict(const Evolve_result& r) {
+// The arrays of a mesh and the input index of every point (-1 for a new one).
+py::dict mesh_dict(const Mesh_arrays& mesh, const std::vector<Index>& origin) {
   py::dict out;
-  out["points"] = points_array(r.mesh.points);
-  out["triangles"] = rows_array<3>(r.mesh.triangles);
-  out["segments"] = rows_array<2>(r.mesh.segments);
-  out["segment_is_boundary"] = vector_array(r.mesh.segment_is_boundary);
-  out["kind"] = kinds_array(r.mesh.kind);
-  out["origin"] = vector_array(r.origin);
+  out["points"] = points_array(mesh.points);
+  out["triangles"] = rows_array<3>(mesh.triangles);
+  out["segments"] = rows_array<2>(mesh.segments);
+  out["segment_is_boundary"] = vector_array(mesh.segment_is_boundary);
+  out["kind"] = kinds_array(mesh.kind);
+  out["origin"] = vector_array(origin);
+  return out;
+}
+
+py::dict evolve_result_dict(const Evolve_result& r) {
+  py::dict out = mesh_dict(r.mesh, r.origin);
   out["input_f"] = vector_array(r.input_f);
   out["input_nn"] = vector_array(r.input_nn);
   out["parent_triangle"] = vector_array(r.parents.triangle);
@@ -236,6 +242,29 @@ void bind_options(py::module_& m) {
 
 }  // namespace
 
+// One step on a mesh given as arrays (frfc, drfc, drfc_refine): the GIL is
+// released while `run` works; `to_dict` turns its result into a dict.
+template <class Options, class Result, class To_dict>
+void bind_step(py::module_& m, const char* name, Result (*run)(const Mesh_arrays&, const std::vector<double>&, const Options&),
+               To_dict to_dict, const char* doc) {
+  m.def(
+      name,
+      [run, to_dict](const Float_array& points, const Int_array& triangles, const Int_array& segments,
+                     const Byte_array& segment_is_boundary, const Byte_array& kind, const Float_array& delta,
+                     const Options& options) {
+        Mesh_arrays mesh = to_mesh(points, triangles, segments, segment_is_boundary, kind);
+        auto d = to_vector<double>(delta);
+        Result r;
+        {
+          py::gil_scoped_release release;
+          r = run(mesh, d, options);
+        }
+        return to_dict(r);
+      },
+      py::arg("points"), py::arg("triangles"), py::arg("segments"), py::arg("segment_is_boundary"),
+      py::arg("kind"), py::arg("delta"), py::arg("options") = Options::recommended(), doc);
+}
+
 PYBIND11_MODULE(_core, m) {
   m.doc() = "evomesh C++ core (CGAL): spacing functions, sampling, lexical-first MIS, FRFC";
 
@@ -328,61 +357,16 @@ PYBIND11_MODULE(_core, m) {
 
   bind_options(m);
 
-  m.def(
-      "frfc",
-      [](const Float_array& points, const Int_array& triangles, const Int_array& segments,
-         const Byte_array& segment_is_boundary, const Byte_array& kind, const Float_array& delta,
-         const Frfc_options& options) {
-        Mesh_arrays mesh = to_mesh(points, triangles, segments, segment_is_boundary, kind);
-        auto d = to_vector<double>(delta);
-        Evolve_result r;
-        {
-          py::gil_scoped_release release;
-          r = frfc(mesh, d, options);
-        }
-        return evolve_result_dict(r);
-      },
-      py::arg("points"), py::arg("triangles"), py::arg("segments"), py::arg("segment_is_boundary"),
-      py::arg("kind"), py::arg("delta"), py::arg("options") = Frfc_options::recommended(),
-      "Functional-Refining-Functional-Coarsening (Section 3.2): one step; returns a dict of arrays and stats.");
+  bind_step<Frfc_options>(m, "frfc", &frfc, evolve_result_dict,
+                          "Functional-Refining-Functional-Coarsening (Section 3.2): one step; returns a dict of arrays "
+                          "and stats.");
+  bind_step<Drfc_options>(m, "drfc", &drfc, evolve_result_dict,
+                          "Delaunay-Refining-Functional-Coarsening (Section 5); returns the same dict as frfc.");
 
-  m.def(
-      "drfc",
-      [](const Float_array& points, const Int_array& triangles, const Int_array& segments,
-         const Byte_array& segment_is_boundary, const Byte_array& kind, const Float_array& delta,
-         const Drfc_options& options) {
-        Mesh_arrays mesh = to_mesh(points, triangles, segments, segment_is_boundary, kind);
-        auto d = to_vector<double>(delta);
-        Evolve_result r;
-        {
-          py::gil_scoped_release release;
-          r = drfc(mesh, d, options);
-        }
-        return evolve_result_dict(r);
-      },
-      py::arg("points"), py::arg("triangles"), py::arg("segments"), py::arg("segment_is_boundary"),
-      py::arg("kind"), py::arg("delta"), py::arg("options") = Drfc_options::recommended(),
-      "Delaunay-Refining-Functional-Coarsening (Section 5); returns the same dict as frfc.");
-
-  m.def(
-      "drfc_refine",
-      [](const Float_array& points, const Int_array& triangles, const Int_array& segments,
-         const Byte_array& segment_is_boundary, const Byte_array& kind, const Float_array& delta,
-         const Drfc_options& options) {
-        Mesh_arrays mesh = to_mesh(points, triangles, segments, segment_is_boundary, kind);
-        auto d = to_vector<double>(delta);
-        Refined_mesh r;
-        {
-          py::gil_scoped_release release;
-          r = drfc_refine(mesh, d, options);
-        }
-        py::dict out;
-        out["points"] = points_array(r.mesh.points);
-        out["triangles"] = rows_array<3>(r.mesh.triangles);
-        out["segments"] = rows_array<2>(r.mesh.segments);
-        out["segment_is_boundary"] = vector_array(r.mesh.segment_is_boundary);
-        out["kind"] = kinds_array(r.mesh.kind);
-        out["origin"] = vector_array(r.source);
+  bind_step<Drfc_options>(
+      m, "drfc_refine", &drfc_refine,
+      [](const Refined_mesh& r) {
+        py::dict out = mesh_dict(r.mesh, r.source);
         out["f"] = vector_array(r.f);
         py::dict stats;
         stats["points_added"] = static_cast<double>(r.report.n_inserted);
@@ -392,8 +376,6 @@ PYBIND11_MODULE(_core, m) {
         out["stats"] = stats;
         return out;
       },
-      py::arg("points"), py::arg("triangles"), py::arg("segments"), py::arg("segment_is_boundary"),
-      py::arg("kind"), py::arg("delta"), py::arg("options") = Drfc_options::recommended(),
       "DRFC step 1 alone: Delaunay refinement with Ruppert's rules and rule 4 (Section 5).");
 
   m.def(

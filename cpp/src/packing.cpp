@@ -333,4 +333,40 @@ std::vector<Index> packing_order(const std::vector<std::uint8_t>& priority_class
   return order;
 }
 
+Packing_class old_point_class(Point_kind kind, bool forced) {
+  if (forced) return class_corner;
+  switch (kind) {
+    case Point_kind::corner:
+    case Point_kind::boundary: return class_boundary;
+    case Point_kind::original: return class_original;
+    default: return class_steiner;
+  }
+}
+
+Packing_class new_point_class(bool on_segment, int round) {
+  if (round < 0) return on_segment ? class_boundary_new : class_new;
+  return static_cast<Packing_class>((on_segment ? class_boundary_ring : class_ring) + round);
+}
+
+void extend_packing(const std::vector<Vec2>& centers, const std::vector<double>& radii,
+                    const std::vector<Index>& first_order, const std::vector<Vec2>& more_centers,
+                    const std::vector<double>& more_radii, const std::vector<Index>& more_order,
+                    std::vector<std::uint8_t>& kept) {
+  std::vector<Index> order;
+  std::vector<Vec2> all_centers;
+  std::vector<double> all_radii;
+  for (Index c : first_order) {
+    if (!kept[c]) continue;
+    order.push_back(static_cast<Index>(all_centers.size()));
+    all_centers.push_back(centers[c]);
+    all_radii.push_back(radii[c]);
+  }
+  const std::size_t n_first = order.size();
+  for (Index j : more_order) order.push_back(static_cast<Index>(n_first + j));
+  all_centers.insert(all_centers.end(), more_centers.begin(), more_centers.end());
+  all_radii.insert(all_radii.end(), more_radii.begin(), more_radii.end());
+  const auto more_kept = lexical_first_mis(all_centers, all_radii, order, n_first);
+  kept.insert(kept.end(), more_kept.begin() + static_cast<std::ptrdiff_t>(n_first), more_kept.end());
+}
+
 }  // namespace evomesh

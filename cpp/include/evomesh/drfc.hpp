@@ -3,13 +3,12 @@
 
 #include <vector>
 
-#include "evomesh/frfc.hpp"
+#include "evomesh/drfc_refinement.hpp"
 #include "evomesh/options.hpp"
-#include "evomesh/refinement.hpp"
+#include "evomesh/step.hpp"
 #include "evomesh/types.hpp"
 
 namespace evomesh {
-
 
 // Step 1 alone: the refined mesh M_I (input points first, in input order, then
 // new ones), with f at its points in `f` and the counts in `report`.

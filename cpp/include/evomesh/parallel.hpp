@@ -4,7 +4,10 @@
 
 #include <algorithm>
 #include <cstddef>
+#include <exception>
 #include <string>
+#include <thread>
+#include <utility>
 
 namespace evomesh {
 
@@ -79,5 +82,36 @@ void parallel_for(std::size_t n, int threads, Body body) {
   detail::run_parallel(
       n, t, [](void* context, std::size_t i) { (*static_cast<Body*>(context))(i); }, &body);
 }
+
+// Work started on another thread and waited for later; the destructor waits
+// too, so an exception on the main path never leaves a running thread behind.
+class Background {
+ public:
+  template <class Work>
+  void start(Work work, bool on_thread) {
+    if (!on_thread) {
+      work();
+      return;
+    }
+    thread_ = std::thread([this, work]() {
+      try {
+        work();
+      } catch (...) {
+        error_ = std::current_exception();
+      }
+    });
+  }
+  void wait() {
+    if (thread_.joinable()) thread_.join();
+    if (error_) std::rethrow_exception(std::exchange(error_, nullptr));
+  }
+  ~Background() {
+    if (thread_.joinable()) thread_.join();
+  }
+
+ private:
+  std::thread thread_;
+  std::exception_ptr error_;
+};
 
 }  // namespace evomesh

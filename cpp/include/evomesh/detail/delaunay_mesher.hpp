@@ -1,0 +1,330 @@
+// The machinery of Delaunay refinement with CGAL shared by the quality pass
+// (quality_pass.cpp, Section 6) and DRFC's refinement (drfc_refinement.cpp,
+// Section 5): a constrained Delaunay triangulation whose vertices carry f, the
+// face criteria (Ruppert's rule 3, and rule 4 in terms of f), the mesher levels,
+// and the extraction of the result. Internal: include from .cpp files only.
+#pragma once
+
+#include <CGAL/Constrained_Delaunay_triangulation_2.h>
+#include <CGAL/Constrained_Delaunay_triangulation_face_base_2.h>
+#include <CGAL/Delaunay_mesh_face_base_2.h>
+#include <CGAL/Mesh_2/Clusters.h>
+#include <CGAL/Mesh_2/Face_badness.h>
+#include <CGAL/Mesh_2/Refine_edges_with_clusters.h>  // before the visitor, as in Delaunay_mesher_2.h
+#include <CGAL/Mesh_2/Refine_edges_visitor.h>
+#include <CGAL/Mesh_2/Refine_faces.h>
+#include <CGAL/Triangulation_face_base_with_info_2.h>
+#include <CGAL/Triangulation_vertex_base_with_info_2.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <limits>
+#include <utility>
+#include <vector>
+
+#include "evomesh/kernel.hpp"
+#include "evomesh/refined_mesh.hpp"
+#include "evomesh/triangulation.hpp"
+#include "evomesh/types.hpp"
+
+namespace evomesh::detail {
+
+inline constexpr double kPi = 3.14159265358979323846;
+
+struct Vertex_info {
+  Index index = -1;    // input point, -1 for an inserted one
+  Index out = -1;      // output index (extraction)
+  double f = -1;       // spacing function here; < 0: not known yet
+  Index site = -1;     // Apollonius site that attains f here
+  bool exact = false;  // f evaluated exactly (else from the sites of neighbours)
+};
+
+using Vb = CGAL::Triangulation_vertex_base_with_info_2<Vertex_info, Kernel>;
+using Fb_info = CGAL::Triangulation_face_base_with_info_2<std::int8_t, Kernel>;  // flood-fill label
+using Fb_constrained = CGAL::Constrained_triangulation_face_base_2<Kernel, Fb_info>;
+using Fb_cdt = CGAL::Constrained_Delaunay_triangulation_face_base_2<Kernel, Fb_constrained>;
+using Fb = CGAL::Delaunay_mesh_face_base_2<Kernel, Fb_cdt>;
+using Tds = CGAL::Triangulation_data_structure_2<Vb, Fb>;
+// As in constrained_delaunay: constraints may pass through points, never cross.
+using Cdt = CGAL::Constrained_Delaunay_triangulation_2<
+    Kernel, Tds, CGAL::No_constraint_intersection_requiring_constructions_tag>;
+using Vertex_handle = Cdt::Vertex_handle;
+using Face_handle = Cdt::Face_handle;
+
+// The triangulation works on the points scaled by a power of two (exact) to
+// magnitude about 1: CGAL's circumcentres and the quality measures multiply three
+// lengths, which would overflow for coordinates near 1e150 (or underflow near 1e-150).
+struct Scaling {
+  double to_unit = 1;
+  double from_unit = 1;
+};
+
+inline Scaling unit_scaling(const std::vector<Vec2>& points) {
+  double largest = 0;
+  for (const auto& p : points) largest = std::max({largest, std::abs(p[0]), std::abs(p[1])});
+  if (!(largest > 0) || !std::isfinite(largest)) return {};
+  const int e = std::ilogb(largest);
+  const Scaling s{std::ldexp(1.0, -e), std::ldexp(1.0, e)};
+  // Exact unless a coordinate would become subnormal; then keep the input scale.
+  for (const auto& p : points) {
+    for (double x : p) {
+      const double y = x * s.to_unit;
+      if (y * s.from_unit != x || (y != 0 && !std::isnormal(y))) return {};
+    }
+  }
+  return s;
+}
+
+// Spacing data for rule 4 (Section 5): sites and weights of f = min_s (w_s + |x - s|)
+// in input units; f at the vertices is kept in the triangulation's units.
+struct Spacing_data {
+  const std::vector<Vec2>* sites = nullptr;
+  const std::vector<double>* weights = nullptr;
+  Scaling scaling;
+};
+
+inline double squared_distance(const Point_2& a, const Point_2& b) {
+  const double dx = a.x() - b.x(), dy = a.y() - b.y();
+  return dx * dx + dy * dy;
+}
+
+// Squared length of the shortest edge at v: the Delaunay neighbour spacing. It is
+// never below the true nn spacing, so nn(v) <= f(v) follows from it.
+inline double neighbour_spacing_squared(const Cdt& tr, Vertex_handle v) {
+  double best = std::numeric_limits<double>::infinity();
+  auto c = tr.incident_vertices(v), done = c;
+  do {
+    if (!tr.is_infinite(c)) best = std::min(best, squared_distance(v->point(), c->point()));
+  } while (++c != done);
+  return best;
+}
+
+// f at an inserted vertex while refining: the cones of its neighbours' sites. This
+// is f over a subset of the cones, so never below f; exact values replace it after
+// each pass.
+inline double target_spacing(const Cdt& tr, Vertex_handle v, const Spacing_data& spacing) {
+  auto& info = v->info();
+  if (info.f >= 0) return info.f;
+  double best = std::numeric_limits<double>::infinity();
+  Index best_site = -1;
+  const double x = v->point().x() * spacing.scaling.from_unit, y = v->point().y() * spacing.scaling.from_unit;
+  auto c = tr.incident_vertices(v), done = c;
+  do {
+    if (tr.is_infinite(c) || c->info().site < 0) continue;
+    const Index s = c->info().site;
+    const Vec2& p = (*spacing.sites)[s];
+    const double value = (*spacing.weights)[s] + std::hypot(x - p[0], y - p[1]);
+    if (value < best) {
+      best = value;
+      best_site = s;
+    }
+  } while (++c != done);
+  if (best_site < 0) return best;  // no neighbour knows a site yet: no rule 4 here
+  info.f = best * spacing.scaling.to_unit;
+  info.site = best_site;
+  return info.f;
+}
+
+// Face criteria for CGAL's Delaunay mesher. Quality: for a triangle that breaks
+// rule 4, minus (circumradius / f)^2 of its worst vertex, so the largest such
+// triangles are split first; otherwise the squared sine of its smallest angle (as
+// Delaunay_mesh_criteria_2), bad below sin^2(min_angle) (rule 3).
+class Refinement_criteria {
+ public:
+  using Quality = double;
+
+  Refinement_criteria(double min_angle_degrees, const Cdt& tr, const Spacing_data* spacing, bool off_centres)
+      : bound_(std::pow(std::sin(min_angle_degrees * kPi / 180.0), 2)),
+        min_angle_(min_angle_degrees),
+        off_centres_(off_centres),
+        tr_(&tr),
+        spacing_(spacing) {}
+
+  // Cotangent of half the angle under which an off-centre sees the short edge;
+  // infinite (always the circumcentre) without off-centres. That angle is a little
+  // above the target, so rounding cannot make the new triangle bad again.
+  double off_centre_half_angle_cotangent() const {
+    if (!off_centres_) return std::numeric_limits<double>::infinity();
+    return 1.0 / std::tan(0.5 * std::min(1.02 * min_angle_, 60.0) * kPi / 180.0);
+  }
+
+  class Is_bad {
+   public:
+    Is_bad(double bound, const Cdt* tr, const Spacing_data* spacing) : bound_(bound), tr_(tr), spacing_(spacing) {}
+
+    CGAL::Mesh_2::Face_badness operator()(Quality q) const {
+      return q < bound_ ? CGAL::Mesh_2::BAD : CGAL::Mesh_2::NOT_BAD;
+    }
+
+    CGAL::Mesh_2::Face_badness operator()(const Face_handle& fh, Quality& q) const {
+      const Point_2& pa = fh->vertex(0)->point();
+      const Point_2& pb = fh->vertex(1)->point();
+      const Point_2& pc = fh->vertex(2)->point();
+      // Edge lengths, not their products (which could leave the range of double).
+      const double a = std::sqrt(squared_distance(pb, pc)), b = std::sqrt(squared_distance(pc, pa)),
+                   c = std::sqrt(squared_distance(pa, pb));
+      const double twice_area = (pb.x() - pa.x()) * (pc.y() - pa.y()) - (pb.y() - pa.y()) * (pc.x() - pa.x());
+      if (spacing_ != nullptr) {
+        // Rule 4: a vertex whose neighbour spacing exceeds f there.
+        double worst = 0;
+        for (int k = 0; k < 3; ++k) {
+          const Vertex_handle v = fh->vertex(k);
+          const double f = target_spacing(*tr_, v, *spacing_);
+          if (!(f < std::numeric_limits<double>::infinity())) continue;
+          if (std::sqrt(neighbour_spacing_squared(*tr_, v)) > f) {
+            const double circumradius = a / twice_area * b * c / 2;
+            worst = std::max(worst, (circumradius / f) * (circumradius / f));
+          }
+        }
+        if (worst > 0) {
+          q = rounded(-worst);
+          return CGAL::Mesh_2::BAD;
+        }
+      }
+      // Squared sine of the angle opposite the shortest edge: 2 area / (product of the others).
+      double sine;
+      if (a < b) sine = a < c ? twice_area / b / c : twice_area / a / b;
+      else sine = b < c ? twice_area / a / c : twice_area / a / b;
+      q = rounded(sine * sine);
+      return operator()(q);
+    }
+
+   private:
+    // The queue order must not depend on rounding: the same mesh scaled by 1e-100
+    // has qualities equal up to a few ulps, and near-ties would then be refined in
+    // another order. Rounded to float, they tie exactly and CGAL breaks ties by the
+    // points' lexicographic order, which scaling keeps.
+    static double rounded(double q) { return static_cast<double>(static_cast<float>(q)); }
+
+    double bound_;
+    const Cdt* tr_;
+    const Spacing_data* spacing_;
+  };
+
+  Is_bad is_bad_object() const { return Is_bad(bound_, tr_, spacing_); }
+
+ private:
+  double bound_;
+  double min_angle_;
+  bool off_centres_;
+  const Cdt* tr_;
+  const Spacing_data* spacing_;
+};
+
+using Gabriel = CGAL::Mesh_2::Is_locally_conforming_Gabriel<Cdt>;
+using Edges_base_with_clusters = CGAL::Mesh_2::Refine_edges_base_with_clusters<Cdt, Gabriel>;
+
+// Edge level that can also be told to split a given constraint edge (Section 6:
+// a segment crowded by points is split instead of keeping them).
+struct Edges_base : Edges_base_with_clusters {
+  using Edges_base_with_clusters::Edges_base_with_clusters;
+  void queue_split(Cdt::Vertex_handle a, Cdt::Vertex_handle b) { this->add_constrained_edge_to_be_conformed(a, b); }
+};
+using Edges_level = CGAL::Mesh_2::Refine_edges_with_clusters<Cdt, Gabriel, Edges_base>;
+
+using Faces_base_cgal = CGAL::Mesh_2::Refine_faces_base<Cdt, Refinement_criteria, Edges_level>;
+
+// Rule 4 is about vertices: a triangle queued as bad can become good when a point
+// is inserted next to one of its vertices without destroying it. Such stale
+// entries are dropped before the mesher looks at the queue.
+//
+// In the quality pass badly shaped triangles are split at their off-centre (Ungor,
+// "Off-centers", 2004) rather than their circumcentre: the point on the bisector of
+// the shortest edge pq, towards the circumcentre, from which pq is seen under the
+// target angle; the circumcentre when that is nearer. Same guarantees as Ruppert's
+// rule 3 with fewer points. DRFC's refinement uses circumcentres (Ruppert, Section 5).
+struct Faces_base : Faces_base_cgal {
+  Faces_base(Cdt& tr, Refinement_criteria& criteria, Edges_level& edges)
+      : Faces_base_cgal(tr, criteria, edges),
+        half_angle_cotangent_(criteria.off_centre_half_angle_cotangent()) {}
+
+  Point_2 refinement_point_impl(const Cdt::Face_handle& f) const {
+    const Point_2 c = this->triangulation_ref_impl().circumcenter(f);
+    Refinement_criteria::Quality q;
+    this->is_bad(f, q);
+    if (q < 0) return c;  // rule 4 (size): the circumcentre
+    int k = 0;  // the shortest edge is opposite vertex k
+    double shortest = std::numeric_limits<double>::infinity();
+    for (int i = 0; i < 3; ++i) {
+      const double l = squared_distance(f->vertex(Cdt::ccw(i))->point(), f->vertex(Cdt::cw(i))->point());
+      if (l < shortest) {
+        shortest = l;
+        k = i;
+      }
+    }
+    const Point_2& p = f->vertex(Cdt::ccw(k))->point();
+    const Point_2& r = f->vertex(Cdt::cw(k))->point();
+    const double mx = 0.5 * (p.x() + r.x()), my = 0.5 * (p.y() + r.y());
+    const double dx = c.x() - mx, dy = c.y() - my;
+    const double to_centre = std::hypot(dx, dy);
+    const double height = 0.5 * std::sqrt(shortest) * half_angle_cotangent_;
+    if (!(to_centre > height)) return c;
+    return Point_2(mx + dx / to_centre * height, my + dy / to_centre * height);
+  }
+
+  bool no_longer_element_to_refine_impl() {
+    while (!this->bad_faces.empty()) {
+      Refinement_criteria::Quality q;
+      if (this->is_bad(this->bad_faces.front()->second, q) != CGAL::Mesh_2::NOT_BAD) break;
+      this->bad_faces.pop_front();
+    }
+    return this->bad_faces.empty();
+  }
+
+ private:
+  double half_angle_cotangent_;
+};
+using Faces_level = CGAL::Mesh_2::Refine_faces<Cdt, Refinement_criteria, Edges_level, Faces_base>;
+using Visitor = CGAL::Mesh_2::Refine_edges_visitor_from_faces<Faces_level>;
+
+// CGAL's Delaunay_mesher_2, wired with the levels above, driven one point at a
+// time so the number of insertions can be bounded. The domain is marked by the
+// caller (in_domain flags); the levels keep the marks up to date.
+class Mesher {
+ public:
+  Mesher(Cdt& tr, const Refinement_criteria& criteria)
+      : criteria_(criteria),
+        clusters_(tr),
+        edges_(tr, clusters_, null_level_),
+        faces_(tr, criteria_, edges_),
+        visitor_(faces_, edges_, null_visitor_) {}
+
+  void init() {
+    clusters_.create_clusters();
+    edges_.scan_triangulation();
+    faces_.scan_triangulation();
+  }
+  void queue_split(Vertex_handle a, Vertex_handle b) { edges_.queue_split(a, b); }
+  void rescan_faces() { faces_.scan_triangulation(); }
+  // Inserts one point; false when nothing is left to refine.
+  bool insert_one_point() { return faces_.try_to_insert_one_point(visitor_); }
+  bool is_done() { return faces_.is_algorithm_done(); }
+
+ private:
+  Refinement_criteria criteria_;
+  CGAL::Null_mesher_level null_level_;
+  CGAL::Null_mesh_visitor null_visitor_;
+  CGAL::Mesh_2::Clusters<Cdt> clusters_;
+  Edges_level edges_;
+  Faces_level faces_;
+  Visitor visitor_;
+};
+
+std::vector<Vertex_handle> insert_points(Cdt& cdt, const std::vector<Vec2>& points, const Scaling& scaling);
+
+// The face on the left of a -> b (f, with the edge opposite vertex i), if ab is an edge.
+bool left_face(const Cdt& cdt, Vertex_handle a, Vertex_handle b, Face_handle& f, int& i);
+
+// in_domain marks: regions bounded by the pieces take the side labels of their
+// pieces (left of a boundary piece: inside; right: outside), as in constrained_delaunay.
+void mark_domain(Cdt& cdt, const std::vector<Vertex_handle>& handles, const std::vector<Constraint_piece>& pieces);
+
+// Runs the mesher until it is done or `budget` points were inserted; returns the number inserted.
+std::size_t run_mesher(Mesher& mesher, std::size_t budget, Refinement_report& report);
+
+// Input points keep their exact input coordinates; f is returned in input units.
+Refined_mesh extract(Cdt& cdt, const std::vector<Vec2>& input_points, const std::vector<Point_kind>& input_kind,
+                     const std::vector<std::uint8_t>& removed, const Scaling& scaling);
+
+}  // namespace evomesh::detail

@@ -1,0 +1,39 @@
+// Chains of segments between corners (Section 3.2): the corners a step always
+// keeps, and the constraint pieces between the points it keeps along them.
+// Shared by FRFC and DRFC.
+#pragma once
+
+#include <cstdint>
+#include <vector>
+
+#include "evomesh/triangulation.hpp"
+#include "evomesh/types.hpp"
+
+namespace evomesh {
+
+// Maximal chains of segments between corners, in order, for building constraint pieces.
+struct Segment_chain {
+  std::vector<Index> vertices;  // v0 .. vk along the chain
+  std::vector<Index> segments;  // segment index of (v_i, v_{i+1})
+  std::vector<std::uint8_t> forward;  // segment k is traversed a -> b
+  bool closed = false;
+  bool boundary = true;
+};
+std::vector<Segment_chain> segment_chains(const Mesh_arrays& mesh);
+
+// Points always kept (forced in the packing): corners, and both ends of every chain.
+// `n_forced` receives their number.
+std::vector<std::uint8_t> forced_corners(const Mesh_arrays& mesh, const std::vector<Segment_chain>& chains,
+                                         std::size_t& n_forced);
+
+// Constraint pieces between consecutive kept points along every chain. A chain
+// vertex v is kept when out_vertex[v] >= 0 (its output index). New points
+// strictly inside segment s, sorted from its first to its second end, are
+// out_on_segment[segment_begin[s] .. segment_begin[s + 1]) (-1: not kept);
+// segment_begin empty: none. Boundary pieces have the domain on their left.
+std::vector<Constraint_piece> constraint_pieces(const std::vector<Segment_chain>& chains,
+                                                const std::vector<Index>& out_vertex,
+                                                const std::vector<Index>& segment_begin = {},
+                                                const std::vector<Index>& out_on_segment = {});
+
+}  // namespace evomesh

@@ -1,0 +1,117 @@
+// What FRFC and DRFC share: the result of a step, its input check, the
+// selection of output points, their triangulation (or quality pass), the parent
+// map and the stage timings.
+#pragma once
+
+#include <chrono>
+#include <initializer_list>
+#include <memory>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include "evomesh/options.hpp"
+#include "evomesh/parent_map.hpp"
+#include "evomesh/quality_pass.hpp"
+#include "evomesh/spacing.hpp"
+#include "evomesh/triangulation.hpp"
+#include "evomesh/types.hpp"
+
+namespace evomesh {
+
+namespace detail {
+
+// Appends ("seconds_" + stage, elapsed seconds since the previous lap) to stats.
+class Stage_timer {
+ public:
+  explicit Stage_timer(std::vector<std::pair<std::string, double>>& stats) : stats_(stats) {}
+  // Adds the time since the last lap to the stage `name` (a stage may be timed in several laps).
+  void lap(const std::string& name) {
+    const auto now = std::chrono::steady_clock::now();
+    const double seconds = std::chrono::duration<double>(now - last_).count();
+    last_ = now;
+    for (auto& entry : stats_) {
+      if (entry.first == "seconds_" + name) {
+        entry.second += seconds;
+        return;
+      }
+    }
+    stats_.emplace_back("seconds_" + name, seconds);
+  }
+
+ private:
+  std::vector<std::pair<std::string, double>>& stats_;
+  std::chrono::steady_clock::time_point last_ = std::chrono::steady_clock::now();
+};
+
+}  // namespace detail
+
+struct Evolve_result {
+  Mesh_arrays mesh;
+  std::vector<Index> origin;   // index in the input mesh, -1 for a new point
+  std::vector<double> input_f; // f at the input points
+  std::vector<double> input_nn;
+  Parent_map parents;          // where every new point lies in the input mesh
+  std::vector<std::pair<std::string, double>> stats;  // stage timings (s) and counts
+};
+
+// Throws Input_error unless delta has one positive finite value per point.
+void check_delta(const Mesh_arrays& mesh, const std::vector<double>& delta);
+
+// Step 1 of both methods (Section 3.1): nn_M at the input points, the weights
+// w_p = delta(p) nn_M(p), the spacing function f = min_p (w_p + |x - p|) and f
+// at the input points (timed as "nn", "apollonius", "spacing_at_points").
+struct Step_spacing {
+  std::vector<double> nn;  // nn_M at the input points
+  std::vector<double> f;   // f at the input points
+  std::unique_ptr<Spacing_function> function;
+};
+// How f is found at the input points: `lemma_3_1` takes f(p) = w_p where
+// delta(p) <= 1 and asks the Apollonius graph only at the others (FRFC);
+// `evaluate_all` asks it everywhere and takes the minimum with w_p (DRFC).
+enum class F_at_points { lemma_3_1, evaluate_all };
+Step_spacing step_spacing(const Mesh_arrays& mesh, const std::vector<double>& delta, F_at_points how, int threads,
+                          detail::Stage_timer& timer);
+
+// Throws Input_error when `estimate` (the points `what` would create) is above max_samples.
+void check_sample_budget(double estimate, double max_samples, const char* what);
+
+// The points a step keeps, in output order: mesh.points and mesh.kind, and the
+// input index of every point (-1 for a new one).
+struct Selection {
+  Mesh_arrays mesh;
+  std::vector<Index> origin;
+  void add(const Vec2& x, Point_kind kind, Index from) {
+    mesh.points.push_back(x);
+    mesh.kind.push_back(kind);
+    origin.push_back(from);
+  }
+};
+
+// The output kind of a kept point of the mesh being coarsened: a forced corner
+// is a corner, and an input point sampled in an earlier step (`from_input`) is a
+// Steiner point now.
+inline Point_kind kept_point_kind(Point_kind kind, bool forced_corner, bool from_input = true) {
+  if (forced_corner) return Point_kind::corner;
+  return from_input && kind == Point_kind::sampled ? Point_kind::steiner : kind;
+}
+
+// The last stage of a step. Triangulates the selected points with the
+// constraint pieces between them (constrained Delaunay, Section 3.2 step 6), or
+// runs the quality pass on them when `quality` is given (on `early`, when given,
+// whose first points must be the first selected points). Fills result.mesh and
+// result.origin and adds the pass's counts and the smallest angle to result.stats.
+void triangulate_selection(Selection selected, const std::vector<Constraint_piece>& pieces,
+                           const Quality_options* quality, Evolve_result& result,
+                           Early_triangulation* early = nullptr);
+
+
+// After triangulate_selection: the parent map of the new mesh in `input` (timed
+// as "parent_map") and the step's total time.
+void finish_step(const Mesh_arrays& input, Evolve_result& result, detail::Stage_timer& timer);
+
+// Appends the counts (name, value) to result.stats, then the output's point and
+// triangle counts.
+void add_step_counts(Evolve_result& result, std::initializer_list<std::pair<const char*, double>> counts);
+
+}  // namespace evomesh

@@ -1,0 +1,370 @@
+#include "evomesh/candidates.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <utility>
+
+#include "evomesh/kernel.hpp"
+#include "evomesh/packing.hpp"
+#include "evomesh/parallel.hpp"
+#include "evomesh/triangulation.hpp"
+
+namespace evomesh {
+
+namespace {
+
+constexpr double kMargin = 1.02;
+
+// Interior ring candidates of every R-point, in point order, appended to
+// `inside` (with their rounds), except those in a cover disc of their triangle.
+// Points are handled in parallel in fixed blocks joined in order.
+void add_interior_ring_samples(const Mesh_arrays& mesh, const Triangle_fans& fans, const std::vector<double>& delta,
+                               const std::vector<double>& f, double reach, std::uint64_t seed,
+                               const std::vector<Disc>& cover, int threads, Sample_set& inside,
+                               std::vector<std::int8_t>& inside_round) {
+  const std::size_t n = mesh.points.size();
+  constexpr std::size_t kBlock = 4096;
+  const std::size_t n_blocks = (n + kBlock - 1) / kBlock;
+  std::vector<Sample_set> blocks(n_blocks);
+  std::vector<std::vector<std::int8_t>> rounds(n_blocks);
+  parallel_for(n_blocks, threads, [&](std::size_t b) {
+    std::array<Ring_candidate, kRingDirections> ring;
+    for (std::size_t p = b * kBlock; p < std::min(n, (b + 1) * kBlock); ++p) {
+      if (!(delta[p] < 1)) continue;
+      const int count = ring_candidates_of(mesh, fans, f, reach, seed, p, ring);
+      for (int k = 0; k < count; ++k) {
+        const Ring_candidate& r = ring[k];
+        if (in_cover(cover, mesh.triangles[r.triangle], r.x)) continue;
+        blocks[b].points.push_back(r.x);
+        blocks[b].parent.push_back(r.triangle);
+        rounds[b].push_back(static_cast<std::int8_t>(r.round));
+      }
+    }
+  });
+  for (std::size_t b = 0; b < n_blocks; ++b) {
+    inside.points.insert(inside.points.end(), blocks[b].points.begin(), blocks[b].points.end());
+    inside.parent.insert(inside.parent.end(), blocks[b].parent.begin(), blocks[b].parent.end());
+    inside_round.insert(inside_round.end(), rounds[b].begin(), rounds[b].end());
+  }
+}
+
+// Segment ring candidates: one each way from an R-point, on the segment, merged
+// into the per-segment sample lists (which stay sorted along each segment).
+void add_segment_ring_samples(const Mesh_arrays& mesh, const std::vector<double>& delta, const std::vector<double>& f,
+                              double radius_scale, Sample_set& on_segments, std::vector<std::int8_t>& segment_round,
+                              std::vector<Index>& segment_owner) {
+  const double reach = ring_reach(radius_scale);
+  segment_round.assign(on_segments.points.size(), -1);
+  segment_owner.assign(on_segments.points.size(), -1);
+  std::vector<std::pair<Index, double>> extra;  // (segment, t)
+  std::vector<std::int8_t> extra_round;
+  std::vector<Index> extra_owner;
+  for (std::size_t s = 0; s < mesh.segments.size(); ++s) {
+    const Edge& e = mesh.segments[s];
+    const Vec2& a = mesh.points[e[0]];
+    const Vec2& b = mesh.points[e[1]];
+    const double length = std::hypot(b[0] - a[0], b[1] - a[1]);
+    // round 0 for the segment leaving a point, 1 for the one entering it
+    if (delta[e[0]] < 1) {
+      extra.emplace_back(static_cast<Index>(s), reach * f[e[0]] / length);
+      extra_round.push_back(0);
+      extra_owner.push_back(e[0]);
+    }
+    if (delta[e[1]] < 1) {
+      extra.emplace_back(static_cast<Index>(s), 1.0 - reach * f[e[1]] / length);
+      extra_round.push_back(1);
+      extra_owner.push_back(e[1]);
+    }
+  }
+  if (extra.empty()) return;
+  // Merge into the per-segment lists, keeping each segment's samples sorted by t.
+  std::vector<std::pair<Index, double>> all;
+  all.reserve(on_segments.points.size() + extra.size());
+  for (std::size_t j = 0; j < on_segments.points.size(); ++j) {
+    const Edge& e = mesh.segments[on_segments.parent[j]];
+    const Vec2& a = mesh.points[e[0]];
+    const Vec2& b = mesh.points[e[1]];
+    const double dx = b[0] - a[0], dy = b[1] - a[1];
+    const double t = ((on_segments.points[j][0] - a[0]) * dx + (on_segments.points[j][1] - a[1]) * dy) / (dx * dx + dy * dy);
+    all.emplace_back(on_segments.parent[j], t);
+  }
+  std::vector<Vec2> points = std::move(on_segments.points);
+  std::vector<std::int8_t> rounds(points.size(), -1);
+  std::vector<Index> owners(points.size(), -1);
+  for (std::size_t i = 0; i < extra.size(); ++i) {
+    const auto [s, t] = extra[i];
+    if (!(t > 0 && t < 1)) continue;
+    const Edge& e = mesh.segments[s];
+    const Vec2& a = mesh.points[e[0]];
+    const Vec2& b = mesh.points[e[1]];
+    const Vec2 x{a[0] + t * (b[0] - a[0]), a[1] + t * (b[1] - a[1])};
+    if ((x[0] == a[0] && x[1] == a[1]) || (x[0] == b[0] && x[1] == b[1])) continue;
+    all.emplace_back(s, t);
+    points.push_back(x);
+    rounds.push_back(extra_round[i]);
+    owners.push_back(extra_owner[i]);
+  }
+  std::vector<std::size_t> order(all.size());
+  for (std::size_t i = 0; i < order.size(); ++i) order[i] = i;
+  std::sort(order.begin(), order.end(), [&](std::size_t i, std::size_t j) {
+    if (all[i].first != all[j].first) return all[i].first < all[j].first;
+    if (all[i].second != all[j].second) return all[i].second < all[j].second;
+    return i < j;
+  });
+  on_segments.points.clear();
+  on_segments.parent.clear();
+  segment_round.clear();
+  segment_owner.clear();
+  for (std::size_t i : order) {
+    const Vec2& x = points[i];
+    // drop exact duplicates (a ring sample can coincide with a grid sample only by accident)
+    if (!on_segments.points.empty() && on_segments.points.back() == x) continue;
+    on_segments.points.push_back(x);
+    on_segments.parent.push_back(all[i].first);
+    segment_round.push_back(rounds[i]);
+    segment_owner.push_back(owners[i]);
+  }
+}
+
+// Samples on a straight chain (all its vertices within kStraightUlps units of
+// rounding of the line through its end corners A, B: the tolerance that decides
+// corners, triangulation.hpp) are projected onto that line. Chain points
+// kept from earlier steps are rounded; sampling between them would let new
+// boundary points drift by a rounding per step, while the projection keeps
+// every boundary point within a rounding or two of the original side for any
+// number of steps. A projection that would not lie strictly between its
+// segment's end points (in the order along AB) keeps the sample as drawn.
+void snap_to_straight_chains(const Mesh_arrays& mesh, const std::vector<Segment_chain>& chains, Sample_set& on_segments) {
+  std::vector<Index> chain_of(mesh.segments.size(), -1);
+  std::vector<std::uint8_t> straight(chains.size(), 0);
+  for (std::size_t c = 0; c < chains.size(); ++c) {
+    const auto& chain = chains[c];
+    if (chain.closed || chain.vertices.size() < 3) continue;  // a single segment is exact already
+    const Vec2& a = mesh.points[chain.vertices.front()];
+    const Vec2& b = mesh.points[chain.vertices.back()];
+    const double dx = b[0] - a[0], dy = b[1] - a[1];
+    const double length2 = dx * dx + dy * dy;
+    bool ok = length2 > 0;
+    double reach = std::max({std::abs(a[0]), std::abs(a[1]), std::abs(b[0]), std::abs(b[1])});
+    for (Index v : chain.vertices) reach = std::max({reach, std::abs(mesh.points[v][0]), std::abs(mesh.points[v][1])});
+    const double tolerance = kStraightUlps * std::numeric_limits<double>::epsilon() * reach * std::sqrt(length2);
+    for (std::size_t k = 1; ok && k + 1 < chain.vertices.size(); ++k) {
+      const Vec2& v = mesh.points[chain.vertices[k]];
+      const double cross = dx * (v[1] - a[1]) - dy * (v[0] - a[0]);
+      ok = std::abs(cross) <= tolerance;  // distance from AB within kStraightUlps roundings
+    }
+    if (!ok) continue;
+    straight[c] = 1;
+    for (Index seg : chain.segments) chain_of[seg] = static_cast<Index>(c);
+  }
+  for (std::size_t j = 0; j < on_segments.points.size(); ++j) {
+    const Index c = chain_of[on_segments.parent[j]];
+    if (c < 0) continue;
+    const auto& chain = chains[c];
+    const Vec2& a = mesh.points[chain.vertices.front()];
+    const Vec2& b = mesh.points[chain.vertices.back()];
+    const double dx = b[0] - a[0], dy = b[1] - a[1];
+    const double length2 = dx * dx + dy * dy;
+    auto along = [&](const Vec2& p) { return ((p[0] - a[0]) * dx + (p[1] - a[1]) * dy) / length2; };
+    const Vec2& x = on_segments.points[j];
+    const double t = along(x);
+    const Vec2 y{a[0] + t * dx, a[1] + t * dy};
+    const Edge& e = mesh.segments[on_segments.parent[j]];
+    const double t0 = along(mesh.points[e[0]]), t1 = along(mesh.points[e[1]]);
+    const double ty = along(y);
+    if (ty > std::min(t0, t1) && ty < std::max(t0, t1) && y != mesh.points[e[0]] && y != mesh.points[e[1]]) {
+      on_segments.points[j] = y;
+    }
+  }
+}
+
+}  // namespace
+
+std::vector<std::uint8_t> Candidates::classes(bool on_segment) const {
+  std::vector<std::uint8_t> out(size());
+  for (std::size_t j = 0; j < out.size(); ++j) out[j] = new_point_class(on_segment, round[j]);
+  return out;
+}
+
+Triangle_fans::Triangle_fans(const Mesh_arrays& mesh) : xadj(mesh.points.size() + 1, 0), adj(3 * mesh.triangles.size()) {
+  const std::size_t n = mesh.points.size();
+  for (const auto& t : mesh.triangles) {
+    for (Index v : t) ++xadj[v + 1];
+  }
+  for (std::size_t v = 0; v < n; ++v) xadj[v + 1] += xadj[v];
+  std::vector<Index> fill(xadj.begin(), xadj.end() - 1);
+  for (std::size_t t = 0; t < mesh.triangles.size(); ++t) {
+    for (Index v : mesh.triangles[t]) adj[fill[v]++] = static_cast<Index>(t);
+  }
+}
+
+double ring_reach(double radius_scale) {
+  return kMargin * radius_scale / (1.0 - 0.5 * radius_scale);
+}
+
+int ring_candidates_of(const Mesh_arrays& mesh, const Triangle_fans& fans, const std::vector<double>& f, double reach,
+                       std::uint64_t seed, std::size_t p, std::array<Ring_candidate, kRingDirections>& out) {
+  constexpr double kTwoPi = 6.283185307179586;
+  const Vec2& c = mesh.points[p];
+  const double d = reach * f[p];
+  Random_stream rng(seed, (std::uint64_t{3} << 61) + p);
+  const double phase = rng.uniform() * kTwoPi / kRingDirections;
+  int count = 0;
+  for (int k = 0; k < kRingDirections; ++k) {
+    const double angle = phase + kTwoPi * k / kRingDirections;
+    const Vec2 x{c[0] + d * std::cos(angle), c[1] + d * std::sin(angle)};
+    for (Index a = fans.xadj[p]; a < fans.xadj[p + 1]; ++a) {
+      const Triangle& t = mesh.triangles[fans.adj[a]];
+      if (orientation(mesh.points[t[0]], mesh.points[t[1]], x) > 0 &&
+          orientation(mesh.points[t[1]], mesh.points[t[2]], x) > 0 &&
+          orientation(mesh.points[t[2]], mesh.points[t[0]], x) > 0) {
+        out[count++] = {x, fans.adj[a], k};
+        break;
+      }
+    }
+  }
+  return count;
+}
+
+Candidates segment_candidates(const Mesh_arrays& mesh, const std::vector<double>& delta, const std::vector<double>& f,
+                              const std::vector<Segment_chain>& chains, const Frfc_options& options) {
+  Candidates on_segments;
+  on_segments.samples = sample_segments(mesh, f, options.cell_factor, options.samples, options.seed,
+                                        options.adaptive_cells);
+  on_segments.round.assign(on_segments.size(), -1);
+  on_segments.owner.assign(on_segments.size(), -1);
+  if (options.ring_samples) {
+    add_segment_ring_samples(mesh, delta, f, options.radius_scale, on_segments.samples, on_segments.round,
+                             on_segments.owner);
+  }
+  snap_to_straight_chains(mesh, chains, on_segments.samples);
+  return on_segments;
+}
+
+Candidates interior_candidates(const Mesh_arrays& mesh, const Triangle_fans& fans, const std::vector<double>& delta,
+                               const std::vector<double>& f, const std::vector<Disc>& cover,
+                               const Frfc_options& options, std::size_t& n_drawn) {
+  std::vector<std::uint8_t> skip;
+  if (options.skip_coarse) {
+    skip.resize(mesh.triangles.size());
+    for (std::size_t t = 0; t < mesh.triangles.size(); ++t) {
+      const auto& tri = mesh.triangles[t];
+      skip[t] = delta[tri[0]] > 1 && delta[tri[1]] > 1 && delta[tri[2]] > 1;
+    }
+  }
+  n_drawn = 0;
+  Candidates inside;
+  inside.samples = sample_triangles(mesh, f, options.cell_factor, options.samples, options.seed, skip, cover,
+                                    options.threads, &n_drawn, options.adaptive_cells);
+  inside.round.assign(inside.size(), -1);
+  if (options.ring_samples) {
+    add_interior_ring_samples(mesh, fans, delta, f, ring_reach(options.radius_scale), options.seed, cover,
+                              options.threads, inside.samples, inside.round);
+  }
+  return inside;
+}
+
+std::vector<double> input_point_radii(const Mesh_arrays& mesh, const std::vector<double>& f,
+                                      const Frfc_options& options) {
+  std::vector<double> radius(mesh.points.size());
+  for (std::size_t i = 0; i < radius.size(); ++i) {
+    radius[i] = 0.5 * options.radius_scale * f[i];
+    if (mesh.kind[i] == Point_kind::corner || mesh.kind[i] == Point_kind::boundary) radius[i] *= options.boundary_scale;
+  }
+  return radius;
+}
+
+void candidate_radii(const Mesh_arrays& mesh, const Spacing_function& spacing, const std::vector<double>& f,
+                     const Frfc_options& options, bool on_segment, Candidates& candidates) {
+  const Sample_set& samples = candidates.samples;
+  const std::size_t m = samples.points.size();
+  candidates.radius.resize(m);
+  double* out = candidates.radius.data();
+  if (options.radius == Radius_rule::exact) {
+    spacing.evaluate(samples.points.data(), m, out, nullptr, options.threads, /*certified=*/false);
+  } else {
+    for (std::size_t j = 0; j < m; ++j) {
+      Index q;
+      if (on_segment) {
+        const Edge& e = mesh.segments[samples.parent[j]];
+        q = f[e[0]] <= f[e[1]] ? e[0] : e[1];
+      } else {
+        const Triangle& t = mesh.triangles[samples.parent[j]];
+        q = t[0];
+        if (f[t[1]] < f[q]) q = t[1];
+        if (f[t[2]] < f[q]) q = t[2];
+      }
+      const Vec2& x = samples.points[j];
+      out[j] = f[q] + std::hypot(x[0] - mesh.points[q][0], x[1] - mesh.points[q][1]);
+    }
+  }
+  for (std::size_t j = 0; j < m; ++j) out[j] *= 0.5 * options.radius_scale * (on_segment ? options.boundary_scale : 1.0);
+}
+
+// A sample x is certainly rejected when it lies within cover(c) of a kept
+// sphere B(c, r_c) at an input point c: f is 1-Lipschitz, so its radius is at
+// least s (f(c) - |x - c|) / 2 (s = radius_scale; also for the cheap radius,
+// which is at least f(x) / 2), and |x - c| < r_c + that radius when
+// |x - c| (1 + s/2) < r_c + s f(c) / 2. Each triangle vertex v offers one such
+// disc: its own when v is kept, else that of the kept input point that rejected
+// it. Samples in a disc of their triangle are dropped before their radius is
+// computed (the factor 1 - 1e-9 keeps rounding on the safe side); the kept
+// spheres are the same as without.
+std::vector<Disc> cover_discs(const Mesh_arrays& mesh, const std::vector<double>& f,
+                              const std::vector<double>& radius, const std::vector<std::uint8_t>& kept,
+                              const std::vector<Index>& blocker, double radius_scale) {
+  const std::size_t n = mesh.points.size();
+  std::vector<Disc> cover(n, Disc{{0.0, 0.0}, 0.0});
+  const double s = radius_scale;
+  for (std::size_t v = 0; v < n; ++v) {
+    const Index c = kept[v] ? static_cast<Index>(v) : blocker[v];
+    if (c < 0 || static_cast<std::size_t>(c) >= n) continue;
+    cover[v] = {mesh.points[c], (radius[c] + 0.5 * s * f[c]) / (1 + 0.5 * s) * (1 - 1e-9)};
+  }
+  return cover;
+}
+
+// With its radius known, a sample that overlaps the kept sphere of a vertex of
+// its triangle (or of the kept point that rejected that vertex) is rejected by
+// the packing for sure: the test is the packing's own conflict test, so
+// dropping it here changes nothing.
+void drop_blocked_candidates(const Mesh_arrays& mesh, const std::vector<Vec2>& centers,
+                             const std::vector<double>& radius, const std::vector<std::uint8_t>& kept,
+                             const std::vector<Index>& blocker, int threads, Candidates& inside) {
+  const std::size_t m = inside.size();
+  std::vector<std::uint8_t> drop(m, 0);
+  constexpr std::size_t kBlock = 1 << 16;
+  parallel_for((m + kBlock - 1) / kBlock, threads, [&](std::size_t b) {
+    for (std::size_t j = b * kBlock; j < std::min(m, (b + 1) * kBlock); ++j) {
+      const Vec2& x = inside.samples.points[j];
+      const double r = inside.radius[j];
+      for (Index v : mesh.triangles[inside.samples.parent[j]]) {
+        const Index c = kept[v] ? v : blocker[v];
+        if (c < 0) continue;
+        const double ex = centers[c][0] - x[0];
+        const double ey = centers[c][1] - x[1];
+        const double sum = r + radius[c];
+        if (ex * ex + ey * ey < sum * sum) {
+          drop[j] = 1;
+          break;
+        }
+      }
+    }
+  });
+  std::size_t k = 0;
+  for (std::size_t j = 0; j < m; ++j) {
+    if (drop[j]) continue;
+    inside.samples.points[k] = inside.samples.points[j];
+    inside.samples.parent[k] = inside.samples.parent[j];
+    inside.round[k] = inside.round[j];
+    inside.radius[k] = inside.radius[j];
+    ++k;
+  }
+  inside.samples.points.resize(k);
+  inside.samples.parent.resize(k);
+  inside.round.resize(k);
+  inside.radius.resize(k);
+}
+
+}  // namespace evomesh

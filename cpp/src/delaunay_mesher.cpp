@@ -1,0 +1,117 @@
+#include "evomesh/detail/delaunay_mesher.hpp"
+
+#include "evomesh/detail/domain.hpp"
+
+namespace evomesh::detail {
+
+std::vector<Vertex_handle> insert_points(Cdt& cdt, const std::vector<Vec2>& points, const Scaling& scaling) {
+  std::vector<std::pair<Point_2, Vertex_info>> input;
+  input.reserve(points.size());
+  for (std::size_t i = 0; i < points.size(); ++i) {
+    Vertex_info info;
+    info.index = static_cast<Index>(i);
+    input.emplace_back(Point_2(points[i][0] * scaling.to_unit, points[i][1] * scaling.to_unit), info);
+  }
+  cdt.insert(input.begin(), input.end());
+  if (cdt.number_of_vertices() != points.size()) throw Input_error("points contain duplicates");
+  std::vector<Vertex_handle> handles(points.size());
+  for (auto v = cdt.finite_vertices_begin(); v != cdt.finite_vertices_end(); ++v) handles[v->info().index] = v;
+  return handles;
+}
+
+bool left_face(const Cdt& cdt, Vertex_handle a, Vertex_handle b, Face_handle& f, int& i) {
+  if (!cdt.is_edge(a, b, f, i)) return false;
+  if (f->vertex(Cdt::ccw(i)) != a) {
+    const Face_handle g = f->neighbor(i);
+    i = g->index(f);
+    f = g;
+  }
+  return true;
+}
+
+void mark_domain(Cdt& cdt, const std::vector<Vertex_handle>& handles, const std::vector<Constraint_piece>& pieces) {
+  label_domain(cdt, handles, pieces, "refinement");
+  for (auto f = cdt.all_faces_begin(); f != cdt.all_faces_end(); ++f) f->set_in_domain(f->info() == domain_inside);
+}
+
+std::size_t run_mesher(Mesher& mesher, std::size_t budget, Refinement_report& report) {
+  std::size_t inserted = 0;
+  while (inserted < budget && mesher.insert_one_point()) ++inserted;
+  if (inserted == budget && !mesher.is_done()) report.capped = true;
+  report.n_inserted += inserted;
+  return inserted;
+}
+
+Refined_mesh extract(Cdt& cdt, const std::vector<Vec2>& input_points, const std::vector<Point_kind>& input_kind,
+                     const std::vector<std::uint8_t>& removed, const Scaling& scaling) {
+  Refined_mesh result;
+  Mesh_arrays& out = result.mesh;
+  const std::size_t n = input_kind.size();
+  std::vector<Index> input_to_out(n, -1);
+  for (std::size_t i = 0; i < n; ++i) {
+    if (removed[i]) continue;
+    input_to_out[i] = static_cast<Index>(result.source.size());
+    result.source.push_back(static_cast<Index>(i));
+  }
+  std::vector<Vertex_handle> inserted;
+  for (auto v = cdt.finite_vertices_begin(); v != cdt.finite_vertices_end(); ++v) {
+    if (v->info().index >= 0) v->info().out = input_to_out[v->info().index];
+    else inserted.push_back(v);
+  }
+  std::sort(inserted.begin(), inserted.end(), [](Vertex_handle u, Vertex_handle w) {
+    return u->point().x() < w->point().x() || (u->point().x() == w->point().x() && u->point().y() < w->point().y());
+  });
+  const std::size_t n_out = result.source.size() + inserted.size();
+  out.points.resize(n_out);
+  out.kind.resize(n_out);
+  result.f.resize(n_out);
+  for (auto v = cdt.finite_vertices_begin(); v != cdt.finite_vertices_end(); ++v) {
+    if (v->info().index < 0) continue;
+    const Index o = v->info().out;
+    out.points[o] = input_points[v->info().index];
+    out.kind[o] = input_kind[v->info().index];
+    result.f[o] = v->info().f * scaling.from_unit;
+  }
+  for (std::size_t k = 0; k < inserted.size(); ++k) {
+    const Index o = static_cast<Index>(result.source.size() + k);
+    inserted[k]->info().out = o;
+    out.points[o] = {inserted[k]->point().x() * scaling.from_unit, inserted[k]->point().y() * scaling.from_unit};
+    out.kind[o] = Point_kind::sampled;
+    result.f[o] = inserted[k]->info().f * scaling.from_unit;
+  }
+  result.source.resize(n_out, -1);
+  for (auto f = cdt.finite_faces_begin(); f != cdt.finite_faces_end(); ++f) {
+    if (f->is_in_domain()) {
+      out.triangles.push_back({f->vertex(0)->info().out, f->vertex(1)->info().out, f->vertex(2)->info().out});
+    }
+  }
+  // Constraint edges: boundary ones oriented with the domain on their left.
+  std::vector<std::pair<Edge, std::uint8_t>> segments;
+  for (auto e = cdt.finite_edges_begin(); e != cdt.finite_edges_end(); ++e) {
+    const Face_handle f = e->first;
+    const int i = e->second;
+    if (!f->is_constrained(i)) continue;
+    const Face_handle g = f->neighbor(i);
+    const bool f_in = !cdt.is_infinite(f) && f->is_in_domain();
+    const bool g_in = !cdt.is_infinite(g) && g->is_in_domain();
+    const Index a = f->vertex(Cdt::ccw(i))->info().out, b = f->vertex(Cdt::cw(i))->info().out;
+    if (f_in && g_in) segments.push_back({{std::min(a, b), std::max(a, b)}, 0});
+    else if (f_in) segments.push_back({{a, b}, 1});
+    else if (g_in) segments.push_back({{b, a}, 1});
+    else throw std::runtime_error("refinement: a constraint lies outside the domain");
+  }
+  std::sort(segments.begin(), segments.end());
+  for (const auto& s : segments) {
+    out.segments.push_back(s.first);
+    out.segment_is_boundary.push_back(s.second);
+    for (Index v : s.first) {
+      if (out.kind[v] > Point_kind::boundary) out.kind[v] = Point_kind::boundary;
+      if (result.source[v] < 0) ++result.report.n_inserted_on_segments;
+    }
+  }
+  // Each new point on a constraint was counted once per constraint edge at it (two).
+  result.report.n_inserted_on_segments /= 2;
+  return result;
+}
+
+}  // namespace evomesh::detail

@@ -1,0 +1,163 @@
+#include "evomesh/quality_pass.hpp"
+
+#include <algorithm>
+#include <cmath>
+
+#include "evomesh/detail/delaunay_mesher.hpp"
+
+namespace evomesh {
+
+using namespace detail;
+
+namespace {
+
+// Section 6: drop free points that crowd a piece (see it under more than
+// crowding_angle) and return the pieces to split instead. The apex of a side of a
+// constrained Delaunay edge sees it under the largest angle of all points visible
+// on that side, so only apexes need testing.
+std::vector<std::pair<Vertex_handle, Vertex_handle>> drop_crowding_points(
+    Cdt& cdt, const std::vector<Vertex_handle>& handles, const std::vector<Constraint_piece>& pieces,
+    double crowding_angle, std::vector<std::uint8_t>& removed, Refinement_report& report) {
+  std::vector<std::pair<Vertex_handle, Vertex_handle>> crowded;
+  const double cos_bound = std::cos(crowding_angle * kPi / 180.0);
+  auto crowds = [&](const Point_2& a, const Point_2& p, const Point_2& b) {
+    // A choice of which points to drop, not a combinatorial predicate: floating point.
+    const double ux = a.x() - p.x(), uy = a.y() - p.y(), vx = b.x() - p.x(), vy = b.y() - p.y();
+    return ux * vx + uy * vy < cos_bound * std::sqrt((ux * ux + uy * uy) * (vx * vx + vy * vy));
+  };
+  for (const auto& piece : pieces) {
+    const Vertex_handle a = handles[piece.a], b = handles[piece.b];
+    bool dropped = false;
+    for (int side = 0; side < (piece.boundary ? 1 : 2); ++side) {
+      const Vertex_handle from = side == 0 ? a : b, to = side == 0 ? b : a;
+      while (true) {
+        Face_handle f;
+        int i;
+        if (!left_face(cdt, from, to, f, i)) break;
+        const Vertex_handle apex = f->vertex(i);
+        if (cdt.is_infinite(apex) || cdt.are_there_incident_constraints(apex)) break;
+        if (!crowds(a->point(), apex->point(), b->point())) break;
+        removed[apex->info().index] = 1;
+        cdt.remove(apex);
+        ++report.n_removed;
+        dropped = true;
+      }
+    }
+    if (dropped) crowded.emplace_back(a, b);
+  }
+  report.n_crowded_segments = crowded.size();
+  return crowded;
+}
+
+// The quality pass on `cdt`, which holds all points (handles by point index).
+Refined_mesh quality_pass(Cdt& cdt, const std::vector<Vertex_handle>& handles, const Scaling& scaling,
+                          const std::vector<Vec2>& points, const std::vector<Point_kind>& kind,
+                          const std::vector<Constraint_piece>& pieces, const Quality_options& options) {
+  for (const auto& piece : pieces) cdt.insert_constraint(handles[piece.a], handles[piece.b]);
+  Refinement_report report;
+  std::vector<std::uint8_t> removed(points.size(), 0);
+  std::vector<std::pair<Vertex_handle, Vertex_handle>> crowded;
+  if (options.crowding_angle > 0) {
+    crowded = drop_crowding_points(cdt, handles, pieces, options.crowding_angle, removed, report);
+  }
+  mark_domain(cdt, handles, pieces);
+  Mesher mesher(cdt, Refinement_criteria(options.min_angle, cdt, nullptr, /*off_centres=*/true));
+  mesher.init();
+  for (const auto& e : crowded) mesher.queue_split(e.first, e.second);
+  const double budget = options.max_inserted_fraction * static_cast<double>(points.size()) + options.max_inserted_extra;
+  run_mesher(mesher, static_cast<std::size_t>(std::max(0.0, budget)), report);
+  report.rounds = 1;
+  Refined_mesh result = extract(cdt, points, kind, removed, scaling);
+  result.f.clear();
+  result.report.n_inserted = report.n_inserted;
+  result.report.n_removed = report.n_removed;
+  result.report.n_crowded_segments = report.n_crowded_segments;
+  result.report.rounds = report.rounds;
+  result.report.capped = report.capped;
+  return result;
+}
+
+// Whether every point scales exactly (and stays normal) with `s`.
+bool scales_exactly(const Vec2* begin, const Vec2* end, const Scaling& s) {
+  for (const Vec2* p = begin; p != end; ++p) {
+    for (double x : *p) {
+      const double y = x * s.to_unit;
+      if (y * s.from_unit != x || (y != 0 && !std::isnormal(y))) return false;
+    }
+  }
+  return true;
+}
+
+}  // namespace
+
+Refined_mesh quality_triangulate(const std::vector<Vec2>& points, const std::vector<Point_kind>& kind,
+                                 const std::vector<Constraint_piece>& pieces, const Quality_options& options) {
+  options.validate();
+  Cdt cdt;
+  const Scaling scaling = unit_scaling(points);
+  const auto handles = insert_points(cdt, points, scaling);
+  return quality_pass(cdt, handles, scaling, points, kind, pieces, options);
+}
+
+struct Early_triangulation::Impl {
+  Cdt cdt;
+  Scaling scaling;
+  std::size_t n_first = 0;
+  bool started = false;
+};
+
+Early_triangulation::Early_triangulation() : impl_(std::make_unique<Impl>()) {}
+Early_triangulation::~Early_triangulation() = default;
+
+void Early_triangulation::insert_first(const std::vector<Vec2>& first) {
+  Impl& impl = *impl_;
+  impl.scaling = unit_scaling(first);
+  insert_points(impl.cdt, first, impl.scaling);
+  impl.n_first = first.size();
+  impl.started = true;
+}
+
+Refined_mesh Early_triangulation::finish(const std::vector<Vec2>& points, const std::vector<Point_kind>& kind,
+                                         const std::vector<Constraint_piece>& pieces, const Quality_options& options) {
+  Impl& impl = *impl_;
+  options.validate();
+  if (!impl.started || impl.n_first > points.size() ||
+      !scales_exactly(points.data() + impl.n_first, points.data() + points.size(), impl.scaling) ||
+      unit_scaling(points).to_unit != impl.scaling.to_unit) {
+    return quality_triangulate(points, kind, pieces, options);
+  }
+  Cdt& cdt = impl.cdt;
+  std::vector<std::pair<Point_2, Vertex_info>> input;
+  input.reserve(points.size() - impl.n_first);
+  for (std::size_t i = impl.n_first; i < points.size(); ++i) {
+    Vertex_info info;
+    info.index = static_cast<Index>(i);
+    input.emplace_back(Point_2(points[i][0] * impl.scaling.to_unit, points[i][1] * impl.scaling.to_unit), info);
+  }
+  cdt.insert(input.begin(), input.end());
+  if (cdt.number_of_vertices() != points.size()) throw Input_error("points contain duplicates");
+  std::vector<Vertex_handle> handles(points.size());
+  for (auto v = cdt.finite_vertices_begin(); v != cdt.finite_vertices_end(); ++v) handles[v->info().index] = v;
+  return quality_pass(cdt, handles, impl.scaling, points, kind, pieces, options);
+}
+
+std::pair<double, Vec2> smallest_angle(const std::vector<Vec2>& points, const std::vector<Triangle>& triangles) {
+  double best = 180.0;
+  Vec2 where{0, 0};
+  for (const auto& t : triangles) {
+    for (int k = 0; k < 3; ++k) {
+      const Vec2& p = points[t[k]];
+      const Vec2& q = points[t[(k + 1) % 3]];
+      const Vec2& r = points[t[(k + 2) % 3]];
+      const double ux = q[0] - p[0], uy = q[1] - p[1], vx = r[0] - p[0], vy = r[1] - p[1];
+      const double angle = std::atan2(std::abs(ux * vy - uy * vx), ux * vx + uy * vy) * 180.0 / kPi;
+      if (angle < best) {
+        best = angle;
+        where = {(p[0] + q[0] + r[0]) / 3.0, (p[1] + q[1] + r[1]) / 3.0};
+      }
+    }
+  }
+  return {best, where};
+}
+
+}  // namespace evomesh

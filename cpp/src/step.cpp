@@ -1,0 +1,124 @@
+#include "evomesh/step.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <string>
+#include <stdexcept>
+
+namespace evomesh {
+
+void check_delta(const Mesh_arrays& mesh, const std::vector<double>& delta) {
+  if (delta.size() != mesh.points.size()) throw Input_error("delta must have one value per mesh point");
+  for (double d : delta) {
+    if (!std::isfinite(d) || !(d > 0)) throw Input_error("delta must be finite and > 0");
+  }
+}
+
+Step_spacing step_spacing(const Mesh_arrays& mesh, const std::vector<double>& delta, F_at_points how, int threads,
+                          detail::Stage_timer& timer) {
+  const std::size_t n = mesh.points.size();
+  Step_spacing spacing;
+  spacing.nn = nn_spacing(mesh.points);
+  std::vector<double> weight(n);
+  for (std::size_t i = 0; i < n; ++i) weight[i] = delta[i] * spacing.nn[i];
+  timer.lap("nn");
+  spacing.function = std::make_unique<Spacing_function>(mesh.points, weight);
+  timer.lap("apollonius");
+  auto& f = spacing.f;
+  f.resize(n);
+  if (how == F_at_points::evaluate_all) {
+    spacing.function->evaluate(mesh.points.data(), n, f.data(), nullptr, threads);
+    for (std::size_t i = 0; i < n; ++i) f[i] = std::min(f[i], weight[i]);
+  } else {
+    // Lemma 3.1: f(p) = delta(p) nn_M(p) = w_p exactly where delta(p) <= 1; the
+    // Apollonius graph answers the others (f_p(p) = w_p is one of the cones, so
+    // f(p) <= w_p there too).
+    std::vector<Vec2> coarse;
+    std::vector<std::size_t> which;
+    for (std::size_t i = 0; i < n; ++i) {
+      f[i] = weight[i];
+      if (delta[i] > 1) {
+        coarse.push_back(mesh.points[i]);
+        which.push_back(i);
+      }
+    }
+    std::vector<double> value(coarse.size());
+    spacing.function->evaluate(coarse.data(), coarse.size(), value.data(), nullptr, threads);
+    for (std::size_t k = 0; k < which.size(); ++k) f[which[k]] = std::min(value[k], weight[which[k]]);
+  }
+  timer.lap("spacing_at_points");
+  return spacing;
+}
+
+void check_sample_budget(double estimate, double max_samples, const char* what) {
+  if (estimate > max_samples) {
+    throw Input_error("delta asks for too much refinement in one step: " + std::string(what) +
+                      " would create about " + format_count(estimate) + " points (max_samples is " +
+                      format_count(max_samples) +
+                      "); delta is relative (the new spacing is delta times the current one): raise it, refine over "
+                      "several steps, or raise max_samples");
+  }
+}
+
+void triangulate_selection(Selection selected, const std::vector<Constraint_piece>& pieces,
+                           const Quality_options* quality, Evolve_result& result, Early_triangulation* early) {
+  auto& stats = result.stats;
+  Mesh_arrays& mesh = selected.mesh;
+  // CGAL's triangulations assume these (a piece from a point to itself, or out
+  // of range, is undefined behaviour there): an internal error, never a crash.
+  for (const auto& piece : pieces) {
+    if (piece.a == piece.b || piece.a < 0 || piece.b < 0 || static_cast<std::size_t>(piece.a) >= mesh.points.size() ||
+        static_cast<std::size_t>(piece.b) >= mesh.points.size()) {
+      throw std::logic_error("triangulate_selection: a degenerate constraint piece");
+    }
+  }
+  if (quality == nullptr) {
+    mesh.triangles = constrained_delaunay(mesh.points, pieces);
+    for (const auto& piece : pieces) {
+      mesh.segments.push_back({piece.a, piece.b});
+      mesh.segment_is_boundary.push_back(piece.boundary);
+    }
+    result.mesh = std::move(mesh);
+    result.origin = std::move(selected.origin);
+  } else {
+    Refined_mesh refined = early ? early->finish(mesh.points, mesh.kind, pieces, *quality)
+                                 : quality_triangulate(mesh.points, mesh.kind, pieces, *quality);
+    result.origin.resize(refined.source.size());
+    for (std::size_t i = 0; i < refined.source.size(); ++i) {
+      result.origin[i] = refined.source[i] < 0 ? -1 : selected.origin[refined.source[i]];
+    }
+    result.mesh = std::move(refined.mesh);
+    const auto& report = refined.report;
+    stats.emplace_back("quality_points_added", static_cast<double>(report.n_inserted));
+    stats.emplace_back("quality_points_added_on_segments", static_cast<double>(report.n_inserted_on_segments));
+    stats.emplace_back("quality_points_removed", static_cast<double>(report.n_removed));
+    stats.emplace_back("quality_crowded_segments", static_cast<double>(report.n_crowded_segments));
+    stats.emplace_back("quality_capped", report.capped ? 1.0 : 0.0);
+  }
+  // The smallest angle and where it is (Section 6 reports it per step).
+  const auto angle = smallest_angle(result.mesh.points, result.mesh.triangles);
+  stats.emplace_back("min_angle", angle.first);
+  stats.emplace_back("min_angle_x", angle.second[0]);
+  stats.emplace_back("min_angle_y", angle.second[1]);
+}
+
+void finish_step(const Mesh_arrays& input, Evolve_result& result, detail::Stage_timer& timer) {
+  result.parents = parent_map(input, result.mesh, result.origin);
+  timer.lap("parent_map");
+  auto& stats = result.stats;
+  double seconds = 0;
+  for (const auto& s : stats) {
+    if (s.first.rfind("seconds_", 0) == 0) seconds += s.second;
+  }
+  stats.emplace_back("seconds_total", seconds);
+  stats.emplace_back("parent_walk_steps", static_cast<double>(result.parents.n_walk_steps));
+  stats.emplace_back("parent_located_globally", static_cast<double>(result.parents.n_located_globally));
+}
+
+void add_step_counts(Evolve_result& result, std::initializer_list<std::pair<const char*, double>> counts) {
+  for (const auto& count : counts) result.stats.emplace_back(count.first, count.second);
+  result.stats.emplace_back("n_output_points", static_cast<double>(result.mesh.points.size()));
+  result.stats.emplace_back("n_output_triangles", static_cast<double>(result.mesh.triangles.size()));
+}
+
+}  // namespace evomesh
