@@ -6,6 +6,7 @@
 
 #include <cmath>
 #include <cstring>
+#include <optional>
 
 #include "evomesh/drfc.hpp"
 #include "evomesh/frfc.hpp"
@@ -119,9 +120,30 @@ Mesh_arrays to_mesh(const Float_array& points, const Int_array& triangles, const
   return mesh;
 }
 
+// Optional labels of a mesh (segment and triangle tags, required points), checked
+// against its sizes.
+void add_labels(Mesh_arrays& mesh, const std::optional<Int_array>& segment_tags,
+                const std::optional<Int_array>& triangle_tags, const std::optional<Byte_array>& required) {
+  if (segment_tags) {
+    mesh.segment_tags = to_vector<std::int64_t>(*segment_tags);
+    if (mesh.segment_tags.size() != mesh.segments.size()) throw Input_error("segment_tags: one tag per segment");
+  }
+  if (triangle_tags) {
+    mesh.triangle_tags = to_vector<std::int64_t>(*triangle_tags);
+    if (mesh.triangle_tags.size() != mesh.triangles.size()) throw Input_error("triangle_tags: one tag per triangle");
+  }
+  if (required) {
+    mesh.required = to_vector<std::uint8_t>(*required);
+    if (mesh.required.size() != mesh.points.size()) throw Input_error("required: one flag per point");
+  }
+}
+
 // The arrays of a mesh and the input index of every point (-1 for a new one).
 py::dict mesh_dict(const Mesh_arrays& mesh, const std::vector<Index>& origin) {
   py::dict out;
+  if (!mesh.segment_tags.empty()) out["segment_tags"] = vector_array(mesh.segment_tags);
+  if (!mesh.triangle_tags.empty()) out["triangle_tags"] = vector_array(mesh.triangle_tags);
+  if (!mesh.required.empty()) out["required"] = vector_array(mesh.required);
   out["points"] = points_array(mesh.points);
   out["triangles"] = rows_array<3>(mesh.triangles);
   out["segments"] = rows_array<2>(mesh.segments);
@@ -251,8 +273,10 @@ void bind_step(py::module_& m, const char* name, Result (*run)(const Mesh_arrays
       name,
       [run, to_dict](const Float_array& points, const Int_array& triangles, const Int_array& segments,
                      const Byte_array& segment_is_boundary, const Byte_array& kind, const Float_array& delta,
-                     const Options& options) {
+                     const Options& options, std::optional<Int_array> segment_tags,
+                     std::optional<Int_array> triangle_tags, std::optional<Byte_array> required) {
         Mesh_arrays mesh = to_mesh(points, triangles, segments, segment_is_boundary, kind);
+        add_labels(mesh, segment_tags, triangle_tags, required);
         auto d = to_vector<double>(delta);
         Result r;
         {
@@ -262,7 +286,9 @@ void bind_step(py::module_& m, const char* name, Result (*run)(const Mesh_arrays
         return to_dict(r);
       },
       py::arg("points"), py::arg("triangles"), py::arg("segments"), py::arg("segment_is_boundary"),
-      py::arg("kind"), py::arg("delta"), py::arg("options") = Options::recommended(), doc);
+      py::arg("kind"), py::arg("delta"), py::arg("options") = Options::recommended(),
+      py::arg("segment_tags") = py::none(), py::arg("triangle_tags") = py::none(), py::arg("required") = py::none(),
+      doc);
 }
 
 PYBIND11_MODULE(_core, m) {
@@ -271,7 +297,7 @@ PYBIND11_MODULE(_core, m) {
   m.def(
       "prepare_mesh",
       [](const Float_array& points, const Int_array& triangles, std::optional<Int_array> segments,
-         bool check_planar) {
+         bool check_planar, std::optional<Int_array> segment_tags, std::optional<Byte_array> required) {
         Mesh_arrays mesh;
         mesh.points = to_points(points);
         mesh.triangles = to_index_rows<3>(triangles, "triangles");
@@ -279,21 +305,33 @@ PYBIND11_MODULE(_core, m) {
         if (segments) user = to_index_rows<2>(*segments, "segments");
         require_indices(mesh.triangles, mesh.points.size(), "triangles");
         require_indices(user, mesh.points.size(), "segments");
+        std::vector<std::int64_t> user_tags;
+        if (segment_tags) {
+          user_tags = to_vector<std::int64_t>(*segment_tags);
+          if (user_tags.size() != user.size()) throw Input_error("segment_tags: one tag per segment");
+        }
+        if (required) {
+          mesh.required = to_vector<std::uint8_t>(*required);
+          if (mesh.required.size() != mesh.points.size()) throw Input_error("required: one flag per point");
+        }
         std::size_t flipped;
         {
           py::gil_scoped_release release;
           flipped = orient_triangles(mesh.points, mesh.triangles);
           build_segments(mesh, user);
           if (check_planar) check_planar_mesh(mesh.points, mesh.triangles);
+          if (!user_tags.empty()) mesh.segment_tags = tags_of_segments(mesh.segments, user, user_tags);
           mesh.kind = classify_points(mesh);
         }
         return py::make_tuple(rows_array<3>(mesh.triangles), rows_array<2>(mesh.segments),
                               vector_array<std::uint8_t>(mesh.segment_is_boundary), kinds_array(mesh.kind),
-                              flipped);
+                              flipped, vector_array(mesh.segment_tags));
       },
       py::arg("points"), py::arg("triangles"), py::arg("segments") = py::none(), py::arg("check_planar") = true,
-      "Orient triangles CCW, build segments, check planarity, classify points. "
-      "Returns (triangles, segments, segment_is_boundary, kind, n_flipped).");
+      py::arg("segment_tags") = py::none(), py::arg("required") = py::none(),
+      "Orient triangles CCW, build segments, check planarity, classify points (a change of segment tag and a "
+      "required point on segments are corners). Returns (triangles, segments, segment_is_boundary, kind, "
+      "n_flipped, segment_tags of the built segments: the user's tag, 0 for a boundary edge not given).");
 
   m.def(
       "nn_spacing",

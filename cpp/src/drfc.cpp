@@ -1,5 +1,9 @@
 #include "evomesh/drfc.hpp"
 
+#include <CGAL/exceptions.h>
+
+#include <string>
+
 #include <utility>
 
 #include "evomesh/packing.hpp"
@@ -29,7 +33,14 @@ Refinement_stage refinement_stage(const Mesh_arrays& mesh, const std::vector<dou
   const double estimate = estimate_sample_count(mesh, stage.spacing.f, 1.0, options.max_samples);
   check_sample_budget(estimate, options.max_samples, "refinement");
   const auto cap = static_cast<std::size_t>(2 * estimate + 1000);
-  stage.refined = spacing_refine(mesh, *stage.spacing.function, stage.spacing.f, options.min_angle, cap, options.threads);
+  try {
+    stage.refined =
+        spacing_refine(mesh, *stage.spacing.function, stage.spacing.f, options.min_angle, cap, options.threads);
+  } catch (const CGAL::Failure_exception& error) {
+    // CGAL's mesher broke an invariant on near-degenerate input (see CMakeLists.txt).
+    throw Input_error(std::string("DRFC's Delaunay refinement failed on this mesh (") + error.what() +
+                      "); its geometry is too close to degenerate for it: try method='frfc'");
+  }
   timer.lap("refine");
   return stage;
 }
@@ -62,7 +73,7 @@ Selection select_output(const Refined_mesh& refined, const std::vector<std::uint
     if (!kept[i]) continue;
     out_index[i] = static_cast<Index>(out.mesh.points.size());
     const Index source = refined.source[i];
-    out.add(refined.mesh.points[i], kept_point_kind(refined.mesh.kind[i], forced[i], source >= 0), source);
+    out.add(refined.mesh.points[i], kept_point_kind(refined.mesh.kind[i], forced[i] == kForcedCorner, source >= 0), source);
   }
   return out;
 }
@@ -85,7 +96,14 @@ Evolve_result drfc(const Mesh_arrays& mesh, const std::vector<double>& delta, co
 
   const auto chains = segment_chains(refined.mesh);
   std::size_t n_forced = 0;
-  const auto forced = forced_corners(refined.mesh, chains, n_forced);
+  std::vector<std::uint8_t> required;  // the input's required points, on M_I
+  if (!mesh.required.empty()) {
+    required.assign(refined.mesh.points.size(), 0);
+    for (std::size_t i = 0; i < required.size(); ++i) {
+      if (refined.source[i] >= 0) required[i] = mesh.required[refined.source[i]];
+    }
+  }
+  const auto forced = forced_corners(refined.mesh, chains, n_forced, required);
   const auto kept = coarsen(refined, forced, n_forced, options.radius_scale);
   timer.lap("lfmis");
 
@@ -93,6 +111,7 @@ Evolve_result drfc(const Mesh_arrays& mesh, const std::vector<double>& delta, co
   // M_I, their triangulation.
   std::vector<Index> out_index;
   Selection selection = select_output(refined, forced, kept, out_index);
+  selection.pin(mesh.required);
   const auto pieces = constraint_pieces(chains, out_index);
   const Quality_options quality = options.quality_settings();
   triangulate_selection(std::move(selection), pieces, options.quality ? &quality : nullptr, result);

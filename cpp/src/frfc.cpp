@@ -79,7 +79,7 @@ Selection select_output(const Mesh_arrays& mesh, const std::vector<std::uint8_t>
   out_index.assign(total, -1);
   for (std::size_t c : out_order) {
     out_index[c] = static_cast<Index>(out.mesh.points.size());
-    if (c < n) out.add(packing.centers[c], kept_point_kind(mesh.kind[c], forced[c]), static_cast<Index>(c));
+    if (c < n) out.add(packing.centers[c], kept_point_kind(mesh.kind[c], forced[c] == kForcedCorner), static_cast<Index>(c));
     else out.add(packing.centers[c], c < n + n_seg ? Point_kind::boundary : Point_kind::sampled, -1);
   }
   for (const Vec2& x : repair_points) out.add(x, Point_kind::sampled, -1);
@@ -177,7 +177,7 @@ Evolve_result frfc(const Mesh_arrays& mesh, const std::vector<double>& delta, co
   const auto chains = segment_chains(mesh);
   const Candidates on_segments = segment_stage(mesh, delta, spacing, chains, options, timer);
   std::size_t n_forced = 0;
-  const auto forced = forced_corners(mesh, chains, n_forced);
+  const auto forced = forced_corners(mesh, chains, n_forced, mesh.required);
   Packing packing = first_packing_pass(mesh, spacing.f, on_segments, forced, n_forced, options);
   Early_start early(packing, options);
   timer.lap("lfmis");
@@ -193,6 +193,7 @@ Evolve_result frfc(const Mesh_arrays& mesh, const std::vector<double>& delta, co
   // Step 6: the kept points, the constraint pieces between them, their triangulation.
   std::vector<Index> out_index;
   Selection selection = select_output(mesh, forced, packing, on_segments.size(), repair_points, out_index);
+  selection.pin(mesh.required);
   const auto pieces = pieces_along_chains(mesh, chains, on_segments, out_index);
   const Quality_options quality = options.quality_settings();
   early.work.wait();

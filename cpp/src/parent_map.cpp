@@ -5,6 +5,8 @@
 #include <cstdint>
 #include <deque>
 #include <limits>
+#include <queue>
+#include <unordered_set>
 #include <stdexcept>
 #include <numeric>
 
@@ -55,6 +57,153 @@ std::array<double, 3> barycentric_in(const std::vector<Vec2>& points, const Tria
   return {1.0 - l1 - l2, l1, l2};
 }
 
+double distance_to_segment(const Vec2& q, const Vec2& a, const Vec2& b) {
+  const double dx = b[0] - a[0], dy = b[1] - a[1];
+  const double along = std::clamp(((q[0] - a[0]) * dx + (q[1] - a[1]) * dy) / (dx * dx + dy * dy), 0.0, 1.0);
+  return std::hypot(q[0] - a[0] - along * dx, q[1] - a[1] - along * dy);
+}
+
+// Point location in the old mesh by visibility walks over its triangles.
+class Old_mesh_walker {
+ public:
+  explicit Old_mesh_walker(const Mesh_arrays& old_mesh)
+      : P_(old_mesh.points),
+        T_(old_mesh.triangles),
+        neighbour_(triangle_neighbours(old_mesh.triangles)),
+        triangle_at_(old_mesh.points.size(), -1),
+        fan_begin_(old_mesh.points.size() + 1, 0),
+        limit_(64 + 4 * static_cast<std::size_t>(std::sqrt(static_cast<double>(old_mesh.triangles.size())))) {
+    for (std::size_t t = 0; t < T_.size(); ++t) {
+      for (Index v : T_[t]) {
+        triangle_at_[v] = static_cast<Index>(t);
+        ++fan_begin_[v + 1];
+      }
+    }
+    std::partial_sum(fan_begin_.begin(), fan_begin_.end(), fan_begin_.begin());
+    fan_.resize(3 * T_.size());
+    std::vector<Index> fill(fan_begin_.begin(), fan_begin_.end() - 1);
+    for (std::size_t t = 0; t < T_.size(); ++t) {
+      for (Index v : T_[t]) fan_[fill[v]++] = static_cast<Index>(t);
+    }
+  }
+
+  // One old triangle at old point v.
+  Index triangle_at(Index v) const { return triangle_at_[v]; }
+
+  // Visibility walk from triangle t towards q: cross an edge that has q strictly
+  // on its outer side (the first in a rotating order, so that walks do not
+  // cycle); stop in a triangle that has q on no outer side (q inside or on it),
+  // or at a boundary edge with q beyond it by rounding (q outside the old domain
+  // as far as a step that kept the domain can put it). -1: blocked (a
+  // non-convex domain) or longer than the bound; the caller searches instead.
+  Index walk(Index t, const Vec2& q, std::size_t salt, std::size_t& steps) const {
+    for (std::size_t step = 0; step < limit_; ++step) {
+      const Triangle& tri = T_[t];
+      Index next = -1;
+      int boundary_side = -1;
+      for (int j = 0; j < 3; ++j) {
+        const int k = static_cast<int>((salt + step + j) % 3);
+        if (orientation(P_[tri[k]], P_[tri[(k + 1) % 3]], q) < 0) {
+          if (neighbour_[t][k] >= 0) {
+            next = neighbour_[t][k];
+            break;
+          }
+          boundary_side = k;
+        }
+      }
+      if (next >= 0) {
+        t = next;
+        ++steps;
+        continue;
+      }
+      if (boundary_side < 0) return t;
+      const Vec2& a = P_[tri[boundary_side]];
+      const Vec2& b = P_[tri[(boundary_side + 1) % 3]];
+      const double reach = std::max({std::abs(q[0]), std::abs(q[1]), std::abs(a[0]), std::abs(a[1]), std::abs(b[0]),
+                                     std::abs(b[1])});
+      if (distance_to_segment(q, a, b) <= rounding(reach)) return t;
+      return search(t, q);  // blocked by the boundary of a non-convex domain
+    }
+    return search(t, q);
+  }
+
+  // Best-first search over the old triangles from t, nearest to q first: the
+  // first within rounding of q, or -1 after kSearchBudget triangles. Finds q
+  // around holes and re-entrant corners, where a walk is blocked.
+  Index search(Index t, const Vec2& q) const {
+    constexpr std::size_t kSearchBudget = 1 << 16;
+    using Entry = std::pair<double, Index>;
+    std::priority_queue<Entry, std::vector<Entry>, std::greater<Entry>> open;
+    std::unordered_set<Index> seen{t};
+    open.push({gap(t, q), t});
+    for (std::size_t popped = 0; !open.empty() && popped < kSearchBudget; ++popped) {
+      const auto [d, u] = open.top();
+      open.pop();
+      double reach = std::max(std::abs(q[0]), std::abs(q[1]));
+      for (Index v : T_[u]) reach = std::max({reach, std::abs(P_[v][0]), std::abs(P_[v][1])});
+      if (d <= rounding(reach)) return u;
+      // across edges, and around vertices: where a domain touches itself at a
+      // vertex, the triangles on either side share no edge
+      for (Index v : T_[u]) {
+        for (Index a = fan_begin_[v]; a < fan_begin_[v + 1]; ++a) {
+          const Index w = fan_[a];
+          if (seen.insert(w).second) open.push({gap(w, q), w});
+        }
+      }
+    }
+    return -1;
+  }
+
+  // Distance from q to triangle t (0 inside or on it).
+  double gap(Index t, const Vec2& q) const {
+    double d = 0;
+    for (int k = 0; k < 3; ++k) {
+      const Vec2& a = P_[T_[t][k]];
+      const Vec2& b = P_[T_[t][(k + 1) % 3]];
+      if (orientation(a, b, q) < 0) d = std::max(d, distance_to_segment(q, a, b));
+    }
+    return d;
+  }
+
+  // What rounding can put between a point and the old mesh's boundary: a few
+  // units, plus a straight chain's tolerance, of the largest coordinate.
+  static double rounding(double reach) {
+    return (16 + kStraightUlps) * std::numeric_limits<double>::epsilon() * reach;
+  }
+
+ private:
+  const std::vector<Vec2>& P_;
+  const std::vector<Triangle>& T_;
+  std::vector<std::array<Index, 3>> neighbour_;
+  std::vector<Index> triangle_at_;
+  std::vector<Index> fan_begin_, fan_;  // the triangles around each old point (compressed lists)
+  std::size_t limit_;
+};
+
+// The old triangles of `queries` by walks from `hints` (an old triangle near
+// each), a search over the old mesh for those no walk reaches.
+std::vector<Index> locate_with_hints(const Mesh_arrays& old_mesh, const Old_mesh_walker& walker,
+                                     const std::vector<Vec2>& queries, const std::vector<Index>& hints,
+                                     std::size_t& n_searched) {
+  std::vector<Index> found(queries.size(), -1);
+  std::vector<std::size_t> missed;
+  std::size_t steps = 0;
+  for (std::size_t k = 0; k < queries.size(); ++k) {
+    found[k] = hints[k] < 0 ? -1 : walker.walk(hints[k], queries[k], k, steps);
+    if (found[k] < 0) missed.push_back(k);
+  }
+  n_searched = missed.size();
+  if (!missed.empty()) {
+    std::vector<Vec2> lost(missed.size());
+    for (std::size_t k = 0; k < missed.size(); ++k) lost[k] = queries[missed[k]];
+    std::vector<Index> where;
+    std::vector<std::array<double, 3>> unused;
+    locate_points(old_mesh.points, old_mesh.triangles, lost, where, unused);
+    for (std::size_t k = 0; k < missed.size(); ++k) found[missed[k]] = where[k];
+  }
+  return found;
+}
+
 }  // namespace
 
 Parent_map parent_map(const Mesh_arrays& old_mesh, const Mesh_arrays& new_mesh, const std::vector<Index>& origin) {
@@ -66,11 +215,7 @@ Parent_map parent_map(const Mesh_arrays& old_mesh, const Mesh_arrays& new_mesh, 
   map.triangle.assign(n_new, -1);
   map.barycentric.assign(n_new, {0.0, 0.0, 0.0});
   if (T.empty()) return map;
-  const auto neighbour = triangle_neighbours(T);
-  std::vector<Index> triangle_at(P.size(), -1);  // one old triangle at every old point
-  for (std::size_t t = 0; t < T.size(); ++t) {
-    for (Index v : T[t]) triangle_at[v] = static_cast<Index>(t);
-  }
+  const Old_mesh_walker walker(old_mesh);
   // New points around each new point (compressed lists).
   std::vector<Index> xadj(n_new + 1, 0), adj;
   for (const auto& t : new_mesh.triangles) {
@@ -87,46 +232,6 @@ Parent_map parent_map(const Mesh_arrays& old_mesh, const Mesh_arrays& new_mesh, 
       }
     }
   }
-  // Visibility walk from triangle t towards q: cross an edge that has q strictly on
-  // its outer side (the first in a rotating order, so that walks do not cycle);
-  // stop in a triangle that has q on no outer side (q inside or on it), or at a
-  // boundary edge with q beyond it (q outside the old domain, by rounding when the
-  // step kept the domain). Gives up after `limit` steps.
-  const std::size_t limit = 64 + 4 * static_cast<std::size_t>(std::sqrt(static_cast<double>(T.size())));
-  auto walk = [&](Index t, const Vec2& q, std::size_t salt) -> Index {
-    for (std::size_t step = 0; step < limit; ++step) {
-      const Triangle& tri = T[t];
-      Index next = -1;
-      int boundary_side = -1;
-      for (int j = 0; j < 3; ++j) {
-        const int k = static_cast<int>((salt + step + j) % 3);
-        if (orientation(P[tri[k]], P[tri[(k + 1) % 3]], q) < 0) {
-          if (neighbour[t][k] >= 0) {
-            next = neighbour[t][k];
-            break;
-          }
-          boundary_side = k;
-        }
-      }
-      if (next >= 0) {
-        t = next;
-        ++map.n_walk_steps;
-        continue;
-      }
-      if (boundary_side < 0) return t;
-      // Beyond a boundary edge: rounding if q is that close to it (else a
-      // non-convex domain blocks the walk, and the search decides).
-      const Vec2& a = P[tri[boundary_side]];
-      const Vec2& b = P[tri[(boundary_side + 1) % 3]];
-      const double dx = b[0] - a[0], dy = b[1] - a[1];
-      const double along = std::clamp(((q[0] - a[0]) * dx + (q[1] - a[1]) * dy) / (dx * dx + dy * dy), 0.0, 1.0);
-      const double gap = std::hypot(q[0] - a[0] - along * dx, q[1] - a[1] - along * dy);
-      const double reach = std::max({std::abs(q[0]), std::abs(q[1]), std::abs(a[0]), std::abs(a[1]), std::abs(b[0]),
-                                     std::abs(b[1])});
-      return gap <= (16 + kStraightUlps) * std::numeric_limits<double>::epsilon() * reach ? t : -1;
-    }
-    return -1;
-  };
   std::vector<std::uint8_t> placed(n_new, 0);
   std::deque<Index> queue;
   for (std::size_t i = 0; i < n_new; ++i) {
@@ -139,12 +244,12 @@ Parent_map parent_map(const Mesh_arrays& old_mesh, const Mesh_arrays& new_mesh, 
   while (!queue.empty()) {
     const Index u = queue.front();
     queue.pop_front();
-    const Index start = origin[u] >= 0 ? triangle_at[origin[u]] : map.triangle[u];
+    const Index start = origin[u] >= 0 ? walker.triangle_at(origin[u]) : map.triangle[u];
     for (Index a = xadj[u]; a < xadj[u + 1]; ++a) {
       const Index v = adj[a];
       if (placed[v]) continue;
       placed[v] = 1;
-      const Index t = start < 0 ? -1 : walk(start, new_mesh.points[v], static_cast<std::size_t>(v));
+      const Index t = start < 0 ? -1 : walker.walk(start, new_mesh.points[v], static_cast<std::size_t>(v), map.n_walk_steps);
       if (t < 0) {
         unplaced.push_back(v);
         continue;
@@ -171,6 +276,90 @@ Parent_map parent_map(const Mesh_arrays& old_mesh, const Mesh_arrays& new_mesh, 
     map.n_located_globally = unplaced.size();
   }
   return map;
+}
+
+void carry_tags(const Mesh_arrays& old_mesh, const std::vector<Index>& origin, const Parent_map& parents,
+                Mesh_arrays& new_mesh) {
+  if (!old_mesh.required.empty()) {
+    new_mesh.required.assign(new_mesh.points.size(), 0);
+    for (std::size_t i = 0; i < origin.size(); ++i) {
+      if (origin[i] >= 0) new_mesh.required[i] = old_mesh.required[origin[i]];
+    }
+  }
+  const bool segments_tagged = !old_mesh.segment_tags.empty();
+  const bool triangles_tagged = !old_mesh.triangle_tags.empty();
+  if (!segments_tagged && !triangles_tagged) return;
+  const Old_mesh_walker walker(old_mesh);
+  // An old triangle at (or near) every new point, to start walks from.
+  auto hint_at = [&](Index v) { return origin[v] >= 0 ? walker.triangle_at(origin[v]) : parents.triangle[v]; };
+  std::size_t searched = 0;
+  if (triangles_tagged) {
+    // Region borders are constraints, so a new triangle lies in one region: the
+    // one of the old triangle that contains its centroid.
+    const std::size_t m = new_mesh.triangles.size();
+    std::vector<Vec2> centroids(m);
+    std::vector<Index> hints(m);
+    for (std::size_t t = 0; t < m; ++t) {
+      const Triangle& tri = new_mesh.triangles[t];
+      const Vec2 &a = new_mesh.points[tri[0]], &b = new_mesh.points[tri[1]], &c = new_mesh.points[tri[2]];
+      centroids[t] = {(a[0] + b[0] + c[0]) / 3.0, (a[1] + b[1] + c[1]) / 3.0};
+      hints[t] = hint_at(tri[0]);
+    }
+    const auto found = locate_with_hints(old_mesh, walker, centroids, hints, searched);
+    new_mesh.triangle_tags.resize(m);
+    for (std::size_t t = 0; t < m; ++t) {
+      if (found[t] < 0) throw std::logic_error("carry_tags: a new triangle outside the old mesh");
+      new_mesh.triangle_tags[t] = old_mesh.triangle_tags[found[t]];
+    }
+  }
+  if (segments_tagged) {
+    // A new segment lies on one chain of old segments, all of one tag (a tag
+    // change is a corner, which every step keeps): the tag of the old segment
+    // nearest its midpoint, among those on the old triangle found there and at
+    // that triangle's vertices.
+    const std::size_t k = new_mesh.segments.size();
+    std::vector<Vec2> midpoints(k);
+    std::vector<Index> hints(k);
+    for (std::size_t s = 0; s < k; ++s) {
+      const Edge& e = new_mesh.segments[s];
+      const Vec2 &a = new_mesh.points[e[0]], &b = new_mesh.points[e[1]];
+      midpoints[s] = {0.5 * (a[0] + b[0]), 0.5 * (a[1] + b[1])};
+      hints[s] = hint_at(e[0]);
+    }
+    const auto found = locate_with_hints(old_mesh, walker, midpoints, hints, searched);
+    const std::size_t n_old = old_mesh.points.size();
+    std::vector<Index> xadj(n_old + 1, 0), adj(2 * old_mesh.segments.size());
+    for (const auto& e : old_mesh.segments) {
+      ++xadj[e[0] + 1];
+      ++xadj[e[1] + 1];
+    }
+    std::partial_sum(xadj.begin(), xadj.end(), xadj.begin());
+    {
+      std::vector<Index> fill(xadj.begin(), xadj.end() - 1);
+      for (std::size_t s = 0; s < old_mesh.segments.size(); ++s) {
+        adj[fill[old_mesh.segments[s][0]]++] = static_cast<Index>(s);
+        adj[fill[old_mesh.segments[s][1]]++] = static_cast<Index>(s);
+      }
+    }
+    new_mesh.segment_tags.resize(k);
+    for (std::size_t s = 0; s < k; ++s) {
+      if (found[s] < 0) throw std::logic_error("carry_tags: a new segment outside the old mesh");
+      Index best = -1;
+      double best_distance = std::numeric_limits<double>::infinity();
+      for (Index v : old_mesh.triangles[found[s]]) {
+        for (Index a = xadj[v]; a < xadj[v + 1]; ++a) {
+          const Edge& e = old_mesh.segments[adj[a]];
+          const double d = distance_to_segment(midpoints[s], old_mesh.points[e[0]], old_mesh.points[e[1]]);
+          if (d < best_distance) {
+            best_distance = d;
+            best = adj[a];
+          }
+        }
+      }
+      if (best < 0) throw std::logic_error("carry_tags: a new segment far from every old one");
+      new_mesh.segment_tags[s] = old_mesh.segment_tags[best];
+    }
+  }
 }
 
 }  // namespace evomesh

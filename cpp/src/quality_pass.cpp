@@ -17,7 +17,8 @@ namespace {
 // on that side, so only apexes need testing.
 std::vector<std::pair<Vertex_handle, Vertex_handle>> drop_crowding_points(
     Cdt& cdt, const std::vector<Vertex_handle>& handles, const std::vector<Constraint_piece>& pieces,
-    double crowding_angle, std::vector<std::uint8_t>& removed, Refinement_report& report) {
+    double crowding_angle, const std::vector<std::uint8_t>& pinned, std::vector<std::uint8_t>& removed,
+    Refinement_report& report) {
   std::vector<std::pair<Vertex_handle, Vertex_handle>> crowded;
   const double cos_bound = std::cos(crowding_angle * kPi / 180.0);
   auto crowds = [&](const Point_2& a, const Point_2& p, const Point_2& b) {
@@ -36,6 +37,7 @@ std::vector<std::pair<Vertex_handle, Vertex_handle>> drop_crowding_points(
         if (!left_face(cdt, from, to, f, i)) break;
         const Vertex_handle apex = f->vertex(i);
         if (cdt.is_infinite(apex) || cdt.are_there_incident_constraints(apex)) break;
+        if (!pinned.empty() && pinned[apex->info().index]) break;  // a required point stays
         if (!crowds(a->point(), apex->point(), b->point())) break;
         removed[apex->info().index] = 1;
         cdt.remove(apex);
@@ -52,13 +54,14 @@ std::vector<std::pair<Vertex_handle, Vertex_handle>> drop_crowding_points(
 // The quality pass on `cdt`, which holds all points (handles by point index).
 Refined_mesh quality_pass(Cdt& cdt, const std::vector<Vertex_handle>& handles, const Scaling& scaling,
                           const std::vector<Vec2>& points, const std::vector<Point_kind>& kind,
-                          const std::vector<Constraint_piece>& pieces, const Quality_options& options) {
+                          const std::vector<Constraint_piece>& pieces, const Quality_options& options,
+                          const std::vector<std::uint8_t>& pinned) {
   for (const auto& piece : pieces) cdt.insert_constraint(handles[piece.a], handles[piece.b]);
   Refinement_report report;
   std::vector<std::uint8_t> removed(points.size(), 0);
   std::vector<std::pair<Vertex_handle, Vertex_handle>> crowded;
   if (options.crowding_angle > 0) {
-    crowded = drop_crowding_points(cdt, handles, pieces, options.crowding_angle, removed, report);
+    crowded = drop_crowding_points(cdt, handles, pieces, options.crowding_angle, pinned, removed, report);
   }
   mark_domain(cdt, handles, pieces);
   Mesher mesher(cdt, Refinement_criteria(options.min_angle, cdt, nullptr, /*off_centres=*/true));
@@ -91,12 +94,13 @@ bool scales_exactly(const Vec2* begin, const Vec2* end, const Scaling& s) {
 }  // namespace
 
 Refined_mesh quality_triangulate(const std::vector<Vec2>& points, const std::vector<Point_kind>& kind,
-                                 const std::vector<Constraint_piece>& pieces, const Quality_options& options) {
+                                 const std::vector<Constraint_piece>& pieces, const Quality_options& options,
+                                 const std::vector<std::uint8_t>& pinned) {
   options.validate();
   Cdt cdt;
   const Scaling scaling = unit_scaling(points);
   const auto handles = insert_points(cdt, points, scaling);
-  return quality_pass(cdt, handles, scaling, points, kind, pieces, options);
+  return quality_pass(cdt, handles, scaling, points, kind, pieces, options, pinned);
 }
 
 struct Early_triangulation::Impl {
@@ -118,13 +122,14 @@ void Early_triangulation::insert_first(const std::vector<Vec2>& first) {
 }
 
 Refined_mesh Early_triangulation::finish(const std::vector<Vec2>& points, const std::vector<Point_kind>& kind,
-                                         const std::vector<Constraint_piece>& pieces, const Quality_options& options) {
+                                         const std::vector<Constraint_piece>& pieces, const Quality_options& options,
+                                         const std::vector<std::uint8_t>& pinned) {
   Impl& impl = *impl_;
   options.validate();
   if (!impl.started || impl.n_first > points.size() ||
       !scales_exactly(points.data() + impl.n_first, points.data() + points.size(), impl.scaling) ||
       unit_scaling(points).to_unit != impl.scaling.to_unit) {
-    return quality_triangulate(points, kind, pieces, options);
+    return quality_triangulate(points, kind, pieces, options, pinned);
   }
   Cdt& cdt = impl.cdt;
   std::vector<std::pair<Point_2, Vertex_info>> input;
@@ -138,7 +143,7 @@ Refined_mesh Early_triangulation::finish(const std::vector<Vec2>& points, const 
   if (cdt.number_of_vertices() != points.size()) throw Input_error("points contain duplicates");
   std::vector<Vertex_handle> handles(points.size());
   for (auto v = cdt.finite_vertices_begin(); v != cdt.finite_vertices_end(); ++v) handles[v->info().index] = v;
-  return quality_pass(cdt, handles, impl.scaling, points, kind, pieces, options);
+  return quality_pass(cdt, handles, impl.scaling, points, kind, pieces, options, pinned);
 }
 
 std::pair<double, Vec2> smallest_angle(const std::vector<Vec2>& points, const std::vector<Triangle>& triangles) {

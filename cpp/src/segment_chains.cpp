@@ -36,6 +36,7 @@ std::vector<Segment_chain> segment_chains(const Mesh_arrays& mesh) {
   auto walk = [&](Index start, Index first_segment) {
     Segment_chain chain;
     chain.boundary = mesh.segment_is_boundary[first_segment] != 0;
+    chain.tag = mesh.segment_tags.empty() ? 0 : mesh.segment_tags[first_segment];
     Index v = start, s = first_segment;
     chain.vertices.push_back(v);
     while (true) {
@@ -71,16 +72,19 @@ std::vector<Segment_chain> segment_chains(const Mesh_arrays& mesh) {
 }
 
 std::vector<std::uint8_t> forced_corners(const Mesh_arrays& mesh, const std::vector<Segment_chain>& chains,
-                                         std::size_t& n_forced) {
+                                         std::size_t& n_forced, const std::vector<std::uint8_t>& required) {
   const std::size_t n = mesh.points.size();
   std::vector<std::uint8_t> forced(n, 0);
-  for (std::size_t i = 0; i < n; ++i) forced[i] = mesh.kind[i] == Point_kind::corner;
+  for (std::size_t i = 0; i < n; ++i) {
+    if (mesh.kind[i] == Point_kind::corner) forced[i] = kForcedCorner;
+    else if (!required.empty() && required[i]) forced[i] = kForcedRequired;
+  }
   for (const auto& chain : chains) {
-    forced[chain.vertices.front()] = 1;
-    forced[chain.vertices.back()] = 1;
+    forced[chain.vertices.front()] = kForcedCorner;
+    forced[chain.vertices.back()] = kForcedCorner;
   }
   n_forced = 0;
-  for (std::uint8_t f : forced) n_forced += f;
+  for (std::uint8_t f : forced) n_forced += f != 0;
   return forced;
 }
 

@@ -1,5 +1,7 @@
 #include "evomesh/step.hpp"
 
+#include <CGAL/exceptions.h>
+
 #include <algorithm>
 #include <cmath>
 #include <string>
@@ -72,6 +74,31 @@ void triangulate_selection(Selection selected, const std::vector<Constraint_piec
       throw std::logic_error("triangulate_selection: a degenerate constraint piece");
     }
   }
+  if (quality != nullptr) {
+    // CGAL's mesher checks its own invariants (these files are built with CGAL's
+    // assertions on, see CMakeLists.txt); on near-degenerate input it can fail
+    // them. The quality pass is an improvement, not a requirement: then the step
+    // keeps the plain constrained Delaunay triangulation of the selected points
+    // and says so (stats "quality_failed", a warning in Python), never a crash.
+    try {
+      Refined_mesh refined = early ? early->finish(mesh.points, mesh.kind, pieces, *quality, mesh.required)
+                                   : quality_triangulate(mesh.points, mesh.kind, pieces, *quality, mesh.required);
+      result.origin.resize(refined.source.size());
+      for (std::size_t i = 0; i < refined.source.size(); ++i) {
+        result.origin[i] = refined.source[i] < 0 ? -1 : selected.origin[refined.source[i]];
+      }
+      result.mesh = std::move(refined.mesh);
+      const auto& report = refined.report;
+      stats.emplace_back("quality_points_added", static_cast<double>(report.n_inserted));
+      stats.emplace_back("quality_points_added_on_segments", static_cast<double>(report.n_inserted_on_segments));
+      stats.emplace_back("quality_points_removed", static_cast<double>(report.n_removed));
+      stats.emplace_back("quality_crowded_segments", static_cast<double>(report.n_crowded_segments));
+      stats.emplace_back("quality_capped", report.capped ? 1.0 : 0.0);
+    } catch (const CGAL::Failure_exception&) {
+      stats.emplace_back("quality_failed", 1.0);
+      quality = nullptr;
+    }
+  }
   if (quality == nullptr) {
     mesh.triangles = constrained_delaunay(mesh.points, pieces);
     for (const auto& piece : pieces) {
@@ -80,20 +107,6 @@ void triangulate_selection(Selection selected, const std::vector<Constraint_piec
     }
     result.mesh = std::move(mesh);
     result.origin = std::move(selected.origin);
-  } else {
-    Refined_mesh refined = early ? early->finish(mesh.points, mesh.kind, pieces, *quality)
-                                 : quality_triangulate(mesh.points, mesh.kind, pieces, *quality);
-    result.origin.resize(refined.source.size());
-    for (std::size_t i = 0; i < refined.source.size(); ++i) {
-      result.origin[i] = refined.source[i] < 0 ? -1 : selected.origin[refined.source[i]];
-    }
-    result.mesh = std::move(refined.mesh);
-    const auto& report = refined.report;
-    stats.emplace_back("quality_points_added", static_cast<double>(report.n_inserted));
-    stats.emplace_back("quality_points_added_on_segments", static_cast<double>(report.n_inserted_on_segments));
-    stats.emplace_back("quality_points_removed", static_cast<double>(report.n_removed));
-    stats.emplace_back("quality_crowded_segments", static_cast<double>(report.n_crowded_segments));
-    stats.emplace_back("quality_capped", report.capped ? 1.0 : 0.0);
   }
   // The smallest angle and where it is (Section 6 reports it per step).
   const auto angle = smallest_angle(result.mesh.points, result.mesh.triangles);
@@ -104,6 +117,7 @@ void triangulate_selection(Selection selected, const std::vector<Constraint_piec
 
 void finish_step(const Mesh_arrays& input, Evolve_result& result, detail::Stage_timer& timer) {
   result.parents = parent_map(input, result.mesh, result.origin);
+  carry_tags(input, result.origin, result.parents, result.mesh);
   timer.lap("parent_map");
   auto& stats = result.stats;
   double seconds = 0;

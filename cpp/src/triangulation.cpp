@@ -139,6 +139,23 @@ void build_segments(Mesh_arrays& mesh, const std::vector<Edge>& user_segments) {
   }
 }
 
+std::vector<std::int64_t> tags_of_segments(const std::vector<Edge>& segments, const std::vector<Edge>& tagged,
+                                           const std::vector<std::int64_t>& tags) {
+  std::vector<std::pair<Edge, std::int64_t>> keyed(tagged.size());
+  for (std::size_t k = 0; k < tagged.size(); ++k) {
+    keyed[k] = {{std::min(tagged[k][0], tagged[k][1]), std::max(tagged[k][0], tagged[k][1])}, tags[k]};
+  }
+  std::sort(keyed.begin(), keyed.end());
+  std::vector<std::int64_t> out(segments.size(), 0);
+  for (std::size_t k = 0; k < segments.size(); ++k) {
+    const Edge key{std::min(segments[k][0], segments[k][1]), std::max(segments[k][0], segments[k][1])};
+    auto it = std::lower_bound(keyed.begin(), keyed.end(), key,
+                               [](const std::pair<Edge, std::int64_t>& a, const Edge& b) { return a.first < b; });
+    if (it != keyed.end() && it->first == key) out[k] = it->second;
+  }
+  return out;
+}
+
 bool runs_straight_through(const Vec2& u, const Vec2& p, const Vec2& w) {
   const double ux = u[0] - p[0], uy = u[1] - p[1], wx = w[0] - p[0], wy = w[1] - p[1];
   if (!(ux * wx + uy * wy < 0)) return false;  // u and w must lie on opposite sides of p
@@ -156,6 +173,7 @@ std::vector<Point_kind> classify_points(const Mesh_arrays& mesh) {
   std::vector<int> degree(n, 0);
   std::vector<std::array<Index, 2>> neighbour(n, {-1, -1});
   std::vector<std::array<int, 2>> flavour(n, {-1, -1});
+  std::vector<std::array<std::int64_t, 2>> tag(n, {0, 0});
   for (std::size_t k = 0; k < mesh.segments.size(); ++k) {
     const Edge& e = mesh.segments[k];
     for (int s = 0; s < 2; ++s) {
@@ -163,19 +181,85 @@ std::vector<Point_kind> classify_points(const Mesh_arrays& mesh) {
       if (degree[v] < 2) {
         neighbour[v][degree[v]] = e[1 - s];
         flavour[v][degree[v]] = mesh.segment_is_boundary[k];
+        tag[v][degree[v]] = mesh.segment_tags.empty() ? 0 : mesh.segment_tags[k];
       }
       ++degree[v];
     }
   }
   for (std::size_t v = 0; v < n; ++v) {
     if (degree[v] == 0) continue;
-    if (degree[v] != 2 || flavour[v][0] != flavour[v][1]) {
+    const bool required = !mesh.required.empty() && mesh.required[v];
+    if (degree[v] != 2 || flavour[v][0] != flavour[v][1] || tag[v][0] != tag[v][1] || required) {
       kind[v] = Point_kind::corner;
       continue;
     }
     kind[v] = runs_straight_through(mesh.points[neighbour[v][0]], mesh.points[v], mesh.points[neighbour[v][1]])
                   ? Point_kind::boundary
                   : Point_kind::corner;
+  }
+  // Straight vertex by vertex is not enough: a chain of many such vertices can
+  // bend slowly (a finely sampled hull or arc), and a step may replace all of it
+  // by one piece. So every chain between corners must be straight as a whole:
+  // the vertex farthest from the line through the chain's ends becomes a corner
+  // while it is farther than the tolerance (Douglas-Peucker). A step then moves
+  // the boundary by at most the tolerance, however long the chain.
+  std::vector<std::uint8_t> visited(n, 0);
+  std::vector<Index> chain, side;
+  std::vector<std::pair<std::size_t, std::size_t>> pending;
+  for (std::size_t v0 = 0; v0 < n; ++v0) {
+    if (kind[v0] != Point_kind::boundary || visited[v0]) continue;
+    // the chain through v0, from corner to corner (or a loop without one)
+    auto walk = [&](Index from, Index to, std::vector<Index>& out) {
+      out.clear();
+      while (kind[to] == Point_kind::boundary && to != static_cast<Index>(v0)) {
+        out.push_back(to);
+        const Index next = neighbour[to][0] == from ? neighbour[to][1] : neighbour[to][0];
+        from = to;
+        to = next;
+      }
+      out.push_back(to);
+    };
+    walk(static_cast<Index>(v0), neighbour[v0][0], side);
+    const bool loop = side.back() == static_cast<Index>(v0);
+    if (loop) {  // v0 .. around .. v0: v0 becomes a corner
+      chain.assign(1, static_cast<Index>(v0));
+      chain.insert(chain.end(), side.begin(), side.end());
+      kind[v0] = Point_kind::corner;
+    } else {  // corner .. neighbour of v0, v0, other neighbour .. corner
+      chain.assign(side.rbegin(), side.rend());
+      chain.push_back(static_cast<Index>(v0));
+      walk(static_cast<Index>(v0), neighbour[v0][1], side);
+      chain.insert(chain.end(), side.begin(), side.end());
+    }
+    for (Index v : chain) visited[v] = 1;
+    double reach = 0;
+    for (Index v : chain) reach = std::max({reach, std::abs(mesh.points[v][0]), std::abs(mesh.points[v][1])});
+    const double tolerance = kStraightUlps * std::numeric_limits<double>::epsilon() * reach;
+    pending.assign(1, {0, chain.size() - 1});
+    while (!pending.empty()) {
+      const auto [lo, hi] = pending.back();
+      pending.pop_back();
+      if (hi <= lo + 1) continue;
+      const Vec2& a = mesh.points[chain[lo]];
+      const Vec2& b = mesh.points[chain[hi]];
+      const double dx = b[0] - a[0], dy = b[1] - a[1];
+      const double length = std::hypot(dx, dy);
+      std::size_t far = lo;
+      double far_distance = 0;
+      for (std::size_t k = lo + 1; k < hi; ++k) {
+        const Vec2& q = mesh.points[chain[k]];
+        const double d = length > 0 ? std::abs(dx * (q[1] - a[1]) - dy * (q[0] - a[0])) / length
+                                    : std::hypot(q[0] - a[0], q[1] - a[1]);
+        if (d > far_distance) {
+          far_distance = d;
+          far = k;
+        }
+      }
+      if (far_distance <= tolerance && length > 0) continue;
+      kind[chain[far]] = Point_kind::corner;
+      pending.push_back({lo, far});
+      pending.push_back({far, hi});
+    }
   }
   return kind;
 }
@@ -242,18 +326,32 @@ void locate_points(const std::vector<Vec2>& points, const std::vector<Triangle>&
     const double l2 = ((b[0] - a[0]) * (q[1] - a[1]) - (b[1] - a[1]) * (q[0] - a[0])) / det;
     return std::array<double, 3>{1.0 - l1 - l2, l1, l2};
   };
-  // Of candidate faces, the mesh triangle where q is least outside.
-  auto best_of = [&](const std::vector<Cdt::Face_handle>& faces, const Vec2& q, std::array<double, 3>& bary) {
+  // Distance from q to mesh triangle t (0 inside or on it; exact orientation tests).
+  auto gap_to = [&](Index t, const Vec2& q) {
+    const Triangle& tri = triangles[t];
+    double gap = 0;
+    for (int e = 0; e < 3; ++e) {
+      const Vec2& a = points[tri[e]];
+      const Vec2& b = points[tri[(e + 1) % 3]];
+      if (orientation(a, b, q) >= 0) continue;
+      const double dx = b[0] - a[0], dy = b[1] - a[1];
+      const double along = std::clamp(((q[0] - a[0]) * dx + (q[1] - a[1]) * dy) / (dx * dx + dy * dy), 0.0, 1.0);
+      gap = std::max(gap, std::hypot(q[0] - a[0] - along * dx, q[1] - a[1] - along * dy));
+    }
+    return gap;
+  };
+  // Of candidate faces, the mesh triangle nearest q (q inside it: distance 0).
+  // Distances, not barycentric coordinates, which are scale-free: in a sliver a
+  // point on an edge has coordinates off by far more than the point is.
+  auto best_of = [&](const std::vector<Cdt::Face_handle>& faces, const Vec2& q, double& best_gap) {
     Index best = -1;
-    double best_score = -std::numeric_limits<double>::infinity();
+    best_gap = std::numeric_limits<double>::infinity();
     for (auto f : faces) {
       if (f->info() < 0) continue;
-      auto l = barycentric(f->info(), q);
-      const double score = std::min({l[0], l[1], l[2]});
-      if (score > best_score) {
-        best_score = score;
+      const double gap = gap_to(f->info(), q);
+      if (gap < best_gap) {
+        best_gap = gap;
         best = f->info();
-        bary = l;
       }
     }
     return best;
@@ -289,12 +387,16 @@ void locate_points(const std::vector<Vec2>& points, const std::vector<Triangle>&
         } while (++c != done);
       }
     }
-    std::array<double, 3> bary{0, 0, 0};
-    Index t = best_of(candidates, queries[idx], bary);
-    // Barycentric coordinates are scale-free: a point more than this far outside
-    // every nearby triangle is outside the mesh, not off by rounding.
-    constexpr double kOutsideTolerance = 1e-9;
-    if (t >= 0 && std::min({bary[0], bary[1], bary[2]}) < -kOutsideTolerance) t = -1;
+    double gap = 0;
+    Index t = best_of(candidates, queries[idx], gap);
+    // Farther outside every nearby triangle than rounding (in units of the
+    // coordinates, as for straight chains): outside the mesh.
+    if (t >= 0) {
+      double reach = std::max(std::abs(queries[idx][0]), std::abs(queries[idx][1]));
+      for (Index v : triangles[t]) reach = std::max({reach, std::abs(points[v][0]), std::abs(points[v][1])});
+      if (gap > (16 + kStraightUlps) * std::numeric_limits<double>::epsilon() * reach) t = -1;
+    }
+    std::array<double, 3> bary = t >= 0 ? barycentric(t, queries[idx]) : std::array<double, 3>{0, 0, 0};
     triangle_out[idx] = t;
     if (t >= 0) {
       for (auto& l : bary) l = std::max(l, 0.0);

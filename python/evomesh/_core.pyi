@@ -9,6 +9,7 @@ from typing import ClassVar, TypedDict
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
+from typing_extensions import NotRequired
 
 POINT_KINDS: tuple[tuple[str, int], ...]
 MAX_MIN_ANGLE: float
@@ -120,6 +121,9 @@ class EvolveResult(TypedDict):
     input_f: NDArray[np.float64]  # (n_input,)
     input_nn: NDArray[np.float64]  # (n_input,)
     parent_triangle: NDArray[np.int64]  # (n,), input triangle of a new point, -1 for kept ones
+    segment_tags: NotRequired[NDArray[np.int64]]  # when the input had tags
+    triangle_tags: NotRequired[NDArray[np.int64]]
+    required: NotRequired[NDArray[np.uint8]]
     barycentric: NDArray[np.float64]  # (n, 3), its coordinates there
     stats: dict[str, float]
 
@@ -149,10 +153,15 @@ class SpacingFunction:
     def n_parts(self) -> int: ...
 
 def prepare_mesh(
-    points: ArrayLike, triangles: ArrayLike, segments: ArrayLike | None = None, check_planar: bool = True
-) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.uint8], NDArray[np.uint8], int]:
+    points: ArrayLike,
+    triangles: ArrayLike,
+    segments: ArrayLike | None = None,
+    check_planar: bool = True,
+    segment_tags: ArrayLike | None = None,
+    required: ArrayLike | None = None,
+) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.uint8], NDArray[np.uint8], int, NDArray[np.int64]]:
     """Orient triangles CCW, build segments, check planarity, classify points.
-    Returns (triangles, segments, segment_is_boundary, kind, n_flipped)."""
+    Returns (triangles, segments, segment_is_boundary, kind, n_flipped, segment_tags)."""
 
 def nn_spacing(points: ArrayLike) -> NDArray[np.float64]: ...
 def default_thread_count() -> int: ...
@@ -168,6 +177,9 @@ def frfc(
     kind: ArrayLike,
     delta: ArrayLike,
     options: FrfcOptions = ...,
+    segment_tags: ArrayLike | None = None,
+    triangle_tags: ArrayLike | None = None,
+    required: ArrayLike | None = None,
 ) -> EvolveResult:
     """Functional-Refining-Functional-Coarsening (Section 3.2): one step; returns a dict of arrays and stats."""
 
@@ -179,6 +191,9 @@ def drfc(
     kind: ArrayLike,
     delta: ArrayLike,
     options: DrfcOptions = ...,
+    segment_tags: ArrayLike | None = None,
+    triangle_tags: ArrayLike | None = None,
+    required: ArrayLike | None = None,
 ) -> EvolveResult:
     """Delaunay-Refining-Functional-Coarsening (Section 5); returns the same dict as frfc."""
 
@@ -190,6 +205,9 @@ def drfc_refine(
     kind: ArrayLike,
     delta: ArrayLike,
     options: DrfcOptions = ...,
+    segment_tags: ArrayLike | None = None,
+    triangle_tags: ArrayLike | None = None,
+    required: ArrayLike | None = None,
 ) -> RefineResult:
     """DRFC step 1 alone: Delaunay refinement with Ruppert's rules and rule 4 (Section 5)."""
 

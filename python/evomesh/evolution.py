@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import copy
 import numbers
+import warnings
 from typing import Any
 
 import numpy as np
@@ -13,7 +14,7 @@ from evomesh.mesh import Lineage, Mesh, check_mesh_limits
 from evomesh.spacing_function import _require_mesh, as_delta, delta_from_size
 
 __all__ = ["evolve", "delaunay_refine", "make_options", "FRFC_DEFAULTS", "DRFC_DEFAULTS", "FrfcOptions", "DrfcOptions",
-           "SampleMode", "RadiusRule"]
+           "SampleMode", "RadiusRule", "QualityWarning"]
 
 FrfcOptions = _core.FrfcOptions
 DrfcOptions = _core.DrfcOptions
@@ -263,8 +264,15 @@ def evolve(mesh: Mesh, delta: Any = None, *, size: Any = None, method: str = "fr
     if method == "frfc" and seed is not None:
         o.seed = _check_seed(seed)
     core = _core.frfc if method == "frfc" else _core.drfc
-    result = core(mesh.points, mesh.triangles, mesh.segments, mesh.segment_is_boundary.astype(np.uint8), mesh.kind, d, o)
+    result = core(mesh.points, mesh.triangles, mesh.segments, mesh.segment_is_boundary.astype(np.uint8), mesh.kind, d, o,
+                  **mesh._labels())
     return _wrap(result, mesh)
+
+
+class QualityWarning(UserWarning):
+    """The quality pass could not run on a step's selected points (its mesher
+    failed on near-degenerate geometry); the step returned the plain constrained
+    Delaunay triangulation of them instead (``stats["quality_failed"] == 1``)."""
 
 
 def _wrap(result: dict[str, Any], old: Mesh | None = None) -> Mesh:
@@ -278,6 +286,13 @@ def _wrap(result: dict[str, Any], old: Mesh | None = None) -> Mesh:
             "float64 resolves at these coordinates; rescale the mesh (or translate it towards the origin) or "
             "refine less"
         ) from None
+    if result["stats"].get("quality_failed"):
+        warnings.warn(
+            "the quality pass failed on this step's points (near-degenerate geometry); the step kept their plain "
+            f"constrained Delaunay triangulation (min angle {result['stats'].get('min_angle', float('nan')):.3g} deg)",
+            QualityWarning,
+            stacklevel=3,
+        )
     lineage = None
     if old is not None and "parent_triangle" in result:
         lineage = Lineage(old.n_points, old.n_triangles, result["parent_triangle"], result["barycentric"],
@@ -292,6 +307,9 @@ def _wrap(result: dict[str, Any], old: Mesh | None = None) -> Mesh:
         dict(result["stats"]),
         lineage,
         nn,
+        result.get("segment_tags"),
+        result.get("triangle_tags"),
+        result.get("required"),
     )
 
 

@@ -22,7 +22,9 @@ if TYPE_CHECKING:
 __all__ = ["to_meshio", "write_mesh", "read_mesh", "write_pvd", "write_run", "RESERVED_POINT_DATA"]
 
 #: Point data that :func:`write_run` always writes.
-RESERVED_POINT_DATA = ("kind", "origin", "nn_spacing", "delta")
+RESERVED_POINT_DATA = ("kind", "origin", "required", "nn_spacing", "delta")
+# What every written mesh holds (Mesh.to_meshio).
+_MESH_POINT_DATA = ("kind", "origin", "required")
 
 
 #: numpy dtypes that VTU stores (Float32/64, Int8..64, UInt8..64).
@@ -104,11 +106,10 @@ def _vtu_arrays(name: str, values: Any) -> list[tuple[str, np.ndarray]]:
 
 
 def to_meshio(mesh: Mesh, point_data: Mapping[str, ArrayLike] | None = None) -> meshio.Mesh:
-    """A meshio.Mesh: points with z = 0, a "triangle" block, and a "line" block
-    for the interior constraint segments (boundary segments are implied by the
-    triangles).
+    """A meshio.Mesh (:meth:`Mesh.to_meshio`: points with z = 0, a "triangle"
+    and a "line" block with their tags as ``gmsh:physical``).
 
-    Point data always includes ``kind`` and ``origin``, then the arrays of
+    Point data always includes ``kind``, ``origin`` and ``required``, then the arrays of
     ``point_data`` (each shape (n,) or (n, ...)), stored as VTU can hold them:
     extra axes are flattened into components ((n, 2, 2) -> (n, 4)), bool becomes
     uint8 and float16 float32, and a complex field ``u`` becomes two real arrays
@@ -125,19 +126,12 @@ def to_meshio(mesh: Mesh, point_data: Mapping[str, ArrayLike] | None = None) -> 
         per point or without components; a float / complex dtype wider than
         64-bit parts (VTU would lose precision).
     """
-    import meshio
-
     _require_mesh(mesh)
-    _check_point_data(point_data, mesh.n_points, ("kind", "origin"))
-    cells = [("triangle", np.asarray(mesh.triangles, dtype=np.int64))]
-    interior = mesh.segments[~mesh.segment_is_boundary]
-    if len(interior):
-        cells.append(("line", np.asarray(interior, dtype=np.int64)))
-    data: dict[str, np.ndarray] = {"kind": mesh.kind.astype(np.int32), "origin": mesh.origin.astype(np.int64)}
+    _check_point_data(point_data, mesh.n_points, _MESH_POINT_DATA)
+    out = mesh.to_meshio()
     for name, values in (point_data or {}).items():
-        data.update(_vtu_arrays(name, values))
-    points = np.c_[mesh.points, np.zeros(mesh.n_points)]
-    return meshio.Mesh(points, cells, point_data=data)
+        out.point_data.update(_vtu_arrays(name, values))
+    return out
 
 
 def write_mesh(path: str | Path, mesh: Mesh, point_data: Mapping[str, ArrayLike] | None = None) -> Path:
@@ -149,7 +143,10 @@ def write_mesh(path: str | Path, mesh: Mesh, point_data: Mapping[str, ArrayLike]
     ``<name>_imag``); nothing is written if they are refused.
     """
     path = Path(path)
-    to_meshio(mesh, point_data).write(path)
+    out = to_meshio(mesh, point_data)
+    if path.suffix.lower() != ".msh":
+        out.point_data.pop("gmsh:dim_tags", None)  # only Gmsh files need it
+    out.write(path, file_format="gmsh22" if path.suffix.lower() == ".msh" else None)  # tags read back
     return path
 
 
@@ -198,7 +195,11 @@ def read_mesh(path: str | Path) -> tuple[Mesh, dict[str, np.ndarray]]:
         mesh, used = Mesh._from_meshio(m)
     except ValueError as error:
         raise ValueError(f"mesh file {path}: {error}") from None
-    data = {name: np.asarray(v)[used] for name, v in m.point_data.items() if name not in ("kind", "origin")}
+    data = {
+        name: np.asarray(v)[used]
+        for name, v in m.point_data.items()
+        if name not in _MESH_POINT_DATA and not name.startswith("gmsh:")
+    }
     return mesh, data
 
 

@@ -199,6 +199,19 @@ class Mesh:
         says (so the domain never changes), CORNER on a straight boundary point
         pins it, and CORNER/BOUNDARY must be given exactly for the points on
         segments.
+    segment_tags : array_like of int, shape (k,), optional
+        An integer tag per row of ``segments`` (boundary-condition ids, Gmsh
+        physical lines); boundary edges not in ``segments`` get 0. Every step
+        keeps them: each output segment has the tag of the input segment it lies
+        on, and a point where the tag changes is a corner (always kept).
+    triangle_tags : array_like of int, shape (m,), optional
+        An integer tag per triangle (regions, materials). Edges between
+        triangles of different tags become interior segments (tag 0 unless
+        given), so no triangle of a later step straddles two regions; each
+        output triangle has the tag of the region it lies in.
+    required : array_like of bool, shape (n,), optional
+        Points every step keeps, at their exact coordinates and with their
+        origin (a required point on segments is a corner).
     origin : array_like of int, shape (n,), optional
         Index of each point in the mesh it was evolved from, -1 for a new point.
 
@@ -215,7 +228,8 @@ class Mesh:
         The caller's arrays are never modified.
     """
 
-    __slots__ = ("points", "triangles", "segments", "segment_is_boundary", "kind", "origin", "stats", "lineage", "_nn")
+    __slots__ = ("points", "triangles", "segments", "segment_is_boundary", "kind", "origin", "stats", "lineage", "_nn",
+                 "segment_tags", "triangle_tags", "required")
 
     points: np.ndarray
     triangles: np.ndarray
@@ -225,8 +239,12 @@ class Mesh:
     origin: np.ndarray
     stats: Mapping[str, float]
     lineage: "Lineage | None"
+    segment_tags: np.ndarray
+    triangle_tags: np.ndarray
+    required: np.ndarray
 
-    def __init__(self, points: Any, triangles: Any, segments: Any = None, *, kind: Any = None, origin: Any = None):
+    def __init__(self, points: Any, triangles: Any, segments: Any = None, *, segment_tags: Any = None,
+                 triangle_tags: Any = None, required: Any = None, kind: Any = None, origin: Any = None):
         pts = _as_points(points)
         n = len(pts)
         if n < 3:
@@ -235,9 +253,21 @@ class Mesh:
         if len(tris) == 0:
             raise ValueError("a mesh needs at least one triangle")
         segs = None if segments is None else _as_indices(segments, 2, "segments", n)
+        seg_tags = None
+        if segment_tags is not None:
+            if segs is None:
+                raise ValueError("segment_tags need segments: one tag per row of segments")
+            seg_tags = _as_tags(segment_tags, len(segs), "segment_tags", "segments")
+        tri_tags = None if triangle_tags is None else _as_tags(triangle_tags, len(tris), "triangle_tags", "triangles")
+        req = None if required is None else _as_mask(required, n)
         _check_topology(pts, tris)
         nn = _check_point_distances(pts)
-        tris, segs, boundary, computed_kind, _ = _core.prepare_mesh(pts, tris, segs, True)
+        if tri_tags is not None:
+            # Region borders are constraints: a triangle of a step never straddles two regions.
+            segs, seg_tags = _with_region_borders(tris, tri_tags, segs, seg_tags)
+        tris, segs, boundary, computed_kind, _, built_tags = _core.prepare_mesh(
+            pts, tris, segs, True, seg_tags, None if req is None else req.astype(np.uint8)
+        )
         _check_not_flat(pts, tris)
         if kind is None:
             kinds = computed_kind
@@ -273,9 +303,11 @@ class Mesh:
             if (org < -1).any() or (org.dtype.kind == "u" and (org > np.iinfo(np.int64).max).any()):
                 raise ValueError("origin values must be point indices >= 0, or -1 for a new point")
             org = org.astype(np.int64)
-        self._assign(pts, tris, segs, boundary, kinds, org, {}, None, nn)
+        self._assign(pts, tris, segs, boundary, kinds, org, {}, None, nn, built_tags if seg_tags is not None else None,
+                     tri_tags, req)
 
-    def _assign(self, points, triangles, segments, segment_is_boundary, kind, origin, stats, lineage, nn) -> None:
+    def _assign(self, points, triangles, segments, segment_is_boundary, kind, origin, stats, lineage, nn,
+                segment_tags=None, triangle_tags=None, required=None) -> None:
         set_ = object.__setattr__
         set_(self, "points", _frozen(np.asarray(points, dtype=np.float64)))
         set_(self, "triangles", _frozen(np.asarray(triangles, dtype=np.int64)))
@@ -285,15 +317,31 @@ class Mesh:
         set_(self, "origin", _frozen(np.asarray(origin, dtype=np.int64)))
         set_(self, "stats", MappingProxyType(dict(stats)))
         set_(self, "lineage", lineage)
+        n_segments, n_triangles, n_points = len(self.segments), len(self.triangles), len(self.points)
+        set_(self, "segment_tags", _frozen(np.zeros(n_segments, np.int64) if segment_tags is None
+                                           else np.asarray(segment_tags, dtype=np.int64)))
+        set_(self, "triangle_tags", _frozen(np.zeros(n_triangles, np.int64) if triangle_tags is None
+                                            else np.asarray(triangle_tags, dtype=np.int64)))
+        set_(self, "required", _frozen(np.zeros(n_points, bool) if required is None
+                                       else np.asarray(required, dtype=bool)))
         set_(self, "_nn", None if nn is None else _frozen(np.asarray(nn, dtype=np.float64)))
 
     @classmethod
     def _trusted(cls, points, triangles, segments, segment_is_boundary, kind, origin, stats=None, lineage=None,
-                 nn=None) -> "Mesh":
+                 nn=None, segment_tags=None, triangle_tags=None, required=None) -> "Mesh":
         """Wrap arrays that evomesh itself produced (already valid); no checks."""
         mesh = cls.__new__(cls)
-        mesh._assign(points, triangles, segments, segment_is_boundary, kind, origin, stats or {}, lineage, nn)
+        mesh._assign(points, triangles, segments, segment_is_boundary, kind, origin, stats or {}, lineage, nn,
+                     segment_tags, triangle_tags, required)
         return mesh
+
+    def _labels(self) -> dict[str, Any]:
+        """The labels to hand to the core: None where a label is unused."""
+        return {
+            "segment_tags": self.segment_tags if self.segment_tags.any() else None,
+            "triangle_tags": self.triangle_tags if self.triangle_tags.any() else None,
+            "required": self.required.astype(np.uint8) if self.required.any() else None,
+        }
 
     @property
     def nn_spacing(self) -> np.ndarray:
@@ -311,7 +359,7 @@ class Mesh:
         return (
             _unpickle_mesh,
             (self.points, self.triangles, self.segments, self.segment_is_boundary, self.kind, self.origin,
-             dict(self.stats), self.lineage, self._nn),
+             dict(self.stats), self.lineage, self._nn, self.segment_tags, self.triangle_tags, self.required),
         )
 
     def __copy__(self) -> "Mesh":
@@ -321,7 +369,7 @@ class Mesh:
         return _unpickle_mesh(*self.__reduce__()[1])
 
     @classmethod
-    def from_meshio(cls, m: Any) -> "Mesh":
+    def from_meshio(cls, m: Any, *, tags: str | None = None) -> "Mesh":
         """A Mesh from a ``meshio.Mesh`` (any format meshio reads).
 
         Triangle blocks are concatenated; line cells become segments; a z
@@ -332,10 +380,10 @@ class Mesh:
         with a warning that says how many. Other cells (vertex cells) are
         ignored; quadrilaterals, polygons and higher-order cells are refused.
         """
-        return cls._from_meshio(m)[0]
+        return cls._from_meshio(m, tags)[0]
 
     @classmethod
-    def _from_meshio(cls, m: Any) -> "tuple[Mesh, np.ndarray]":
+    def _from_meshio(cls, m: Any, tags: str | None = None) -> "tuple[Mesh, np.ndarray]":
         """The Mesh and the mask of the meshio points it kept."""
         points = np.asarray(m.points)
         if points.ndim != 2 or points.shape[1] not in (2, 3):
@@ -349,20 +397,32 @@ class Mesh:
                     f"not a planar mesh: {len(lifted)} of {len(points)} points have z != 0: points {first}{more}"
                 )
             points = points[:, :2]
-        triangles, lines = [], []
-        for block in m.cells:
+        if tags is None:
+            tags = next((name for name in ("gmsh:physical", "tag", "tags") if name in m.cell_data), None)
+        elif tags not in m.cell_data:
+            raise ValueError(f"meshio mesh has no cell data {tags!r}; it has: {', '.join(m.cell_data) or 'none'}")
+        triangles: list[np.ndarray] = []
+        lines: list[np.ndarray] = []
+        triangle_tags: list[np.ndarray] = []
+        line_tags: list[np.ndarray] = []
+        for k, block in enumerate(m.cells):
+            block_tags = [] if tags is None else [np.asarray(m.cell_data[tags][k]).reshape(-1)]
             if block.type == "triangle":
                 triangles.append(np.asarray(block.data))
+                triangle_tags += block_tags
             elif block.type == "line":
                 lines.append(np.asarray(block.data))
+                line_tags += block_tags
             elif block.type != "vertex":
                 raise ValueError(f"cells of type {block.type!r} are not supported: evomesh meshes are linear triangles")
         if not triangles:
             raise ValueError("meshio mesh has no triangle cells")
         tris = np.concatenate(triangles)
         segs = np.concatenate(lines) if lines else None
-        data = {name: np.asarray(values) for name, values in m.point_data.items()}
-        kind, origin = data.get("kind"), data.get("origin")
+        tri_tags = None if tags is None else _integral_values(np.concatenate(triangle_tags), tags)
+        seg_tags = None if tags is None or not lines else _integral_values(np.concatenate(line_tags), tags)
+        data = {name: np.asarray(values) for name, values in m.point_data.items() if not name.startswith("gmsh:")}
+        kind, origin, required = data.get("kind"), data.get("origin"), data.get("required")
         used = np.zeros(len(points), dtype=bool)
         if tris.size and tris.min() >= 0 and tris.max() < len(points):
             used[tris.ravel()] = True
@@ -375,21 +435,32 @@ class Mesh:
             segs = None if segs is None else remap[segs]
             kind = None if kind is None else kind[used]
             origin = None if origin is None else origin[used]
-        mesh = cls(points, tris, segs, kind=None if kind is None else _integral_values(kind, "kind"),
+            required = None if required is None else required[used]
+        mesh = cls(points, tris, segs, segment_tags=seg_tags, triangle_tags=tri_tags,
+                   required=None if required is None else _integral_values(required, "required").astype(bool),
+                   kind=None if kind is None else _integral_values(kind, "kind"),
                    origin=None if origin is None else _integral_values(origin, "origin"))
         return mesh, used
 
     def to_meshio(self) -> Any:
         """A ``meshio.Mesh``: points with z = 0, one "triangle" block and one
-        "line" block for the segments, point data ``kind`` and ``origin``."""
+        "line" block for the segments, their tags as cell data ``gmsh:physical``
+        (and ``gmsh:geometrical``, which Gmsh files need), point data ``kind``,
+        ``origin`` and ``required``."""
         import meshio
 
         points = np.c_[self.points, np.zeros(self.n_points)]
         cells = [("triangle", np.array(self.triangles))]
+        tags = [np.array(self.triangle_tags, dtype=np.int32)]
         if len(self.segments):
             cells.append(("line", np.array(self.segments)))
-        point_data = {"kind": np.array(self.kind, dtype=np.int32), "origin": np.array(self.origin)}
-        return meshio.Mesh(points, cells, point_data=point_data)
+            tags.append(np.array(self.segment_tags, dtype=np.int32))
+        point_data = {"kind": np.array(self.kind, dtype=np.int32), "origin": np.array(self.origin),
+                      "required": np.array(self.required, dtype=np.uint8),
+                      # Gmsh files need an entity per node when they hold several cell types
+                      "gmsh:dim_tags": np.tile(np.array([2, 0], dtype=np.int32), (self.n_points, 1))}
+        cell_data = {"gmsh:physical": tags, "gmsh:geometrical": [t.copy() for t in tags]}
+        return meshio.Mesh(points, cells, point_data=point_data, cell_data=cell_data)
 
     @property
     def n_points(self) -> int:
@@ -430,8 +501,50 @@ class Mesh:
 
 
 def _unpickle_mesh(points, triangles, segments, segment_is_boundary, kind, origin, stats, lineage=None,
-                   nn=None) -> Mesh:
-    return Mesh._trusted(points, triangles, segments, segment_is_boundary, kind, origin, stats, lineage, nn)
+                   nn=None, segment_tags=None, triangle_tags=None, required=None) -> Mesh:
+    return Mesh._trusted(points, triangles, segments, segment_is_boundary, kind, origin, stats, lineage, nn,
+                         segment_tags, triangle_tags, required)
+
+
+def _as_tags(values: Any, length: int, name: str, rows: str) -> np.ndarray:
+    array = _as_array(values, name)
+    if array.dtype == object or array.dtype.kind not in "iu":
+        raise TypeError(f"{name} must be an integer array, got dtype {array.dtype}")
+    if array.shape != (length,):
+        raise ValueError(f"{name} must have one tag per row of {rows}: shape ({length},), got {array.shape}")
+    if array.dtype.kind == "u" and array.size and array.max() > np.iinfo(np.int64).max:
+        raise ValueError(f"{name} must fit in int64")
+    return array.astype(np.int64)
+
+
+def _as_mask(values: Any, n: int) -> np.ndarray:
+    array = _as_array(values, "required")
+    if array.dtype != bool:
+        raise TypeError(f"required must be a boolean array (one flag per point), got dtype {array.dtype}")
+    if array.shape != (n,):
+        raise ValueError(f"required must have one flag per point: shape ({n},), got {array.shape}")
+    return array.copy()
+
+
+def _with_region_borders(triangles: np.ndarray, tags: np.ndarray, segments: np.ndarray | None,
+                         segment_tags: np.ndarray | None) -> tuple[np.ndarray | None, np.ndarray | None]:
+    """segments (and their tags) with every edge between triangles of different
+    tags added as an interior segment of tag 0 (unless already a segment)."""
+    edges = np.sort(np.concatenate([triangles[:, [0, 1]], triangles[:, [1, 2]], triangles[:, [2, 0]]]), axis=1)
+    owner = np.tile(np.arange(len(triangles)), 3)
+    order = np.lexsort((edges[:, 1], edges[:, 0]))
+    edges, owner = edges[order], owner[order]
+    pair = np.flatnonzero((edges[1:] == edges[:-1]).all(axis=1))
+    border = edges[pair[tags[owner[pair]] != tags[owner[pair + 1]]]]
+    if len(border) == 0:
+        return segments, segment_tags
+    if segments is not None and len(segments):
+        n = int(triangles.max()) + 1
+        known = np.sort(segments, axis=1)
+        border = border[~np.isin(border[:, 0] * n + border[:, 1], known[:, 0] * n + known[:, 1])]
+    base = np.zeros((0, 2), np.int64) if segments is None else segments
+    base_tags = np.zeros(len(base), np.int64) if segment_tags is None else segment_tags
+    return np.concatenate([base, border]), np.concatenate([base_tags, np.zeros(len(border), np.int64)])
 
 
 def _integral_values(values: np.ndarray, name: str) -> np.ndarray:

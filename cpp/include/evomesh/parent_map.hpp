@@ -31,4 +31,13 @@ struct Parent_map {
 // than its bound) are located by a search over the whole old mesh. O(n) walks.
 Parent_map parent_map(const Mesh_arrays& old_mesh, const Mesh_arrays& new_mesh, const std::vector<Index>& origin);
 
+// The input's labels on the new mesh, through the parent map (no global search):
+// every new triangle gets the tag of the input triangle containing its centroid
+// (region borders are constraints, so it lies in one region), every new segment
+// the tag of the input segment it lies on (a tag change is a corner, kept by every
+// step, so a chain of segments has one tag), every kept point its `required` flag.
+// Labels the input does not have stay empty.
+void carry_tags(const Mesh_arrays& old_mesh, const std::vector<Index>& origin, const Parent_map& parents,
+                Mesh_arrays& new_mesh);
+
 }  // namespace evomesh

@@ -21,8 +21,11 @@ namespace evomesh {
 // min_angle, concentric-shell splits near small input angles). There is no size
 // criterion: new points only go where a triangle is badly shaped, so their spacing
 // follows that of the points handed in.
+// `pinned` (aligned with points; empty: none) marks points the pass never drops
+// (required points), even where they crowd a segment.
 Refined_mesh quality_triangulate(const std::vector<Vec2>& points, const std::vector<Point_kind>& kind,
-                                 const std::vector<Constraint_piece>& pieces, const Quality_options& options);
+                                 const std::vector<Constraint_piece>& pieces, const Quality_options& options,
+                                 const std::vector<std::uint8_t>& pinned = {});
 
 // The triangulation of quality_triangulate started early: the first points
 // (those known before the rest, e.g. the kept input points of FRFC) are inserted
@@ -44,7 +47,8 @@ class Early_triangulation {
   // Falls back to a triangulation from scratch when the rest does not scale
   // exactly with the first points' scaling.
   Refined_mesh finish(const std::vector<Vec2>& points, const std::vector<Point_kind>& kind,
-                      const std::vector<Constraint_piece>& pieces, const Quality_options& options);
+                      const std::vector<Constraint_piece>& pieces, const Quality_options& options,
+                      const std::vector<std::uint8_t>& pinned = {});
 
  private:
   struct Impl;

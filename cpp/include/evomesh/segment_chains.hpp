@@ -18,13 +18,18 @@ struct Segment_chain {
   std::vector<std::uint8_t> forward;  // segment k is traversed a -> b
   bool closed = false;
   bool boundary = true;
+  std::int64_t tag = 0;  // the tag of its segments (a tag change ends a chain)
 };
 std::vector<Segment_chain> segment_chains(const Mesh_arrays& mesh);
 
-// Points always kept (forced in the packing): corners, and both ends of every chain.
+// Points always kept (forced in the packing): corners and both ends of every chain
+// (kForcedCorner), and required points off the segments (kForcedRequired, they
+// keep their kind). `required` is aligned with mesh.points (empty: none).
 // `n_forced` receives their number.
+constexpr std::uint8_t kForcedCorner = 1;
+constexpr std::uint8_t kForcedRequired = 2;
 std::vector<std::uint8_t> forced_corners(const Mesh_arrays& mesh, const std::vector<Segment_chain>& chains,
-                                         std::size_t& n_forced);
+                                         std::size_t& n_forced, const std::vector<std::uint8_t>& required = {});
 
 // Constraint pieces between consecutive kept points along every chain. A chain
 // vertex v is kept when out_vertex[v] >= 0 (its output index). New points

@@ -86,6 +86,15 @@ struct Selection {
     mesh.kind.push_back(kind);
     origin.push_back(from);
   }
+  // Marks the points that are required in the input (`input_required`, empty:
+  // none), so that the quality pass keeps them.
+  void pin(const std::vector<std::uint8_t>& input_required) {
+    if (input_required.empty()) return;
+    mesh.required.assign(origin.size(), 0);
+    for (std::size_t i = 0; i < origin.size(); ++i) {
+      if (origin[i] >= 0) mesh.required[i] = input_required[origin[i]];
+    }
+  }
 };
 
 // The output kind of a kept point of the mesh being coarsened: a forced corner

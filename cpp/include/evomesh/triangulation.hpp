@@ -38,6 +38,11 @@ std::size_t orient_triangles(const std::vector<Vec2>& points, std::vector<Triang
 // more than two triangles, or inconsistently oriented neighbours, throw).
 void build_segments(Mesh_arrays& mesh, const std::vector<Edge>& segments);
 
+// The tag of every segment of `segments` (either direction): the tag of the same
+// edge among `tagged` (with `tags`), 0 where it is not among them.
+std::vector<std::int64_t> tags_of_segments(const std::vector<Edge>& segments, const std::vector<Edge>& tagged,
+                                           const std::vector<std::int64_t>& tags);
+
 // Whether a chain of segments u - p - w runs straight through p: u and w lie on
 // opposite sides of p and p is on the line uw up to rounding, kStraightUlps units
 // in the last place of the largest coordinate (points placed on a segment as
@@ -48,9 +53,10 @@ constexpr double kStraightUlps = 32;
 bool runs_straight_through(const Vec2& u, const Vec2& p, const Vec2& w);
 
 // Kinds for a user mesh: corner (a segment end, a vertex where segments meet
-// other than two, where an interior constraint meets the boundary, or where the
-// chain does not run straight through: runs_straight_through), boundary (other
-// points on segments), original (interior).
+// other than two, where an interior constraint meets the boundary, where the
+// segment tag changes, a required point on segments, or where the chain does not
+// run straight through: runs_straight_through), boundary (other points on
+// segments), original (interior).
 std::vector<Point_kind> classify_points(const Mesh_arrays& mesh);
 
 // Point location: for each query, the index of a triangle containing it (or -1)

@@ -48,6 +48,12 @@ struct Mesh_arrays {
   std::vector<Edge> segments;
   std::vector<std::uint8_t> segment_is_boundary;
   std::vector<Point_kind> kind;
+  // Optional (empty: none). An integer tag per segment (boundary conditions,
+  // Gmsh physical lines) and per triangle (regions, materials); required points
+  // are kept by every step, exactly.
+  std::vector<std::int64_t> segment_tags;
+  std::vector<std::int64_t> triangle_tags;
+  std::vector<std::uint8_t> required;
 };
 
 }  // namespace evomesh

@@ -1,0 +1,134 @@
+"""Tags and required points through steps, and meshio round trips (issue 12)."""
+
+import warnings
+
+import meshio
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+import evomesh
+import evomesh.io
+from evomesh import Mesh, PointKind, _core
+from invariants import check_valid_mesh
+from strategies import grid_mesh, random_meshes
+
+
+def tagged(mesh: Mesh, seed: int) -> Mesh:
+    """The same mesh with segment tags by side, a split side, region tags and
+    three required points."""
+    rng = np.random.default_rng(seed)
+    p, t, s = np.array(mesh.points), np.array(mesh.triangles), np.array(mesh.segments)
+    lo, hi = p.min(axis=0), p.max(axis=0)
+    mid = (p[s].mean(axis=1) - lo) / (hi - lo)
+    segment_tags = np.select([mid[:, 1] < 0.5, mid[:, 0] > 0.5], [1 + (mid[:, 0] > 0.5), 3], 4)
+    centre = (p[t].mean(axis=1) - lo) / (hi - lo)
+    triangle_tags = np.where(np.hypot(*(centre - 0.5).T) < 0.3, 7, 8)
+    required = np.zeros(len(p), bool)
+    required[rng.choice(len(p), size=min(3, len(p)), replace=False)] = True
+    return Mesh(p, t, s, segment_tags=segment_tags, triangle_tags=triangle_tags, required=required)
+
+
+def check_labels(initial: Mesh, mesh: Mesh) -> None:
+    """Tags against the initial mesh's geometry; required points present."""
+    check_valid_mesh(mesh)
+    mids = mesh.points[mesh.segments].mean(axis=1)
+    a, b = initial.points[initial.segments[:, 0]], initial.points[initial.segments[:, 1]]
+    d = b - a
+    along = np.clip(np.einsum("qkj,kj->qk", mids[:, None] - a[None], d) / np.einsum("kj,kj->k", d, d)[None], 0, 1)
+    nearest = np.linalg.norm(mids[:, None] - (a[None] + along[..., None] * d[None]), axis=2).argmin(axis=1)
+    assert (mesh.segment_tags == initial.segment_tags[nearest]).all()
+    found, _ = _core.locate_points(initial.points, initial.triangles, mesh.points[mesh.triangles].mean(axis=1))
+    assert (found >= 0).all() and (mesh.triangle_tags == initial.triangle_tags[found]).all()
+    for point in initial.points[initial.required]:
+        row = np.flatnonzero((mesh.points == point).all(axis=1))
+        assert len(row) == 1 and mesh.required[row[0]]
+
+
+@settings(max_examples=6)
+@given(random_meshes(max_points=80), st.integers(0, 2**16), st.sampled_from(["frfc", "drfc"]))
+def test_tags_and_required_points_survive_twenty_steps(mesh, seed, method):
+    initial = tagged(mesh, seed)
+    current = initial
+    for step in range(20):
+        delta = np.full(current.n_points, 0.6 if step % 2 == 0 else 1.8)
+        try:
+            with warnings.catch_warnings():  # near-degenerate random clouds may defeat the quality pass
+                warnings.simplefilter("ignore", evomesh.QualityWarning)
+                current = evomesh.evolve(current, delta, method=method, seed=step)
+        except ValueError as error:  # a random cloud may ask too much of float64 or of memory: refused, fine
+            assert "max_samples" in str(error) or "not a valid mesh in float64" in str(error)
+            break
+        check_labels(initial, current)
+
+
+def test_a_tag_change_is_a_kept_corner():
+    mesh = grid_mesh(11, 11)
+    s = np.array(mesh.segments)
+    mid = mesh.points[s].mean(axis=1)
+    tags = np.where(mid[:, 0] < 0.45, 1, 2)  # the bottom side changes tag at x = 0.4..0.5
+    tagged_mesh = Mesh(mesh.points, mesh.triangles, s, segment_tags=tags)
+    change = np.flatnonzero(np.isclose(mesh.points[:, 0], 0.4) & (mesh.points[:, 1] == 0))[0]
+    assert tagged_mesh.kind[change] == PointKind.CORNER
+    coarse = evomesh.evolve(tagged_mesh, 8.0)
+    assert change in set(coarse.origin.tolist())
+
+
+def test_triangle_tags_make_region_borders_constraints():
+    mesh = grid_mesh(9, 9)
+    tags = (mesh.points[mesh.triangles].mean(axis=1)[:, 0] > 0.5).astype(int)
+    regions = Mesh(mesh.points, mesh.triangles, triangle_tags=tags)
+    assert (~regions.segment_is_boundary).sum() == 8  # the border x = 0.5
+    new = evomesh.evolve(regions, 5.0)
+    centre_x = new.points[new.triangles].mean(axis=1)[:, 0]
+    assert ((centre_x > 0.5) == (new.triangle_tags == 1)).all()
+
+
+def test_label_arguments_are_checked():
+    mesh = grid_mesh(5, 5)
+    with pytest.raises(ValueError, match="segment_tags need segments"):
+        Mesh(mesh.points, mesh.triangles, segment_tags=[1])
+    with pytest.raises(ValueError, match="one tag per row of triangles"):
+        Mesh(mesh.points, mesh.triangles, triangle_tags=[1, 2])
+    with pytest.raises(TypeError, match="integer"):
+        Mesh(mesh.points, mesh.triangles, triangle_tags=np.zeros(mesh.n_triangles))
+    with pytest.raises(TypeError, match="boolean"):
+        Mesh(mesh.points, mesh.triangles, required=np.zeros(mesh.n_points, int))
+
+
+@pytest.mark.parametrize("suffix", [".msh", ".vtu", ".xdmf"])
+def test_meshio_round_trip_keeps_points_triangles_and_tags(tmp_path, suffix):
+    mesh = tagged(grid_mesh(8, 8, jitter=0.2, seed=3), seed=1)
+    mesh = evomesh.evolve(mesh, 0.7, seed=0)
+    path = tmp_path / f"mesh{suffix}"
+    file_format = "gmsh22" if suffix == ".msh" else None  # meshio reads tags back from Gmsh 2.2 files
+    mesh.to_meshio().write(path, file_format=file_format)
+    back = Mesh.from_meshio(meshio.read(path, file_format="gmsh" if file_format else None))
+    assert np.array_equal(back.points, mesh.points)
+    assert np.array_equal(back.triangles, mesh.triangles)
+    assert np.array_equal(back.triangle_tags, mesh.triangle_tags)
+    key = lambda m: {tuple(sorted(e)): t for e, t in zip(m.segments.tolist(), m.segment_tags.tolist())}  # noqa: E731
+    assert key(back) == key(mesh)
+    if suffix != ".msh":  # Gmsh files hold no point data
+        assert np.array_equal(back.required, mesh.required)
+
+
+def test_from_meshio_drops_an_orphan_and_refuses_lifted_points():
+    points = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0], [0.3, 0.3, 0]])
+    with pytest.warns(UserWarning, match="removed 1 points"):
+        mesh = Mesh.from_meshio(meshio.Mesh(points, [("triangle", np.array([[0, 1, 2]]))]))
+    assert mesh.n_points == 3
+    points[1, 2] = 0.5
+    with pytest.raises(ValueError, match="z != 0"):
+        Mesh.from_meshio(meshio.Mesh(points[:3], [("triangle", np.array([[0, 1, 2]]))]))
+    with pytest.raises(ValueError, match="quad"):
+        Mesh.from_meshio(meshio.Mesh(np.c_[points[:, :2], np.zeros(4)], [("quad", np.array([[0, 1, 3, 2]]))]))
+
+
+def test_write_and_read_mesh_keep_tags(tmp_path):
+    mesh = tagged(grid_mesh(7, 7), seed=2)
+    path = evomesh.io.write_mesh(tmp_path / "m.vtu", mesh, {"u": mesh.points[:, 0]})
+    back, data = evomesh.io.read_mesh(path)
+    assert np.array_equal(back.triangle_tags, mesh.triangle_tags) and back.required.sum() == 3
+    assert set(data) == {"u"}
