@@ -237,6 +237,7 @@ void bind_options(py::module_& m) {
 }  // namespace
 
 PYBIND11_MODULE(_core, m) {
+  void bind_supermesh(pybind11::module_&); bind_supermesh(m);  // cpp/bindings/bind_supermesh.cpp (issue 12)
   m.doc() = "evomesh C++ core (CGAL): spacing functions, sampling, lexical-first MIS, FRFC";
 
   m.def(
