@@ -420,7 +420,6 @@ class Supermesh:
         self.old_triangle = raw["old_triangle"]
         self.area = raw["area"]
         self.mass = raw["mass"]
-        self._mix: scipy.sparse.csr_matrix | None = None
         self._factor: Any = None  # SuperLU of new's P1 mass matrix, made on first use
         self.new_triangle = np.repeat(np.arange(new.n_triangles), np.diff(self.offsets))
         empty = np.flatnonzero(np.diff(self.offsets) == 0)
@@ -453,9 +452,21 @@ class Supermesh:
         """L2 projection of per-vertex (P1) values (see :func:`transfer`, method="conservative")."""
         array, flat, dtype = _numeric(values, self.old.n_points, "point")
         if self._factor is None:
-            self._mix = self.mixed_mass()
             self._factor = scipy.sparse.linalg.splu(_p1_mass(self.new).tocsc())
-        rhs = self._mix @ flat
+        # rhs = M_mix @ flat without assembling M_mix: per pair, the 3 x 3 block
+        # times the old triangle's values, summed into the new triangle's rows.
+        local = np.einsum("kab,kbc->kac", self.mass, flat[self.old.triangles[self.old_triangle]])
+        rows = self.new.triangles[self.new_triangle].ravel()
+        local = local.reshape(len(rows), -1)
+        rhs = np.empty((self.new.n_points, flat.shape[1]), dtype=local.dtype)
+        for column in range(flat.shape[1]):
+            part = local[:, column]
+            if np.iscomplexobj(part):
+                rhs[:, column] = np.bincount(rows, part.real, self.new.n_points) + 1j * np.bincount(
+                    rows, part.imag, self.new.n_points
+                )
+            else:
+                rhs[:, column] = np.bincount(rows, part, self.new.n_points)
         if np.iscomplexobj(rhs):  # the factor is real: solve the two parts
             out = self._factor.solve(np.ascontiguousarray(rhs.real)) + 1j * self._factor.solve(
                 np.ascontiguousarray(rhs.imag)
