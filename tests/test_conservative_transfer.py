@@ -7,10 +7,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from hypothesis import given, settings
-from strategies import grid_mesh, mesh_and_delta
 
 import evomesh
 from evomesh.field_transfer import Supermesh
+from strategies import grid_mesh, mesh_and_delta
 
 
 def vertex_integral(mesh: evomesh.Mesh, u: np.ndarray) -> np.ndarray:

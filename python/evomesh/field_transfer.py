@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from typing import Any, Literal, Mapping, overload
+from typing import Any, Callable, Literal, Mapping, overload
 
 import numpy as np
 import scipy.sparse
@@ -477,7 +477,7 @@ class Supermesh:
         return out.reshape((self.new.n_points,) + array.shape[1:])
 
 
-def _named(interpolation: Interpolation, name: Any, values: Any) -> np.ndarray:
+def _named(interpolation: Callable[[Any], np.ndarray], name: Any, values: Any) -> np.ndarray:
     try:
         return interpolation(values)
     except (TypeError, ValueError) as error:
