@@ -50,7 +50,7 @@ from evomesh._core import default_thread_count  # noqa: E402
 
 # Moving-front workflow.
 from evomesh.experiments.growing_circle import growing_circle  # noqa: E402
-from evomesh.field_transfer import transfer  # noqa: E402
+from evomesh.field_transfer import transfer, transfer_cells  # noqa: E402
 from evomesh.fronts import CircleFront, Front, LevelSetFront, PointFront, SpacingLaw  # noqa: E402
 from evomesh.meshgen import unit_square_mesh  # noqa: E402
 from evomesh.statistics import step_statistics  # noqa: E402
@@ -63,6 +63,7 @@ __all__ += [
     "LevelSetFront",
     "SpacingLaw",
     "transfer",
+    "transfer_cells",
     "run",
     "Run",
     "Step",

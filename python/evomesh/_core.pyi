@@ -212,6 +212,26 @@ def drfc_refine(
     """DRFC step 1 alone: Delaunay refinement with Ruppert's rules and rule 4 (Section 5)."""
 
 def constrained_delaunay(points: ArrayLike, pieces: ArrayLike, boundary: ArrayLike) -> NDArray[np.int64]: ...
+class SupermeshResult(TypedDict):
+    """What :func:`supermesh` returns (a plain dict at run time)."""
+
+    offsets: NDArray[np.int64]  # (n_new_triangles + 1,), pairs of new triangle t: offsets[t]:offsets[t+1]
+    old_triangle: NDArray[np.int64]  # (pairs,)
+    area: NDArray[np.float64]  # (pairs,), |t n s|
+    mass: NDArray[np.float64]  # (pairs, 3, 3), int phi^new_a phi^old_b; (0, 3, 3) when mass=False
+
+def supermesh(
+    old_points: ArrayLike,
+    old_triangles: ArrayLike,
+    new_points: ArrayLike,
+    new_triangles: ArrayLike,
+    origin: ArrayLike,
+    parent_triangle: ArrayLike,
+    mass: bool = True,
+    threads: int = 0,
+) -> SupermeshResult:
+    """Local supermesh of new over old (cpp/src/supermesh.cpp), seeded by the step's origin and parent_triangle."""
+
 def locate_points(
     points: ArrayLike, triangles: ArrayLike, queries: ArrayLike
 ) -> tuple[NDArray[np.int64], NDArray[np.float64]]:

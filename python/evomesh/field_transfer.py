@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
-from typing import Any, Mapping, overload
+from typing import Any, Callable, Literal, Mapping, overload
 
 import numpy as np
+import scipy.sparse
+import scipy.sparse.linalg
 from numpy.typing import ArrayLike
 from scipy.spatial import cKDTree
 
@@ -12,7 +14,7 @@ from evomesh import _core
 from evomesh.mesh import Mesh
 from evomesh.spacing_function import _require_mesh
 
-__all__ = ["transfer", "Interpolation"]
+__all__ = ["transfer", "transfer_cells", "Interpolation", "Supermesh"]
 
 # A new point that the core does not locate in the old mesh is accepted on the
 # nearest old boundary edge if it lies within _outside_tolerance of it:
@@ -233,18 +235,35 @@ def _pairs_within(tree: cKDTree, queries: np.ndarray, radius: float) -> tuple[np
     return np.concatenate(out_query), np.concatenate(out_item)
 
 
+Method = Literal["linear", "conservative"]
+
+
 @overload
-def transfer(old: Mesh, new: Mesh, values: Mapping[str, ArrayLike]) -> dict[str, np.ndarray]: ...
-@overload
-def transfer(old: Mesh, new: Mesh, values: ArrayLike) -> np.ndarray: ...
 def transfer(
-    old: Mesh, new: Mesh, values: ArrayLike | Mapping[str, ArrayLike]
+    old: Mesh, new: Mesh, values: Mapping[str, ArrayLike], method: Method = "linear"
+) -> dict[str, np.ndarray]: ...
+@overload
+def transfer(old: Mesh, new: Mesh, values: ArrayLike, method: Method = "linear") -> np.ndarray: ...
+def transfer(
+    old: Mesh, new: Mesh, values: ArrayLike | Mapping[str, ArrayLike], method: Method = "linear"
 ) -> np.ndarray | dict[str, np.ndarray]:
     """Per-vertex field(s) of ``old`` at the points of ``new``.
 
-    Exact copy at kept points (``new.origin >= 0``), linear interpolation in
-    the old triangle elsewhere. A linear function is reproduced exactly (up to
-    rounding); kept values are copied bit for bit.
+    ``method="linear"`` (the default): exact copy at kept points
+    (``new.origin >= 0``), linear interpolation in the old triangle elsewhere.
+    A linear function is reproduced exactly (up to rounding); kept values are
+    copied bit for bit.
+
+    ``method="conservative"``: the L2 (Galerkin) projection of the old P1 field
+    onto the new P1 space, ``M_new u_new = M_mix u_old`` with
+    ``M_mix[i, j] = int phi_i^new phi_j^old`` computed exactly on the
+    intersections of old and new triangles (a local :class:`Supermesh`, found
+    through ``new.lineage``). The integral over the domain is preserved up to
+    rounding (constants lie in both spaces) and linear fields are reproduced;
+    values at kept points generally change (the projection is global). The
+    system is solved directly (``scipy.sparse.linalg.spsolve``, SuperLU).
+    Needs ``new = evolve(old, ...)``; chain calls step by step over several
+    steps (each step is conservative, so the chain is).
 
     Parameters
     ----------
@@ -252,12 +271,13 @@ def transfer(
         The mesh the values live on.
     new : Mesh
         A mesh of the same domain, normally ``evolve(old, ...)``; its
-        ``origin`` must index ``old`` (a mesh with all origins -1 is
-        interpolated everywhere).
+        ``origin`` must index ``old`` (with ``method="linear"`` a mesh with all
+        origins -1 is interpolated everywhere).
     values : array_like, shape (n_old,) or (n_old, ...), or a mapping of them
         Scalar or vector fields. Floating and complex dtypes are kept; integer
         fields become float64. A mapping (name -> array) gives a dict, with
-        one point location for all fields.
+        one point location (one supermesh) for all fields.
+    method : {"linear", "conservative"}
 
     Returns
     -------
@@ -270,15 +290,194 @@ def transfer(
         If old or new is not a Mesh, or values are not numeric.
     ValueError
         If values do not have one row per old point, if new's origins do not
-        match old, or a new point lies outside the old domain.
+        match old, a new point lies outside the old domain, method is
+        unknown, or (conservative) new has no lineage from old.
     """
-    interpolation = Interpolation(old, new)
+    if method == "linear":
+        interpolation: Any = Interpolation(old, new)
+    elif method == "conservative":
+        interpolation = Supermesh(old, new, mass=True).project_vertices
+    else:
+        raise ValueError(f"method must be 'linear' or 'conservative', got {method!r}")
     if isinstance(values, Mapping):
         return {name: _named(interpolation, name, v) for name, v in values.items()}
     return interpolation(values)
 
 
-def _named(interpolation: Interpolation, name: Any, values: Any) -> np.ndarray:
+@overload
+def transfer_cells(old: Mesh, new: Mesh, values: Mapping[str, ArrayLike]) -> dict[str, np.ndarray]: ...
+@overload
+def transfer_cells(old: Mesh, new: Mesh, values: ArrayLike) -> np.ndarray: ...
+def transfer_cells(
+    old: Mesh, new: Mesh, values: ArrayLike | Mapping[str, ArrayLike]
+) -> np.ndarray | dict[str, np.ndarray]:
+    """Per-triangle field(s) of ``old`` on the triangles of ``new``, conservatively.
+
+    The P0 projection ``new[t] = sum_s |t n s| old[s] / |t|`` over the old
+    triangles s overlapping t (a local :class:`Supermesh`, found through
+    ``new.lineage``): ``sum_t |t| new[t] = sum_s |s| old[s]`` up to rounding,
+    and a constant field is reproduced exactly.
+
+    Over several steps, chain the calls, one per step::
+
+        c1 = transfer_cells(m0, m1, c0)
+        c2 = transfer_cells(m1, m2, c1)
+
+    Each step preserves the total, so the chain does (the drift is the sum of
+    the steps' rounding). There is no direct ``m0 -> m2`` transfer: ``m2`` has
+    no lineage from ``m0``.
+
+    Parameters
+    ----------
+    old, new : Mesh
+        ``new = evolve(old, ...)`` (``new.lineage`` must refer to old).
+    values : array_like, shape (n_old_triangles,) or (n_old_triangles, ...), or a mapping of them
+        Floating and complex dtypes are kept; integer fields become float64.
+
+    Returns
+    -------
+    ndarray, shape (n_new_triangles,) + values.shape[1:], or dict of them
+
+    Raises
+    ------
+    TypeError, ValueError
+        As :func:`transfer` with method="conservative".
+    """
+    supermesh = Supermesh(old, new, mass=False)
+    if isinstance(values, Mapping):
+        return {name: _named(supermesh.project_cells, name, v) for name, v in values.items()}
+    return supermesh.project_cells(values)
+
+
+def _numeric(values: Any, rows: int, what: str) -> tuple[np.ndarray, np.ndarray, np.dtype]:
+    """(array, flat (rows, -1) in float64/complex128, output dtype) of a field."""
+    array = np.asarray(values)
+    if array.dtype == object or array.dtype.kind not in "fiuc":
+        raise TypeError(f"values must be a numeric array, got dtype {array.dtype}")
+    if array.ndim == 0 or array.shape[0] != rows:
+        raise ValueError(f"values must have one row per {what} of the old mesh: shape ({rows}, ...), got {array.shape}")
+    dtype = array.dtype if array.dtype.kind in "fc" else np.dtype(np.float64)
+    flat = array.reshape(rows, -1).astype(np.result_type(dtype, np.float64), copy=False)
+    return array, flat, dtype
+
+
+def _p1_mass(mesh: Mesh) -> scipy.sparse.csr_matrix:
+    """The P1 mass matrix of a mesh: |T| / 12 (1 + delta_ij) per triangle."""
+    t = mesh.triangles
+    area = np.abs(mesh.triangle_areas)
+    local = (np.ones((3, 3)) + np.eye(3)) / 12.0
+    data = area[:, None, None] * local[None]
+    rows = np.broadcast_to(t[:, :, None], data.shape)
+    cols = np.broadcast_to(t[:, None, :], data.shape)
+    n = mesh.n_points
+    return scipy.sparse.csr_matrix((data.ravel(), (rows.ravel(), cols.ravel())), shape=(n, n))
+
+
+class Supermesh:
+    """The intersections of the triangles of ``new = evolve(old, ...)`` with those of ``old``.
+
+    Built by the C++ core without a global search: each new triangle starts
+    from the old triangles at its vertices (the old star of a kept vertex, the
+    lineage's parent triangle of a new one) and floods over old edge adjacency;
+    each intersection is clipped (Sutherland-Hodgman) and measured (shoelace);
+    with ``mass=True`` also ``int phi_a^new phi_b^old`` over it (edge-midpoint
+    rule on a fan of the polygon: exact for the quadratic integrand).
+    Parallel over fixed blocks of new triangles: independent of the thread count.
+
+    Attributes
+    ----------
+    new_triangle, old_triangle : ndarray of int, shape (pairs,)
+        The overlapping pairs, grouped by new triangle.
+    offsets : ndarray of int, shape (n_new_triangles + 1,)
+    area : ndarray, shape (pairs,)
+        |t n s| per pair.
+    mass : ndarray, shape (pairs, 3, 3) (empty when mass=False)
+        ``mass[k, a, b] = int_{t n s} phi^new_{t[a]} phi^old_{s[b]}`` (vertex order of the meshes' triangles).
+    """
+
+    def __init__(self, old: Mesh, new: Mesh, *, mass: bool = True, threads: int = 0):
+        _require_mesh(old)
+        _require_mesh(new)
+        lineage = new.lineage
+        if lineage is None or not lineage.matches(old):
+            raise ValueError(
+                "conservative transfer needs new = evolve(old, ...): new.lineage "
+                + ("is None" if lineage is None else "refers to a mesh of another size")
+            )
+        origin = new.origin
+        kept = origin >= 0
+        if kept.any() and not (new.points[kept] == old.points[origin[kept]]).all():
+            raise ValueError("kept points of new differ from their origin in old: new was not evolved from old")
+        parent = lineage.parent_triangle
+        unknown = np.flatnonzero(~kept & (parent < 0))
+        if len(unknown):  # rare: points the step did not locate
+            parent = parent.copy()
+            parent[unknown], _ = _core.locate_points(old.points, old.triangles, new.points[unknown])
+        raw = _core.supermesh(old.points, old.triangles, new.points, new.triangles, origin, parent, mass, threads)
+        self.old = old
+        self.new = new
+        self.offsets = raw["offsets"]
+        self.old_triangle = raw["old_triangle"]
+        self.area = raw["area"]
+        self.mass = raw["mass"]
+        self._factor: Any = None  # SuperLU of new's P1 mass matrix, made on first use
+        self.new_triangle = np.repeat(np.arange(new.n_triangles), np.diff(self.offsets))
+        empty = np.flatnonzero(np.diff(self.offsets) == 0)
+        if len(empty):
+            raise ValueError(f"new triangle {int(empty[0])} overlaps no old triangle: new was not evolved from old")
+
+    def project_cells(self, values: Any) -> np.ndarray:
+        """P0 projection of per-triangle values (see :func:`transfer_cells`)."""
+        array, flat, dtype = _numeric(values, self.old.n_triangles, "triangle")
+        covered = np.add.reduceat(self.area, self.offsets[:-1])
+        # Relative to a reference value per new triangle (its first old
+        # triangle): a constant field gives differences 0, hence exactly itself.
+        reference = flat[self.old_triangle[self.offsets[:-1]]]
+        weights = (self.area / covered[self.new_triangle])[:, None]
+        mixed = np.add.reduceat(weights * (flat[self.old_triangle] - reference[self.new_triangle]), self.offsets[:-1])
+        out = (reference + mixed).astype(dtype, copy=False)
+        return out.reshape((self.new.n_triangles,) + array.shape[1:])
+
+    def mixed_mass(self) -> scipy.sparse.csr_matrix:
+        """``M_mix[i, j] = int phi_i^new phi_j^old``, shape (n_new_points, n_old_points)."""
+        if self.mass.size == 0 and len(self.area):
+            raise ValueError("this Supermesh was built with mass=False")
+        rows = np.broadcast_to(self.new.triangles[self.new_triangle][:, :, None], self.mass.shape)
+        cols = np.broadcast_to(self.old.triangles[self.old_triangle][:, None, :], self.mass.shape)
+        return scipy.sparse.csr_matrix(
+            (self.mass.ravel(), (rows.ravel(), cols.ravel())), shape=(self.new.n_points, self.old.n_points)
+        )
+
+    def project_vertices(self, values: Any) -> np.ndarray:
+        """L2 projection of per-vertex (P1) values (see :func:`transfer`, method="conservative")."""
+        array, flat, dtype = _numeric(values, self.old.n_points, "point")
+        if self._factor is None:
+            self._factor = scipy.sparse.linalg.splu(_p1_mass(self.new).tocsc())
+        # rhs = M_mix @ flat without assembling M_mix: per pair, the 3 x 3 block
+        # times the old triangle's values, summed into the new triangle's rows.
+        local = np.einsum("kab,kbc->kac", self.mass, flat[self.old.triangles[self.old_triangle]])
+        rows = self.new.triangles[self.new_triangle].ravel()
+        local = local.reshape(len(rows), -1)
+        rhs = np.empty((self.new.n_points, flat.shape[1]), dtype=local.dtype)
+        for column in range(flat.shape[1]):
+            part = local[:, column]
+            if np.iscomplexobj(part):
+                rhs[:, column] = np.bincount(rows, part.real, self.new.n_points) + 1j * np.bincount(
+                    rows, part.imag, self.new.n_points
+                )
+            else:
+                rhs[:, column] = np.bincount(rows, part, self.new.n_points)
+        if np.iscomplexobj(rhs):  # the factor is real: solve the two parts
+            out = self._factor.solve(np.ascontiguousarray(rhs.real)) + 1j * self._factor.solve(
+                np.ascontiguousarray(rhs.imag)
+            )
+        else:
+            out = self._factor.solve(np.ascontiguousarray(rhs))
+        out = out.reshape(len(out), -1).astype(dtype, copy=False)
+        return out.reshape((self.new.n_points,) + array.shape[1:])
+
+
+def _named(interpolation: Callable[[Any], np.ndarray], name: Any, values: Any) -> np.ndarray:
     try:
         return interpolation(values)
     except (TypeError, ValueError) as error:
