@@ -13,7 +13,7 @@ if ! "$PY" -m ruff --version >/dev/null 2>&1 || ! "$PY" -m mypy --version >/dev/
 fi
 status=0
 echo "== ruff"
-"$PY" -m ruff check python tests benchmarks || status=1
+"$PY" -m ruff check python tests benchmarks examples || status=1
 echo "== mypy"
 "$PY" -m mypy python/evomesh || status=1
 exit $status

@@ -27,6 +27,8 @@ if [[ ! -x "$python" ]]; then
   python3 -m venv "$venv"
   "$venv/bin/pip" install -q numpy scipy pybind11 scikit-build-core pytest hypothesis meshio matplotlib tqdm ninja
 fi
+# test dependencies added later (XDMF round trips, the scikit-fem interop)
+"$venv/bin/python" -c "import h5py, skfem" 2>/dev/null || "$venv/bin/pip" install -q h5py scikit-fem
 
 if [[ "${SKIP_BUILD:-0}" != 1 ]]; then
   # Serial compile by default: the machine is shared (override with CMAKE_BUILD_PARALLEL_LEVEL).

@@ -462,6 +462,157 @@ class Mesh:
         cell_data = {"gmsh:physical": tags, "gmsh:geometrical": [t.copy() for t in tags]}
         return meshio.Mesh(points, cells, point_data=point_data, cell_data=cell_data)
 
+    @staticmethod
+    def skfem_names(m: Any) -> "tuple[dict[int, str], dict[int, str]]":
+        """The tag numbering :meth:`from_skfem` uses for a scikit-fem mesh.
+
+        Parameters
+        ----------
+        m : skfem.MeshTri
+            A scikit-fem triangle mesh, with or without named boundaries and
+            subdomains.
+
+        Returns
+        -------
+        boundary_names, subdomain_names : dict of int to str
+            Tag -> name, the names of ``m.boundaries`` (``m.subdomains``)
+            numbered 1, 2, ... in sorted order (0 means untagged). Pass them to
+            :meth:`to_skfem` to get the names back after a round trip.
+        """
+        boundaries = getattr(m, "boundaries", None) or {}
+        subdomains = getattr(m, "subdomains", None) or {}
+        return ({tag: name for tag, name in enumerate(sorted(boundaries), start=1)},
+                {tag: name for tag, name in enumerate(sorted(subdomains), start=1)})
+
+    @classmethod
+    def from_skfem(cls, m: Any) -> "Mesh":
+        """A Mesh from a scikit-fem triangle mesh (``skfem.MeshTri``).
+
+        Points are ``m.p.T`` (vertices only), triangles ``m.t.T``, in the
+        same order (triangles are stored counter-clockwise). Every facet of a
+        named boundary (``m.boundaries``) becomes a segment whose tag is the
+        number of its name, and every element of a named subdomain
+        (``m.subdomains``) gets the number of its name as triangle tag; names
+        are numbered 1, 2, ... in sorted order (0 = untagged; boundary and
+        subdomain names are numbered separately). The numbering is not stored:
+        :meth:`skfem_names` returns it, so that
+        ``mesh.to_skfem(*Mesh.skfem_names(m))`` restores the names.
+
+        Parameters
+        ----------
+        m : skfem.MeshTri
+            A 2-D triangle mesh (a quadratic ``MeshTri2`` gives its linear
+            mesh on the vertices).
+
+        Returns
+        -------
+        Mesh
+
+        Raises
+        ------
+        ImportError
+            If scikit-fem is not installed.
+        ValueError
+            If ``m`` is not a 2-D triangle mesh, or a facet (element) belongs
+            to two named boundaries (subdomains): one tag each cannot say that.
+        """
+        try:
+            import skfem  # noqa: F401  (only to give the install hint)
+        except ImportError as error:
+            raise ImportError("Mesh.from_skfem needs scikit-fem: pip install evomesh[fem]") from error
+
+        def tags_by_name(groups: Mapping[str, Any], names: Mapping[int, str], count: int, what: str) -> np.ndarray:
+            """One tag per facet (element) from skfem's name -> indices; 0 where unnamed."""
+            tags = np.zeros(count, np.int64)
+            for tag, name in names.items():
+                indices = np.asarray(groups[name], dtype=np.int64).reshape(-1)
+                if indices.size and (indices.min() < 0 or indices.max() >= count):
+                    raise ValueError(f"{name!r} has a {what} index out of range [0, {count})")
+                clash = indices[tags[indices] != 0]
+                if clash.size:
+                    raise ValueError(f"{what} {int(clash[0])} is in both {names[int(tags[clash[0]])]!r} and {name!r}: "
+                                     f"evomesh keeps one tag (one name) per {what}")
+                tags[indices] = tag
+            return tags
+
+        t = np.asarray(m.t)
+        if t.ndim != 2 or t.shape[0] != 3 or np.asarray(m.p).shape[0] != 2:
+            raise ValueError(f"expected a 2-D triangle mesh (p of shape (2, n), t of shape (3, m)), got "
+                             f"{type(m).__name__} with p {np.asarray(m.p).shape} and t {t.shape}")
+        n_vertices = int(t.max()) + 1
+        points = np.asarray(m.p)[:, :n_vertices].T
+        triangles = t.T
+        boundary_names, subdomain_names = cls.skfem_names(m)
+        segments = segment_tags = triangle_tags = None
+        if boundary_names:
+            facets = np.asarray(m.facets).T
+            facet_tag = tags_by_name(m.boundaries, boundary_names, facets.shape[0], "facet")
+            named = np.flatnonzero(facet_tag)
+            segments, segment_tags = facets[named], facet_tag[named]
+        if subdomain_names:
+            triangle_tags = tags_by_name(m.subdomains, subdomain_names, len(triangles), "element")
+        return cls(points, triangles, segments, segment_tags=segment_tags, triangle_tags=triangle_tags)
+
+    def to_skfem(self, boundary_names: "dict[int, str] | None" = None,
+                 subdomain_names: "dict[int, str] | None" = None) -> Any:
+        """This mesh as a scikit-fem ``MeshTri`` with named boundaries and subdomains.
+
+        Points and triangles keep their order and orientation (``p`` is
+        ``points.T``, ``t`` is ``triangles.T``; skfem's sorting of ``t`` is
+        switched off). Every nonzero segment tag k becomes the boundary
+        ``boundary_names[k]`` (the facets of the segments of that tag; interior
+        segments too), every nonzero triangle tag k the subdomain
+        ``subdomain_names[k]`` (element indices); a tag without a name is
+        called ``"tag_<k>"``. Named tags the mesh does not use give empty
+        index arrays, so the names of :meth:`skfem_names` survive a round trip.
+
+        Parameters
+        ----------
+        boundary_names, subdomain_names : dict of int to str, optional
+            Tag -> name, e.g. the dicts of :meth:`skfem_names`.
+
+        Returns
+        -------
+        skfem.MeshTri
+
+        Raises
+        ------
+        ImportError
+            If scikit-fem is not installed.
+        """
+        import dataclasses
+
+        try:
+            import skfem
+        except ImportError as error:
+            raise ImportError("Mesh.to_skfem needs scikit-fem: pip install evomesh[fem]") from error
+        fields = {field.name for field in dataclasses.fields(skfem.MeshTri)}
+        keywords = {"sort_t": False} if "sort_t" in fields else {}
+        m = skfem.MeshTri(np.ascontiguousarray(self.points.T), np.ascontiguousarray(self.triangles.T), **keywords)
+        boundary_names = dict(boundary_names or {})
+        subdomain_names = dict(subdomain_names or {})
+        boundaries: dict[str, np.ndarray] = {}
+        tags = np.union1d(self.segment_tags[self.segment_tags != 0], np.array(list(boundary_names), np.int64))
+        if len(tags):
+            facets = np.sort(np.asarray(m.facets).T, axis=1).astype(np.int64)
+            n = np.int64(self.n_points)
+            facet_keys = facets[:, 0] * n + facets[:, 1]
+            order = np.argsort(facet_keys)
+            segments = np.sort(self.segments, axis=1)
+            found = np.searchsorted(facet_keys, segments[:, 0] * n + segments[:, 1], sorter=order)
+            segment_facet = order[np.minimum(found, len(order) - 1)]
+            for tag in tags.tolist():
+                boundaries[boundary_names.get(tag, f"tag_{tag}")] = np.sort(segment_facet[self.segment_tags == tag])
+        subdomains: dict[str, np.ndarray] = {}
+        named_regions = np.array(list(subdomain_names), np.int64)
+        for tag in np.union1d(self.triangle_tags[self.triangle_tags != 0], named_regions).tolist():
+            subdomains[subdomain_names.get(tag, f"tag_{tag}")] = np.flatnonzero(self.triangle_tags == tag)
+        if boundaries:
+            m = m.with_boundaries(boundaries)
+        if subdomains:
+            m = m.with_subdomains(subdomains)
+        return m
+
     @property
     def n_points(self) -> int:
         return len(self.points)
