@@ -29,6 +29,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 import evomesh
+from evomesh.mesh_quality import integral_inverse_square as _integral_inverse_square
 
 # label, method, options
 CONFIGURATIONS = [
@@ -52,30 +53,9 @@ BAND_CENTER, BAND_SHIFT, BAND_HALF_WIDTH, GRADING_LENGTH, COARSE_RATIO = 0.35, 0
 POINTS_PER_INVERSE_SQUARE_SPACING = 0.104
 
 
-def _sub_triangle_barycentres(levels: int) -> np.ndarray:
-    k = 2**levels
-    bary = []
-    for i in range(k):
-        for j in range(k - i):
-            bary.append(((i + 1 / 3) / k, (j + 1 / 3) / k))
-            if i + j < k - 1:
-                bary.append(((i + 2 / 3) / k, (j + 2 / 3) / k))
-    return np.array(bary)
-
-
-def integral_inverse_square(mesh: evomesh.Mesh, f, levels: int = 2, chunk: int = 20000) -> float:
+def integral_inverse_square(mesh: evomesh.Mesh, f, levels: int = 2) -> float:
     """Integral of 1/f^2 over the mesh: midpoint rule on 4**levels sub-triangles."""
-    bary = _sub_triangle_barycentres(levels)
-    total = 0.0
-    areas = mesh.triangle_areas
-    for s in range(0, mesh.n_triangles, chunk):
-        p = mesh.points[mesh.triangles[s : s + chunk]]
-        q = p[:, None, 0] + bary[None, :, 0, None] * (p[:, None, 1] - p[:, None, 0]) + bary[None, :, 1, None] * (
-            p[:, None, 2] - p[:, None, 0]
-        )
-        values = 1.0 / f(q.reshape(-1, 2)) ** 2
-        total += float((values.reshape(len(p), -1).mean(axis=1) * areas[s : s + chunk]).sum())
-    return total
+    return _integral_inverse_square(mesh.points, mesh.triangles, f, levels=levels)
 
 
 def spacing_ratio(old: evomesh.Mesh, new: evomesh.Mesh, delta: np.ndarray) -> np.ndarray:

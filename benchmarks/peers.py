@@ -33,6 +33,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 import evomesh
+from evomesh.mesh_quality import integral_inverse_square
 
 REPO = Path(__file__).resolve().parent.parent
 MMG2D_BINARY = Path(os.environ.get("EVOMESH_MMG2D", REPO / "build" / "peers" / "mmg2d_O3"))
@@ -235,33 +236,6 @@ def run_gmsh(mesh: evomesh.Mesh, h: np.ndarray, algorithm: int = 6) -> tuple[np.
 # ---------------------------------------------------------------- metrics
 
 
-def _sub_triangle_barycentres(levels: int) -> np.ndarray:
-    k = 2**levels
-    bary = []
-    for i in range(k):
-        for j in range(k - i):
-            bary.append(((i + 1 / 3) / k, (j + 1 / 3) / k))
-            if i + j < k - 1:
-                bary.append(((i + 2 / 3) / k, (j + 2 / 3) / k))
-    return np.array(bary)
-
-
-def integral_inverse_square(points: np.ndarray, triangles: np.ndarray, f, levels: int = 2) -> float:
-    """Integral of 1/f^2 over the triangles: midpoint rule on each triangle split
-    into 4**levels similar triangles (tests/invariants.py, 16 by default here)."""
-    bary = _sub_triangle_barycentres(levels)
-    p = points[triangles]
-    areas = triangle_areas(points, triangles)
-    total = 0.0
-    for start in range(0, len(p), 100_000):  # bounded memory
-        q = p[start:start + 100_000]
-        x = q[:, None, 0] + bary[None, :, 0, None] * (q[:, None, 1] - q[:, None, 0]) + bary[None, :, 1, None] * (
-            q[:, None, 2] - q[:, None, 0])
-        values = 1.0 / f(x.reshape(-1, 2)) ** 2
-        total += float((values.reshape(len(q), -1).mean(axis=1) * areas[start:start + 100_000]).sum())
-    return total
-
-
 def triangle_areas(points: np.ndarray, triangles: np.ndarray) -> np.ndarray:
     a, b, c = (points[triangles[:, i]] for i in range(3))
     return 0.5 * ((b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0]))
@@ -309,7 +283,7 @@ def metrics(mesh: evomesh.Mesh, delta: np.ndarray, points: np.ndarray, triangles
     return {
         "points": n,
         "triangles": len(triangles),
-        "n_over_integral": n / integral_inverse_square(points, triangles, f),
+        "n_over_integral": n / integral_inverse_square(points, triangles, f, levels=2),
         "input_ratio_p50": float(np.percentile(input_ratio, 50)),
         "input_ratio_p99": float(np.percentile(input_ratio, 99)),
         "input_ratio_max": float(input_ratio.max()),
