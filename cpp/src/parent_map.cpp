@@ -47,22 +47,6 @@ std::vector<std::array<Index, 3>> triangle_neighbours(const std::vector<Triangle
   return neighbour;
 }
 
-std::array<double, 3> barycentric_in(const std::vector<Vec2>& points, const Triangle& t, const Vec2& q) {
-  const Vec2& a = points[t[0]];
-  const Vec2& b = points[t[1]];
-  const Vec2& c = points[t[2]];
-  const double det = (b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0]);
-  const double l1 = ((q[0] - a[0]) * (c[1] - a[1]) - (q[1] - a[1]) * (c[0] - a[0])) / det;
-  const double l2 = ((b[0] - a[0]) * (q[1] - a[1]) - (b[1] - a[1]) * (q[0] - a[0])) / det;
-  return {1.0 - l1 - l2, l1, l2};
-}
-
-double distance_to_segment(const Vec2& q, const Vec2& a, const Vec2& b) {
-  const double dx = b[0] - a[0], dy = b[1] - a[1];
-  const double along = std::clamp(((q[0] - a[0]) * dx + (q[1] - a[1]) * dy) / (dx * dx + dy * dy), 0.0, 1.0);
-  return std::hypot(q[0] - a[0] - along * dx, q[1] - a[1] - along * dy);
-}
-
 // Point location in the old mesh by visibility walks over its triangles.
 class Old_mesh_walker {
  public:
@@ -121,7 +105,7 @@ class Old_mesh_walker {
       const Vec2& b = P_[tri[(boundary_side + 1) % 3]];
       const double reach = std::max({std::abs(q[0]), std::abs(q[1]), std::abs(a[0]), std::abs(a[1]), std::abs(b[0]),
                                      std::abs(b[1])});
-      if (distance_to_segment(q, a, b) <= rounding(reach)) return t;
+      if (distance_to_segment(q, a, b) <= boundary_rounding(reach)) return t;
       return search(t, q);  // blocked by the boundary of a non-convex domain
     }
     return search(t, q);
@@ -135,40 +119,23 @@ class Old_mesh_walker {
     using Entry = std::pair<double, Index>;
     std::priority_queue<Entry, std::vector<Entry>, std::greater<Entry>> open;
     std::unordered_set<Index> seen{t};
-    open.push({gap(t, q), t});
+    open.push({distance_to_triangle(P_, T_[t], q), t});
     for (std::size_t popped = 0; !open.empty() && popped < kSearchBudget; ++popped) {
       const auto [d, u] = open.top();
       open.pop();
       double reach = std::max(std::abs(q[0]), std::abs(q[1]));
       for (Index v : T_[u]) reach = std::max({reach, std::abs(P_[v][0]), std::abs(P_[v][1])});
-      if (d <= rounding(reach)) return u;
+      if (d <= boundary_rounding(reach)) return u;
       // across edges, and around vertices: where a domain touches itself at a
       // vertex, the triangles on either side share no edge
       for (Index v : T_[u]) {
         for (Index a = fan_begin_[v]; a < fan_begin_[v + 1]; ++a) {
           const Index w = fan_[a];
-          if (seen.insert(w).second) open.push({gap(w, q), w});
+          if (seen.insert(w).second) open.push({distance_to_triangle(P_, T_[w], q), w});
         }
       }
     }
     return -1;
-  }
-
-  // Distance from q to triangle t (0 inside or on it).
-  double gap(Index t, const Vec2& q) const {
-    double d = 0;
-    for (int k = 0; k < 3; ++k) {
-      const Vec2& a = P_[T_[t][k]];
-      const Vec2& b = P_[T_[t][(k + 1) % 3]];
-      if (orientation(a, b, q) < 0) d = std::max(d, distance_to_segment(q, a, b));
-    }
-    return d;
-  }
-
-  // What rounding can put between a point and the old mesh's boundary: a few
-  // units, plus a straight chain's tolerance, of the largest coordinate.
-  static double rounding(double reach) {
-    return (16 + kStraightUlps) * std::numeric_limits<double>::epsilon() * reach;
   }
 
  private:
@@ -255,7 +222,7 @@ Parent_map parent_map(const Mesh_arrays& old_mesh, const Mesh_arrays& new_mesh, 
         continue;
       }
       map.triangle[v] = t;
-      map.barycentric[v] = barycentric_in(P, T[t], new_mesh.points[v]);
+      map.barycentric[v] = barycentric_coordinates(P, T[t], new_mesh.points[v]);
       queue.push_back(v);
     }
   }

@@ -299,6 +299,36 @@ std::vector<Triangle> constrained_delaunay(const std::vector<Vec2>& points,
   return triangles;
 }
 
+double distance_to_segment(const Vec2& q, const Vec2& a, const Vec2& b) {
+  const double dx = b[0] - a[0], dy = b[1] - a[1];
+  const double along = std::clamp(((q[0] - a[0]) * dx + (q[1] - a[1]) * dy) / (dx * dx + dy * dy), 0.0, 1.0);
+  return std::hypot(q[0] - a[0] - along * dx, q[1] - a[1] - along * dy);
+}
+
+double distance_to_triangle(const std::vector<Vec2>& points, const Triangle& t, const Vec2& q) {
+  double gap = 0;
+  for (int e = 0; e < 3; ++e) {
+    const Vec2& a = points[t[e]];
+    const Vec2& b = points[t[(e + 1) % 3]];
+    if (orientation(a, b, q) < 0) gap = std::max(gap, distance_to_segment(q, a, b));
+  }
+  return gap;
+}
+
+std::array<double, 3> barycentric_coordinates(const std::vector<Vec2>& points, const Triangle& t, const Vec2& q) {
+  const Vec2& a = points[t[0]];
+  const Vec2& b = points[t[1]];
+  const Vec2& c = points[t[2]];
+  const double det = (b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0]);
+  const double l1 = ((q[0] - a[0]) * (c[1] - a[1]) - (q[1] - a[1]) * (c[0] - a[0])) / det;
+  const double l2 = ((b[0] - a[0]) * (q[1] - a[1]) - (b[1] - a[1]) * (q[0] - a[0])) / det;
+  return {1.0 - l1 - l2, l1, l2};
+}
+
+double boundary_rounding(double reach) {
+  return (16 + kStraightUlps) * std::numeric_limits<double>::epsilon() * reach;
+}
+
 void locate_points(const std::vector<Vec2>& points, const std::vector<Triangle>& triangles,
                    const std::vector<Vec2>& queries, std::vector<Index>& triangle_out,
                    std::vector<std::array<double, 3>>& barycentric_out) {
@@ -317,29 +347,6 @@ void locate_points(const std::vector<Vec2>& points, const std::vector<Triangle>&
     }
     f->info() = static_cast<Index>(t);
   }
-  auto barycentric = [&](Index t, const Vec2& q) {
-    const Vec2& a = points[triangles[t][0]];
-    const Vec2& b = points[triangles[t][1]];
-    const Vec2& c = points[triangles[t][2]];
-    const double det = (b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0]);
-    const double l1 = ((q[0] - a[0]) * (c[1] - a[1]) - (q[1] - a[1]) * (c[0] - a[0])) / det;
-    const double l2 = ((b[0] - a[0]) * (q[1] - a[1]) - (b[1] - a[1]) * (q[0] - a[0])) / det;
-    return std::array<double, 3>{1.0 - l1 - l2, l1, l2};
-  };
-  // Distance from q to mesh triangle t (0 inside or on it; exact orientation tests).
-  auto gap_to = [&](Index t, const Vec2& q) {
-    const Triangle& tri = triangles[t];
-    double gap = 0;
-    for (int e = 0; e < 3; ++e) {
-      const Vec2& a = points[tri[e]];
-      const Vec2& b = points[tri[(e + 1) % 3]];
-      if (orientation(a, b, q) >= 0) continue;
-      const double dx = b[0] - a[0], dy = b[1] - a[1];
-      const double along = std::clamp(((q[0] - a[0]) * dx + (q[1] - a[1]) * dy) / (dx * dx + dy * dy), 0.0, 1.0);
-      gap = std::max(gap, std::hypot(q[0] - a[0] - along * dx, q[1] - a[1] - along * dy));
-    }
-    return gap;
-  };
   // Of candidate faces, the mesh triangle nearest q (q inside it: distance 0).
   // Distances, not barycentric coordinates, which are scale-free: in a sliver a
   // point on an edge has coordinates off by far more than the point is.
@@ -348,7 +355,7 @@ void locate_points(const std::vector<Vec2>& points, const std::vector<Triangle>&
     best_gap = std::numeric_limits<double>::infinity();
     for (auto f : faces) {
       if (f->info() < 0) continue;
-      const double gap = gap_to(f->info(), q);
+      const double gap = distance_to_triangle(points, triangles[f->info()], q);
       if (gap < best_gap) {
         best_gap = gap;
         best = f->info();
@@ -394,9 +401,10 @@ void locate_points(const std::vector<Vec2>& points, const std::vector<Triangle>&
     if (t >= 0) {
       double reach = std::max(std::abs(queries[idx][0]), std::abs(queries[idx][1]));
       for (Index v : triangles[t]) reach = std::max({reach, std::abs(points[v][0]), std::abs(points[v][1])});
-      if (gap > (16 + kStraightUlps) * std::numeric_limits<double>::epsilon() * reach) t = -1;
+      if (gap > boundary_rounding(reach)) t = -1;
     }
-    std::array<double, 3> bary = t >= 0 ? barycentric(t, queries[idx]) : std::array<double, 3>{0, 0, 0};
+    std::array<double, 3> bary =
+        t >= 0 ? barycentric_coordinates(points, triangles[t], queries[idx]) : std::array<double, 3>{0, 0, 0};
     triangle_out[idx] = t;
     if (t >= 0) {
       for (auto& l : bary) l = std::max(l, 0.0);

@@ -1,6 +1,7 @@
 // Constrained Delaunay triangulation and mesh checks (CGAL).
 #pragma once
 
+#include <array>
 #include <vector>
 
 #include "evomesh/types.hpp"
@@ -58,6 +59,19 @@ bool runs_straight_through(const Vec2& u, const Vec2& p, const Vec2& w);
 // run straight through: runs_straight_through), boundary (other points on
 // segments), original (interior).
 std::vector<Point_kind> classify_points(const Mesh_arrays& mesh);
+
+// Small geometric helpers shared by point location (here and parent_map.cpp).
+// Distance from q to the segment ab.
+double distance_to_segment(const Vec2& q, const Vec2& a, const Vec2& b);
+// Distance from q to the counter-clockwise triangle t of `points` (0 inside or on
+// it; which sides q is beyond is decided by exact orientation tests).
+double distance_to_triangle(const std::vector<Vec2>& points, const Triangle& t, const Vec2& q);
+// Barycentric coordinates of q in triangle t (they sum to 1; negative outside).
+std::array<double, 3> barycentric_coordinates(const std::vector<Vec2>& points, const Triangle& t, const Vec2& q);
+// How far rounding can put a point from the boundary it lies on: a few units of
+// rounding, plus a straight chain's tolerance (kStraightUlps), of `reach`, the
+// largest coordinate involved.
+double boundary_rounding(double reach);
 
 // Point location: for each query, the index of a triangle containing it (or -1)
 // and its barycentric coordinates in that triangle.
