@@ -4,10 +4,13 @@
 #include <pybind11/pybind11.h>
 #include <pybind11/stl.h>
 
+#include <algorithm>
 #include <cmath>
+#include <memory>
 #include <cstring>
 #include <optional>
 
+#include "evomesh/boundary_geometry.hpp"
 #include "evomesh/drfc.hpp"
 #include "evomesh/frfc.hpp"
 #include "evomesh/options.hpp"
@@ -138,6 +141,39 @@ void add_labels(Mesh_arrays& mesh, const std::optional<Int_array>& segment_tags,
   }
 }
 
+// A boundary geometry from Python: the curved tags, the corner angle and
+// project(points (k, 2) float64, tags (k,) int64) -> (k, 2) array, called with
+// the GIL taken (the step releases it); its exceptions reach the caller.
+std::shared_ptr<const Boundary_geometry> to_geometry(const std::optional<Int_array>& curved_tags,
+                                                     double corner_angle, const std::optional<py::function>& project) {
+  if (!curved_tags) return nullptr;
+  if (!project) throw Input_error("geometry: curved_tags given without a projection");
+  auto geometry = std::make_shared<Boundary_geometry>();
+  geometry->curved_tags = to_vector<std::int64_t>(*curved_tags);
+  std::sort(geometry->curved_tags.begin(), geometry->curved_tags.end());
+  geometry->curved_tags.erase(std::unique(geometry->curved_tags.begin(), geometry->curved_tags.end()),
+                              geometry->curved_tags.end());
+  geometry->corner_angle = corner_angle;
+  // The Python function outlives the step: the binding's arguments hold it.
+  PyObject* function = project->ptr();
+  geometry->project = [function](std::vector<Vec2>& points, const std::vector<std::int64_t>& tags) {
+    py::gil_scoped_acquire gil;
+    const auto k = static_cast<py::ssize_t>(points.size());
+    py::array_t<double> x({k, static_cast<py::ssize_t>(2)});
+    py::array_t<std::int64_t> t(k);
+    std::copy(&points[0][0], &points[0][0] + 2 * points.size(), x.mutable_data());
+    std::copy(tags.begin(), tags.end(), t.mutable_data());
+    py::object returned = py::reinterpret_borrow<py::function>(function)(x, t);
+    auto y = py::array_t<double, py::array::c_style | py::array::forcecast>::ensure(returned);
+    if (!y || y.ndim() != 2 || y.shape(0) != k || y.shape(1) != 2) {
+      throw Input_error("geometry: the projection must return an array of shape (k, 2) for k points");
+    }
+    std::copy(y.data(), y.data() + 2 * points.size(), &points[0][0]);
+  };
+  geometry->validate();
+  return geometry;
+}
+
 // The arrays of a mesh and the input index of every point (-1 for a new one).
 py::dict mesh_dict(const Mesh_arrays& mesh, const std::vector<Index>& origin) {
   py::dict out;
@@ -238,6 +274,7 @@ void bind_options(py::module_& m) {
       py::make_tuple("SAMPLED", static_cast<int>(Point_kind::sampled)));
   m.attr("MAX_MIN_ANGLE") = kMaxMinAngle;
   m.attr("STRAIGHT_ULPS") = kStraightUlps;
+  m.attr("DEFAULT_CORNER_ANGLE") = kDefaultCornerAngle;
   m.def("default_thread_count", &default_thread_count,
         "Threads a step uses by default: EVOMESH_NUM_THREADS, else OMP_NUM_THREADS, else the CPUs this process "
         "may use (affinity and cgroup quota).");
@@ -274,9 +311,11 @@ void bind_step(py::module_& m, const char* name, Result (*run)(const Mesh_arrays
       [run, to_dict](const Float_array& points, const Int_array& triangles, const Int_array& segments,
                      const Byte_array& segment_is_boundary, const Byte_array& kind, const Float_array& delta,
                      const Options& options, std::optional<Int_array> segment_tags,
-                     std::optional<Int_array> triangle_tags, std::optional<Byte_array> required) {
+                     std::optional<Int_array> triangle_tags, std::optional<Byte_array> required,
+                     std::optional<Int_array> curved_tags, double corner_angle, std::optional<py::function> project) {
         Mesh_arrays mesh = to_mesh(points, triangles, segments, segment_is_boundary, kind);
         add_labels(mesh, segment_tags, triangle_tags, required);
+        mesh.geometry = to_geometry(curved_tags, corner_angle, project);
         auto d = to_vector<double>(delta);
         Result r;
         {
@@ -288,7 +327,8 @@ void bind_step(py::module_& m, const char* name, Result (*run)(const Mesh_arrays
       py::arg("points"), py::arg("triangles"), py::arg("segments"), py::arg("segment_is_boundary"),
       py::arg("kind"), py::arg("delta"), py::arg("options") = Options::recommended(),
       py::arg("segment_tags") = py::none(), py::arg("triangle_tags") = py::none(), py::arg("required") = py::none(),
-      doc);
+      py::arg("curved_tags") = py::none(), py::arg("corner_angle") = kDefaultCornerAngle,
+      py::arg("project") = py::none(), doc);
 }
 
 PYBIND11_MODULE(_core, m) {

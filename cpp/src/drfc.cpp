@@ -26,6 +26,7 @@ struct Refinement_stage {
 Refinement_stage refinement_stage(const Mesh_arrays& mesh, const std::vector<double>& delta,
                                   const Drfc_options& options, Stage_timer& timer) {
   check_delta(mesh, delta);
+  if (mesh.geometry) throw Input_error("a boundary geometry (curved boundaries) is supported by method 'frfc' only");
   options.validate();
   Refinement_stage stage;
   stage.spacing = step_spacing(mesh, delta, F_at_points::evaluate_all, options.threads, timer);

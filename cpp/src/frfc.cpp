@@ -120,8 +120,9 @@ struct Early_start {
   std::vector<Vec2> points;
   Early_triangulation triangulation;
   Background work;
-  Early_start(const Packing& packing, const Frfc_options& options) {
-    if (!options.quality) return;
+  Early_start(const Packing& packing, const Frfc_options& options, bool curved) {
+    // (with curved boundaries, kept segment candidates move before the triangulation)
+    if (!options.quality || curved) return;
     for (std::size_t c = 0; c < packing.kept_first.size(); ++c) {
       if (packing.kept_first[c]) points.push_back(packing.centers[c]);
     }
@@ -164,9 +165,12 @@ std::vector<Vec2> spacing_repair_stage(const Mesh_arrays& mesh, const Triangle_f
 
 }  // namespace
 
-Evolve_result frfc(const Mesh_arrays& mesh, const std::vector<double>& delta, const Frfc_options& options) {
-  check_delta(mesh, delta);
+Evolve_result frfc(const Mesh_arrays& input, const std::vector<double>& delta, const Frfc_options& options) {
+  check_delta(input, delta);
   options.validate();
+  // With curved boundaries, the corners of curved chains come from the geometry.
+  const Mesh_arrays with_curves = input.geometry ? with_curve_kinds(input) : Mesh_arrays{};
+  const Mesh_arrays& mesh = input.geometry ? with_curves : input;
   Evolve_result result;
   Stage_timer timer(result.stats);
   const Thread_limit thread_limit(options.threads);  // also for the stages without a threads argument
@@ -179,7 +183,7 @@ Evolve_result frfc(const Mesh_arrays& mesh, const std::vector<double>& delta, co
   std::size_t n_forced = 0;
   const auto forced = forced_corners(mesh, chains, n_forced, mesh.required);
   Packing packing = first_packing_pass(mesh, spacing.f, on_segments, forced, n_forced, options);
-  Early_start early(packing, options);
+  Early_start early(packing, options, mesh.geometry != nullptr);
   timer.lap("lfmis");
   const Triangle_fans fans(mesh);
   std::size_t n_drawn = 0;
@@ -190,17 +194,23 @@ Evolve_result frfc(const Mesh_arrays& mesh, const std::vector<double>& delta, co
   const auto repair_points = spacing_repair_stage(mesh, fans, delta, spacing, on_segments, options, packing, n_repairs);
   timer.lap("spacing_repair");
 
-  // Step 6: the kept points, the constraint pieces between them, their triangulation.
+  // Step 6: the kept points (on curves, moved onto them), the constraint pieces
+  // between them, their triangulation.
+  if (mesh.geometry) {
+    project_segment_candidates(mesh, on_segments.samples.parent, mesh.points.size(), packing.kept, packing.radius,
+                               packing.centers);
+  }
   std::vector<Index> out_index;
   Selection selection = select_output(mesh, forced, packing, on_segments.size(), repair_points, out_index);
   selection.pin(mesh.required);
   const auto pieces = pieces_along_chains(mesh, chains, on_segments, out_index);
   const Quality_options quality = options.quality_settings();
   early.work.wait();
+  const bool early_started = options.quality && !mesh.geometry;
   triangulate_selection(std::move(selection), pieces, options.quality ? &quality : nullptr, result,
-                        options.quality ? &early.triangulation : nullptr);
+                        early_started ? &early.triangulation : nullptr, mesh.geometry.get());
   timer.lap(options.quality ? "quality" : "cdt");
-  finish_step(mesh, result, timer);
+  finish_step(input, result, timer);
   add_step_counts(result, {{"n_input_points", mesh.points.size()},
                            {"n_segment_samples", on_segments.size()},
                            {"n_interior_samples", inside.size()},

@@ -50,8 +50,11 @@ std::vector<std::array<Index, 3>> triangle_neighbours(const std::vector<Triangle
 // Point location in the old mesh by visibility walks over its triangles.
 class Old_mesh_walker {
  public:
-  explicit Old_mesh_walker(const Mesh_arrays& old_mesh)
-      : P_(old_mesh.points),
+  // `outside`: how far outside the old domain a point may lie and still be
+  // located (in its nearest boundary triangle); 0: by rounding only.
+  explicit Old_mesh_walker(const Mesh_arrays& old_mesh, double outside = 0)
+      : outside_(outside),
+        P_(old_mesh.points),
         T_(old_mesh.triangles),
         neighbour_(triangle_neighbours(old_mesh.triangles)),
         triangle_at_(old_mesh.points.size(), -1),
@@ -105,7 +108,7 @@ class Old_mesh_walker {
       const Vec2& b = P_[tri[(boundary_side + 1) % 3]];
       const double reach = std::max({std::abs(q[0]), std::abs(q[1]), std::abs(a[0]), std::abs(a[1]), std::abs(b[0]),
                                      std::abs(b[1])});
-      if (distance_to_segment(q, a, b) <= boundary_rounding(reach)) return t;
+      if (distance_to_segment(q, a, b) <= std::max(outside_, boundary_rounding(reach))) return t;
       return search(t, q);  // blocked by the boundary of a non-convex domain
     }
     return search(t, q);
@@ -125,7 +128,7 @@ class Old_mesh_walker {
       open.pop();
       double reach = std::max(std::abs(q[0]), std::abs(q[1]));
       for (Index v : T_[u]) reach = std::max({reach, std::abs(P_[v][0]), std::abs(P_[v][1])});
-      if (d <= boundary_rounding(reach)) return u;
+      if (d <= std::max(outside_, boundary_rounding(reach))) return u;
       // across edges, and around vertices: where a domain touches itself at a
       // vertex, the triangles on either side share no edge
       for (Index v : T_[u]) {
@@ -139,6 +142,7 @@ class Old_mesh_walker {
   }
 
  private:
+  double outside_;
   const std::vector<Vec2>& P_;
   const std::vector<Triangle>& T_;
   std::vector<std::array<Index, 3>> neighbour_;
@@ -173,7 +177,8 @@ std::vector<Index> locate_with_hints(const Mesh_arrays& old_mesh, const Old_mesh
 
 }  // namespace
 
-Parent_map parent_map(const Mesh_arrays& old_mesh, const Mesh_arrays& new_mesh, const std::vector<Index>& origin) {
+Parent_map parent_map(const Mesh_arrays& old_mesh, const Mesh_arrays& new_mesh, const std::vector<Index>& origin,
+                      double outside) {
   const auto& P = old_mesh.points;
   const auto& T = old_mesh.triangles;
   const std::size_t n_new = new_mesh.points.size();
@@ -182,7 +187,7 @@ Parent_map parent_map(const Mesh_arrays& old_mesh, const Mesh_arrays& new_mesh, 
   map.triangle.assign(n_new, -1);
   map.barycentric.assign(n_new, {0.0, 0.0, 0.0});
   if (T.empty()) return map;
-  const Old_mesh_walker walker(old_mesh);
+  const Old_mesh_walker walker(old_mesh, outside);
   // New points around each new point (compressed lists).
   std::vector<Index> xadj(n_new + 1, 0), adj;
   for (const auto& t : new_mesh.triangles) {
@@ -246,7 +251,7 @@ Parent_map parent_map(const Mesh_arrays& old_mesh, const Mesh_arrays& new_mesh, 
 }
 
 void carry_tags(const Mesh_arrays& old_mesh, const std::vector<Index>& origin, const Parent_map& parents,
-                Mesh_arrays& new_mesh) {
+                Mesh_arrays& new_mesh, double outside) {
   if (!old_mesh.required.empty()) {
     new_mesh.required.assign(new_mesh.points.size(), 0);
     for (std::size_t i = 0; i < origin.size(); ++i) {
@@ -256,7 +261,7 @@ void carry_tags(const Mesh_arrays& old_mesh, const std::vector<Index>& origin, c
   const bool segments_tagged = !old_mesh.segment_tags.empty();
   const bool triangles_tagged = !old_mesh.triangle_tags.empty();
   if (!segments_tagged && !triangles_tagged) return;
-  const Old_mesh_walker walker(old_mesh);
+  const Old_mesh_walker walker(old_mesh, outside);
   // An old triangle at (or near) every new point, to start walks from.
   auto hint_at = [&](Index v) { return origin[v] >= 0 ? walker.triangle_at(origin[v]) : parents.triangle[v]; };
   std::size_t searched = 0;

@@ -115,7 +115,7 @@ std::vector<Constraint_piece> constraint_pieces(const std::vector<Segment_chain>
     // All segments of a boundary chain are oriented alike (domain on the left).
     const bool flip = chain.boundary && !chain.forward.front();
     for (std::size_t k = 0; k + 1 < along.size(); ++k) {
-      Constraint_piece piece{along[k], along[k + 1], chain.boundary};
+      Constraint_piece piece{along[k], along[k + 1], chain.boundary, chain.tag};
       if (flip) std::swap(piece.a, piece.b);
       pieces.push_back(piece);
     }

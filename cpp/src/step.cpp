@@ -63,7 +63,8 @@ void check_sample_budget(double estimate, double max_samples, const char* what) 
 }
 
 void triangulate_selection(Selection selected, const std::vector<Constraint_piece>& pieces,
-                           const Quality_options* quality, Evolve_result& result, Early_triangulation* early) {
+                           const Quality_options* quality, Evolve_result& result, Early_triangulation* early,
+                           const Boundary_geometry* geometry) {
   auto& stats = result.stats;
   Mesh_arrays& mesh = selected.mesh;
   // CGAL's triangulations assume these (a piece from a point to itself, or out
@@ -74,6 +75,7 @@ void triangulate_selection(Selection selected, const std::vector<Constraint_piec
       throw std::logic_error("triangulate_selection: a degenerate constraint piece");
     }
   }
+  std::vector<Index> selection_index;  // of every output point, -1: inserted by the quality pass
   if (quality != nullptr) {
     // CGAL's mesher checks its own invariants (these files are built with CGAL's
     // assertions on, see CMakeLists.txt); on near-degenerate input it can fail
@@ -88,6 +90,7 @@ void triangulate_selection(Selection selected, const std::vector<Constraint_piec
         result.origin[i] = refined.source[i] < 0 ? -1 : selected.origin[refined.source[i]];
       }
       result.mesh = std::move(refined.mesh);
+      if (geometry) selection_index = std::move(refined.source);
       const auto& report = refined.report;
       stats.emplace_back("quality_points_added", static_cast<double>(report.n_inserted));
       stats.emplace_back("quality_points_added_on_segments", static_cast<double>(report.n_inserted_on_segments));
@@ -107,6 +110,13 @@ void triangulate_selection(Selection selected, const std::vector<Constraint_piec
     }
     result.mesh = std::move(mesh);
     result.origin = std::move(selected.origin);
+    if (geometry) {
+      selection_index.resize(result.mesh.points.size());
+      for (std::size_t i = 0; i < selection_index.size(); ++i) selection_index[i] = static_cast<Index>(i);
+    }
+  }
+  if (geometry) {
+    result.curve_reach = fit_to_curves(*geometry, pieces, selection_index, result);
   }
   // The smallest angle and where it is (Section 6 reports it per step).
   const auto angle = smallest_angle(result.mesh.points, result.mesh.triangles);
@@ -116,8 +126,8 @@ void triangulate_selection(Selection selected, const std::vector<Constraint_piec
 }
 
 void finish_step(const Mesh_arrays& input, Evolve_result& result, detail::Stage_timer& timer) {
-  result.parents = parent_map(input, result.mesh, result.origin);
-  carry_tags(input, result.origin, result.parents, result.mesh);
+  result.parents = parent_map(input, result.mesh, result.origin, result.curve_reach);
+  carry_tags(input, result.origin, result.parents, result.mesh, result.curve_reach);
   timer.lap("parent_map");
   auto& stats = result.stats;
   double seconds = 0;

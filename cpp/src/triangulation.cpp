@@ -14,6 +14,7 @@
 #include <numeric>
 #include <string>
 
+#include "evomesh/boundary_geometry.hpp"
 #include "evomesh/detail/domain.hpp"
 #include "evomesh/kernel.hpp"
 
@@ -174,6 +175,7 @@ std::vector<Point_kind> classify_points(const Mesh_arrays& mesh) {
   std::vector<std::array<Index, 2>> neighbour(n, {-1, -1});
   std::vector<std::array<int, 2>> flavour(n, {-1, -1});
   std::vector<std::array<std::int64_t, 2>> tag(n, {0, 0});
+  std::vector<std::uint8_t> curved(n, 0);  // a vertex inside a chain of a curved tag
   for (std::size_t k = 0; k < mesh.segments.size(); ++k) {
     const Edge& e = mesh.segments[k];
     for (int s = 0; s < 2; ++s) {
@@ -191,6 +193,15 @@ std::vector<Point_kind> classify_points(const Mesh_arrays& mesh) {
     const bool required = !mesh.required.empty() && mesh.required[v];
     if (degree[v] != 2 || flavour[v][0] != flavour[v][1] || tag[v][0] != tag[v][1] || required) {
       kind[v] = Point_kind::corner;
+      continue;
+    }
+    if (mesh.geometry && mesh.geometry->is_curved(tag[v][0])) {
+      // On a curve: a corner only where the polygon turns by more than the corner angle.
+      curved[v] = 1;
+      const Vec2 &u = mesh.points[neighbour[v][0]], &p = mesh.points[v], &w = mesh.points[neighbour[v][1]];
+      const double ax = p[0] - u[0], ay = p[1] - u[1], bx = w[0] - p[0], by = w[1] - p[1];
+      const double turn = std::atan2(std::abs(ax * by - ay * bx), ax * bx + ay * by) * 57.295779513082320876;  // degrees
+      kind[v] = turn > mesh.geometry->corner_angle ? Point_kind::corner : Point_kind::boundary;
       continue;
     }
     kind[v] = runs_straight_through(mesh.points[neighbour[v][0]], mesh.points[v], mesh.points[neighbour[v][1]])
@@ -232,6 +243,7 @@ std::vector<Point_kind> classify_points(const Mesh_arrays& mesh) {
       chain.insert(chain.end(), side.begin(), side.end());
     }
     for (Index v : chain) visited[v] = 1;
+    if (curved[v0]) continue;  // a curve: its geometry, not straightness, decides
     double reach = 0;
     for (Index v : chain) reach = std::max({reach, std::abs(mesh.points[v][0]), std::abs(mesh.points[v][1])});
     const double tolerance = kStraightUlps * std::numeric_limits<double>::epsilon() * reach;

@@ -17,6 +17,7 @@ from evomesh.evolution import (
     delaunay_refine,
     evolve,
 )
+from evomesh.geometry import Arc, BoundaryGeometry, Circle, SignedDistance
 from evomesh.mesh import Lineage, Mesh, PointKind
 from evomesh.mesh_quality import Quality, quality
 from evomesh.packing import lexical_first_mis
@@ -25,6 +26,10 @@ from evomesh.spacing_function import SpacingFunction, nn_spacing, spacing
 __all__ = [
     "Mesh",
     "PointKind",
+    "BoundaryGeometry",
+    "Circle",
+    "Arc",
+    "SignedDistance",
     "Lineage",
     "QualityWarning",
     "default_thread_count",

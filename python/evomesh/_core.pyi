@@ -5,6 +5,7 @@ like of the right shape is accepted. Returned arrays are new numpy arrays of
 the dtypes given here; indices are int64, flags and point kinds uint8.
 """
 
+from collections.abc import Callable
 from typing import ClassVar, TypedDict
 
 import numpy as np
@@ -13,6 +14,7 @@ from typing_extensions import NotRequired
 
 POINT_KINDS: tuple[tuple[str, int], ...]
 MAX_MIN_ANGLE: float
+DEFAULT_CORNER_ANGLE: float
 STRAIGHT_ULPS: float
 
 class SampleMode:
@@ -159,6 +161,9 @@ def prepare_mesh(
     check_planar: bool = True,
     segment_tags: ArrayLike | None = None,
     required: ArrayLike | None = None,
+    curved_tags: ArrayLike | None = None,
+    corner_angle: float = ...,
+    project: Callable[[NDArray[np.float64], NDArray[np.int64]], ArrayLike] | None = None,
 ) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.uint8], NDArray[np.uint8], int, NDArray[np.int64]]:
     """Orient triangles CCW, build segments, check planarity, classify points.
     Returns (triangles, segments, segment_is_boundary, kind, n_flipped, segment_tags)."""
@@ -180,6 +185,9 @@ def frfc(
     segment_tags: ArrayLike | None = None,
     triangle_tags: ArrayLike | None = None,
     required: ArrayLike | None = None,
+    curved_tags: ArrayLike | None = None,
+    corner_angle: float = ...,
+    project: Callable[[NDArray[np.float64], NDArray[np.int64]], ArrayLike] | None = None,
 ) -> EvolveResult:
     """Functional-Refining-Functional-Coarsening (Section 3.2): one step; returns a dict of arrays and stats."""
 
@@ -194,6 +202,9 @@ def drfc(
     segment_tags: ArrayLike | None = None,
     triangle_tags: ArrayLike | None = None,
     required: ArrayLike | None = None,
+    curved_tags: ArrayLike | None = None,
+    corner_angle: float = ...,
+    project: Callable[[NDArray[np.float64], NDArray[np.int64]], ArrayLike] | None = None,
 ) -> EvolveResult:
     """Delaunay-Refining-Functional-Coarsening (Section 5); returns the same dict as frfc."""
 
@@ -208,6 +219,9 @@ def drfc_refine(
     segment_tags: ArrayLike | None = None,
     triangle_tags: ArrayLike | None = None,
     required: ArrayLike | None = None,
+    curved_tags: ArrayLike | None = None,
+    corner_angle: float = ...,
+    project: Callable[[NDArray[np.float64], NDArray[np.int64]], ArrayLike] | None = None,
 ) -> RefineResult:
     """DRFC step 1 alone: Delaunay refinement with Ruppert's rules and rule 4 (Section 5)."""
 

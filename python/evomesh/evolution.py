@@ -10,6 +10,7 @@ from typing import Any
 import numpy as np
 
 from evomesh import _core
+from evomesh.geometry import as_geometry
 from evomesh.mesh import Lineage, Mesh, check_mesh_limits
 from evomesh.spacing_function import _require_mesh, as_delta, delta_from_size
 
@@ -124,7 +125,7 @@ def _check_seed(seed: Any) -> int:
 
 
 def evolve(mesh: Mesh, delta: Any = None, *, size: Any = None, method: str = "frfc", seed: int | None = None,
-           options: Any = None, **overrides: Any) -> Mesh:
+           options: Any = None, geometry: Any = None, **overrides: Any) -> Mesh:
     """Evolve a mesh one step: new spacing delta(p) * nn_M(p) at every point p
     (or the absolute spacing ``size``).
 
@@ -236,6 +237,14 @@ def evolve(mesh: Mesh, delta: Any = None, *, size: Any = None, method: str = "fr
 
         Every output's ``stats`` holds ``min_angle`` (degrees) and its location
         ``min_angle_x``, ``min_angle_y`` (centroid of the triangle that has it).
+    geometry : BoundaryGeometry or mapping of segment tag to curve, optional
+        Curved boundaries (:mod:`evomesh.geometry`; "frfc" only): boundary
+        vertices of the curved tags that turn by less than the geometry's
+        ``corner_angle`` may be removed, and every boundary point the step
+        creates there lies on the curve. ``stats`` then also holds
+        ``curve_points_projected``, ``curve_largest_move`` and
+        ``curve_points_dropped_outside`` (interior points a coarser curved
+        boundary left outside). Without it the polygon is the domain, exactly.
 
     Returns
     -------
@@ -263,9 +272,12 @@ def evolve(mesh: Mesh, delta: Any = None, *, size: Any = None, method: str = "fr
     o = make_options(method, options, **overrides)
     if method == "frfc" and seed is not None:
         o.seed = _check_seed(seed)
+    g = as_geometry(geometry)
+    if g is not None and method != "frfc":
+        raise ValueError("geometry (curved boundaries) is supported by method='frfc' only")
     core = _core.frfc if method == "frfc" else _core.drfc
     result = core(mesh.points, mesh.triangles, mesh.segments, mesh.segment_is_boundary.astype(np.uint8), mesh.kind, d, o,
-                  **mesh._labels())
+                  **mesh._labels(), **({} if g is None else g._core_arguments()))
     return _wrap(result, mesh)
 
 

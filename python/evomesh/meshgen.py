@@ -9,7 +9,7 @@ from scipy.spatial import Delaunay
 
 from evomesh.mesh import Mesh
 
-__all__ = ["unit_square_mesh"]
+__all__ = ["unit_square_mesh", "disc_with_hole_mesh", "OUTER_TAG", "HOLE_TAG"]
 
 _ROW_RATIO = np.sqrt(3.0) / 2.0  # row spacing / point spacing of a hexagonal lattice
 
@@ -121,3 +121,58 @@ def unit_square_mesh(n_points: int = 1096, *, jitter: float = 0.1, seed: int = 0
     area = 0.5 * np.abs(d1[:, 0] * d2[:, 1] - d1[:, 1] * d2[:, 0])
     triangles = triangles[area > 1e-12]
     return Mesh(points * size, triangles)
+
+
+#: Segment tags of :func:`disc_with_hole_mesh`.
+OUTER_TAG = 1
+HOLE_TAG = 2
+
+
+def disc_with_hole_mesh(spacing: float = 0.05, *, outer: float = 1.0, hole: float = 0.35,
+                        boundary_spacing: float | None = None, seed: int = 0) -> Mesh:
+    """A deterministic mesh of the disc of radius ``outer`` minus the disc of
+    radius ``hole`` (both centred at the origin), for curved-boundary work.
+
+    Both circles are polygons of about ``boundary_spacing`` (default
+    ``spacing``) whose vertices lie on the circles (within a unit of rounding);
+    interior points are a jittered hexagonal lattice of ``spacing``, kept
+    0.75 spacings away from the circles; the triangulation is their Delaunay
+    triangulation (scipy) less the triangles in the hole. Segments are tagged
+    :data:`OUTER_TAG` on the outer circle and :data:`HOLE_TAG` on the hole, so
+    ``BoundaryGeometry({OUTER_TAG: Circle((0, 0), outer), HOLE_TAG: Circle((0, 0), hole)})``
+    is its geometry.
+    """
+    for name, value in (("spacing", spacing), ("outer", outer), ("hole", hole)):
+        if isinstance(value, bool) or not isinstance(value, numbers.Real) or not np.isfinite(value) or value <= 0:
+            raise ValueError(f"{name} must be a finite number > 0, got {value!r}")
+    if not hole < outer:
+        raise ValueError(f"hole ({hole}) must be smaller than outer ({outer})")
+    b = spacing if boundary_spacing is None else boundary_spacing
+    if not (np.isfinite(b) and b > 0):
+        raise ValueError(f"boundary_spacing must be a finite number > 0, got {boundary_spacing!r}")
+    if outer / spacing > 5000 or outer / b > 5000:
+        raise ValueError("spacing too small for disc_with_hole_mesh (more than about 1e8 points)")
+
+    def circle(radius: float) -> np.ndarray:
+        n = max(12, int(np.ceil(2 * np.pi * radius / b)))
+        angle = 2 * np.pi * np.arange(n) / n
+        return radius * np.c_[np.cos(angle), np.sin(angle)]
+
+    k = int(np.ceil(outer / spacing)) + 1
+    i, j = np.meshgrid(np.arange(-k, k + 1), np.arange(-k, k + 1))
+    lattice = np.c_[(i + 0.5 * (j % 2)).ravel() * spacing, (j * _ROW_RATIO).ravel() * spacing]
+    rng = np.random.default_rng(seed)
+    lattice += rng.uniform(-0.1, 0.1, lattice.shape) * spacing
+    r = np.hypot(lattice[:, 0], lattice[:, 1])
+    margin = 0.75 * max(spacing, b)
+    lattice = lattice[(r > hole + margin) & (r < outer - margin)]
+    points = np.concatenate([circle(outer), circle(hole), lattice])
+    triangles = Delaunay(points).simplices
+    centroid = points[triangles].mean(axis=1)
+    triangles = triangles[np.hypot(centroid[:, 0], centroid[:, 1]) > hole]
+    edges = np.sort(np.concatenate([triangles[:, [0, 1]], triangles[:, [1, 2]], triangles[:, [2, 0]]]), axis=1)
+    edges, count = np.unique(edges, axis=0, return_counts=True)
+    segments = edges[count == 1]
+    middle = np.hypot(*points[segments].mean(axis=1).T)
+    tags = np.where(middle < 0.5 * (hole + outer), HOLE_TAG, OUTER_TAG)
+    return Mesh(points, triangles, segments, segment_tags=tags)

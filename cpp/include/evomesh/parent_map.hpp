@@ -29,7 +29,12 @@ struct Parent_map {
 // neighbour already placed, a few triangles away (a visibility walk with exact
 // orientation tests). Points a walk cannot reach (across a hole, or a walk longer
 // than its bound) are located by a search over the whole old mesh. O(n) walks.
-Parent_map parent_map(const Mesh_arrays& old_mesh, const Mesh_arrays& new_mesh, const std::vector<Index>& origin);
+// `outside`: a step that moved boundary points onto curves (boundary_geometry.hpp)
+// may put new points outside the old domain by up to this much; they are
+// located in the nearest boundary triangle (with a negative coordinate). 0: by
+// rounding only.
+Parent_map parent_map(const Mesh_arrays& old_mesh, const Mesh_arrays& new_mesh, const std::vector<Index>& origin,
+                      double outside = 0);
 
 // The input's labels on the new mesh, through the parent map (no global search):
 // every new triangle gets the tag of the input triangle containing its centroid
@@ -38,6 +43,6 @@ Parent_map parent_map(const Mesh_arrays& old_mesh, const Mesh_arrays& new_mesh, 
 // step, so a chain of segments has one tag), every kept point its `required` flag.
 // Labels the input does not have stay empty.
 void carry_tags(const Mesh_arrays& old_mesh, const std::vector<Index>& origin, const Parent_map& parents,
-                Mesh_arrays& new_mesh);
+                Mesh_arrays& new_mesh, double outside = 0);
 
 }  // namespace evomesh

@@ -10,6 +10,7 @@
 #include <utility>
 #include <vector>
 
+#include "evomesh/boundary_geometry.hpp"
 #include "evomesh/options.hpp"
 #include "evomesh/parent_map.hpp"
 #include "evomesh/quality_pass.hpp"
@@ -52,6 +53,7 @@ struct Evolve_result {
   std::vector<double> input_f; // f at the input points
   std::vector<double> input_nn;
   Parent_map parents;          // where every new point lies in the input mesh
+  double curve_reach = 0;      // how far outside the input's domain curved boundaries put new points
   std::vector<std::pair<std::string, double>> stats;  // stage timings (s) and counts
 };
 
@@ -110,9 +112,12 @@ inline Point_kind kept_point_kind(Point_kind kind, bool forced_corner, bool from
 // runs the quality pass on them when `quality` is given (on `early`, when given,
 // whose first points must be the first selected points). Fills result.mesh and
 // result.origin and adds the pass's counts and the smallest angle to result.stats.
+// With a `geometry`, new points on curved pieces are then moved onto their
+// curves (fit_to_curves); result.curve_reach says how far outside the input's
+// domain that may put them.
 void triangulate_selection(Selection selected, const std::vector<Constraint_piece>& pieces,
                            const Quality_options* quality, Evolve_result& result,
-                           Early_triangulation* early = nullptr);
+                           Early_triangulation* early = nullptr, const Boundary_geometry* geometry = nullptr);
 
 
 // After triangulate_selection: the parent map of the new mesh in `input` (timed

@@ -14,6 +14,7 @@ struct Constraint_piece {
   Index a;
   Index b;
   bool boundary;
+  std::int64_t tag = 0;  // the segment tag of the chain it lies on
 };
 
 // Constrained Delaunay triangulation of `points` with `pieces` as constraints;

@@ -4,11 +4,14 @@
 #include <array>
 #include <cstdio>
 #include <cstdint>
+#include <memory>
 #include <stdexcept>
 #include <string>
 #include <vector>
 
 namespace evomesh {
+
+struct Boundary_geometry;  // boundary_geometry.hpp
 
 using Index = std::int64_t;
 using Vec2 = std::array<double, 2>;
@@ -54,6 +57,9 @@ struct Mesh_arrays {
   std::vector<std::int64_t> segment_tags;
   std::vector<std::int64_t> triangle_tags;
   std::vector<std::uint8_t> required;
+  // Optional (null: the polygon is the domain, exactly): the curves behind
+  // segments of some tags (boundary_geometry.hpp). A step's input only.
+  std::shared_ptr<const Boundary_geometry> geometry;
 };
 
 }  // namespace evomesh

@@ -1,0 +1,66 @@
+// Curved boundaries (issue 12): the true curve behind a polygonal boundary,
+// given per segment tag as a projection onto it. With a geometry, a boundary
+// vertex of a curved tag where the boundary turns by less than `corner_angle`
+// is not a corner (a step may remove it), and every boundary point a step
+// creates on a curved tag is moved onto the curve. Without one, the polygon is
+// the domain, exactly (classify_points).
+#pragma once
+
+#include <algorithm>
+#include <cstdint>
+#include <functional>
+#include <vector>
+
+#include "evomesh/types.hpp"
+
+namespace evomesh {
+
+// The default of Boundary_geometry::corner_angle (degrees).
+constexpr double kDefaultCornerAngle = 30.0;
+
+struct Boundary_geometry {
+  // Segment tags whose segments approximate a curve (sorted, no repeats).
+  std::vector<std::int64_t> curved_tags;
+  // A vertex where the boundary turns by more than this (degrees, in (0, 180))
+  // stays a corner, even between two segments of one curved tag.
+  double corner_angle = kDefaultCornerAngle;
+  // Moves points[i] onto the curve of tag tags[i] (in place); may throw.
+  std::function<void(std::vector<Vec2>& points, const std::vector<std::int64_t>& tags)> project;
+
+  bool is_curved(std::int64_t tag) const {
+    return std::binary_search(curved_tags.begin(), curved_tags.end(), tag);
+  }
+  // Throws Input_error naming the first field out of range.
+  void validate() const;
+};
+
+struct Mesh_arrays;
+struct Evolve_result;
+struct Constraint_piece;
+
+// The step's input with the kinds of points on curved chains taken from the
+// geometry (corners only where it turns by more than corner_angle, at tag
+// changes and at required points), and a zero tag on every segment when it had
+// none. mesh.geometry must be set.
+Mesh_arrays with_curve_kinds(const Mesh_arrays& mesh);
+
+// FRFC, before triangulating: moves the kept segment candidates of curved tags
+// onto their curves. Candidate k is centers[first + k], on segment
+// segment_of_candidate[k]; each may move by at most its sphere's radius (else
+// Input_error). Returns the largest move.
+double project_segment_candidates(const Mesh_arrays& mesh, const std::vector<Index>& segment_of_candidate,
+                                  std::size_t first, const std::vector<std::uint8_t>& kept,
+                                  const std::vector<double>& radius, std::vector<Vec2>& centers);
+
+// After triangulating the selection with `pieces`: every new point on a curved
+// piece (a new selected point, or one the quality pass inserted; by at most half
+// its shortest segment) is moved onto its curve and the constraints are
+// triangulated again through the moved points; points that end up outside the
+// domain are dropped (stats "curve_points_projected", "curve_points_dropped_outside",
+// "curve_largest_move"). selection_index: of every output point, -1 for one the
+// quality pass inserted. Returns how far outside the input's domain the new
+// boundary may lie (at most the longest piece on a curve, or twice the largest move).
+double fit_to_curves(const Boundary_geometry& geometry, const std::vector<Constraint_piece>& pieces,
+                     const std::vector<Index>& selection_index, Evolve_result& result);
+
+}  // namespace evomesh

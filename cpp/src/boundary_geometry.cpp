@@ -1,0 +1,254 @@
+#include "evomesh/boundary_geometry.hpp"
+
+#include <CGAL/exceptions.h>
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <string>
+#include <unordered_map>
+
+#include "evomesh/step.hpp"
+#include "evomesh/triangulation.hpp"
+
+namespace evomesh {
+
+void Boundary_geometry::validate() const {
+  if (!(corner_angle > 0 && corner_angle < 180)) {
+    throw Input_error("geometry: corner_angle must be in (0, 180) degrees, got " + std::to_string(corner_angle));
+  }
+  if (!std::is_sorted(curved_tags.begin(), curved_tags.end()) ||
+      std::adjacent_find(curved_tags.begin(), curved_tags.end()) != curved_tags.end()) {
+    throw std::logic_error("Boundary_geometry: curved_tags must be sorted without repeats");
+  }
+  if (!project) throw Input_error("geometry: no projection");
+}
+
+namespace {
+
+std::string where(const Vec2& x) {
+  char buffer[80];
+  std::snprintf(buffer, sizeof buffer, "(%.17g, %.17g)", x[0], x[1]);
+  return buffer;
+}
+
+// Projects `points` (on segments tagged `tags`) onto their curves; each may move
+// by at most limit[k]. Returns the largest move.
+double project_points(const Boundary_geometry& geometry, std::vector<Vec2>& points,
+                      const std::vector<std::int64_t>& tags, const std::vector<double>& limit) {
+  if (points.empty()) return 0;
+  const std::vector<Vec2> before = points;
+  geometry.project(points, tags);
+  if (points.size() != before.size()) throw Input_error("geometry: the projection returned a different number of points");
+  double largest = 0;
+  for (std::size_t k = 0; k < points.size(); ++k) {
+    const double move = std::hypot(points[k][0] - before[k][0], points[k][1] - before[k][1]);
+    if (!std::isfinite(points[k][0]) || !std::isfinite(points[k][1]) || !(move <= limit[k])) {
+      throw Input_error("geometry: projecting the boundary point " + where(before[k]) + " (segment tag " +
+                        std::to_string(tags[k]) + ") gave " + where(points[k]) + ", a move of " + format_count(move) +
+                        ", more than the local spacing allows (" + format_count(limit[k]) +
+                        "): is this the curve that the segments of that tag approximate?");
+    }
+    largest = std::max(largest, move);
+  }
+  return largest;
+}
+
+}  // namespace
+
+Mesh_arrays with_curve_kinds(const Mesh_arrays& input) {
+  Mesh_arrays mesh = input;
+  mesh.geometry->validate();
+  if (mesh.segment_tags.empty()) mesh.segment_tags.assign(mesh.segments.size(), 0);
+  // A point on segments of curved tags only is a corner exactly when the geometry
+  // says so (classify_points); on straight chains the given kinds stand.
+  const std::vector<Point_kind> geometric = classify_points(mesh);
+  std::vector<std::uint8_t> on_curve(mesh.points.size(), 0), on_straight(mesh.points.size(), 0);
+  for (std::size_t s = 0; s < mesh.segments.size(); ++s) {
+    auto& mark = mesh.geometry->is_curved(mesh.segment_tags[s]) ? on_curve : on_straight;
+    mark[mesh.segments[s][0]] = mark[mesh.segments[s][1]] = 1;
+  }
+  for (std::size_t v = 0; v < mesh.points.size(); ++v) {
+    if (on_curve[v] && !on_straight[v]) mesh.kind[v] = geometric[v];
+  }
+  return mesh;
+}
+
+double project_segment_candidates(const Mesh_arrays& mesh, const std::vector<Index>& segment_of_candidate,
+                                  std::size_t first, const std::vector<std::uint8_t>& kept,
+                                  const std::vector<double>& radius, std::vector<Vec2>& centers) {
+  const Boundary_geometry& geometry = *mesh.geometry;
+  std::vector<std::size_t> which;
+  std::vector<Vec2> points;
+  std::vector<std::int64_t> tags;
+  std::vector<double> limit;
+  for (std::size_t k = 0; k < segment_of_candidate.size(); ++k) {
+    const std::size_t c = first + k;
+    const std::int64_t tag = mesh.segment_tags[segment_of_candidate[k]];
+    if (!kept[c] || !geometry.is_curved(tag)) continue;
+    which.push_back(c);
+    points.push_back(centers[c]);
+    tags.push_back(tag);
+    limit.push_back(radius[c]);
+  }
+  const double largest = project_points(geometry, points, tags, limit);
+  for (std::size_t k = 0; k < which.size(); ++k) centers[which[k]] = points[k];
+  return largest;
+}
+
+namespace {
+
+// Removes the points no triangle uses (interior points that a curved boundary
+// left outside), renumbering everything.
+std::size_t drop_unused_points(Evolve_result& result) {
+  Mesh_arrays& mesh = result.mesh;
+  const std::size_t n = mesh.points.size();
+  std::vector<Index> renumber(n, -1);
+  for (const auto& t : mesh.triangles) {
+    for (Index v : t) renumber[v] = 0;
+  }
+  Index next = 0;
+  for (std::size_t v = 0; v < n; ++v) {
+    if (renumber[v] < 0) continue;
+    renumber[v] = next;
+    mesh.points[next] = mesh.points[v];
+    mesh.kind[next] = mesh.kind[v];
+    result.origin[next] = result.origin[v];
+    if (!mesh.required.empty()) mesh.required[next] = mesh.required[v];
+    ++next;
+  }
+  const std::size_t dropped = n - static_cast<std::size_t>(next);
+  if (dropped == 0) return 0;
+  for (std::size_t v = 0; v < n; ++v) {
+    if (renumber[v] < 0 && !mesh.required.empty() && mesh.required[v]) {
+      throw Input_error("geometry: the required point " + where(mesh.points[v]) +
+                        " lies outside the curved boundary");
+    }
+  }
+  mesh.points.resize(next);
+  mesh.kind.resize(next);
+  result.origin.resize(next);
+  if (!mesh.required.empty()) mesh.required.resize(next);
+  for (auto& t : mesh.triangles) {
+    for (Index& v : t) v = renumber[v];
+  }
+  for (auto& e : mesh.segments) {
+    for (Index& v : e) {
+      if (renumber[v] < 0) throw std::logic_error("drop_unused_points: a segment end in no triangle");
+      v = renumber[v];
+    }
+  }
+  return dropped;
+}
+
+}  // namespace
+
+double fit_to_curves(const Boundary_geometry& geometry, const std::vector<Constraint_piece>& pieces,
+                     const std::vector<Index>& selection_index, Evolve_result& result) {
+  Mesh_arrays& mesh = result.mesh;
+  const std::size_t n = mesh.points.size();
+  // The tag of every output segment: the piece (between selected points) it is part of.
+  std::unordered_map<std::uint64_t, std::int64_t> piece_tag;
+  auto key = [](Index a, Index b) {
+    return (static_cast<std::uint64_t>(std::min(a, b)) << 32) ^ static_cast<std::uint64_t>(std::max(a, b));
+  };
+  for (const auto& piece : pieces) piece_tag[key(piece.a, piece.b)] = piece.tag;
+  std::vector<Index> xadj(n + 1, 0), adj(2 * mesh.segments.size());
+  for (const auto& e : mesh.segments) {
+    ++xadj[e[0] + 1];
+    ++xadj[e[1] + 1];
+  }
+  for (std::size_t v = 0; v < n; ++v) xadj[v + 1] += xadj[v];
+  {
+    std::vector<Index> fill(xadj.begin(), xadj.end() - 1);
+    for (std::size_t s = 0; s < mesh.segments.size(); ++s) {
+      adj[fill[mesh.segments[s][0]]++] = static_cast<Index>(s);
+      adj[fill[mesh.segments[s][1]]++] = static_cast<Index>(s);
+    }
+  }
+  auto other = [&](Index s, Index v) { return mesh.segments[s][0] == v ? mesh.segments[s][1] : mesh.segments[s][0]; };
+  // Points the step created: those of the selection that are new, and those the
+  // quality pass inserted on segments (inside pieces, two segments each).
+  std::vector<std::int64_t> tag_of(n, 0);
+  std::vector<std::uint8_t> curved(n, 0);
+  double longest = 0;  // of the pieces on curves
+  for (std::size_t v = 0; v < n; ++v) {
+    if (selection_index[v] < 0) continue;
+    for (Index a = xadj[v]; a < xadj[v + 1]; ++a) {
+      // follow the piece from v through inserted points to the next selected point
+      Index prev = static_cast<Index>(v), s = adj[a], w = other(s, prev);
+      std::vector<Index> inside;
+      while (selection_index[w] < 0) {
+        if (xadj[w + 1] - xadj[w] != 2) throw std::logic_error("fit_to_curves: an inserted point off a piece");
+        inside.push_back(w);
+        const Index s0 = adj[xadj[w]], s1 = adj[xadj[w] + 1];
+        s = s0 == s ? s1 : s0;
+        prev = w;
+        w = other(s, prev);
+      }
+      if (selection_index[w] < static_cast<Index>(selection_index[v])) continue;  // walked from the other end
+      const auto found = piece_tag.find(key(selection_index[v], selection_index[w]));
+      if (found == piece_tag.end()) throw std::logic_error("fit_to_curves: a segment on no constraint piece");
+      if (!geometry.is_curved(found->second)) continue;
+      const Vec2 &from = mesh.points[v], &to = mesh.points[w];
+      longest = std::max(longest, std::hypot(to[0] - from[0], to[1] - from[1]));
+      for (Index u : inside) {
+        curved[u] = 1;
+        tag_of[u] = found->second;
+      }
+      // new selected points on a curve (already projected in FRFC; a projection is idempotent)
+      for (Index end : {static_cast<Index>(v), w}) {
+        if (result.origin[end] < 0 && mesh.kind[end] != Point_kind::corner) {
+          curved[end] = 1;
+          tag_of[end] = found->second;
+        }
+      }
+    }
+  }
+  std::vector<Index> which;
+  std::vector<Vec2> points;
+  std::vector<std::int64_t> tags;
+  std::vector<double> limit;
+  for (std::size_t v = 0; v < n; ++v) {
+    if (!curved[v]) continue;
+    double shortest = std::numeric_limits<double>::infinity();
+    for (Index a = xadj[v]; a < xadj[v + 1]; ++a) {
+      const Vec2& w = mesh.points[other(adj[a], static_cast<Index>(v))];
+      shortest = std::min(shortest, std::hypot(w[0] - mesh.points[v][0], w[1] - mesh.points[v][1]));
+    }
+    which.push_back(static_cast<Index>(v));
+    points.push_back(mesh.points[v]);
+    tags.push_back(tag_of[v]);
+    limit.push_back(0.5 * shortest);
+  }
+  const double largest = project_points(geometry, points, tags, limit);
+  bool moved = false;
+  for (std::size_t k = 0; k < which.size(); ++k) {
+    moved = moved || points[k] != mesh.points[which[k]];
+    mesh.points[which[k]] = points[k];
+  }
+  if (moved) {
+    // The same constraints through the moved points: triangulated again.
+    std::vector<Constraint_piece> constraints(mesh.segments.size());
+    for (std::size_t s = 0; s < mesh.segments.size(); ++s) {
+      constraints[s] = {mesh.segments[s][0], mesh.segments[s][1], mesh.segment_is_boundary[s] != 0, 0};
+    }
+    try {
+      mesh.triangles = constrained_delaunay(mesh.points, constraints);
+    } catch (const CGAL::Failure_exception&) {
+      throw Input_error("geometry: the boundary moved onto its curves crosses itself (the mesh is too coarse for "
+                        "the curve, or the geometry is not the one its segments approximate)");
+    } catch (const std::runtime_error&) {
+      throw Input_error("geometry: the boundary moved onto its curves no longer bounds a domain");
+    }
+  }
+  const std::size_t dropped = drop_unused_points(result);
+  result.stats.emplace_back("curve_points_projected", static_cast<double>(which.size()));
+  result.stats.emplace_back("curve_points_dropped_outside", static_cast<double>(dropped));
+  result.stats.emplace_back("curve_largest_move", largest);
+  // A chord between points of a curve strays from the input's polygon by at
+  // most about its sagitta, well under its length.
+  return std::max(2 * largest, longest);
+}
+
+}  // namespace evomesh
