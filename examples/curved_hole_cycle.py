@@ -1,11 +1,12 @@
 """Coarsen and refine a square with a circular hole, and watch the hole.
 
-The hole is a polygon: evomesh meshes polygonal domains and does not yet
-project new boundary points onto curved boundaries. Every vertex of the hole
-polygon is a corner (the boundary turns there), and corners are kept forever,
-so coarsening cannot thin the polygon out and refinement only adds points on
-its chords: the hole's area error stays that of the initial polygon. This
-example prints both so that the behaviour is visible, not hidden.
+With the hole's geometry (``evomesh.BoundaryGeometry({HOLE: evomesh.Circle(...)})``)
+its vertices are no longer corners: coarsening removes them, refinement adds
+new ones on the circle (not on the chords), so the number of hole points
+follows the spacing and the hole's area error shrinks as the spacing does.
+``--polygon`` runs the same cycle without the geometry: every vertex of the
+hole polygon is then a corner, kept forever, and the area error stays that of
+the initial polygon.
 
     python examples/curved_hole_cycle.py --points 4000 --cycles 3
 """
@@ -38,12 +39,15 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--points", type=int, default=4000, help="about this many points in the fine mesh")
     parser.add_argument("--cycles", type=int, default=3, help="coarsen/refine cycles")
     parser.add_argument("--hole-points", type=int, default=64, help="vertices of the hole polygon")
+    parser.add_argument("--polygon", action="store_true", help="no geometry: the hole stays the initial polygon")
     args = parser.parse_args(argv)
+    geometry = None if args.polygon else evomesh.BoundaryGeometry({HOLE: evomesh.Circle((0.0, 0.0), RADIUS)})
 
     h = np.sqrt(2 / np.sqrt(3) * ((2 * HALF_WIDTH) ** 2 - np.pi * RADIUS**2) / args.points)
-    mesh = evomesh.evolve(plate_with_hole(h, 2 * np.pi * RADIUS / args.hole_points, radius=RADIUS), size=h)
-    print("note: curved-boundary projection is not implemented in evomesh yet; the hole is a polygon and its")
-    print("      vertices are corners, kept by every step (the area error below is the polygon's, unchanged)")
+    mesh = evomesh.evolve(plate_with_hole(h, 2 * np.pi * RADIUS / args.hole_points, radius=RADIUS), size=h,
+                          geometry=geometry)
+    if geometry is None:
+        print("without a geometry the hole is a polygon whose vertices are corners, kept by every step")
     header = [("step", 4), ("operation", 18), ("points", 7), ("median nn/h", 11), ("hole points", 11),
               ("hole area error", 15)]
     print(" ".join(f"{name:>{width}}" for name, width in header))
@@ -54,9 +58,9 @@ def main(argv: list[str] | None = None) -> None:
 
     report(0, "initial")
     for cycle in range(args.cycles):
-        mesh = evomesh.evolve(mesh, 3.0)
+        mesh = evomesh.evolve(mesh, 3.0, geometry=geometry)
         report(2 * cycle + 1, "coarsen x3")
-        mesh = evomesh.evolve(mesh, size=h)
+        mesh = evomesh.evolve(mesh, size=h, geometry=geometry)
         report(2 * cycle + 2, "refine to size h")
 
 

@@ -223,3 +223,15 @@ def test_circle_and_arc_projection(angle: float, radius: float, cx: float, cy: f
     assert np.abs(np.hypot(*(a - [cx, cy]).T) - radius).max() <= 1e-12 * (1 + radius + abs(cx) + abs(cy))
     theta = (np.arctan2(a[:, 1] - cy, a[:, 0] - cx) - angle) % (2 * math.pi)
     assert ((theta <= 1.0 + 1e-9) | (theta >= 2 * math.pi - 1e-9)).all()
+
+
+def test_driver_passes_the_geometry() -> None:
+    g = geometry()
+    start = evomesh.evolve(disc_with_hole_mesh(0.05), 3.0, geometry=g)
+    driver = evomesh.Driver(start, lambda mesh, distance: np.full(mesh.n_points, 0.6), geometry=g,
+                            fields={"x": start.points[:, 0]})
+    step = driver.step()
+    np.testing.assert_allclose(step.fields["x"], step.mesh.points[:, 0], atol=1e-12)
+    check_valid(step.mesh)
+    assert step.mesh.stats["curve_points_projected"] > 0
+    assert max(distance_to_circles(step.mesh)) < 1e-12

@@ -31,7 +31,11 @@ def test_heat_moving_source(tmp_path):
 
 def test_curved_hole_cycle(tmp_path):
     out = run_example("curved_hole_cycle.py", "--points", "2000", "--cycles", "2", cwd=tmp_path)
-    assert "not implemented" in out
     rows = [line.split() for line in out.splitlines() if line.split() and line.split()[0].isdigit()]
     assert len(rows) == 5
-    assert len({row[-2] for row in rows}) == 1  # the hole polygon's vertices are corners: all kept
+    hole = [int(row[-2]) for row in rows]
+    assert hole[1] < 0.7 * hole[0] and hole[3] < 0.7 * hole[2]  # coarsening removes hole points
+    assert hole[2] > 1.4 * hole[1] and hole[4] > 1.4 * hole[3]  # refining puts new ones on the circle
+    polygon = run_example("curved_hole_cycle.py", "--points", "2000", "--cycles", "1", "--polygon", cwd=tmp_path)
+    rows = [line.split() for line in polygon.splitlines() if line.split() and line.split()[0].isdigit()]
+    assert len({row[-2] for row in rows}) == 1  # without the geometry the polygon's vertices are corners: all kept

@@ -2,12 +2,14 @@
 
 import pathlib
 import re
+import textwrap
 
 README = pathlib.Path(__file__).resolve().parents[1] / "README.md"
 
 
 def test_readme_python_blocks_run(capsys):
-    blocks = re.findall(r"```python\n(.*?)```", README.read_text(), flags=re.S)
+    # blocks may be indented (inside a list item)
+    blocks = [textwrap.dedent(b) for b in re.findall(r"^ *```python\n(.*?)^ *```", README.read_text(), flags=re.S | re.M)]
     assert blocks
     for block in blocks:
         exec(compile(block, str(README), "exec"), {})

@@ -261,7 +261,9 @@ def transfer(
     through ``new.lineage``). The integral over the domain is preserved up to
     rounding (constants lie in both spaces) and linear fields are reproduced;
     values at kept points generally change (the projection is global). The
-    system is solved directly (``scipy.sparse.linalg.spsolve``, SuperLU).
+    system is solved by conjugate gradients preconditioned by the diagonal (the
+    scaled P1 mass matrix has condition number at most 4 on any mesh), to
+    rounding, with the integral restored exactly at the end.
     Needs ``new = evolve(old, ...)``; chain calls step by step over several
     steps (each step is conservative, so the chain is).
 
@@ -373,6 +375,45 @@ def _p1_mass(mesh: Mesh) -> scipy.sparse.csr_matrix:
     return scipy.sparse.csr_matrix((data.ravel(), (rows.ravel(), cols.ravel())), shape=(n, n))
 
 
+def _solve_mass(mass: scipy.sparse.csr_matrix, rhs: np.ndarray) -> np.ndarray:
+    """Solves ``mass @ u = rhs`` (columns at once) for a P1 mass matrix.
+
+    Conjugate gradients preconditioned by the diagonal: the diagonally scaled P1
+    mass matrix has eigenvalues in [1/2, 2] on any triangle mesh, however graded
+    (each element's scaled 3 x 3 block has eigenvalues 1/2, 1/2 and 2), so the
+    error shrinks by about (2 - 1) / (2 + 1) = 1/3 per iteration whatever the
+    mesh: O(n) per iteration, about 35 iterations to the rounding of float64,
+    where a sparse LU costs far more at 1e5 points. Then a constant is added
+    so that the integral (``1^T mass u = 1^T rhs``) holds to rounding, whatever
+    the iteration left over.
+    """
+    diagonal = mass.diagonal()[:, None]
+    u = rhs / diagonal
+    r = rhs - mass @ u
+    z = r / diagonal
+    p = z.copy()
+    rz = (r * z).sum(axis=0)
+    scale = np.sqrt((rhs * rhs / diagonal).sum(axis=0))
+    tiny = np.finfo(np.float64).eps * np.maximum(scale, np.finfo(np.float64).tiny)
+    for _ in range(200):
+        if (np.sqrt(np.abs(rz)) <= tiny).all():
+            break
+        q = mass @ p
+        pq = (p * q).sum(axis=0)
+        alpha = np.divide(rz, pq, out=np.zeros_like(rz), where=pq != 0)
+        u += alpha * p
+        r -= alpha * q
+        z = r / diagonal
+        rz_new = (r * z).sum(axis=0)
+        beta = np.divide(rz_new, rz, out=np.zeros_like(rz), where=rz != 0)
+        p = z + beta * p
+        rz = rz_new
+    ones = np.ones(mass.shape[0])
+    m1 = mass @ ones
+    u += ((rhs - mass @ u).sum(axis=0) / m1.sum())[None, :]
+    return u
+
+
 class Supermesh:
     """The intersections of the triangles of ``new = evolve(old, ...)`` with those of ``old``.
 
@@ -420,7 +461,7 @@ class Supermesh:
         self.old_triangle = raw["old_triangle"]
         self.area = raw["area"]
         self.mass = raw["mass"]
-        self._factor: Any = None  # SuperLU of new's P1 mass matrix, made on first use
+        self._factor: Any = None  # new's P1 mass matrix, made on first use
         self.new_triangle = np.repeat(np.arange(new.n_triangles), np.diff(self.offsets))
         empty = np.flatnonzero(np.diff(self.offsets) == 0)
         if len(empty):
@@ -452,7 +493,7 @@ class Supermesh:
         """L2 projection of per-vertex (P1) values (see :func:`transfer`, method="conservative")."""
         array, flat, dtype = _numeric(values, self.old.n_points, "point")
         if self._factor is None:
-            self._factor = scipy.sparse.linalg.splu(_p1_mass(self.new).tocsc())
+            self._factor = _p1_mass(self.new)
         # rhs = M_mix @ flat without assembling M_mix: per pair, the 3 x 3 block
         # times the old triangle's values, summed into the new triangle's rows.
         local = np.einsum("kab,kbc->kac", self.mass, flat[self.old.triangles[self.old_triangle]])
@@ -467,12 +508,12 @@ class Supermesh:
                 )
             else:
                 rhs[:, column] = np.bincount(rows, part, self.new.n_points)
-        if np.iscomplexobj(rhs):  # the factor is real: solve the two parts
-            out = self._factor.solve(np.ascontiguousarray(rhs.real)) + 1j * self._factor.solve(
-                np.ascontiguousarray(rhs.imag)
+        if np.iscomplexobj(rhs):  # the matrix is real: solve the two parts
+            out = _solve_mass(self._factor, np.ascontiguousarray(rhs.real)) + 1j * _solve_mass(
+                self._factor, np.ascontiguousarray(rhs.imag)
             )
         else:
-            out = self._factor.solve(np.ascontiguousarray(rhs))
+            out = _solve_mass(self._factor, np.ascontiguousarray(rhs))
         out = out.reshape(len(out), -1).astype(dtype, copy=False)
         return out.reshape((self.new.n_points,) + array.shape[1:])
 

@@ -178,7 +178,8 @@ class Driver:
     seed : int
         Each step uses a seed derived from (seed, iteration): reproducible.
     **options
-        Passed to :func:`evomesh.evolve`.
+        Passed to :func:`evomesh.evolve` (options, and ``geometry=`` for
+        curved boundaries).
 
     Attributes
     ----------
