@@ -143,6 +143,10 @@ def test_adapt_size_expression_equals_the_size_field(mesh_file, tmp_path):
         (["--size-expr", "x +"], "not a valid expression"),
         (["--size", "h", "--option", "colour=red"], "unknown option"),
         (["--size", "h", "--option", "min_angle"], "NAME=VALUE"),
+        (["--size", "h", "--circle", "1:0,0"], "TAG:CX,CY,R"),
+        (["--size", "h", "--circle", "1:0,0,-1"], "TAG:CX,CY,R"),
+        (["--size", "h", "--corner-angle", "20"], "needs at least one --circle"),
+        (["--size", "h", "--circle", "1:0,0,1", "--method", "drfc"], "needs --method frfc"),
     ],
 )
 def test_adapt_bad_arguments_exit_2_with_one_line(mesh_file, tmp_path, arguments, message, capsys):
@@ -166,3 +170,20 @@ def test_info_prints_the_mesh(mesh_file, capsys):
     assert main(["info", str(path)]) == 0
     printed = capsys.readouterr().out
     assert f"points     {mesh.n_points}" in printed and "min angle" in printed and "point data h, u" in printed
+
+
+def test_adapt_with_a_circle(tmp_path, capsys):
+    import numpy as np
+
+    import evomesh.io
+    from evomesh.meshgen import HOLE_TAG, OUTER_TAG, disc_with_hole_mesh
+
+    path = tmp_path / "disc.msh"
+    evomesh.io.write_mesh(path, disc_with_hole_mesh(0.08))
+    out = tmp_path / "fine.vtu"
+    assert main(["adapt", str(path), str(out), "--size-expr", "0.03 + 0*x", "--circle", f"{OUTER_TAG}:0,0,1",
+                 "--circle", f"{HOLE_TAG}:0,0,0.35", "--quiet"]) == 0
+    new, _ = evomesh.io.read_mesh(out)
+    on = np.unique(new.segments[new.segment_is_boundary.astype(bool)])
+    r = np.hypot(*new.points[on].T)
+    assert np.minimum(abs(r - 1), abs(r - 0.35)).max() < 1e-12

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 import sys
-from typing import Sequence
+from typing import Any, Sequence
 
 import numpy as np
 
@@ -85,6 +85,11 @@ def build_parser() -> argparse.ArgumentParser:
     adapt.add_argument("--paper", action="store_true", help="the paper's algorithm exactly (options preset paper())")
     adapt.add_argument("--option", action="append", default=[], metavar="NAME=VALUE",
                        help="any evolve option, e.g. --option min_angle=25 --option quality=False (repeatable)")
+    adapt.add_argument("--circle", action="append", default=[], metavar="TAG:CX,CY,R",
+                       help="segments of TAG lie on the circle of centre (CX, CY) and radius R: a curved boundary "
+                            "(repeatable; frfc only)")
+    adapt.add_argument("--corner-angle", type=float, default=None, metavar="DEG",
+                       help="with --circle: vertices turning by more than DEG stay corners (default 30)")
     adapt.add_argument("--quiet", action="store_true", help="no progress bar, no summary")
 
     info = commands.add_parser("info", help="points, triangles, segments, kinds and quality of a mesh file")
@@ -141,6 +146,27 @@ def _parse_options(items: Sequence[str]) -> dict:
     return options
 
 
+def _parse_circles(items: Sequence[str], corner_angle: float | None) -> Any:
+    import evomesh
+
+    if not items:
+        if corner_angle is not None:
+            raise ValueError("--corner-angle needs at least one --circle")
+        return None
+    curves = {}
+    for item in items:
+        tag, sep, rest = item.partition(":")
+        numbers = rest.split(",")
+        try:
+            if not sep or len(numbers) != 3:
+                raise ValueError
+            curves[int(tag)] = evomesh.Circle((float(numbers[0]), float(numbers[1])), float(numbers[2]))
+        except (ValueError, TypeError):
+            raise ValueError(f"--circle must be TAG:CX,CY,R with a positive radius, got {item!r}") from None
+    kwargs = {} if corner_angle is None else {"corner_angle": corner_angle}
+    return evomesh.BoundaryGeometry(curves, **kwargs)
+
+
 def _check_output(path: str) -> None:
     import os
     from pathlib import Path
@@ -174,6 +200,9 @@ def _adapt(args: argparse.Namespace) -> int:
     overrides = _parse_options(args.option)
     base = (evomesh.FrfcOptions if args.method == "frfc" else evomesh.DrfcOptions).paper() if args.paper else None
     make_options(args.method, base, **overrides)
+    geometry = _parse_circles(args.circle, args.corner_angle)
+    if geometry is not None and args.method != "frfc":
+        raise ValueError("--circle (a curved boundary) needs --method frfc")
     with tqdm(total=3, desc="evomesh adapt", unit="stage", disable=True if args.quiet else None, leave=False) as bar:
         mesh, data = read_mesh(args.input)
         bar.update(1)
@@ -182,7 +211,7 @@ def _adapt(args: argparse.Namespace) -> int:
             raise ValueError(f"{args.input} has no point data {field!r}; it has: {', '.join(data) or 'none'}")
         target = {"size": size_function} if size_function else {"size": data[field]} if args.size else {}
         new = evomesh.evolve(mesh, data[field] if args.delta else None, method=args.method, seed=args.seed,
-                             options=base, **target, **overrides)
+                             options=base, geometry=geometry, **target, **overrides)
         bar.update(1)
         fields = {name: values for name, values in data.items() if np.asarray(values).dtype.kind in "biufc"}
         write_mesh(args.output, new, evomesh.transfer(mesh, new, fields) if fields else None)
