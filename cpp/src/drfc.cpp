@@ -29,7 +29,9 @@ Refinement_stage refinement_stage(const Mesh_arrays& mesh, const std::vector<dou
   if (mesh.geometry) throw Input_error("a boundary geometry (curved boundaries) is supported by method 'frfc' only");
   options.validate();
   Refinement_stage stage;
-  stage.spacing = step_spacing(mesh, delta, F_at_points::evaluate_all, options.threads, timer);
+  const auto chains = options.within_domain ? segment_chains(mesh) : std::vector<Segment_chain>{};
+  stage.spacing = step_spacing(mesh, delta, F_at_points::evaluate_all, options.threads, timer,
+                               options.within_domain ? &chains : nullptr);
   // FRFC's sampling count bounds the points a packing for f needs (Lemma 3.5).
   const double estimate = estimate_sample_count(mesh, stage.spacing.f, 1.0, options.max_samples);
   check_sample_budget(estimate, options.max_samples, "refinement");

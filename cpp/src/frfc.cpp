@@ -175,10 +175,11 @@ Evolve_result frfc(const Mesh_arrays& input, const std::vector<double>& delta, c
   Stage_timer timer(result.stats);
   const Thread_limit thread_limit(options.threads);  // also for the stages without a threads argument
 
-  // Step 1: nn_M and the spacing function f (Section 3.1).
-  Step_spacing spacing = step_spacing(mesh, delta, F_at_points::lemma_3_1, options.threads, timer);
-  // Steps 2-5: candidates on segments, first packing pass; interior candidates, second pass.
+  // Step 1: nn_M and the spacing function f (Section 3.1), within the domain.
   const auto chains = segment_chains(mesh);
+  Step_spacing spacing = step_spacing(mesh, delta, F_at_points::lemma_3_1, options.threads, timer,
+                                      options.within_domain ? &chains : nullptr);
+  // Steps 2-5: candidates on segments, first packing pass; interior candidates, second pass.
   const Candidates on_segments = segment_stage(mesh, delta, spacing, chains, options, timer);
   std::size_t n_forced = 0;
   const auto forced = forced_corners(mesh, chains, n_forced, mesh.required);

@@ -42,6 +42,7 @@ Frfc_options Frfc_options::paper() {
   o.adaptive_cells = false;
   o.skip_coarse = false;
   o.quality = false;
+  o.within_domain = false;
   return o;
 }
 
@@ -64,6 +65,7 @@ Drfc_options Drfc_options::paper() {
   Drfc_options o;
   o.radius_scale = 1.0;
   o.quality = false;
+  o.within_domain = false;
   return o;
 }
 

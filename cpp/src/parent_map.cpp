@@ -15,9 +15,6 @@
 
 namespace evomesh {
 
-namespace {
-
-// Neighbour across edge k (t[k] -> t[k+1]) of every triangle, -1 on the boundary.
 std::vector<std::array<Index, 3>> triangle_neighbours(const std::vector<Triangle>& triangles) {
   struct Half {
     Index lo, hi, triangle;
@@ -46,6 +43,8 @@ std::vector<std::array<Index, 3>> triangle_neighbours(const std::vector<Triangle
   }
   return neighbour;
 }
+
+namespace {
 
 // Point location in the old mesh by visibility walks over its triangles.
 class Old_mesh_walker {

@@ -1,5 +1,7 @@
 #include "evomesh/step.hpp"
 
+#include "evomesh/local_feature_size.hpp"
+
 #include <CGAL/exceptions.h>
 
 #include <algorithm>
@@ -17,12 +19,22 @@ void check_delta(const Mesh_arrays& mesh, const std::vector<double>& delta) {
 }
 
 Step_spacing step_spacing(const Mesh_arrays& mesh, const std::vector<double>& delta, F_at_points how, int threads,
-                          detail::Stage_timer& timer) {
+                          detail::Stage_timer& timer, const std::vector<Segment_chain>* within_domain) {
   const std::size_t n = mesh.points.size();
   Step_spacing spacing;
   spacing.nn = nn_spacing(mesh.points);
+  // Within the domain (local_feature_size.hpp): nn of points whose nearest point
+  // hides behind a constraint is taken within the domain, and the weights are
+  // capped by what the domain carries. Lemma 3.1 needs w_p <= nn(p) <= |p - q|,
+  // so f is evaluated at the points whose nn grew.
+  std::vector<std::uint8_t> evaluate;
+  if (within_domain) evaluate = keep_within_domain(mesh.points, mesh.triangles, spacing.nn);
   std::vector<double> weight(n);
   for (std::size_t i = 0; i < n; ++i) weight[i] = delta[i] * spacing.nn[i];
+  if (within_domain) {
+    const auto lfs = local_feature_size(mesh, *within_domain, weight);
+    for (std::size_t i = 0; i < n; ++i) weight[i] = std::min(weight[i], lfs[i]);
+  }
   timer.lap("nn");
   spacing.function = std::make_unique<Spacing_function>(mesh.points, weight);
   timer.lap("apollonius");
@@ -39,7 +51,7 @@ Step_spacing step_spacing(const Mesh_arrays& mesh, const std::vector<double>& de
     std::vector<std::size_t> which;
     for (std::size_t i = 0; i < n; ++i) {
       f[i] = weight[i];
-      if (delta[i] > 1) {
+      if (delta[i] > 1 || (!evaluate.empty() && evaluate[i])) {
         coarse.push_back(mesh.points[i]);
         which.push_back(i);
       }

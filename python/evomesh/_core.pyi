@@ -71,6 +71,7 @@ class FrfcOptions:
     threads: int
     seed: int
     quality: bool
+    within_domain: bool
     min_angle: float
     crowding_angle: float
     quality_max_fraction: float
@@ -96,6 +97,7 @@ class DrfcOptions:
     threads: int
     max_samples: float
     quality: bool
+    within_domain: bool
     crowding_angle: float
     quality_max_fraction: float
     quality_max_extra: float

@@ -3,13 +3,15 @@
 from __future__ import annotations
 
 import numbers
+from typing import Any
 
 import numpy as np
 from scipy.spatial import Delaunay
 
+from evomesh import _core
 from evomesh.mesh import Mesh
 
-__all__ = ["unit_square_mesh", "disc_with_hole_mesh", "OUTER_TAG", "HOLE_TAG"]
+__all__ = ["unit_square_mesh", "disc_with_hole_mesh", "polygon_mesh", "OUTER_TAG", "HOLE_TAG"]
 
 _ROW_RATIO = np.sqrt(3.0) / 2.0  # row spacing / point spacing of a hexagonal lattice
 
@@ -176,3 +178,73 @@ def disc_with_hole_mesh(spacing: float = 0.05, *, outer: float = 1.0, hole: floa
     middle = np.hypot(*points[segments].mean(axis=1).T)
     tags = np.where(middle < 0.5 * (hole + outer), HOLE_TAG, OUTER_TAG)
     return Mesh(points, triangles, segments, segment_tags=tags)
+
+
+def polygon_mesh(loops: Any, spacing: float, *, seed: int = 0, steps: int = 2) -> Mesh:
+    """A mesh of spacing about ``spacing`` of a polygonal domain given by its boundary loops.
+
+    ``loops`` is a list of (k, 2) vertex arrays: the first is the outer
+    boundary, the others holes (any orientation; each loop is closed
+    implicitly). Every loop vertex is kept. Loop edges are split evenly to
+    about ``spacing``, a jittered hexagonal lattice of that spacing fills the
+    inside (half a spacing away from the boundary), the constrained Delaunay
+    triangulation of all of it is taken (by the C++ core), and ``steps`` steps
+    of ``evolve(mesh, size=spacing)`` even it out (they also grade the mesh
+    down to features smaller than ``spacing``, such as the tip of a slit).
+    Segment tag k is loop k's (0: outer).
+    """
+    from matplotlib.path import Path
+    from scipy.spatial import cKDTree
+
+    if isinstance(loops, np.ndarray) and loops.ndim == 2:
+        loops = [loops]
+    arrays = [np.asarray(loop, dtype=np.float64) for loop in loops]
+    if not arrays:
+        raise ValueError("polygon_mesh needs at least one loop")
+    if isinstance(spacing, bool) or not isinstance(spacing, numbers.Real) or not np.isfinite(spacing) or spacing <= 0:
+        raise ValueError(f"spacing must be a finite number > 0, got {spacing!r}")
+    for k, loop in enumerate(arrays):
+        if loop.ndim != 2 or loop.shape[1] != 2 or len(loop) < 3:
+            raise ValueError(f"loop {k} must be an array of at least 3 points (x, y)")
+        if not np.isfinite(loop).all():
+            raise ValueError(f"loop {k} has a non-finite coordinate")
+    extent = np.ptp(np.concatenate(arrays), axis=0).max()
+    if extent / spacing > 20_000:
+        raise ValueError("spacing too small for polygon_mesh (more than about 4e8 points)")
+    boundary, pieces, tags = [], [], []
+    start = 0
+    for k, loop in enumerate(arrays):
+        x, y = loop[:, 0], loop[:, 1]
+        area = 0.5 * float(np.sum(x * np.roll(y, -1) - np.roll(x, -1) * y))
+        if (area > 0) != (k == 0):  # the domain on the left: outer loop counter-clockwise, holes clockwise
+            loop = loop[::-1]
+        nxt = np.roll(loop, -1, axis=0)
+        parts = np.maximum(1, np.ceil(np.hypot(*(nxt - loop).T) / spacing).astype(int))
+        walk = [a + (b - a) * (np.arange(m) / m)[:, None] for a, b, m in zip(loop, nxt, parts)]
+        points = np.concatenate(walk)
+        index = start + np.arange(len(points))
+        boundary.append(points)
+        pieces.append(np.c_[index, np.roll(index, -1)])
+        tags.append(np.full(len(points), k))
+        start += len(points)
+    edge_points = np.concatenate(boundary)
+    low, high = edge_points.min(axis=0), edge_points.max(axis=0)
+    nx = int(np.ceil((high[0] - low[0]) / spacing)) + 2
+    ny = int(np.ceil((high[1] - low[1]) / (spacing * _ROW_RATIO))) + 2
+    i, j = np.meshgrid(np.arange(nx), np.arange(ny))
+    lattice = low + np.c_[(i + 0.5 * (j % 2)).ravel() * spacing, (j * _ROW_RATIO).ravel() * spacing]
+    lattice += np.random.default_rng(seed).uniform(-0.1, 0.1, lattice.shape) * spacing
+    inside = Path(arrays[0]).contains_points(lattice)
+    for hole in arrays[1:]:
+        inside &= ~Path(hole).contains_points(lattice)
+    lattice = lattice[inside]
+    lattice = lattice[cKDTree(edge_points).query(lattice)[0] > 0.6 * spacing]
+    points = np.concatenate([edge_points, lattice])
+    segments = np.concatenate(pieces)
+    triangles = _core.constrained_delaunay(points, segments, np.ones(len(segments), dtype=np.uint8))
+    mesh = Mesh(points, triangles, segments, segment_tags=np.concatenate(tags))
+    from evomesh.evolution import evolve
+
+    for _ in range(steps):
+        mesh = evolve(mesh, size=spacing, seed=seed)
+    return mesh

@@ -68,6 +68,9 @@ struct Frfc_options {
   int threads = 0;              // 0: default_thread_count() (parallel.hpp: EVOMESH_NUM_THREADS, OMP_NUM_THREADS, CPUs)
   std::uint64_t seed = 0;
   bool quality = true;          // the quality pass of Section 6
+  // nn_M within the domain and the spacing capped by the local feature size
+  // (local_feature_size.hpp); false: the paper's Euclidean nn_M.
+  bool within_domain = true;
   double min_angle = 20.0;      // its angle bound (degrees)
   double crowding_angle = 120.0;
   double quality_max_fraction = 0.5;
@@ -95,6 +98,7 @@ struct Drfc_options {
   // from f as FRFC's sampling is), and stop refining at twice the estimate.
   double max_samples = 5e7;
   bool quality = true;  // the quality pass of Section 6 on the coarsened points
+  bool within_domain = true;  // as Frfc_options::within_domain
   double crowding_angle = 120.0;
   double quality_max_fraction = 0.5;
   double quality_max_extra = 1000;

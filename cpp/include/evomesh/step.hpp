@@ -14,6 +14,7 @@
 #include "evomesh/options.hpp"
 #include "evomesh/parent_map.hpp"
 #include "evomesh/quality_pass.hpp"
+#include "evomesh/segment_chains.hpp"
 #include "evomesh/spacing.hpp"
 #include "evomesh/triangulation.hpp"
 #include "evomesh/types.hpp"
@@ -72,8 +73,11 @@ struct Step_spacing {
 // delta(p) <= 1 and asks the Apollonius graph only at the others (FRFC);
 // `evaluate_all` asks it everywhere and takes the minimum with w_p (DRFC).
 enum class F_at_points { lemma_3_1, evaluate_all };
+// `within_domain` (the mesh's chains; null: the paper's nn and weights): nn
+// within the domain and weights capped by the local feature size
+// (local_feature_size.hpp).
 Step_spacing step_spacing(const Mesh_arrays& mesh, const std::vector<double>& delta, F_at_points how, int threads,
-                          detail::Stage_timer& timer);
+                          detail::Stage_timer& timer, const std::vector<Segment_chain>* within_domain = nullptr);
 
 // Throws Input_error when `estimate` (the points `what` would create) is above max_samples.
 void check_sample_budget(double estimate, double max_samples, const char* what);

@@ -23,6 +23,10 @@ struct Constraint_piece {
 std::vector<Triangle> constrained_delaunay(const std::vector<Vec2>& points,
                                            const std::vector<Constraint_piece>& pieces);
 
+// The neighbour across edge k (t[k] -> t[k+1]) of every triangle, -1 where no
+// other triangle shares that edge. O(m log m).
+std::vector<std::array<Index, 3>> triangle_neighbours(const std::vector<Triangle>& triangles);
+
 // Checks that `triangles` (counter-clockwise, non-degenerate) form a planar
 // triangulation: no edge crosses another, no point lies inside an edge, and
 // every triangle is a face of the constrained triangulation of all edges, so no

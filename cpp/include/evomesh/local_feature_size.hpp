@@ -1,0 +1,48 @@
+// Geometry-aware spacing (issue 11): the spacing of a mesh measured within its
+// domain, and the spacing its domain can carry.
+//
+// nn_M(p) of the paper is the distance to the nearest other mesh point, which
+// may lie across a slit or a thin wall, outside the domain: a wall point of a
+// slit 1e-4 wide then asks for spacing 1e-4 along the whole slit. Within the
+// domain, the nearest point is the nearest one visible from p without crossing
+// a constraint; for a constrained Delaunay triangulation (every mesh a step
+// makes) it is an edge neighbour of p, so domain_nn_spacing is p's shortest
+// edge. Conversely, a thin channel carries no spacing wider than itself:
+// local_feature_size caps the spacing at the distance across the domain to a
+// facing, non-adjacent chain of segments.
+#pragma once
+
+#include <cstdint>
+#include <vector>
+
+#include "evomesh/segment_chains.hpp"
+#include "evomesh/types.hpp"
+
+namespace evomesh {
+
+// nn (the Euclidean nearest-neighbour distances) made nn within the domain: where
+// a point's shortest edge is longer than nn beyond rounding, its nearest point is
+// not an edge neighbour (in a constrained Delaunay triangulation: hidden behind
+// a constraint) and nn becomes that edge's length. Returns which points changed.
+// O(m).
+std::vector<std::uint8_t> keep_within_domain(const std::vector<Vec2>& points, const std::vector<Triangle>& triangles,
+                                             std::vector<double>& nn);
+
+// An upper bound on the spacing the domain carries at every point, +infinity
+// where nothing is found below `limit[v]` (the spacing asked for there):
+// - at a point inside a chain of segments, the distance along its normal,
+//   through the triangles (towards the domain, both ways for an interior
+//   constraint), to the first segment of a chain that neither is its own chain
+//   nor shares a corner with it (Ruppert's local feature size, measured through
+//   the domain: a channel's walls face each other, a slit's do not);
+// - at a corner, the length of its shortest straight chain (two corners are
+//   features of their own: the tip of a slit is as wide as the slit);
+// - with a boundary geometry, at a point of a curved chain, the spacing at which
+//   a piece turns by corner_angle (the polygon's turn and edge lengths there), so
+//   a curve never loses the points it needs to stay a curve.
+// Walks stop beyond limit[v], so the cost is O(sum of limit / local edge length)
+// over the points on segments.
+std::vector<double> local_feature_size(const Mesh_arrays& mesh, const std::vector<Segment_chain>& chains,
+                                       const std::vector<double>& limit);
+
+}  // namespace evomesh

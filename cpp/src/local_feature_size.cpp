@@ -1,0 +1,189 @@
+#include "evomesh/local_feature_size.hpp"
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <limits>
+#include <unordered_map>
+
+#include "evomesh/boundary_geometry.hpp"
+#include "evomesh/triangulation.hpp"
+
+namespace evomesh {
+
+std::vector<std::uint8_t> keep_within_domain(const std::vector<Vec2>& points, const std::vector<Triangle>& triangles,
+                                             std::vector<double>& nn) {
+  std::vector<double> shortest(points.size(), std::numeric_limits<double>::infinity());
+  for (const auto& t : triangles) {
+    for (int k = 0; k < 3; ++k) {
+      const Index a = t[k], b = t[(k + 1) % 3];
+      const double d = std::hypot(points[b][0] - points[a][0], points[b][1] - points[a][1]);
+      shortest[a] = std::min(shortest[a], d);
+      shortest[b] = std::min(shortest[b], d);
+    }
+  }
+  std::vector<std::uint8_t> changed(points.size(), 0);
+  constexpr double kRounding = 4 * std::numeric_limits<double>::epsilon();
+  for (std::size_t i = 0; i < points.size(); ++i) {
+    // the nearest point is no edge neighbour: in a constrained Delaunay
+    // triangulation it is hidden behind a constraint (a slit, a thin wall)
+    if (std::isfinite(shortest[i]) && shortest[i] > nn[i] * (1 + kRounding)) {
+      nn[i] = shortest[i];
+      changed[i] = 1;
+    }
+  }
+  return changed;
+}
+
+namespace {
+
+constexpr double kInfinity = std::numeric_limits<double>::infinity();
+
+double cross(const Vec2& u, const Vec2& v) { return u[0] * v[1] - u[1] * v[0]; }
+
+// Triangles around each point (compressed lists) and across each edge.
+struct Mesh_walk {
+  const Mesh_arrays& mesh;
+  std::vector<Index> xadj, adj;
+  std::vector<std::array<Index, 3>> neighbour;
+  std::unordered_map<std::uint64_t, Index> segment_of_edge;
+
+  static std::uint64_t key(Index a, Index b) {
+    return (static_cast<std::uint64_t>(std::min(a, b)) << 32) ^ static_cast<std::uint64_t>(std::max(a, b));
+  }
+
+  explicit Mesh_walk(const Mesh_arrays& m) : mesh(m), xadj(m.points.size() + 1, 0), adj(3 * m.triangles.size()) {
+    for (const auto& t : m.triangles) {
+      for (Index v : t) ++xadj[v + 1];
+    }
+    for (std::size_t v = 0; v < m.points.size(); ++v) xadj[v + 1] += xadj[v];
+    std::vector<Index> fill(xadj.begin(), xadj.end() - 1);
+    for (std::size_t t = 0; t < m.triangles.size(); ++t) {
+      for (Index v : m.triangles[t]) adj[fill[v]++] = static_cast<Index>(t);
+    }
+    neighbour = triangle_neighbours(m.triangles);
+    segment_of_edge.reserve(2 * m.segments.size());
+    for (std::size_t s = 0; s < m.segments.size(); ++s) {
+      segment_of_edge[key(m.segments[s][0], m.segments[s][1])] = static_cast<Index>(s);
+    }
+  }
+
+  // From point v along direction d (unit), through the triangles: the first
+  // segment crossed and the distance to it, or (-1, inf) beyond `limit`.
+  std::pair<Index, double> cast(Index v, const Vec2& d, double limit) const {
+    const Vec2& p = mesh.points[v];
+    // the triangle at v whose angle contains d
+    Index t = -1;
+    int k = 0;  // t's vertex v
+    for (Index a = xadj[v]; a < xadj[v + 1] && t < 0; ++a) {
+      const Triangle& tri = mesh.triangles[adj[a]];
+      const int i = tri[0] == v ? 0 : tri[1] == v ? 1 : 2;
+      const Vec2& b = mesh.points[tri[(i + 1) % 3]];
+      const Vec2& c = mesh.points[tri[(i + 2) % 3]];
+      if (cross({b[0] - p[0], b[1] - p[1]}, d) >= 0 && cross(d, {c[0] - p[0], c[1] - p[1]}) >= 0) {
+        t = adj[a];
+        k = i;
+      }
+    }
+    if (t < 0) return {-1, kInfinity};  // d points out of the domain
+    int exit_edge = (k + 1) % 3;  // the edge opposite v
+    for (int step = 0; step < 1000; ++step) {
+      const Triangle& tri = mesh.triangles[t];
+      const Index a = tri[exit_edge], b = tri[(exit_edge + 1) % 3];
+      const Vec2& pa = mesh.points[a];
+      const Vec2& pb = mesh.points[b];
+      // where the ray p + s d crosses the line ab
+      const Vec2 ab{pb[0] - pa[0], pb[1] - pa[1]};
+      const double denominator = cross(d, ab);
+      if (denominator == 0) return {-1, kInfinity};
+      const double s = cross({pa[0] - p[0], pa[1] - p[1]}, ab) / denominator;
+      if (!(s <= limit)) return {-1, kInfinity};
+      const auto found = segment_of_edge.find(key(a, b));
+      if (found != segment_of_edge.end()) return {found->second, std::max(s, 0.0)};
+      const Index next = neighbour[t][exit_edge];
+      if (next < 0) return {-1, kInfinity};
+      // the edge of `next` other than (a, b) that the ray leaves through
+      const Triangle& ntri = mesh.triangles[next];
+      int m = 0;
+      while (!((ntri[m] == b && ntri[(m + 1) % 3] == a))) ++m;
+      const Index c = ntri[(m + 2) % 3];
+      const Vec2& pc = mesh.points[c];
+      const double side = cross(d, {pc[0] - p[0], pc[1] - p[1]});
+      // the ray passes c on its left: it leaves through (c, b)... by orientation of the pieces
+      exit_edge = side > 0 ? (m + 1) % 3 : (m + 2) % 3;
+      t = next;
+    }
+    return {-1, kInfinity};
+  }
+};
+
+}  // namespace
+
+std::vector<double> local_feature_size(const Mesh_arrays& mesh, const std::vector<Segment_chain>& chains,
+                                       const std::vector<double>& limit) {
+  const std::size_t n = mesh.points.size();
+  std::vector<double> lfs(n, kInfinity);
+  if (chains.empty()) return lfs;
+  std::vector<Index> chain_of(mesh.segments.size(), -1);
+  for (std::size_t c = 0; c < chains.size(); ++c) {
+    for (Index s : chains[c].segments) chain_of[s] = static_cast<Index>(c);
+  }
+  auto adjacent = [&](Index c1, Index c2) {
+    if (c1 == c2) return true;
+    const auto& a = chains[c1].vertices;
+    const auto& b = chains[c2].vertices;
+    return a.front() == b.front() || a.front() == b.back() || a.back() == b.front() || a.back() == b.back();
+  };
+  const Mesh_walk walk(mesh);
+  const Boundary_geometry* geometry = mesh.geometry.get();
+  for (std::size_t c = 0; c < chains.size(); ++c) {
+    const auto& chain = chains[c];
+    const bool curved = geometry && geometry->is_curved(chain.tag);
+    const std::size_t m = chain.segments.size();
+    // the points inside the chain (a closed chain's first point is its corner)
+    for (std::size_t k = 1; k < m; ++k) {
+      const Index v = chain.vertices[k];
+      const Vec2& p = mesh.points[v];
+      const Vec2& u = mesh.points[chain.vertices[k - 1]];
+      const Vec2& w = mesh.points[chain.closed && k + 1 == chain.vertices.size() ? chain.vertices[0]
+                                                                                  : chain.vertices[k + 1]];
+      // tangent along the chain, and the normal on the domain's side (left of
+      // the segments' orientation for a boundary chain)
+      Vec2 tangent{w[0] - u[0], w[1] - u[1]};
+      const double length = std::hypot(tangent[0], tangent[1]);
+      if (!(length > 0)) continue;
+      tangent = {tangent[0] / length, tangent[1] / length};
+      const bool along = chain.forward[k];  // segment k runs v -> next in its own orientation
+      Vec2 normal{-tangent[1], tangent[0]};
+      if (!along) normal = {-normal[0], -normal[1]};
+      double best = kInfinity;
+      for (int side = 0; side < (chain.boundary ? 1 : 2); ++side) {
+        const Vec2 d = side == 0 ? normal : Vec2{-normal[0], -normal[1]};
+        const auto [segment, distance] = walk.cast(v, d, std::min(limit[v], best));
+        if (segment >= 0 && chain_of[segment] >= 0 && !adjacent(static_cast<Index>(c), chain_of[segment])) {
+          best = std::min(best, distance);
+        }
+      }
+      if (curved) {
+        // pieces of length L turn by about L / (edge length / turn) here
+        const double a = std::hypot(p[0] - u[0], p[1] - u[1]), b = std::hypot(w[0] - p[0], w[1] - p[1]);
+        const double ux = p[0] - u[0], uy = p[1] - u[1], wx = w[0] - p[0], wy = w[1] - p[1];
+        const double turn = std::atan2(std::abs(ux * wy - uy * wx), ux * wx + uy * wy);
+        const double allowed = geometry->corner_angle * (3.14159265358979323846 / 180.0);
+        if (turn > 0) best = std::min(best, 0.5 * (a + b) * allowed / turn);
+      }
+      lfs[v] = best;
+    }
+    // Two corners are features of their own (Ruppert): a corner carries no
+    // spacing beyond the other end of its chain (the tip of a slit, a short side).
+    if (!chain.closed && !curved) {
+      const Index a = chain.vertices.front(), b = chain.vertices.back();
+      const double d = std::hypot(mesh.points[b][0] - mesh.points[a][0], mesh.points[b][1] - mesh.points[a][1]);
+      lfs[a] = std::min(lfs[a], d);
+      lfs[b] = std::min(lfs[b], d);
+    }
+  }
+  return lfs;
+}
+
+}  // namespace evomesh
