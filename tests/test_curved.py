@@ -100,12 +100,21 @@ def test_without_geometry_the_polygon_stays() -> None:
 
 
 def test_corner_angle_keeps_sharp_turns() -> None:
-    """A polygon that turns by more than corner_angle at every vertex keeps them all."""
-    mesh = disc_with_hole_mesh(0.05, boundary_spacing=0.2)  # the hole turns by 2 pi / 12 = 30 deg
-    sharp = evomesh.evolve(mesh, 3.0, geometry=geometry(corner_angle=20.0))
+    """A polygon that turns by more than corner_angle at every vertex keeps them all;
+    below it, coarsening removes vertices, but never so many that a piece turns by
+    more than corner_angle (the curve's spacing cap, local_feature_size.hpp)."""
+    mesh = disc_with_hole_mesh(0.05)
+    n_hole = len(points_on(mesh, HOLE_TAG))
+    turn = 360.0 / n_hole
+    sharp = evomesh.evolve(mesh, 3.0, geometry=geometry(corner_angle=0.9 * turn))
     assert set(points_on(mesh, HOLE_TAG)) <= set(sharp.origin[points_on(sharp, HOLE_TAG)])
     smooth = evomesh.evolve(mesh, 3.0, geometry=geometry(corner_angle=40.0))
-    assert len(points_on(smooth, HOLE_TAG)) < len(points_on(mesh, HOLE_TAG))
+    assert len(points_on(smooth, HOLE_TAG)) < 0.7 * n_hole
+    # whatever the coarsening, at least 360 / 40 = 9 points stay on the hole
+    coarse = smooth
+    for _ in range(4):
+        coarse = evomesh.evolve(coarse, 10.0, geometry=geometry(corner_angle=40.0))
+    assert len(points_on(coarse, HOLE_TAG)) >= 9
 
 
 def test_a_tag_change_stays_a_corner() -> None:

@@ -13,6 +13,7 @@
 #include "evomesh/boundary_geometry.hpp"
 #include "evomesh/drfc.hpp"
 #include "evomesh/frfc.hpp"
+#include "evomesh/local_feature_size.hpp"
 #include "evomesh/options.hpp"
 #include "evomesh/packing.hpp"
 #include "evomesh/parallel.hpp"
@@ -376,16 +377,29 @@ PYBIND11_MODULE(_core, m) {
 
   m.def(
       "nn_spacing",
-      [](const Float_array& points) {
+      [](const Float_array& points, std::optional<Int_array> triangles, std::optional<Float_array> euclidean) {
         auto pts = to_points(points);
+        std::vector<Triangle> tris;
+        if (triangles) {
+          tris = to_index_rows<3>(*triangles, "triangles");
+          require_indices(tris, pts.size(), "triangles");
+        }
         std::vector<double> nn;
+        if (euclidean) {
+          nn = to_vector<double>(*euclidean);
+          if (nn.size() != pts.size()) throw Input_error("euclidean: one value per point");
+        }
         {
           py::gil_scoped_release release;
-          nn = nn_spacing(pts);
+          if (!euclidean) nn = nn_spacing(pts);
+          if (triangles) keep_within_domain(pts, tris, nn);
         }
         return vector_array(nn);
       },
-      py::arg("points"));
+      py::arg("points"), py::arg("triangles") = py::none(), py::arg("euclidean") = py::none(),
+      "nn_M: the distance from every point to the nearest other point; with the triangles, within the domain "
+      "(a point whose nearest point is no edge neighbour gets its shortest edge, local_feature_size.hpp). "
+      "`euclidean`: the Euclidean distances if already known.");
 
   py::class_<Spacing_function>(m, "SpacingFunction")
       .def(py::init([](const Float_array& sites, const Float_array& weights, std::size_t min_sites_per_part) {

@@ -165,12 +165,13 @@ std::vector<double> local_feature_size(const Mesh_arrays& mesh, const std::vecto
         }
       }
       if (curved) {
-        // pieces of length L turn by about L / (edge length / turn) here
+        // a piece of length L turns by about L turn / (edge length) here
         const double a = std::hypot(p[0] - u[0], p[1] - u[1]), b = std::hypot(w[0] - p[0], w[1] - p[1]);
         const double ux = p[0] - u[0], uy = p[1] - u[1], wx = w[0] - p[0], wy = w[1] - p[1];
         const double turn = std::atan2(std::abs(ux * wy - uy * wx), ux * wx + uy * wy);
         const double allowed = geometry->corner_angle * (3.14159265358979323846 / 180.0);
-        if (turn > 0) best = std::min(best, 0.5 * (a + b) * allowed / turn);
+        // (half of it: a packing of spacing f leaves gaps up to about 2 f)
+        if (turn > 0) best = std::min(best, 0.25 * (a + b) * allowed / turn);
       }
       lfs[v] = best;
     }

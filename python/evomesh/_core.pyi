@@ -170,7 +170,9 @@ def prepare_mesh(
     """Orient triangles CCW, build segments, check planarity, classify points.
     Returns (triangles, segments, segment_is_boundary, kind, n_flipped, segment_tags)."""
 
-def nn_spacing(points: ArrayLike) -> NDArray[np.float64]: ...
+def nn_spacing(
+    points: ArrayLike, triangles: ArrayLike | None = None, euclidean: ArrayLike | None = None
+) -> NDArray[np.float64]: ...
 def default_thread_count() -> int: ...
 def lexical_first_mis(
     centers: ArrayLike, radii: ArrayLike, order: ArrayLike, n_forced: int = 0

@@ -324,7 +324,9 @@ class Mesh:
                                             else np.asarray(triangle_tags, dtype=np.int64)))
         set_(self, "required", _frozen(np.zeros(n_points, bool) if required is None
                                        else np.asarray(required, dtype=bool)))
-        set_(self, "_nn", None if nn is None else _frozen(np.asarray(nn, dtype=np.float64)))
+        if nn is not None:  # the Euclidean distances, made distances within the domain
+            nn = _core.nn_spacing(points, triangles, np.asarray(nn, dtype=np.float64))
+        set_(self, "_nn", None if nn is None else _frozen(nn))
 
     @classmethod
     def _trusted(cls, points, triangles, segments, segment_is_boundary, kind, origin, stats=None, lineage=None,
@@ -346,9 +348,15 @@ class Mesh:
     @property
     def nn_spacing(self) -> np.ndarray:
         """nn_M(p) at every point, shape (n,): the distance to the nearest other
-        point (computed once, when the mesh is made; read-only)."""
+        point within the domain (computed once, when the mesh is made; read-only).
+
+        A point whose nearest point is not an edge neighbour (in a constrained
+        Delaunay triangulation: one hidden behind a constraint, across a slit or
+        a thin wall) gets the length of its shortest edge instead; elsewhere this
+        is the Euclidean nearest-neighbour distance of the paper. Steps use the
+        same (``within_domain``, the default)."""
         if self._nn is None:
-            object.__setattr__(self, "_nn", _frozen(_core.nn_spacing(self.points)))
+            object.__setattr__(self, "_nn", _frozen(_core.nn_spacing(self.points, self.triangles)))
         return self._nn
 
     def __setattr__(self, name: str, value: Any) -> None:

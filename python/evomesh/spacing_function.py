@@ -182,7 +182,7 @@ def spacing(mesh: Mesh, delta: ArrayLike) -> SpacingFunction:
     """
     _require_mesh(mesh)
     d = as_delta(mesh, delta)
-    return SpacingFunction(mesh.points, d * _core.nn_spacing(mesh.points))
+    return SpacingFunction(mesh.points, d * mesh.nn_spacing)
 
 
 def _require_mesh(mesh: Any) -> None:
