@@ -220,13 +220,22 @@ def evolve(mesh: Mesh, delta: Any = None, *, size: Any = None, method: str = "fr
             the small angles stay near the small input angles. ``stats`` reports
             ``quality_points_added`` (``_on_segments``), ``quality_points_removed``,
             ``quality_capped``. False reproduces the paper's algorithm.
+        within_domain : bool, default True
+            Spacing within the domain: nn_M(p) of a point whose nearest point
+            hides behind a constraint (across a slit or a thin wall) is its
+            shortest edge, and the spacing is capped by the domain's local
+            feature size, measured through the domain (a channel's width, a
+            short side, the spacing at which a curved boundary piece turns by
+            the geometry's corner angle). False: the paper's Euclidean nn_M.
+            :attr:`Mesh.nn_spacing` (and so ``size=``) measures within the
+            domain either way.
         min_angle : float in (0, 30], default 20.0
             Target smallest angle in degrees (Ruppert's algorithm provably ends
             up to about 20.7 degrees; beyond that the bound on inserted points
             stops it).
 
         For "drfc" (defaults in :data:`DRFC_DEFAULTS`): ``min_angle`` (also the
-        shape criterion of the refinement stage), ``quality``, ``max_samples``
+        shape criterion of the refinement stage), ``quality``, ``within_domain``, ``max_samples``
         (refuse a step whose refinement needs more points), ``threads`` as
         above, and
 
