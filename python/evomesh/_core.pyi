@@ -159,9 +159,17 @@ def prepare_mesh(
     check_planar: bool = True,
     segment_tags: ArrayLike | None = None,
     required: ArrayLike | None = None,
-) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.uint8], NDArray[np.uint8], int, NDArray[np.int64]]:
+    reference_planarity: bool = False,
+) -> tuple[
+    NDArray[np.int64], NDArray[np.int64], NDArray[np.uint8], NDArray[np.uint8], int, NDArray[np.int64], dict[str, float]
+]:
     """Orient triangles CCW, build segments, check planarity, classify points.
-    Returns (triangles, segments, segment_is_boundary, kind, n_flipped, segment_tags)."""
+    Returns (triangles, segments, segment_is_boundary, kind, n_flipped, segment_tags, {stage: seconds}).
+    reference_planarity: the pre-issue-13 check (a constrained Delaunay triangulation of every edge)."""
+
+def first_flat_triangles(
+    points: ArrayLike, triangles: ArrayLike, min_relative_height: float, min_height_ulps: float
+) -> tuple[int, int]: ...
 
 def nn_spacing(points: ArrayLike) -> NDArray[np.float64]: ...
 def default_thread_count() -> int: ...
