@@ -386,13 +386,19 @@ PYBIND11_MODULE(_core, m) {
       py::arg("points"));
 
   py::class_<Spacing_function>(m, "SpacingFunction")
-      .def(py::init([](const Float_array& sites, const Float_array& weights, std::size_t min_sites_per_part) {
+      .def(py::init([](const Float_array& sites, const Float_array& weights, std::size_t min_sites_per_part,
+                       std::optional<Int_array> triangles) {
              auto s = to_points(sites, "sites");
              auto w = to_vector<double>(weights);
+             std::vector<Triangle> t;
+             if (triangles) {
+               t = to_index_rows<3>(*triangles, "triangles");
+               require_indices(t, s.size(), "triangles");
+             }
              py::gil_scoped_release release;
-             return std::make_unique<Spacing_function>(s, w, min_sites_per_part);
+             return std::make_unique<Spacing_function>(s, w, min_sites_per_part, triangles ? &t : nullptr);
            }),
-           py::arg("sites"), py::arg("weights"), py::arg("min_sites_per_part") = 0)
+           py::arg("sites"), py::arg("weights"), py::arg("min_sites_per_part") = 0, py::arg("triangles") = py::none())
       .def(
           "evaluate",
           [](const Spacing_function& self, const Float_array& queries, int threads, bool certified) {
@@ -408,6 +414,7 @@ PYBIND11_MODULE(_core, m) {
           py::arg("x"), py::arg("threads") = 0, py::arg("certified") = true)
       .def_property_readonly("n_sites", &Spacing_function::n_sites)
       .def_property_readonly("n_hidden", &Spacing_function::n_hidden)
+      .def_property_readonly("n_filtered", &Spacing_function::n_filtered)
       .def_property_readonly("n_parts", &Spacing_function::n_parts);
 
   m.def(

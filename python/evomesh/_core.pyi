@@ -140,7 +140,9 @@ class RefineResult(TypedDict):
     stats: dict[str, float]
 
 class SpacingFunction:
-    def __init__(self, sites: ArrayLike, weights: ArrayLike, min_sites_per_part: int = 0) -> None: ...
+    def __init__(
+        self, sites: ArrayLike, weights: ArrayLike, min_sites_per_part: int = 0, triangles: ArrayLike | None = None
+    ) -> None: ...
     def evaluate(
         self, x: ArrayLike, threads: int = 0, certified: bool = True
     ) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
@@ -149,6 +151,8 @@ class SpacingFunction:
     def n_sites(self) -> int: ...
     @property
     def n_hidden(self) -> int: ...
+    @property
+    def n_filtered(self) -> int: ...
     @property
     def n_parts(self) -> int: ...
 
