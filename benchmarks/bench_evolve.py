@@ -9,7 +9,7 @@ Each size runs in a fresh process, so its peak RSS (``resource.getrusage``,
 which includes building the graded mesh) is its own; the peak of the timed step
 alone is read from ``VmHWM`` after resetting it (Linux ``/proc/self/clear_refs``).
 Reported per size: ``Mesh(...)`` construction of the graded mesh (validation,
-including the planarity check with a constrained Delaunay), the stage timings
+including the planarity check; see bench_validation.py), the stage timings
 that ``evolve`` returns in ``stats``, the wall time of ``evolve``, and the ratio
 of that time to ``_core.constrained_delaunay`` of the output points and
 segments, measured in the same process. Times are medians over ``--repeats``.

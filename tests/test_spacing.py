@@ -137,3 +137,76 @@ def test_partitioned_apollonius_graphs_answer_like_one_graph(seed, delta_max, ce
     if certified:
         assert np.array_equal(s1, s4)
     assert one.n_hidden == split.n_hidden
+
+
+@st.composite
+def steep_deltas(draw):
+    """A mesh and a delta that jumps or varies fast, so many sites are hidden by a
+    neighbour (w_q + |p - q| <= w_p), some exactly (tangent cones: integer weights
+    on a grid, where the sum is exact)."""
+    mesh, delta = draw(mesh_and_delta())
+    kind = draw(st.sampled_from(["jump", "random-wide", "as-drawn", "lattice-tangent"]))
+    rng = np.random.default_rng(draw(st.integers(0, 2**16)))
+    x = mesh.points[:, 0]
+    if kind == "jump":
+        delta = np.where(x < np.median(x), 0.2, draw(st.sampled_from([2.0, 5.0, 20.0])))
+    elif kind == "random-wide":
+        delta = np.exp(rng.uniform(np.log(0.05), np.log(50.0), mesh.n_points))
+    elif kind == "lattice-tangent":
+        # Sites on the integer lattice with integer weights: w_p = w_q + |p - q| exactly for axis neighbours.
+        k = draw(st.integers(4, 12))
+        i, j = np.meshgrid(np.arange(k), np.arange(k))
+        points = np.column_stack([i.ravel(), j.ravel()]).astype(float)
+        from scipy.spatial import Delaunay
+
+        mesh = evomesh.Mesh(points, Delaunay(points).simplices)
+        weight = rng.integers(1, 4, mesh.n_points).astype(float)
+        return mesh, weight, True
+    return mesh, delta * evomesh.nn_spacing(mesh), False
+
+
+@settings(max_examples=40, deadline=None)
+@given(steep_deltas(), st.integers(0, 1000), st.booleans())
+def test_sites_hidden_by_a_neighbour_are_left_out_without_changing_f(case, seed, split):
+    """Issue 13: with the mesh's triangles the construction leaves out sites
+    hidden by a neighbour; f, the site found and n_hidden are bit for bit those
+    of the full construction, certified or not, in one graph or in parts."""
+    from evomesh import _core
+
+    mesh, weights, lattice = case
+    parts = max(4, mesh.n_points // 5) if split else 0
+    full = _core.SpacingFunction(mesh.points, weights, parts)
+    filtered = _core.SpacingFunction(mesh.points, weights, parts, mesh.triangles)
+    t = mesh.triangles
+    x = np.r_[mesh.points, random_points_in_box(mesh, 500, seed), mesh.points[t].mean(axis=1),
+              0.5 * (mesh.points[t[:, 0]] + mesh.points[t[:, 1]])]
+    for certified in (True, False):
+        f_full, s_full = full.evaluate(x, certified=certified)
+        f_filtered, s_filtered = filtered.evaluate(x, certified=certified)
+        assert np.array_equal(f_full, f_filtered)
+        assert np.array_equal(s_full, s_filtered)
+    assert full.n_hidden == filtered.n_hidden
+    assert full.n_filtered == 0
+    assert filtered.n_filtered <= filtered.n_hidden
+    if lattice:
+        return
+    # Every site left out is hidden by a neighbour in real numbers too (up to rounding of the shift).
+    p, q = np.r_[t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]], t[:, [1, 0]], t[:, [2, 1]], t[:, [0, 2]]].T
+    gap = weights[q] + np.linalg.norm(mesh.points[p] - mesh.points[q], axis=1) - weights[p]
+    dominated = np.zeros(mesh.n_points, bool)
+    dominated[p[gap <= 1e-12 * weights.max()]] = True
+    assert filtered.n_filtered <= dominated.sum()
+
+
+def test_the_step_filters_sites_and_keeps_f():
+    """The step passes the mesh's triangles (n_filtered_sites); f at the points is unchanged."""
+    mesh = grid_mesh(12, 12, jitter=0.2, seed=4)
+    delta = np.where(mesh.points[:, 0] < 0.5, 0.3, 3.0)
+    out = evomesh.evolve(mesh, delta, seed=0)
+    assert 0 < out.stats["n_filtered_sites"] <= out.stats["n_hidden_sites"]
+    f = evomesh.spacing(mesh, delta)
+    assert f.n_hidden == out.stats["n_hidden_sites"]
+    from evomesh import _core
+
+    w = delta * evomesh.nn_spacing(mesh)
+    assert np.array_equal(f(mesh.points), _core.SpacingFunction(mesh.points, w).evaluate(mesh.points)[0])

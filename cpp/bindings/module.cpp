@@ -18,6 +18,7 @@
 #include "evomesh/packing.hpp"
 #include "evomesh/parallel.hpp"
 #include "evomesh/spacing.hpp"
+#include "evomesh/step.hpp"
 #include "evomesh/triangulation.hpp"
 
 namespace py = pybind11;
@@ -339,7 +340,8 @@ PYBIND11_MODULE(_core, m) {
   m.def(
       "prepare_mesh",
       [](const Float_array& points, const Int_array& triangles, std::optional<Int_array> segments,
-         bool check_planar, std::optional<Int_array> segment_tags, std::optional<Byte_array> required) {
+         bool check_planar, std::optional<Int_array> segment_tags, std::optional<Byte_array> required,
+         bool reference_planarity) {
         Mesh_arrays mesh;
         mesh.points = to_points(points);
         mesh.triangles = to_index_rows<3>(triangles, "triangles");
@@ -357,23 +359,59 @@ PYBIND11_MODULE(_core, m) {
           if (mesh.required.size() != mesh.points.size()) throw Input_error("required: one flag per point");
         }
         std::size_t flipped;
+        std::vector<std::pair<std::string, double>> seconds;
         {
           py::gil_scoped_release release;
+          detail::Stage_timer timer(seconds);
           flipped = orient_triangles(mesh.points, mesh.triangles);
+          timer.lap("orient");
           build_segments(mesh, user);
-          if (check_planar) check_planar_mesh(mesh.points, mesh.triangles);
+          timer.lap("segments");
+          if (check_planar) {
+            if (reference_planarity) {
+              check_planar_mesh_cdt(mesh.points, mesh.triangles);
+            } else {
+              std::size_t n_boundary = 0;
+              while (n_boundary < mesh.segments.size() && mesh.segment_is_boundary[n_boundary]) ++n_boundary;
+              check_planar_mesh(mesh.points, mesh.triangles,
+                                std::vector<Edge>(mesh.segments.begin(), mesh.segments.begin() + n_boundary));
+            }
+          }
+          timer.lap("planar");
           if (!user_tags.empty()) mesh.segment_tags = tags_of_segments(mesh.segments, user, user_tags);
           mesh.kind = classify_points(mesh);
+          timer.lap("classify");
         }
+        py::dict timings;
+        for (const auto& [name, value] : seconds) timings[py::str(name)] = value;
         return py::make_tuple(rows_array<3>(mesh.triangles), rows_array<2>(mesh.segments),
                               vector_array<std::uint8_t>(mesh.segment_is_boundary), kinds_array(mesh.kind),
-                              flipped, vector_array(mesh.segment_tags));
+                              flipped, vector_array(mesh.segment_tags), timings);
       },
       py::arg("points"), py::arg("triangles"), py::arg("segments") = py::none(), py::arg("check_planar") = true,
-      py::arg("segment_tags") = py::none(), py::arg("required") = py::none(),
+      py::arg("segment_tags") = py::none(), py::arg("required") = py::none(), py::arg("reference_planarity") = false,
       "Orient triangles CCW, build segments, check planarity, classify points (a change of segment tag and a "
       "required point on segments are corners). Returns (triangles, segments, segment_is_boundary, kind, "
-      "n_flipped, segment_tags of the built segments: the user's tag, 0 for a boundary edge not given).");
+      "n_flipped, segment_tags of the built segments: the user's tag, 0 for a boundary edge not given, "
+      "{stage: seconds} for seconds_orient, seconds_segments, seconds_planar, seconds_classify). "
+      "reference_planarity: the constrained Delaunay triangulation of every edge (check_planar_mesh_cdt, the "
+      "check before issue 13) instead of the boundary-winding check; for tests and benchmarks.");
+
+  m.def(
+      "first_flat_triangles",
+      [](const Float_array& points, const Int_array& triangles, double min_relative_height, double min_height_ulps) {
+        auto pts = to_points(points);
+        auto tris = to_index_rows<3>(triangles, "triangles");
+        require_indices(tris, pts.size(), "triangles");
+        std::array<Index, 2> first;
+        {
+          py::gil_scoped_release release;
+          first = first_flat_triangles(pts, tris, min_relative_height, min_height_ulps);
+        }
+        return py::make_tuple(first[0], first[1]);
+      },
+      py::arg("points"), py::arg("triangles"), py::arg("min_relative_height"), py::arg("min_height_ulps"),
+      "(first thin triangle, first coarse triangle), -1 for none: Mesh()'s flatness limits (mesh.py).");
 
   m.def(
       "nn_spacing",
@@ -402,13 +440,19 @@ PYBIND11_MODULE(_core, m) {
       "`euclidean`: the Euclidean distances if already known.");
 
   py::class_<Spacing_function>(m, "SpacingFunction")
-      .def(py::init([](const Float_array& sites, const Float_array& weights, std::size_t min_sites_per_part) {
+      .def(py::init([](const Float_array& sites, const Float_array& weights, std::size_t min_sites_per_part,
+                       std::optional<Int_array> triangles) {
              auto s = to_points(sites, "sites");
              auto w = to_vector<double>(weights);
+             std::vector<Triangle> t;
+             if (triangles) {
+               t = to_index_rows<3>(*triangles, "triangles");
+               require_indices(t, s.size(), "triangles");
+             }
              py::gil_scoped_release release;
-             return std::make_unique<Spacing_function>(s, w, min_sites_per_part);
+             return std::make_unique<Spacing_function>(s, w, min_sites_per_part, triangles ? &t : nullptr);
            }),
-           py::arg("sites"), py::arg("weights"), py::arg("min_sites_per_part") = 0)
+           py::arg("sites"), py::arg("weights"), py::arg("min_sites_per_part") = 0, py::arg("triangles") = py::none())
       .def(
           "evaluate",
           [](const Spacing_function& self, const Float_array& queries, int threads, bool certified) {
@@ -424,6 +468,7 @@ PYBIND11_MODULE(_core, m) {
           py::arg("x"), py::arg("threads") = 0, py::arg("certified") = true)
       .def_property_readonly("n_sites", &Spacing_function::n_sites)
       .def_property_readonly("n_hidden", &Spacing_function::n_hidden)
+      .def_property_readonly("n_filtered", &Spacing_function::n_filtered)
       .def_property_readonly("n_parts", &Spacing_function::n_parts);
 
   m.def(

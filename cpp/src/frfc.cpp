@@ -218,7 +218,8 @@ Evolve_result frfc(const Mesh_arrays& input, const std::vector<double>& delta, c
                            {"n_interior_samples_drawn", n_drawn},
                            {"n_candidates", packing.centers.size()},
                            {"n_spacing_repairs", n_repairs},
-                           {"n_hidden_sites", spacing.function->n_hidden()}});
+                           {"n_hidden_sites", spacing.function->n_hidden()},
+                           {"n_filtered_sites", spacing.function->n_filtered()}});
   result.input_nn = std::move(spacing.nn);
   result.input_f = std::move(spacing.f);
   return result;

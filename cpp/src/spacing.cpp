@@ -219,6 +219,7 @@ struct Spacing_function::Impl {
     Apollonius_graph graph;
     double lo_x, lo_y, hi_x, hi_y;  // the cell (infinite at the outside)
     std::size_t n_visible_own = 0;  // sites of the cell that are vertices
+    std::size_t n_filtered_own = 0;  // sites of the cell left out as hidden by a neighbour
   };
   std::vector<std::unique_ptr<Part>> parts;
 
@@ -237,9 +238,12 @@ namespace {
 // graph 1.8x faster than one from 8e3 sites up (1e4, 3e4, 1e5, 1e6 points).
 constexpr std::size_t kMinSitesPerPart = std::size_t{1} << 12;
 
-// Inserts the sites `members` (spatially sorted, previous vertex as hint).
+// Inserts the sites `members` (spatially sorted, previous vertex as hint),
+// except those that `skip(order position of each member)` names: sites CGAL would
+// find hidden (see dominated_sites), so leaving them out changes nothing.
+template <class Skip>
 void build_graph(Apollonius_graph& graph, const std::vector<Vec2>& sites, const std::vector<double>& weights,
-                 double shift, std::vector<std::size_t> members) {
+                 double shift, std::vector<std::size_t> members, const Skip& skip) {
   std::vector<Ag_point> pts;
   pts.reserve(members.size());
   for (std::size_t i : members) pts.emplace_back(sites[i][0], sites[i][1]);
@@ -247,8 +251,12 @@ void build_graph(Apollonius_graph& graph, const std::vector<Vec2>& sites, const 
   std::iota(order.begin(), order.end(), 0);
   using Sort_traits = CGAL::Spatial_sort_traits_adapter_2<Ag_kernel, CGAL::Pointer_property_map<Ag_point>::type>;
   CGAL::spatial_sort(order.begin(), order.end(), Sort_traits(CGAL::make_property_map(pts)));
+  // The insertion order of every member (the order of all members, filtered or
+  // not, so the graph is built exactly as without the filter).
+  const std::vector<std::uint8_t> skipped = skip(members, order);
   Apollonius_graph::Vertex_handle hint;
   for (std::size_t k : order) {
+    if (skipped[k]) continue;
     const std::size_t i = members[k];
     const Site_2 site(pts[k], shift - weights[i]);
     auto v = hint == Apollonius_graph::Vertex_handle() ? graph.insert(site) : graph.insert(site, hint);
@@ -271,6 +279,53 @@ void build_graph(Apollonius_graph& graph, const std::vector<Vec2>& sites, const 
   }
 }
 
+// For every site p, a mesh neighbour q that hides it in CGAL's sense, -1 for
+// none: the disc of p (radius W_p = shift - w_p, as CGAL gets it) lies in q's,
+// |p - q| <= W_q - W_p, closed (Apollonius_graph_2's Is_hidden_2, exact).
+// Then p never attains the minimum f(x) = min_i w_i + |x - c_i| alone: with the
+// rounded shifted weights CGAL decides on, w_q + |x - q| <= w_p + |x - p| for
+// every x, and CGAL leaves p out of the graph (hidden) whatever the insertion
+// order, since every site whose disc contains q's contains p's. Candidates are
+// the triangles' edges (O(n)); a double-precision test with a margin of a
+// millionth (far above rounding) discards nearly all pairs before the exact one.
+// Only sound hiding matters here: a site this misses is simply inserted.
+// Of several neighbours hiding p, the lowest index (deterministic).
+std::vector<Index> dominated_sites(const std::vector<Vec2>& sites, const std::vector<double>& weights, double shift,
+                                   const std::vector<Triangle>& triangles) {
+  const std::size_t n = sites.size();
+  const Ag_traits traits;
+  const auto hides = traits.is_hidden_2_object();
+  constexpr std::size_t kBlock = 1 << 15;
+  const std::size_t n_blocks = (triangles.size() + kBlock - 1) / kBlock;
+  std::vector<std::vector<std::pair<Index, Index>>> found(n_blocks);  // (hidden p, by q)
+  parallel_for(n_blocks, 0, [&](std::size_t b) {
+    for (std::size_t t = b * kBlock; t < std::min(triangles.size(), (b + 1) * kBlock); ++t) {
+      for (int k = 0; k < 3; ++k) {
+        for (int side = 0; side < 2; ++side) {
+          const Index p = triangles[t][side == 0 ? k : (k + 1) % 3];
+          const Index q = triangles[t][side == 0 ? (k + 1) % 3 : k];
+          const double wp = shift - weights[p], wq = shift - weights[q];
+          if (!(wq >= wp)) continue;  // exact: CGAL hides p only if W_q >= W_p
+          const double dx = sites[p][0] - sites[q][0], dy = sites[p][1] - sites[q][1];
+          const double dw = wq - wp;
+          // Certainly apart (products in the normal range, where rounding is relative).
+          if (dw * dw > 1e-290 && dx * dx + dy * dy > dw * dw * (1 + 1e-6)) continue;
+          if (hides(Site_2(Ag_point(sites[q][0], sites[q][1]), wq), Site_2(Ag_point(sites[p][0], sites[p][1]), wp))) {
+            found[b].emplace_back(p, q);
+          }
+        }
+      }
+    }
+  });
+  std::vector<Index> by(n, -1);
+  for (const auto& block : found) {
+    for (const auto& [p, q] : block) {
+      if (by[p] < 0 || q < by[p]) by[p] = q;
+    }
+  }
+  return by;
+}
+
 // The median of `values` (a copy), ties broken by position.
 double median_of(std::vector<double> values) {
   const auto mid = values.begin() + static_cast<std::ptrdiff_t>(values.size() / 2);
@@ -281,7 +336,7 @@ double median_of(std::vector<double> values) {
 }  // namespace
 
 Spacing_function::Spacing_function(const std::vector<Vec2>& sites, const std::vector<double>& weights,
-                                   std::size_t min_sites_per_part)
+                                   std::size_t min_sites_per_part, const std::vector<Triangle>* triangles)
     : impl_(std::make_unique<Impl>()) {
   if (min_sites_per_part == 0) min_sites_per_part = kMinSitesPerPart;
   if (sites.empty()) throw Input_error("spacing function needs at least one site");
@@ -359,6 +414,8 @@ Spacing_function::Spacing_function(const std::vector<Vec2>& sites, const std::ve
     members.assign(1, std::vector<std::size_t>(n));
     std::iota(members[0].begin(), members[0].end(), 0);
   }
+  std::vector<Index> dominator;
+  if (triangles != nullptr) dominator = dominated_sites(sites, weights, impl.shift, *triangles);
   impl.parts.resize(n_parts);
   parallel_for(static_cast<std::size_t>(n_parts), 0, [&](std::size_t k) {
     auto part = std::make_unique<Impl::Part>();
@@ -366,7 +423,43 @@ Spacing_function::Spacing_function(const std::vector<Vec2>& sites, const std::ve
     part->lo_y = cells[k][1];
     part->hi_x = cells[k][2];
     part->hi_y = cells[k][3];
-    build_graph(part->graph, impl.sites, impl.weights, impl.shift, std::move(members[k]));
+    // Leave out the members hidden by a neighbour that comes before them in this
+    // part's insertion order: CGAL would find them hidden by the graph it has
+    // then and return at once (Apollonius_graph_2::insert: the nearest vertex
+    // hides the site, nothing changes), so the graph is the same, vertex for
+    // vertex and face for face, and so is every answer of evaluate(). A site
+    // whose neighbour comes after it is inserted as before (CGAL removes it when
+    // a site hiding it arrives): leaving it out would give the same graph only up
+    // to the layout of its data, and at exact ties the walks could then return
+    // another of the tied sites.
+    std::size_t n_filtered = 0;
+    const auto skip = [&](const std::vector<std::size_t>& mem, const std::vector<std::size_t>& order) {
+      std::vector<std::uint8_t> out(mem.size(), 0);
+      if (dominator.empty()) return out;
+      // Members are the cell's own sites, then the halo's, each run increasing.
+      const auto own_end = std::partition_point(mem.begin(), mem.end(), [&](std::size_t i) {
+        return impl.part_of(impl.sites[i][0], impl.sites[i][1]) == static_cast<int>(k);
+      });
+      const auto find = [&](std::size_t q) -> std::ptrdiff_t {
+        for (const auto& [first, last] : {std::pair{mem.begin(), own_end}, std::pair{own_end, mem.end()}}) {
+          const auto it = std::lower_bound(first, last, q);
+          if (it != last && *it == q) return it - mem.begin();
+        }
+        return -1;
+      };
+      std::vector<std::size_t> rank(mem.size());
+      for (std::size_t r = 0; r < order.size(); ++r) rank[order[r]] = r;
+      for (std::size_t j = 0; j < mem.size(); ++j) {
+        const Index q = dominator[mem[j]];
+        if (q < 0) continue;
+        const std::ptrdiff_t jq = find(static_cast<std::size_t>(q));
+        out[j] = jq >= 0 && rank[static_cast<std::size_t>(jq)] < rank[j];
+        n_filtered += out[j] && mem.begin() + static_cast<std::ptrdiff_t>(j) < own_end;
+      }
+      return out;
+    };
+    build_graph(part->graph, impl.sites, impl.weights, impl.shift, std::move(members[k]), skip);
+    part->n_filtered_own = n_filtered;
     for (auto v = part->graph.finite_vertices_begin(); v != part->graph.finite_vertices_end(); ++v) {
       const Vec2& c = impl.sites[v->index];
       part->n_visible_own += impl.part_of(c[0], c[1]) == static_cast<int>(k);
@@ -383,6 +476,11 @@ std::size_t Spacing_function::n_hidden() const {
   std::size_t visible = 0;
   for (const auto& part : impl_->parts) visible += part->n_visible_own;
   return impl_->sites.size() - visible;
+}
+std::size_t Spacing_function::n_filtered() const {
+  std::size_t filtered = 0;
+  for (const auto& part : impl_->parts) filtered += part->n_filtered_own;
+  return filtered;
 }
 const std::vector<Vec2>& Spacing_function::sites() const { return impl_->sites; }
 const std::vector<double>& Spacing_function::weights() const { return impl_->weights; }

@@ -6,6 +6,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdlib>
 #include <string>
 #include <stdexcept>
 
@@ -36,7 +37,12 @@ Step_spacing step_spacing(const Mesh_arrays& mesh, const std::vector<double>& de
     for (std::size_t i = 0; i < n; ++i) weight[i] = std::min(weight[i], lfs[i]);
   }
   timer.lap("nn");
-  spacing.function = std::make_unique<Spacing_function>(mesh.points, weight);
+  // Sites hidden by a mesh neighbour are left out of the Apollonius graph (issue
+  // 13; f is the same). EVOMESH_SITE_FILTER=0 keeps them, for benchmarks only.
+  const char* filter = std::getenv("EVOMESH_SITE_FILTER");
+  const bool filter_sites = filter == nullptr || std::string(filter) != "0";
+  spacing.function =
+      std::make_unique<Spacing_function>(mesh.points, weight, 0, filter_sites ? &mesh.triangles : nullptr);
   timer.lap("apollonius");
   auto& f = spacing.f;
   f.resize(n);

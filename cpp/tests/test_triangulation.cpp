@@ -75,7 +75,23 @@ void check_square_with_hole(int per_side, int n_interior, std::uint64_t seed) {
     if (!found) ++missing;
   }
   CHECK(missing == 0) << missing << " boundary pieces are not edges with the domain on their left";
-  check_planar_mesh(points, triangles);  // throws if triangles overlap
+  {
+    Mesh_arrays mesh;
+    mesh.points = points;
+    mesh.triangles = triangles;
+    CHECK(orient_triangles(mesh.points, mesh.triangles) == 0);
+    build_segments(mesh, {});
+    std::vector<Edge> boundary;
+    for (std::size_t k = 0; k < mesh.segments.size(); ++k) {
+      if (mesh.segment_is_boundary[k]) boundary.push_back(mesh.segments[k]);
+    }
+    std::vector<Index> used(points.size(), 0);
+    for (const auto& t : triangles) for (Index v : t) used[v] = 1;
+    bool orphans = false;
+    for (Index u : used) orphans = orphans || u == 0;
+    check_planar_mesh_cdt(points, triangles);  // throws if triangles overlap
+    if (!orphans) check_planar_mesh(points, triangles, boundary);
+  }
   std::printf("square with hole: %zu points (%zu in the hole), %zu triangles, area %.17g\n", points.size(), in_hole,
               triangles.size(), area);
 }
@@ -157,8 +173,101 @@ void check_classification() {
 
 }  // namespace
 
+// Mesh()'s planarity check (boundary winding, issue 13) against the reference
+// (a constrained Delaunay triangulation of every edge) on meshes that are locally
+// fine everywhere but cover the plane twice, and on valid ones.
+bool refused(void (*check)(const std::vector<Vec2>&, const std::vector<Triangle>&, bool), const std::vector<Vec2>& p,
+             const std::vector<Triangle>& t, bool reference) {
+  try {
+    check(p, t, reference);
+  } catch (const Input_error&) {
+    return true;
+  }
+  return false;
+}
+
+void prepare_and_check(const std::vector<Vec2>& points, const std::vector<Triangle>& triangles, bool reference) {
+  Mesh_arrays mesh;
+  mesh.points = points;
+  mesh.triangles = triangles;
+  orient_triangles(mesh.points, mesh.triangles);
+  build_segments(mesh, {});
+  if (reference) {
+    check_planar_mesh_cdt(mesh.points, mesh.triangles);
+    return;
+  }
+  std::vector<Edge> boundary;
+  for (std::size_t k = 0; k < mesh.segments.size(); ++k) {
+    if (mesh.segment_is_boundary[k]) boundary.push_back(mesh.segments[k]);
+  }
+  check_planar_mesh(mesh.points, mesh.triangles, boundary);
+}
+
+void add_square(std::vector<Vec2>& p, std::vector<Triangle>& t, double lo, double hi) {
+  const Index a = static_cast<Index>(p.size());
+  p.insert(p.end(), {{lo, lo}, {hi, lo}, {hi, hi}, {lo, hi}});
+  t.push_back({a, a + 1, a + 2});
+  t.push_back({a, a + 2, a + 3});
+}
+
+void check_planarity_cases() {
+  struct Case {
+    const char* name;
+    std::vector<Vec2> points;
+    std::vector<Triangle> triangles;
+    bool planar;
+  };
+  std::vector<Case> cases;
+  {
+    // A strip going twice around the origin: every vertex and edge is fine.
+    Case c{"double-cover annulus", {}, {}, false};
+    const int m = 24;
+    for (int ring = 0; ring < 2; ++ring) {
+      for (int i = 0; i < m; ++i) {
+        const double angle = 4 * M_PI * (i + 0.5) / m;
+        const double r = 1.0 + ring + 0.2 * std::sin(angle / 2);
+        c.points.push_back({r * std::cos(angle), r * std::sin(angle)});
+      }
+    }
+    for (Index i = 0; i < m; ++i) {
+      const Index j = (i + 1) % m;
+      c.triangles.push_back({i, j, m + j});
+      c.triangles.push_back({i, m + j, m + i});
+    }
+    cases.push_back(c);
+  }
+  {
+    Case c{"square inside a square", {}, {}, false};
+    add_square(c.points, c.triangles, 0, 3);
+    add_square(c.points, c.triangles, 1, 2);
+    cases.push_back(c);
+  }
+  {
+    Case c{"two squares apart", {}, {}, true};
+    add_square(c.points, c.triangles, 0, 1);
+    add_square(c.points, c.triangles, 2, 3);
+    cases.push_back(c);
+  }
+  {
+    Case c{"corner on an edge from outside", {{0, 0}, {2, 0}, {1, 2}, {1, 0}, {2, -1}, {0, -1}}, {{0, 1, 2}, {3, 4, 5}},
+           false};
+    cases.push_back(c);
+  }
+  {
+    Case c{"bowtie", {{0, 0}, {1, 0}, {1, 1}, {2, 1}, {2, 2}}, {{0, 1, 2}, {2, 3, 4}}, true};
+    cases.push_back(c);
+  }
+  for (const auto& c : cases) {
+    const bool by_winding = refused(prepare_and_check, c.points, c.triangles, false);
+    const bool by_cdt = refused(prepare_and_check, c.points, c.triangles, true);
+    CHECK(by_winding == !c.planar) << c.name << ": boundary winding check " << (by_winding ? "refused" : "accepted");
+    CHECK(by_cdt == !c.planar) << c.name << ": reference check " << (by_cdt ? "refused" : "accepted");
+  }
+}
+
 int main() {
   return evomesh_test::run([] {
+    check_planarity_cases();
     check_square_with_hole(1, 0, 1);
     check_square_with_hole(1, 40, 2);
     check_square_with_hole(5, 300, 3);

@@ -144,7 +144,9 @@ class RefineResult(TypedDict):
     stats: dict[str, float]
 
 class SpacingFunction:
-    def __init__(self, sites: ArrayLike, weights: ArrayLike, min_sites_per_part: int = 0) -> None: ...
+    def __init__(
+        self, sites: ArrayLike, weights: ArrayLike, min_sites_per_part: int = 0, triangles: ArrayLike | None = None
+    ) -> None: ...
     def evaluate(
         self, x: ArrayLike, threads: int = 0, certified: bool = True
     ) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
@@ -153,6 +155,8 @@ class SpacingFunction:
     def n_sites(self) -> int: ...
     @property
     def n_hidden(self) -> int: ...
+    @property
+    def n_filtered(self) -> int: ...
     @property
     def n_parts(self) -> int: ...
 
@@ -163,12 +167,17 @@ def prepare_mesh(
     check_planar: bool = True,
     segment_tags: ArrayLike | None = None,
     required: ArrayLike | None = None,
-    curved_tags: ArrayLike | None = None,
-    corner_angle: float = ...,
-    project: Callable[[NDArray[np.float64], NDArray[np.int64]], ArrayLike] | None = None,
-) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.uint8], NDArray[np.uint8], int, NDArray[np.int64]]:
+    reference_planarity: bool = False,
+) -> tuple[
+    NDArray[np.int64], NDArray[np.int64], NDArray[np.uint8], NDArray[np.uint8], int, NDArray[np.int64], dict[str, float]
+]:
     """Orient triangles CCW, build segments, check planarity, classify points.
-    Returns (triangles, segments, segment_is_boundary, kind, n_flipped, segment_tags)."""
+    Returns (triangles, segments, segment_is_boundary, kind, n_flipped, segment_tags, {stage: seconds}).
+    reference_planarity: the pre-issue-13 check (a constrained Delaunay triangulation of every edge)."""
+
+def first_flat_triangles(
+    points: ArrayLike, triangles: ArrayLike, min_relative_height: float, min_height_ulps: float
+) -> tuple[int, int]: ...
 
 def nn_spacing(
     points: ArrayLike, triangles: ArrayLike | None = None, euclidean: ArrayLike | None = None

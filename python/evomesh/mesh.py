@@ -128,28 +128,36 @@ _MIN_RELATIVE_HEIGHT = 1e-10
 _MIN_HEIGHT_ULPS = 1024
 
 
-def _check_not_flat(points: np.ndarray, triangles: np.ndarray) -> None:
-    p = points[triangles]
+def _flatness(points: np.ndarray, triangles: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Height, longest edge and one unit of rounding of each triangle (numpy; the
+    reference of the C++ ``_core.first_flat_triangles``, which does the same
+    arithmetic, and the numbers of the error message)."""
+    p = points[triangles].reshape(-1, 3, 2)
     edges = np.stack([p[:, 1] - p[:, 0], p[:, 2] - p[:, 1], p[:, 0] - p[:, 2]], axis=1)
     longest = np.sqrt((edges**2).sum(axis=2).max(axis=1))
     twice_area = edges[:, 0, 0] * edges[:, 2, 1] - edges[:, 0, 1] * edges[:, 2, 0]
     height = np.abs(twice_area) / longest
     rounding = np.finfo(float).eps * np.abs(p).max(axis=(1, 2))  # one unit of rounding of the coordinates
-    thin = height < _MIN_RELATIVE_HEIGHT * longest
-    coarse = height < _MIN_HEIGHT_ULPS * rounding
-    if thin.any():
-        k = int(np.argmax(thin))
+    return height, longest, rounding
+
+
+def _check_not_flat(points: np.ndarray, triangles: np.ndarray) -> None:
+    # The first thin / coarse triangle from C++ (O(n), no temporaries), the message from numpy.
+    thin, coarse = _core.first_flat_triangles(points, triangles, _MIN_RELATIVE_HEIGHT, _MIN_HEIGHT_ULPS)
+    if thin >= 0:
+        height, longest, _ = _flatness(points, triangles[thin : thin + 1])
         raise ValueError(
-            f"triangle {k} is degenerate: its height is {height[k] / longest[k]:.1e} of its longest edge "
+            f"triangle {thin} is degenerate: its height is {height[0] / longest[0]:.1e} of its longest edge "
             f"(at least {_MIN_RELATIVE_HEIGHT:g} is needed)"
         )
-    if coarse.any():
-        k = int(np.argmax(coarse))
+    if coarse >= 0:
+        height, _, rounding = _flatness(points, triangles[coarse : coarse + 1])
         raise ValueError(
-            f"triangle {k} is degenerate at this offset: its height {height[k]:.3g} is {height[k] / rounding[k]:.3g} "
-            f"units of rounding of its coordinates (|x| up to {rounding[k] / np.finfo(float).eps:.3g}; at least "
-            f"{_MIN_HEIGHT_ULPS} are needed); translate the mesh towards the origin (for example subtract "
-            "points.mean(axis=0)), which keeps its shape and makes the rounding smaller"
+            f"triangle {coarse} is degenerate at this offset: its height {height[0]:.3g} is "
+            f"{height[0] / rounding[0]:.3g} units of rounding of its coordinates (|x| up to "
+            f"{rounding[0] / np.finfo(float).eps:.3g}; at least {_MIN_HEIGHT_ULPS} are needed); translate the mesh "
+            "towards the origin (for example subtract points.mean(axis=0)), which keeps its shape and makes the "
+            "rounding smaller"
         )
 
 
@@ -265,7 +273,7 @@ class Mesh:
         if tri_tags is not None:
             # Region borders are constraints: a triangle of a step never straddles two regions.
             segs, seg_tags = _with_region_borders(tris, tri_tags, segs, seg_tags)
-        tris, segs, boundary, computed_kind, _, built_tags = _core.prepare_mesh(
+        tris, segs, boundary, computed_kind, _, built_tags, _ = _core.prepare_mesh(
             pts, tris, segs, True, seg_tags, None if req is None else req.astype(np.uint8)
         )
         _check_not_flat(pts, tris)

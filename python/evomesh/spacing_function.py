@@ -121,9 +121,13 @@ class SpacingFunction:
         delta(p) nn_M(p) for every point.
     n_hidden : int
         Points whose cone never attains the minimum.
+
+    ``triangles`` (optional, indices into ``sites``: the mesh's) lets the
+    construction leave out sites hidden by a neighbour before they reach the
+    graph (issue 13); f is the same with or without.
     """
 
-    def __init__(self, sites: Any, weights: Any):
+    def __init__(self, sites: Any, weights: Any, triangles: Any = None):
         sites = _as_sites(sites, "sites")
         if len(sites) == 0:
             raise ValueError("a spacing function needs at least one site")
@@ -138,7 +142,14 @@ class SpacingFunction:
             raise ValueError("weights must be finite and >= 0")
         self.sites = sites
         self.weights = w
-        self._graph = _core.SpacingFunction(sites, w)
+        tris = None
+        if triangles is not None:
+            tris = _as_array(triangles, "triangles")
+            if tris.dtype == object or tris.dtype.kind not in "iu" or tris.ndim != 2 or tris.shape[1] != 3:
+                raise ValueError("triangles must be an integer array of shape (m, 3)")
+            if tris.size and (tris.min() < 0 or tris.max() >= len(sites)):
+                raise ValueError(f"triangles have a point index out of range [0, {len(sites)})")
+        self._graph = _core.SpacingFunction(sites, w, 0, tris)
 
     @property
     def n_hidden(self) -> int:
@@ -182,7 +193,7 @@ def spacing(mesh: Mesh, delta: ArrayLike) -> SpacingFunction:
     """
     _require_mesh(mesh)
     d = as_delta(mesh, delta)
-    return SpacingFunction(mesh.points, d * mesh.nn_spacing)
+    return SpacingFunction(mesh.points, d * mesh.nn_spacing, mesh.triangles)
 
 
 def _require_mesh(mesh: Any) -> None:

@@ -26,8 +26,14 @@ class Spacing_function {
   // least `min_sites_per_part` sites and the halos stay thin; answers are the
   // same as from one graph (see spacing.cpp). 0 picks the default (2^12).
   // Preconditions: sites distinct and finite, weights finite and >= 0.
+  // `triangles` (optional; indices into `sites`, e.g. the mesh whose points are
+  // the sites): their edges are tested for sites hidden by a neighbour (exact);
+  // such a site is not inserted when that neighbour comes before it in the
+  // insertion order (issue 13). The graphs are then exactly those built without
+  // `triangles` (CGAL would find the site hidden and change nothing), so f, the
+  // sites found and n_hidden() are bit for bit the same.
   Spacing_function(const std::vector<Vec2>& sites, const std::vector<double>& weights,
-                   std::size_t min_sites_per_part = 0);
+                   std::size_t min_sites_per_part = 0, const std::vector<Triangle>* triangles = nullptr);
 
   // Number of Apollonius graphs the sites are split into (1, 2 or 4).
   int n_parts() const;
@@ -48,6 +54,9 @@ class Spacing_function {
   std::size_t n_sites() const;
   // Sites whose cone never attains the minimum (hidden in the Apollonius graph).
   std::size_t n_hidden() const;
+  // Of those, the sites left out (hidden by a neighbour along `triangles` that
+  // was inserted before them): they never reached the Apollonius graph.
+  std::size_t n_filtered() const;
   const std::vector<Vec2>& sites() const;
   const std::vector<double>& weights() const;
 

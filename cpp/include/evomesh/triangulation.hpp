@@ -27,11 +27,35 @@ std::vector<Triangle> constrained_delaunay(const std::vector<Vec2>& points,
 // other triangle shares that edge. O(m log m).
 std::vector<std::array<Index, 3>> triangle_neighbours(const std::vector<Triangle>& triangles);
 
-// Checks that `triangles` (counter-clockwise, non-degenerate) form a planar
-// triangulation: no edge crosses another, no point lies inside an edge, and
-// every triangle is a face of the constrained triangulation of all edges, so no
-// two triangles overlap. Throws Input_error naming the problem.
-void check_planar_mesh(const std::vector<Vec2>& points, const std::vector<Triangle>& triangles);
+// Checks that a mesh is planar: its triangles cover no point of the plane twice
+// and touch only in shared edges and points; throws Input_error naming the
+// problem. Preconditions: `triangles` counter-clockwise (orient_triangles), edge
+// manifold with consistent orientation and `boundary` its boundary edges with
+// the domain on their left (build_segments checks and builds both). Exact and
+// O(n) plus a constrained Delaunay triangulation of the boundary points and edges
+// only: the number of triangles over a point is the winding number of the
+// boundary around it, flood-filled over that triangulation (the argument is in
+// triangulation.cpp). Also refuses orphan points (used by no triangle) and
+// duplicate boundary points. For such meshes it accepts exactly what
+// check_planar_mesh_cdt accepts.
+void check_planar_mesh(const std::vector<Vec2>& points, const std::vector<Triangle>& triangles,
+                       const std::vector<Edge>& boundary);
+
+// The reference check (used by Mesh() before issue 13; kept for tests and
+// benchmarks): inserts all points and every edge into a constrained Delaunay
+// triangulation that throws on crossing constraints, then asks that every
+// triangle be a face of it. Throws Input_error for duplicate points, crossing
+// edges, a point inside a triangle or on an edge.
+void check_planar_mesh_cdt(const std::vector<Vec2>& points, const std::vector<Triangle>& triangles);
+
+// Mesh()'s flatness limits (python/evomesh/mesh.py, _check_not_flat), computed as
+// numpy does there: for each triangle the height (twice its area over its
+// longest edge) against min_relative_height times the longest edge ("thin") and
+// against min_height_ulps units of rounding of its largest coordinate
+// ("coarse"). Returns the first thin and the first coarse triangle, -1 for none
+// (the search stops at the first thin one).
+std::array<Index, 2> first_flat_triangles(const std::vector<Vec2>& points, const std::vector<Triangle>& triangles,
+                                          double min_relative_height, double min_height_ulps);
 
 // Orients every triangle counter-clockwise (exact predicate); throws Input_error
 // for a zero-area triangle. Returns the number of triangles flipped.
