@@ -124,12 +124,13 @@ def test_variations_are_deterministic(samples, skip_coarse, radius, quality):
 def test_defaults_are_documented():
     assert FRFC_DEFAULTS["samples"] == "random"
     assert FRFC_DEFAULTS["skip_coarse"] is False
-    assert FRFC_DEFAULTS["radius"] == "exact"
+    assert FRFC_DEFAULTS["radius"] == "interpolated"
     assert FRFC_DEFAULTS["quality"] is True
-    assert FRFC_DEFAULTS["min_angle"] == 20.0
+    assert FRFC_DEFAULTS["min_angle"] == 30.0
+    assert FRFC_DEFAULTS["demote_ratio"] == 1.1
 
 
-@given(mesh_and_delta(), st.sampled_from(SAMPLES), st.sampled_from(["exact", "cheap"]),
+@given(mesh_and_delta(), st.sampled_from(SAMPLES), st.sampled_from(["exact", "cheap", "interpolated"]),
        st.sampled_from([0.5, 1.0, 2.0]), st.integers(0, 3))
 def test_sample_filter_changes_nothing_but_the_work(case, samples, radius, cell_factor, seed):
     """Dropping samples that certainly overlap a kept sphere (the Lipschitz bound) keeps the same spheres."""

@@ -81,14 +81,15 @@ std::vector<double> input_point_radii(const Mesh_arrays& mesh, const std::vector
 // segments), f(x) exact from the Apollonius graph or (f(q) + |x - q|) with q the
 // vertex of smallest f (Section 3.2, step 2).
 void candidate_radii(const Mesh_arrays& mesh, const Spacing_function& spacing, const std::vector<double>& f,
-                     const Frfc_options& options, bool on_segment, Candidates& candidates);
+                     const std::vector<std::uint8_t>& demoted, const Frfc_options& options, bool on_segment,
+                     Candidates& candidates);
 
 // The sample filter, part 1: one cover disc per input point (see candidates.cpp).
 // kept/blocker: the first packing pass over the input points (indices < n) and
 // segment candidates; radius: the radii of its spheres.
 std::vector<Disc> cover_discs(const Mesh_arrays& mesh, const std::vector<double>& f,
                               const std::vector<double>& radius, const std::vector<std::uint8_t>& kept,
-                              const std::vector<Index>& blocker, double radius_scale);
+                              const std::vector<Index>& blocker, double radius_scale, bool interpolated);
 
 // The sample filter, part 2: drops the interior candidates whose sphere overlaps
 // the kept sphere of a vertex of their triangle (or of the kept sphere that
