@@ -31,7 +31,8 @@ def test_the_paper_packing_is_still_there():
     """radius="exact", demote_ratio=None: old points first, as before issue 11 (it
     keeps the lattice at delta = 0.8)."""
     mesh = evomesh.unit_square_mesh(1000, seed=0)
-    new = evomesh.evolve(mesh, 0.8, seed=0, radius="exact", demote_ratio=None, quality=False)
+    new = evomesh.evolve(mesh, 0.8, seed=0, radius="exact", demote_ratio=None, gap_repair_ratio=None,
+                         quality=False)
     assert np.median(new.nn_spacing) / np.median(mesh.nn_spacing) > 0.95
 
 
@@ -95,3 +96,20 @@ def test_demoted_points_are_counted_and_conforming_points_keep_priority():
     assert kept[far].all()
     off = evomesh.evolve(mesh, delta, seed=0, demote_ratio=None)
     assert off.stats["n_demoted_points"] == 0
+
+
+def test_gap_repair_closes_the_gaps_of_a_coarsening():
+    """Uniform coarsening by 2: kept points without a kept neighbour within
+    gap_repair_ratio delta nn_M get one (where one of the six points at delta nn_M fits)."""
+    mesh = evomesh.unit_square_mesh(3000, seed=2)
+    h = 2.0 * mesh.nn_spacing
+
+    def ratios(out):
+        kept = out.origin >= 0
+        return out.nn_spacing[kept] / h[out.origin[kept]]
+
+    repaired = evomesh.evolve(mesh, 2.0, seed=0, quality=False)
+    plain = evomesh.evolve(mesh, 2.0, seed=0, quality=False, gap_repair_ratio=None)
+    assert repaired.stats["n_spacing_repairs"] > 0
+    assert (ratios(repaired) > 1.1).sum() <= 0.5 * (ratios(plain) > 1.1).sum()
+    assert ratios(repaired).max() <= 1.35

@@ -120,6 +120,7 @@ Graded_case graded_case(double target, int threads, double max_samples) {
   Frfc_options setup_options = bench_options(threads, std::max(max_samples, 1e10));
   setup_options.radius = Radius_rule::exact;
   setup_options.demote_ratio = 0;
+  setup_options.gap_repair_ratio = 0;
   Evolve_result setup = frfc(grid, setup_delta, setup_options);
   out.mesh = std::move(setup.mesh);
   out.delta.resize(out.mesh.points.size());

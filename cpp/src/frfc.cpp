@@ -196,10 +196,10 @@ std::vector<Vec2> spacing_repair_stage(const Mesh_arrays& mesh, const Triangle_f
                                        const std::vector<double>& delta, const Step_spacing& spacing,
                                        const Candidates& on_segments, const Frfc_options& options, Packing& packing,
                                        std::size_t& n_repairs) {
-  if (!(options.repair_ratio > 0 && options.ring_samples)) return {};
+  if (!(options.repair_ratio > 0 && options.ring_samples) && !(options.gap_repair_ratio > 0)) return {};
   return repair_spacing(mesh, fans, delta, spacing.nn, spacing.f, ring_reach(options.radius_scale), options.seed,
-                        packing.centers, on_segments.owner, options.repair_ratio, options.threads, packing.kept,
-                        n_repairs);
+                        packing.centers, on_segments.owner, options.ring_samples ? options.repair_ratio : 0.0,
+                        options.gap_repair_ratio, options.threads, packing.kept, n_repairs);
 }
 
 }  // namespace

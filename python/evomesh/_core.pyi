@@ -62,6 +62,7 @@ class FrfcOptions:
     boundary_scale: float
     ring_samples: bool
     repair_ratio: float
+    gap_repair_ratio: float
     demote_ratio: float
     samples: SampleMode
     adaptive_cells: bool

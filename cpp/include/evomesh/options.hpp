@@ -68,6 +68,10 @@ struct Frfc_options {
   // of old points and is packed with the new points by size (packing.hpp,
   // demoted_points). 0: old points always first (the paper).
   double demote_ratio = 1.1;
+  // Gap repair (issue 11): a kept point p with delta(p) >= 1 and no kept point
+  // within gap_repair_ratio * delta(p) nn_M(p) gets one more point at distance
+  // delta(p) nn_M(p) (spacing_repair.hpp). 0 disables (the paper).
+  double gap_repair_ratio = 1.1;
   Sample_mode samples = Sample_mode::random_grid;
   // Grid cells grow where f's Lipschitz bound from the triangle's vertices
   // allows (sampling.cpp); false: the paper's uniform cells of side c f(q)/(2 sqrt 2).
