@@ -179,7 +179,7 @@ Candidates interior_stage(const Mesh_arrays& mesh, const Triangle_fans& fans, co
     cover = cover_discs(mesh, f, packing.radius, packing.kept, packing.blocker, options.radius_scale,
                         options.radius == Radius_rule::interpolated);
   }
-  Candidates inside = interior_candidates(mesh, fans, delta, f, cover, options, n_drawn);
+  Candidates inside = interior_candidates(mesh, fans, delta, f, demoted, cover, options, n_drawn);
   timer.lap("sampling");
   candidate_radii(mesh, *spacing.function, f, demoted, options, /*on_segment=*/false, inside);
   timer.lap("sample_radii");

@@ -70,7 +70,8 @@ Candidates segment_candidates(const Mesh_arrays& mesh, const std::vector<double>
 // candidates of every R-point, except those in a cover disc of their triangle
 // (cover empty: none dropped). `n_drawn` receives the number of grid samples drawn.
 Candidates interior_candidates(const Mesh_arrays& mesh, const Triangle_fans& fans, const std::vector<double>& delta,
-                               const std::vector<double>& f, const std::vector<Disc>& cover,
+                               const std::vector<double>& f, const std::vector<std::uint8_t>& demoted,
+                               const std::vector<Disc>& cover,
                                const Frfc_options& options, std::size_t& n_drawn);
 
 // Sphere radii of the input points: radius_scale f(p) / 2 (times boundary_scale on segments).
