@@ -178,9 +178,13 @@ def test_plot_step_has_three_panels(small_run):
 
 
 def test_growing_circle_meets_the_paper_targets():
-    """The paper's experiment with default options: at least 70% of the points
-    kept in every step and a minimum angle at least the paper's worst."""
-    result = evomesh.growing_circle(progress=False)
+    """The paper's experiment with the paper's preference for old points (exact
+    radii, old points first, no gap repair: radius="exact", demote_ratio=None,
+    gap_repair_ratio=None): at least 70% of
+    the points kept in every step and a minimum angle at least the paper's worst.
+    With the defaults (issue 11) the band gets the spacing it asks for, which takes
+    more new points: see test_growing_circle_with_the_defaults."""
+    result = evomesh.growing_circle(progress=False, radius="exact", demote_ratio=None, gap_repair_ratio=None)
     assert 1050 <= result.initial.n_points <= 1150
     assert evomesh.quality(result.initial).min_angle > 30
     assert len(result.steps) == len(PAPER_TABLE1) == 6
@@ -191,6 +195,16 @@ def test_growing_circle_meets_the_paper_targets():
     assert front.radius(6.0) == pytest.approx(0.5)
     table = result.table(paper=True)
     assert "paper" in table and "1416" in table
+
+
+def test_growing_circle_with_the_defaults():
+    """Issue 11: the band gets more of the spacing it asks for (measured nn'/h max
+    1.23-1.60 at the input points, 1.54-1.75 before), at the price of old points
+    (measured 60-71 %, not the issue's 70 % in every step: benchmarks/README.md, "Issue 11")."""
+    result = evomesh.growing_circle(progress=False)
+    assert result.column("spacing_ratio_max").max() <= 1.65
+    assert result.column("original_pct").min() >= 55.0
+    assert result.column("min_angle_deg").min() >= 25.0
 
 
 def test_unit_square_mesh():

@@ -125,7 +125,8 @@ def test_small_input_angles_end_quickly_and_report_where(method, angle):
     assert stats["quality_points_added"] <= 0.5 * (new.n_points + stats["quality_points_removed"]) + 1000
     assert stats["min_angle"] == pytest.approx(min_angle(new), abs=1e-9)
     where = np.array([stats["min_angle_x"], stats["min_angle_y"]])
-    assert np.allclose(where, evomesh.quality(new).min_angle_location)
+    if angle < 30.0:  # at FRFC's 30 degree bound many triangles tie within rounding
+        assert np.allclose(where, evomesh.quality(new).min_angle_location)
     # the input angle cannot be improved; below the target it is the smallest one left
     assert min_angle(new) <= angle + 1e-9
     if angle < MIN_ANGLE:
@@ -152,8 +153,10 @@ def test_quality_false_is_the_paper_and_the_pass_reports_its_changes():
     assert removed == good.stats["quality_points_removed"]
     assert added == good.stats["quality_points_added"]
     assert (good.origin[[tuple(p) not in before for p in good.points]] == -1).all()
-    # few points: a few percent
-    assert added <= 0.1 * plain.n_points
+    # Few points at the 20 degree bound of before issue 11 (66 here, under 5 %); the default
+    # 30 degrees costs more on this rough size map (delta drawn per point in [0.3, 3]):
+    # 781 here (56 %; 272 at 25 degrees).
+    assert added <= 0.6 * plain.n_points
 
 
 def test_new_points_on_segments_stay_on_the_boundary():
@@ -181,7 +184,7 @@ def test_spacing_and_size_with_the_pass():
     for quality in (False, True):
         new = evomesh.evolve(mesh, delta, seed=0, quality=quality)
         assert spacing_ratio(mesh, new, delta).max() < 2.0
-        assert new.n_points / mass < 2.0
+        assert new.n_points / mass < 2.0 * 1.3**2  # interpolated sizes: test_evolve.py
 
 
 @pytest.mark.parametrize("method", ["frfc", "drfc"])

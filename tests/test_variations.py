@@ -61,8 +61,9 @@ def _new_interior(mesh, new):
 def test_skip_coarse_adds_no_interior_samples_where_all_vertices_coarsen():
     mesh = grid_mesh(16, 16, jitter=0.2, seed=2)
     delta = np.full(mesh.n_points, 2.0)
-    plain = evomesh.evolve(mesh, delta, quality=False)
-    skipped = evomesh.evolve(mesh, delta, quality=False, skip_coarse=True)
+    # (no gap repair: it adds points beside kept C-points, not samples)
+    plain = evomesh.evolve(mesh, delta, quality=False, gap_repair_ratio=None)
+    skipped = evomesh.evolve(mesh, delta, quality=False, skip_coarse=True, gap_repair_ratio=None)
     check_evolved(mesh, skipped)
     assert plain.stats["n_interior_samples"] > 0
     assert skipped.stats["n_interior_samples"] == 0
@@ -81,7 +82,7 @@ def test_deterministic_samples_are_barycentres_and_midpoints(samples):
     barycentre of an input triangle or a midpoint of an input edge."""
     mesh = grid_mesh(12, 12, jitter=0.25, seed=3)
     delta = np.full(mesh.n_points, 1.5)
-    new = evomesh.evolve(mesh, delta, samples=samples, quality=False)
+    new = evomesh.evolve(mesh, delta, samples=samples, quality=False, gap_repair_ratio=None)
     check_evolved(mesh, new)
     p, t = mesh.points, mesh.triangles
     allowed = set()
@@ -124,12 +125,13 @@ def test_variations_are_deterministic(samples, skip_coarse, radius, quality):
 def test_defaults_are_documented():
     assert FRFC_DEFAULTS["samples"] == "random"
     assert FRFC_DEFAULTS["skip_coarse"] is False
-    assert FRFC_DEFAULTS["radius"] == "exact"
+    assert FRFC_DEFAULTS["radius"] == "interpolated"
     assert FRFC_DEFAULTS["quality"] is True
-    assert FRFC_DEFAULTS["min_angle"] == 20.0
+    assert FRFC_DEFAULTS["min_angle"] == 30.0
+    assert FRFC_DEFAULTS["demote_ratio"] == 1.1
 
 
-@given(mesh_and_delta(), st.sampled_from(SAMPLES), st.sampled_from(["exact", "cheap"]),
+@given(mesh_and_delta(), st.sampled_from(SAMPLES), st.sampled_from(["exact", "cheap", "interpolated"]),
        st.sampled_from([0.5, 1.0, 2.0]), st.integers(0, 3))
 def test_sample_filter_changes_nothing_but_the_work(case, samples, radius, cell_factor, seed):
     """Dropping samples that certainly overlap a kept sphere (the Lipschitz bound) keeps the same spheres."""

@@ -116,7 +116,12 @@ Graded_case graded_case(double target, int threads, double max_samples) {
     setup_delta[i] = target_spacing(grid.points[i][0], kBandCenter, s) / grid_spacing;
   }
   // The setup step samples densely in the band: it is not limited by --max-samples.
-  Evolve_result setup = frfc(grid, setup_delta, bench_options(threads, std::max(max_samples, 1e10)));
+  // The graded input is fixed: the packing of before issue 11 (exact radii, old points first).
+  Frfc_options setup_options = bench_options(threads, std::max(max_samples, 1e10));
+  setup_options.radius = Radius_rule::exact;
+  setup_options.demote_ratio = 0;
+  setup_options.gap_repair_ratio = 0;
+  Evolve_result setup = frfc(grid, setup_delta, setup_options);
   out.mesh = std::move(setup.mesh);
   out.delta.resize(out.mesh.points.size());
   for (std::size_t i = 0; i < out.mesh.points.size(); ++i) {

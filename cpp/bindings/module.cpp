@@ -209,9 +209,10 @@ py::dict evolve_result_dict(const Evolve_result& r) {
 
 // The option types, with the same field names as in C++ (one list per type).
 #define EVOMESH_FRFC_FIELDS(X)                                                                                  \
-  X(cell_factor) X(radius) X(radius_scale) X(boundary_scale) X(ring_samples) X(repair_ratio) X(samples)          \
-  X(adaptive_cells) X(skip_coarse) X(filter_samples) X(max_samples) X(threads) X(seed) X(quality) X(within_domain) X(min_angle)   \
-  X(crowding_angle) X(quality_max_fraction) X(quality_max_extra)
+  X(cell_factor) X(radius) X(radius_scale) X(boundary_scale) X(ring_samples) X(repair_ratio)                   \
+  X(gap_repair_ratio) X(demote_ratio) X(samples) X(adaptive_cells) X(skip_coarse) X(filter_samples)            \
+  X(max_samples) X(threads) X(seed) X(quality) X(within_domain) X(min_angle) X(crowding_angle)                 \
+  X(quality_max_fraction) X(quality_max_extra)
 #define EVOMESH_DRFC_FIELDS(X)                                                                                  \
   X(min_angle) X(radius_scale) X(threads) X(max_samples) X(quality) X(crowding_angle) X(quality_max_fraction)    \
   X(quality_max_extra) X(within_domain)
@@ -263,9 +264,11 @@ void bind_options(py::module_& m) {
       .value("barycentre", Sample_mode::barycentre)
       .value("midpoints", Sample_mode::midpoints)
       .value("barycentre_midpoints", Sample_mode::barycentre_midpoints);
-  py::enum_<Radius_rule>(m, "RadiusRule", "Sample sphere radius: exact f(x)/2, or the paper's cheap bound.")
+  py::enum_<Radius_rule>(m, "RadiusRule",
+                         "Sample sphere radius: exact f(x)/2, the paper's cheap bound, or min(f(x), linear f)/2.")
       .value("exact", Radius_rule::exact)
-      .value("cheap", Radius_rule::cheap);
+      .value("cheap", Radius_rule::cheap)
+      .value("interpolated", Radius_rule::interpolated);
   // Point kinds as (name, value) pairs; Python makes its IntEnum PointKind from them
   // (an IntEnum compares with numpy arrays, a pybind11 enum does not).
   m.attr("POINT_KINDS") = py::make_tuple(

@@ -23,6 +23,8 @@ struct Packing {
   std::vector<Index> blocker;            // first pass: a kept sphere that rejected the sphere, -1 if kept
   std::vector<std::uint8_t> kept_first;  // kept by the first pass
   std::vector<std::uint8_t> kept;        // kept by either pass or the spacing repair
+  std::vector<Index> deferred;           // demoted interior input points: packed in the second pass
+  std::size_t n_demoted = 0;             // demoted input points (deferred or on segments)
 };
 
 // Steps 3-5: order the spheres, lexical-first MIS; corners are always kept.
@@ -30,29 +32,65 @@ struct Packing {
 // in the order (its classes are last), so the MIS is computed in two passes:
 // this first one over input points and segment candidates decides them for
 // good; the second goes on with the interior candidates, the spheres kept so
-// far forced.
+// far forced. Demoted interior input points (demoted_points) belong to the
+// interior candidates' last class: they come last here, so taking them out
+// after the pass changes nothing else, and go to the second pass.
 Packing first_packing_pass(const Mesh_arrays& mesh, const std::vector<double>& f, const Candidates& on_segments,
-                           const std::vector<std::uint8_t>& forced, std::size_t n_forced, const Frfc_options& options) {
+                           const std::vector<std::uint8_t>& forced, std::size_t n_forced,
+                           const std::vector<std::uint8_t>& demoted, const Frfc_options& options) {
   Packing packing;
   packing.centers = mesh.points;
   packing.centers.insert(packing.centers.end(), on_segments.samples.points.begin(), on_segments.samples.points.end());
   packing.radius = input_point_radii(mesh, f, options);
   packing.radius.insert(packing.radius.end(), on_segments.radius.begin(), on_segments.radius.end());
   std::vector<std::uint8_t> classes(mesh.points.size());
-  for (std::size_t i = 0; i < classes.size(); ++i) classes[i] = old_point_class(mesh.kind[i], forced[i]);
+  for (std::size_t i = 0; i < classes.size(); ++i) {
+    classes[i] = old_point_class(mesh.kind[i], forced[i], demoted[i]);
+    packing.n_demoted += demoted[i];
+  }
   const auto segment_classes = on_segments.classes(/*on_segment=*/true);
   classes.insert(classes.end(), segment_classes.begin(), segment_classes.end());
   packing.first_order = packing_order(classes, packing.radius);
   packing.kept = lexical_first_mis(packing.centers, packing.radius, packing.first_order, n_forced, &packing.blocker);
+  std::vector<std::uint8_t> deferred(packing.centers.size(), 0);
+  for (std::size_t i = 0; i < mesh.points.size(); ++i) {
+    if (classes[i] != class_new) continue;
+    deferred[i] = 1;
+    packing.deferred.push_back(static_cast<Index>(i));
+    packing.kept[i] = 0;
+    packing.blocker[i] = -1;
+  }
+  // Only a deferred point comes after a deferred point: a blocker that is one is forgotten.
+  for (Index& b : packing.blocker) {
+    if (b >= 0 && deferred[b]) b = -1;
+  }
   packing.kept_first = packing.kept;
   return packing;
 }
 
 // The second pass: the kept spheres of the first (in their order, forced), then
-// the interior candidates by class, radius and index.
+// the deferred input points and the interior candidates by class, radius and index.
 void second_packing_pass(const Candidates& inside, Packing& packing) {
-  extend_packing(packing.centers, packing.radius, packing.first_order, inside.samples.points, inside.radius,
-                 packing_order(inside.classes(/*on_segment=*/false), inside.radius), packing.kept);
+  const std::size_t n_first = packing.kept.size();
+  const std::size_t n_deferred = packing.deferred.size();
+  std::vector<Vec2> centers;
+  std::vector<double> radii;
+  std::vector<std::uint8_t> classes;
+  centers.reserve(n_deferred + inside.size());
+  for (Index c : packing.deferred) {
+    centers.push_back(packing.centers[c]);
+    radii.push_back(packing.radius[c]);
+    classes.push_back(class_new);
+  }
+  centers.insert(centers.end(), inside.samples.points.begin(), inside.samples.points.end());
+  radii.insert(radii.end(), inside.radius.begin(), inside.radius.end());
+  const auto inside_classes = inside.classes(/*on_segment=*/false);
+  classes.insert(classes.end(), inside_classes.begin(), inside_classes.end());
+  extend_packing(packing.centers, packing.radius, packing.first_order, centers, radii, packing_order(classes, radii),
+                 packing.kept);
+  for (std::size_t k = 0; k < n_deferred; ++k) packing.kept[packing.deferred[k]] = packing.kept[n_first + k];
+  packing.kept.erase(packing.kept.begin() + static_cast<std::ptrdiff_t>(n_first),
+                     packing.kept.begin() + static_cast<std::ptrdiff_t>(n_first + n_deferred));
   packing.centers.insert(packing.centers.end(), inside.samples.points.begin(), inside.samples.points.end());
 }
 
@@ -101,13 +139,14 @@ std::vector<Constraint_piece> pieces_along_chains(const Mesh_arrays& mesh, const
 // Step 2a: candidates on segments (grid samples and ring candidates, snapped
 // to straight chains) and their spheres.
 Candidates segment_stage(const Mesh_arrays& mesh, const std::vector<double>& delta, const Step_spacing& spacing,
-                         const std::vector<Segment_chain>& chains, const Frfc_options& options, Stage_timer& timer) {
+                         const std::vector<Segment_chain>& chains, const std::vector<std::uint8_t>& demoted,
+                         const Frfc_options& options, Stage_timer& timer) {
   const std::vector<double>& f = spacing.f;
   check_sample_budget(estimate_sample_count(mesh, f, options.cell_factor, options.max_samples, options.adaptive_cells),
                       options.max_samples, "sampling");
   Candidates on_segments = segment_candidates(mesh, delta, f, chains, options);
   timer.lap("sampling");
-  candidate_radii(mesh, *spacing.function, f, options, /*on_segment=*/true, on_segments);
+  candidate_radii(mesh, *spacing.function, f, demoted, options, /*on_segment=*/true, on_segments);
   timer.lap("sample_radii");
   return on_segments;
 }
@@ -133,16 +172,17 @@ struct Early_start {
 // Step 2b: interior candidates (grid samples and ring candidates, less those
 // the first pass certainly blocks) and their spheres.
 Candidates interior_stage(const Mesh_arrays& mesh, const Triangle_fans& fans, const std::vector<double>& delta,
-                          const Step_spacing& spacing, const Packing& packing, const Frfc_options& options,
-                          Stage_timer& timer, std::size_t& n_drawn) {
+                          const Step_spacing& spacing, const Packing& packing, const std::vector<std::uint8_t>& demoted,
+                          const Frfc_options& options, Stage_timer& timer, std::size_t& n_drawn) {
   const std::vector<double>& f = spacing.f;
   std::vector<Disc> cover;
   if (options.filter_samples) {
-    cover = cover_discs(mesh, f, packing.radius, packing.kept, packing.blocker, options.radius_scale);
+    cover = cover_discs(mesh, f, packing.radius, packing.kept, packing.blocker, options.radius_scale,
+                        options.radius == Radius_rule::interpolated);
   }
-  Candidates inside = interior_candidates(mesh, fans, delta, f, cover, options, n_drawn);
+  Candidates inside = interior_candidates(mesh, fans, delta, f, demoted, cover, options, n_drawn);
   timer.lap("sampling");
-  candidate_radii(mesh, *spacing.function, f, options, /*on_segment=*/false, inside);
+  candidate_radii(mesh, *spacing.function, f, demoted, options, /*on_segment=*/false, inside);
   timer.lap("sample_radii");
   if (options.filter_samples) {
     drop_blocked_candidates(mesh, packing.centers, packing.radius, packing.kept, packing.blocker, options.threads,
@@ -157,10 +197,10 @@ std::vector<Vec2> spacing_repair_stage(const Mesh_arrays& mesh, const Triangle_f
                                        const std::vector<double>& delta, const Step_spacing& spacing,
                                        const Candidates& on_segments, const Frfc_options& options, Packing& packing,
                                        std::size_t& n_repairs) {
-  if (!(options.repair_ratio > 0 && options.ring_samples)) return {};
+  if (!(options.repair_ratio > 0 && options.ring_samples) && !(options.gap_repair_ratio > 0)) return {};
   return repair_spacing(mesh, fans, delta, spacing.nn, spacing.f, ring_reach(options.radius_scale), options.seed,
-                        packing.centers, on_segments.owner, options.repair_ratio, options.threads, packing.kept,
-                        n_repairs);
+                        packing.centers, on_segments.owner, options.ring_samples ? options.repair_ratio : 0.0,
+                        options.gap_repair_ratio, options.threads, packing.kept, n_repairs);
 }
 
 }  // namespace
@@ -180,15 +220,17 @@ Evolve_result frfc(const Mesh_arrays& input, const std::vector<double>& delta, c
   Step_spacing spacing = step_spacing(mesh, delta, F_at_points::lemma_3_1, options.threads, timer,
                                       options.within_domain ? &chains : nullptr);
   // Steps 2-5: candidates on segments, first packing pass; interior candidates, second pass.
-  const Candidates on_segments = segment_stage(mesh, delta, spacing, chains, options, timer);
+  // Old points whose neighbourhood the request refines lose their priority.
   std::size_t n_forced = 0;
   const auto forced = forced_corners(mesh, chains, n_forced, mesh.required);
-  Packing packing = first_packing_pass(mesh, spacing.f, on_segments, forced, n_forced, options);
+  const auto demoted = demoted_points(mesh.triangles, spacing.nn, spacing.f, forced, options.demote_ratio);
+  const Candidates on_segments = segment_stage(mesh, delta, spacing, chains, demoted, options, timer);
+  Packing packing = first_packing_pass(mesh, spacing.f, on_segments, forced, n_forced, demoted, options);
   Early_start early(packing, options, mesh.geometry != nullptr);
   timer.lap("lfmis");
   const Triangle_fans fans(mesh);
   std::size_t n_drawn = 0;
-  const Candidates inside = interior_stage(mesh, fans, delta, spacing, packing, options, timer, n_drawn);
+  const Candidates inside = interior_stage(mesh, fans, delta, spacing, packing, demoted, options, timer, n_drawn);
   second_packing_pass(inside, packing);
   timer.lap("lfmis");
   std::size_t n_repairs = 0;
@@ -217,6 +259,7 @@ Evolve_result frfc(const Mesh_arrays& input, const std::vector<double>& delta, c
                            {"n_interior_samples", inside.size()},
                            {"n_interior_samples_drawn", n_drawn},
                            {"n_candidates", packing.centers.size()},
+                           {"n_demoted_points", packing.n_demoted},
                            {"n_spacing_repairs", n_repairs},
                            {"n_hidden_sites", spacing.function->n_hidden()},
                            {"n_filtered_sites", spacing.function->n_filtered()}});

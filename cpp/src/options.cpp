@@ -38,6 +38,8 @@ Frfc_options Frfc_options::paper() {
   o.boundary_scale = 1.0;
   o.ring_samples = false;
   o.repair_ratio = 0.0;
+  o.demote_ratio = 0.0;
+  o.gap_repair_ratio = 0.0;
   o.samples = Sample_mode::random_grid;
   o.adaptive_cells = false;
   o.skip_coarse = false;
@@ -55,8 +57,12 @@ void Frfc_options::validate() const {
   require(boundary_scale > 0 && boundary_scale <= 1, "boundary_scale", "in (0, 1]");
   require(repair_ratio == 0 || (std::isfinite(repair_ratio) && repair_ratio >= 1), "repair_ratio",
           "None, 0 or a finite number >= 1");
+  require(demote_ratio == 0 || (std::isfinite(demote_ratio) && demote_ratio >= 1), "demote_ratio",
+          "None, 0 or a finite number >= 1");
+  require(gap_repair_ratio == 0 || (std::isfinite(gap_repair_ratio) && gap_repair_ratio >= 1), "gap_repair_ratio",
+          "None, 0 or a finite number >= 1");
   require(static_cast<int>(samples) <= 3, "samples", "a Sample_mode");
-  require(static_cast<int>(radius) <= 1, "radius", "'exact' or 'cheap'");
+  require(static_cast<int>(radius) <= 2, "radius", "'exact', 'cheap' or 'interpolated'");
   validate_common(radius_scale, max_samples, threads);
   quality_settings().validate();
 }

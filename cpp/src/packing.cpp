@@ -333,14 +333,31 @@ std::vector<Index> packing_order(const std::vector<std::uint8_t>& priority_class
   return order;
 }
 
-Packing_class old_point_class(Point_kind kind, bool forced) {
+Packing_class old_point_class(Point_kind kind, bool forced, bool demoted) {
   if (forced) return class_corner;
+  if (demoted) return kind == Point_kind::corner || kind == Point_kind::boundary ? class_boundary_new : class_new;
   switch (kind) {
     case Point_kind::corner:
     case Point_kind::boundary: return class_boundary;
     case Point_kind::original: return class_original;
     default: return class_steiner;
   }
+}
+
+std::vector<std::uint8_t> demoted_points(const std::vector<Triangle>& triangles, const std::vector<double>& nn,
+                                         const std::vector<double>& f, const std::vector<std::uint8_t>& forced,
+                                         double demote_ratio) {
+  const std::size_t n = nn.size();
+  std::vector<std::uint8_t> demoted(n, 0);
+  if (!(demote_ratio > 0)) return demoted;
+  std::vector<std::uint8_t> refined(n);
+  for (std::size_t p = 0; p < n; ++p) refined[p] = nn[p] > demote_ratio * f[p];
+  for (std::size_t p = 0; p < n; ++p) demoted[p] = refined[p] && !forced[p];
+  for (const Triangle& t : triangles) {
+    if (refined[t[0]] && refined[t[1]] && refined[t[2]]) continue;
+    for (Index v : t) demoted[v] = 0;  // a neighbour conforms
+  }
+  return demoted;
 }
 
 Packing_class new_point_class(bool on_segment, int round) {

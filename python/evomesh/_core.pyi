@@ -41,6 +41,7 @@ class RadiusRule:
 
     exact: ClassVar[RadiusRule]
     cheap: ClassVar[RadiusRule]
+    interpolated: ClassVar[RadiusRule]
     __members__: ClassVar[dict[str, RadiusRule]]
     def __init__(self, value: int) -> None: ...
     def __int__(self) -> int: ...
@@ -63,6 +64,8 @@ class FrfcOptions:
     boundary_scale: float
     ring_samples: bool
     repair_ratio: float
+    gap_repair_ratio: float
+    demote_ratio: float
     samples: SampleMode
     adaptive_cells: bool
     skip_coarse: bool

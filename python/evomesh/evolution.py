@@ -29,7 +29,7 @@ _SAMPLE_NAMES = {
     "midpoints": SampleMode.midpoints,
     "barycentre+midpoints": SampleMode.barycentre_midpoints,
 }
-_RADIUS_NAMES = {"exact": RadiusRule.exact, "cheap": RadiusRule.cheap}
+_RADIUS_NAMES = {"exact": RadiusRule.exact, "cheap": RadiusRule.cheap, "interpolated": RadiusRule.interpolated}
 _ENUMS: dict[str, tuple[type, dict[str, Any]]] = {"samples": (SampleMode, _SAMPLE_NAMES), "radius": (RadiusRule, _RADIUS_NAMES)}
 # Options that are not keyword overrides of evolve (evolve has its own seed argument).
 _NOT_KEYWORDS = ("seed",)
@@ -41,7 +41,7 @@ def _python_value(name: str, value: Any) -> Any:
         return next(key for key, member in _ENUMS[name][1].items() if member == value)
     if name == "threads":
         return value or None
-    if name == "repair_ratio":
+    if name in ("repair_ratio", "gap_repair_ratio", "demote_ratio"):
         return value or None
     return value
 
@@ -71,7 +71,7 @@ def _set_field(options: Any, name: str, value: Any) -> None:
             value = 0
         elif isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Integral) or not 1 <= value < 2**31:
             raise ValueError(f"threads must be None or an integer in [1, 2**31), got {value!r}")
-    elif name == "repair_ratio" and value is None:
+    elif name in ("repair_ratio", "gap_repair_ratio", "demote_ratio") and value is None:
         value = 0.0
     elif isinstance(default, bool):
         if not isinstance(value, (bool, np.bool_)):
@@ -173,9 +173,14 @@ def evolve(mesh: Mesh, delta: Any = None, *, size: Any = None, method: str = "fr
             quarter of the samples; on the growing circle and a 1e5-point graded
             step it gives the same angles and spacing ratios and 1-2% fewer
             points (benchmarks/METHODS.md).
-        radius : {"exact", "cheap"}, default "exact"
-            Sample sphere radius f(x)/2 from the Apollonius graph, or the paper's
-            cheaper (f(q) + |x - q|)/2.
+        radius : {"interpolated", "exact", "cheap"}, default "interpolated"
+            Sample sphere radius f(x)/2 from the Apollonius graph ("exact", the
+            paper), the paper's cheaper (f(q) + |x - q|)/2, or ("interpolated",
+            issue 11) f(x)/2 except in triangles with a demoted vertex, where the
+            size follows the linear interpolation l of f at the vertices:
+            min(f, max(1.2 l, f / 1.3))/2. f is a minimum of cones of slope 1, so
+            between old points it exceeds the request by up to their spacing;
+            with it, delta = 0.8 on a uniform mesh keeps the old spacing.
         radius_scale : float in (0, 1], default 0.75
             Spheres are B(x, radius_scale f(x)/2). 1.0 is the paper's choice;
             0.75 packs tighter so that nn_M'(p) stays below 2 delta(p) nn_M(p)
@@ -189,6 +194,17 @@ def evolve(mesh: Mesh, delta: Any = None, *, size: Any = None, method: str = "fr
             within repair_ratio delta(p) nn_M(p) gets one more point next to it
             (a candidate just outside its sphere). None or 0 disables it (the
             paper's plain packing).
+        gap_repair_ratio : float >= 1 or None, default 1.1
+            Gap repair (issue 11): a kept point p with delta(p) >= 1 and no kept
+            point within gap_repair_ratio delta(p) nn_M(p) gets one more point
+            at distance delta(p) nn_M(p) (of six directions, inside the mesh,
+            the one farthest from the kept points). None or 0 disables it.
+        demote_ratio : float >= 1 or None, default 1.1
+            An old point p with nn_M(q) > demote_ratio f(q) at p and at all its
+            mesh neighbours q (the request refines its whole neighbourhood)
+            loses the priority of old points and is packed by size with the new
+            points, so a fresh packing can form there; elsewhere old points come
+            first as in the paper. None or 0: old points always first (the paper).
         samples : {"random", "barycentre", "midpoints", "barycentre+midpoints"}
             "random": a random point in every grid cell (the paper); the others
             are the practical variations of Section 5.
@@ -229,10 +245,12 @@ def evolve(mesh: Mesh, delta: Any = None, *, size: Any = None, method: str = "fr
             the geometry's corner angle). False: the paper's Euclidean nn_M.
             :attr:`Mesh.nn_spacing` (and so ``size=``) measures within the
             domain either way.
-        min_angle : float in (0, 30], default 20.0
+        min_angle : float in (0, 30], default 30.0 (FRFC; 20.0 for DRFC)
             Target smallest angle in degrees (Ruppert's algorithm provably ends
             up to about 20.7 degrees; beyond that the bound on inserted points
-            stops it).
+            stops it; CGAL's off-centres end in practice up to 30). FRFC's
+            default 30 (issue 11; was 20) costs a few % more points on smooth
+            size maps and up to about half more on rough ones.
 
         For "drfc" (defaults in :data:`DRFC_DEFAULTS`): ``min_angle`` (also the
         shape criterion of the refinement stage), ``quality``, ``within_domain``, ``max_samples``

@@ -70,7 +70,8 @@ Candidates segment_candidates(const Mesh_arrays& mesh, const std::vector<double>
 // candidates of every R-point, except those in a cover disc of their triangle
 // (cover empty: none dropped). `n_drawn` receives the number of grid samples drawn.
 Candidates interior_candidates(const Mesh_arrays& mesh, const Triangle_fans& fans, const std::vector<double>& delta,
-                               const std::vector<double>& f, const std::vector<Disc>& cover,
+                               const std::vector<double>& f, const std::vector<std::uint8_t>& demoted,
+                               const std::vector<Disc>& cover,
                                const Frfc_options& options, std::size_t& n_drawn);
 
 // Sphere radii of the input points: radius_scale f(p) / 2 (times boundary_scale on segments).
@@ -81,14 +82,15 @@ std::vector<double> input_point_radii(const Mesh_arrays& mesh, const std::vector
 // segments), f(x) exact from the Apollonius graph or (f(q) + |x - q|) with q the
 // vertex of smallest f (Section 3.2, step 2).
 void candidate_radii(const Mesh_arrays& mesh, const Spacing_function& spacing, const std::vector<double>& f,
-                     const Frfc_options& options, bool on_segment, Candidates& candidates);
+                     const std::vector<std::uint8_t>& demoted, const Frfc_options& options, bool on_segment,
+                     Candidates& candidates);
 
 // The sample filter, part 1: one cover disc per input point (see candidates.cpp).
 // kept/blocker: the first packing pass over the input points (indices < n) and
 // segment candidates; radius: the radii of its spheres.
 std::vector<Disc> cover_discs(const Mesh_arrays& mesh, const std::vector<double>& f,
                               const std::vector<double>& radius, const std::vector<std::uint8_t>& kept,
-                              const std::vector<Index>& blocker, double radius_scale);
+                              const std::vector<Index>& blocker, double radius_scale, bool interpolated);
 
 // The sample filter, part 2: drops the interior candidates whose sphere overlaps
 // the kept sphere of a vertex of their triangle (or of the kept sphere that

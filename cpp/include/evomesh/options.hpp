@@ -19,8 +19,15 @@ enum class Sample_mode : std::uint8_t {
 };
 
 // Radius of a sample's sphere: f(x)/2 from the Apollonius graph, or the paper's
-// cheaper (f(q) + |x - q|)/2 with q the triangle's vertex of smallest f.
-enum class Radius_rule : std::uint8_t { exact = 0, cheap = 1 };
+// cheaper (f(q) + |x - q|)/2 with q the triangle's vertex of smallest f, or
+// (interpolated, issue 11) f(x)/2 except in triangles (segments) with a demoted
+// vertex (packing.hpp, demoted_points), where the size follows the linear
+// interpolation l of f at the vertices: min(f, max(1.2 l, f / 1.3))/2
+// (candidates.cpp). f is a minimum of cones of slope 1 at the old points, so
+// between them it rises by up to about their spacing (by 72 % at delta = 0.8 on
+// a uniform mesh): spheres that follow it pack at nearly the old spacing
+// however close to 1 delta is. l follows the request between the old points.
+enum class Radius_rule : std::uint8_t { exact = 0, cheap = 1, interpolated = 2 };
 
 // The quality pass of Section 6 (refinement.hpp): Delaunay refinement of the
 // selected points to an angle bound, after crowded segments are split.
@@ -46,7 +53,7 @@ constexpr double kMaxMinAngle = 30.0;
 
 struct Frfc_options {
   double cell_factor = 2.0;    // c in the cell side c f(q) / (2 sqrt 2); the paper's c5 <= 1
-  Radius_rule radius = Radius_rule::exact;
+  Radius_rule radius = Radius_rule::interpolated;
   // Spheres are B(x, radius_scale f(x) / 2); 1 is the paper's choice, smaller packs tighter.
   double radius_scale = 0.75;
   // Extra factor for spheres centred on segments (a 1-D packing leaves larger gaps).
@@ -56,6 +63,15 @@ struct Frfc_options {
   // Spacing repair: a kept R-point p with no kept point within
   // repair_ratio * delta(p) nn_M(p) gets its best ring candidate. 0 disables.
   double repair_ratio = 1.75;
+  // An old point p with nn_M(p) > demote_ratio * f(p) (the request refines its
+  // neighbourhood: delta(p) < 1 / demote_ratio at an R-point) loses the priority
+  // of old points and is packed with the new points by size (packing.hpp,
+  // demoted_points). 0: old points always first (the paper).
+  double demote_ratio = 1.1;
+  // Gap repair (issue 11): a kept point p with delta(p) >= 1 and no kept point
+  // within gap_repair_ratio * delta(p) nn_M(p) gets one more point at distance
+  // delta(p) nn_M(p) (spacing_repair.hpp). 0 disables (the paper).
+  double gap_repair_ratio = 1.1;
   Sample_mode samples = Sample_mode::random_grid;
   // Grid cells grow where f's Lipschitz bound from the triangle's vertices
   // allows (sampling.cpp); false: the paper's uniform cells of side c f(q)/(2 sqrt 2).
@@ -71,7 +87,7 @@ struct Frfc_options {
   // nn_M within the domain and the spacing capped by the local feature size
   // (local_feature_size.hpp); false: the paper's Euclidean nn_M.
   bool within_domain = true;
-  double min_angle = 20.0;      // its angle bound (degrees)
+  double min_angle = 30.0;      // its angle bound (degrees; issue 11: kMaxMinAngle, was 20)
   double crowding_angle = 120.0;
   double quality_max_fraction = 0.5;
   double quality_max_extra = 1000;

@@ -47,7 +47,23 @@ enum Packing_class : std::uint8_t {
 };
 
 // The class of a point of the mesh being coarsened (`forced`: a forced corner).
-Packing_class old_point_class(Point_kind kind, bool forced);
+// A `demoted` point has lost its priority (demoted_points): it is packed with
+// the new points of its kind, by size (class_boundary_new on segments, else class_new).
+Packing_class old_point_class(Point_kind kind, bool forced, bool demoted = false);
+
+// Old points whose neighbourhood does not conform to the request (issue 11):
+// p is demoted when nn_M(q) > demote_ratio * f(q) at p and at every point q
+// that shares a triangle with p, that is where the request refines the whole
+// neighbourhood by more than demote_ratio (delta < 1/demote_ratio at R-points;
+// a single point with a far nearest neighbour in a conforming mesh keeps its
+// place). Keeping such a point first would fix the packing around it to the
+// old lattice (in a lattice of spacing nn with delta = 0.8 every candidate
+// lies too close to a kept old point); packed by size with the new points, it
+// is kept only where it fits a fresh packing. Forced points are never demoted;
+// demote_ratio = 0 demotes none (the paper: old points always first).
+std::vector<std::uint8_t> demoted_points(const std::vector<Triangle>& triangles, const std::vector<double>& nn,
+                                         const std::vector<double>& f, const std::vector<std::uint8_t>& forced,
+                                         double demote_ratio);
 
 // The class of a new point (on a segment or inside); `round` >= 0 for a ring candidate.
 Packing_class new_point_class(bool on_segment, int round = -1);

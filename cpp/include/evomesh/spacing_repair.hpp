@@ -19,11 +19,16 @@ namespace evomesh {
 // dropped them; returned). That candidate lies just outside p's sphere, so
 // afterwards nn_M'(p) is about 1.2 f(p). Nearest kept points come from a static
 // kd-tree over the kept centres plus a Delaunay triangulation of the points
-// added here. `n_added` receives the number of candidates added.
+// added here. Then (gap_repair_ratio > 0, issue 11) a kept point p with
+// delta(p) >= 1 and no kept point within gap_repair_ratio * delta(p) nn_M(p)
+// gets the point farthest from every kept point among six at distance
+// delta(p) nn_M(p) from it inside the old mesh (if at least 0.6 of that
+// distance from them). `n_added` receives the number of points added.
 std::vector<Vec2> repair_spacing(const Mesh_arrays& mesh, const Triangle_fans& fans, const std::vector<double>& delta,
                                  const std::vector<double>& nn, const std::vector<double>& f, double reach,
                                  std::uint64_t seed, const std::vector<Vec2>& centers,
-                                 const std::vector<Index>& segment_owner, double repair_ratio, int threads,
-                                 std::vector<std::uint8_t>& kept, std::size_t& n_added);
+                                 const std::vector<Index>& segment_owner, double repair_ratio,
+                                 double gap_repair_ratio, int threads, std::vector<std::uint8_t>& kept,
+                                 std::size_t& n_added);
 
 }  // namespace evomesh
