@@ -514,6 +514,7 @@ PYBIND11_MODULE(_core, m) {
         stats["points_added_on_segments"] = static_cast<double>(r.report.n_inserted_on_segments);
         stats["rounds"] = static_cast<double>(r.report.rounds);
         stats["capped"] = r.report.capped ? 1.0 : 0.0;
+        stats["points_outside"] = static_cast<double>(r.report.n_inserted_outside);
         out["stats"] = stats;
         return out;
       },

@@ -55,8 +55,19 @@ Refined_mesh extract(Cdt& cdt, const std::vector<Vec2>& input_points, const std:
   }
   std::vector<Vertex_handle> inserted;
   for (auto v = cdt.finite_vertices_begin(); v != cdt.finite_vertices_end(); ++v) {
-    if (v->info().index >= 0) v->info().out = input_to_out[v->info().index];
-    else inserted.push_back(v);
+    if (v->info().index >= 0) {
+      v->info().out = input_to_out[v->info().index];
+      continue;
+    }
+    inserted.push_back(v);
+    // Ruppert: a point the mesher inserts lies in the domain (a refinement point
+    // behind a constraint splits the constraint instead); counted, never expected.
+    bool in_domain = false;
+    auto f = cdt.incident_faces(v), done = f;
+    do {
+      in_domain = in_domain || (!cdt.is_infinite(f) && f->is_in_domain());
+    } while (++f != done);
+    if (!in_domain) ++result.report.n_inserted_outside;
   }
   std::sort(inserted.begin(), inserted.end(), [](Vertex_handle u, Vertex_handle w) {
     return u->point().x() < w->point().x() || (u->point().x() == w->point().x() && u->point().y() < w->point().y());

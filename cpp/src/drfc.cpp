@@ -125,7 +125,8 @@ Evolve_result drfc(const Mesh_arrays& mesh, const std::vector<double>& delta, co
                            {"n_refined_points", refined.mesh.points.size()},
                            {"refine_points_added", report.n_inserted},
                            {"refine_rounds", report.rounds},
-                           {"refine_capped", report.capped ? 1.0 : 0.0}});
+                           {"refine_capped", report.capped ? 1.0 : 0.0},
+                           {"refine_points_outside", report.n_inserted_outside}});
   result.input_f = std::move(stage.spacing.f);
   result.input_nn = std::move(stage.spacing.nn);
   return result;

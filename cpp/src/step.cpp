@@ -115,6 +115,7 @@ void triangulate_selection(Selection selected, const std::vector<Constraint_piec
       stats.emplace_back("quality_points_removed", static_cast<double>(report.n_removed));
       stats.emplace_back("quality_crowded_segments", static_cast<double>(report.n_crowded_segments));
       stats.emplace_back("quality_capped", report.capped ? 1.0 : 0.0);
+      stats.emplace_back("quality_points_outside", static_cast<double>(report.n_inserted_outside));
     } catch (const CGAL::Failure_exception&) {
       stats.emplace_back("quality_failed", 1.0);
       quality = nullptr;

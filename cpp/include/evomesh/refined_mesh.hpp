@@ -11,6 +11,7 @@ namespace evomesh {
 struct Refinement_report {
   std::size_t n_inserted = 0;              // points inserted (inside and on segments)
   std::size_t n_inserted_on_segments = 0;
+  std::size_t n_inserted_outside = 0;      // new points with no triangle of the domain at them (never, by design)
   std::size_t n_removed = 0;               // points dropped for crowding a segment
   std::size_t n_crowded_segments = 0;      // pieces split because points crowded them
   std::size_t rounds = 0;                  // spacing_refine: passes with exact f

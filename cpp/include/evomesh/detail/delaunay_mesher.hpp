@@ -19,7 +19,10 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <functional>
 #include <limits>
+#include <stdexcept>
+#include <unordered_set>
 #include <utility>
 #include <vector>
 
@@ -212,14 +215,135 @@ class Refinement_criteria {
   const Spacing_data* spacing_;
 };
 
-using Gabriel = CGAL::Mesh_2::Is_locally_conforming_Gabriel<Cdt>;
+// The side of the domain at each boundary sub-segment (a constraint edge with the
+// domain on one side only), kept as the set of such edges directed with the domain
+// on their left. Recorded from the in_domain marks before refinement starts and
+// updated when the edge level splits a sub-segment a -> b at v (a -> v and v -> b
+// keep the parent's side), it never depends on the marks CGAL changes while it
+// inserts a point. Lookups only: the order of the set is never used.
+class Domain_sides {
+ public:
+  // Domain on the left of every boundary constraint edge, as the marks say now.
+  void record(const Cdt& tr) {
+    left_.clear();
+    for (auto e = tr.finite_edges_begin(); e != tr.finite_edges_end(); ++e) {
+      const Face_handle f = e->first;
+      const int i = e->second;
+      if (!f->is_constrained(i)) continue;
+      const Face_handle g = f->neighbor(i);
+      const bool f_in = !tr.is_infinite(f) && f->is_in_domain();
+      const bool g_in = !tr.is_infinite(g) && g->is_in_domain();
+      // f lies on the left of vertex(ccw(i)) -> vertex(cw(i)).
+      const Vertex_handle a = f->vertex(Cdt::ccw(i)), b = f->vertex(Cdt::cw(i));
+      if (f_in && !g_in) left_.insert(key(a, b));
+      else if (g_in && !f_in) left_.insert(key(b, a));
+    }
+  }
+  // +1: the domain is on the left of a -> b only; -1: on its right only; 0: both
+  // sides (an interior constraint) or not a boundary edge.
+  int side(Vertex_handle a, Vertex_handle b) const {
+    if (left_.empty()) return 0;
+    if (left_.count(key(a, b)) != 0) return 1;
+    if (left_.count(key(b, a)) != 0) return -1;
+    return 0;
+  }
+  // The edge level split a -> b (either direction) at v.
+  void split(Vertex_handle a, Vertex_handle b, Vertex_handle v) {
+    const int s = side(a, b);
+    if (s == 0) return;
+    if (s < 0) std::swap(a, b);
+    left_.erase(key(a, b));
+    left_.insert(key(a, v));
+    left_.insert(key(v, b));
+  }
+
+ private:
+  using Key = std::pair<const void*, const void*>;
+  struct Hash {
+    std::size_t operator()(const Key& k) const {
+      const auto x = reinterpret_cast<std::uintptr_t>(k.first), y = reinterpret_cast<std::uintptr_t>(k.second);
+      return std::hash<std::uintptr_t>()(x * 0x9E3779B97F4A7C15ull ^ y);
+    }
+  };
+  static Key key(Vertex_handle a, Vertex_handle b) { return {&*a, &*b}; }
+  std::unordered_set<Key, Hash> left_;
+};
+
+// Gabriel conformity of a constraint edge as seen from the domain: CGAL's test
+// (no vertex sees the edge under an obtuse or right angle) applied to the apex on
+// each side of the edge where the domain is. A boundary sub-segment is encroached
+// only from its domain side: the points across a slit, behind a thin wall or in a
+// hole are hidden from the domain by the constraint itself and never refine it.
+// The test of a point p to be inserted (four arguments, used on the boundary of a
+// conflict zone) stays CGAL's: p encroaches whichever side it lies on, so a point
+// that would land behind a constraint splits the constraint instead (Ruppert).
+//
+// Except at a small angle: the edges of a cluster (CGAL's, Mesh_2/Clusters.h:
+// constraint edges at a vertex consecutive under less than 60 degrees, whatever
+// lies between them) are split on common concentric shells until the cluster is
+// reduced, which is what ends the refinement there. That needs the edges of a
+// cluster to encroach each other across the wedges between them, also across a
+// wedge outside the domain (a hole or notch touching the vertex): an edge at the
+// vertex of a cluster keeps CGAL's two-sided test.
+struct Gabriel : CGAL::Mesh_2::Is_locally_conforming_Gabriel<Cdt> {
+  using Base = CGAL::Mesh_2::Is_locally_conforming_Gabriel<Cdt>;
+  using Base::operator();
+  const Domain_sides* sides = nullptr;
+  const CGAL::Mesh_2::Clusters<Cdt>* clusters = nullptr;
+
+  // Whether the edge v -> w belongs to a cluster at v.
+  bool in_cluster(Vertex_handle v, Vertex_handle w) const {
+    const unsigned n = clusters->number_of_clusters_at_vertex(v);
+    for (unsigned k = 0; k < n; ++k) {
+      const auto range = clusters->vertices_in_cluster_sequence(v, k);
+      if (std::find(range.first, range.second, w) != range.second) return true;
+    }
+    return false;
+  }
+
+  bool operator()(const Cdt& tr, const Face_handle& fh, const int i) const {
+    const Vertex_handle va = fh->vertex(Cdt::cw(i)), vb = fh->vertex(Cdt::ccw(i));
+    int side = sides == nullptr ? 0 : sides->side(vb, va);  // fh is on the left of vb -> va
+    if (side != 0 && clusters != nullptr && (in_cluster(va, vb) || in_cluster(vb, va))) side = 0;
+    const Vertex_handle vi = fh->vertex(i);
+    const Vertex_handle mvi = tr.tds().mirror_vertex(fh, i);
+    return (side < 0 || tr.is_infinite(vi) || Base::operator()(tr, va, vb, vi->point())) &&
+           (side > 0 || tr.is_infinite(mvi) || Base::operator()(tr, va, vb, mvi->point()));
+  }
+
+  bool operator()(const Cdt& tr, const Vertex_handle& va, const Vertex_handle& vb) const {
+    Face_handle fh;
+    int i;
+    if (!tr.is_edge(va, vb, fh, i)) throw std::logic_error("Gabriel: not an edge");
+    return operator()(tr, fh, i);
+  }
+};
 using Edges_base_with_clusters = CGAL::Mesh_2::Refine_edges_base_with_clusters<Cdt, Gabriel>;
 
-// Edge level that can also be told to split a given constraint edge (Section 6:
-// a segment crowded by points is split instead of keeping them).
+// Edge level with the domain-side Gabriel test, that can also be told to split a
+// given constraint edge (Section 6: a segment crowded by points is split instead
+// of keeping them).
 struct Edges_base : Edges_base_with_clusters {
-  using Edges_base_with_clusters::Edges_base_with_clusters;
+  Edges_base(Cdt& tr, CGAL::Mesh_2::Clusters<Cdt>& clusters) : Edges_base_with_clusters(tr, clusters) {
+    this->is_locally_conform.sides = &sides_;
+    this->is_locally_conform.clusters = &clusters;
+  }
+  Edges_base(const Edges_base&) = delete;
+  Edges_base& operator=(const Edges_base&) = delete;
+
+  // Call once the in_domain marks are set, before scanning.
+  void record_domain_sides() { sides_.record(this->tr); }
   void queue_split(Cdt::Vertex_handle a, Cdt::Vertex_handle b) { this->add_constrained_edge_to_be_conformed(a, b); }
+
+  // The sub-segments take their parent's side before CGAL's after_insertion_impl
+  // tests them (and the edges around the new point).
+  void after_insertion_impl(const detail::Vertex_handle& v) {
+    sides_.split(this->va, this->vb, v);
+    Edges_base_with_clusters::after_insertion_impl(v);
+  }
+
+ private:
+  Domain_sides sides_;
 };
 using Edges_level = CGAL::Mesh_2::Refine_edges_with_clusters<Cdt, Gabriel, Edges_base>;
 
@@ -291,6 +415,7 @@ class Mesher {
         visitor_(faces_, edges_, null_visitor_) {}
 
   void init() {
+    edges_.record_domain_sides();
     clusters_.create_clusters();
     edges_.scan_triangulation();
     faces_.scan_triangulation();
