@@ -120,6 +120,7 @@ def test_kind_can_pin_a_straight_boundary_point_as_a_corner():
 
 
 @given(random_meshes(max_points=60), st.data())
+@pytest.mark.filterwarnings("ignore::evomesh.QualityWarning")  # random meshes may have tiny input angles
 def test_any_kind_on_segments_gives_a_valid_step_on_the_same_domain(mesh, data):
     on_segment = mesh.kind <= PointKind.BOUNDARY
     n = mesh.n_points

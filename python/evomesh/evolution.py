@@ -309,9 +309,12 @@ def evolve(mesh: Mesh, delta: Any = None, *, size: Any = None, method: str = "fr
 
 
 class QualityWarning(UserWarning):
-    """The quality pass could not run on a step's selected points (its mesher
-    failed on near-degenerate geometry); the step returned the plain constrained
-    Delaunay triangulation of them instead (``stats["quality_failed"] == 1``)."""
+    """A step did not meet its angle goal: the quality pass could not run on the
+    selected points (its mesher failed on near-degenerate geometry; the step
+    returned their plain constrained Delaunay triangulation,
+    ``stats["quality_failed"] == 1``), or it stopped at its bound on inserted
+    points (``stats["quality_capped"] == 1``, small input angles or unresolved
+    features). The step's mesh is valid either way."""
 
 
 def _wrap(result: dict[str, Any], old: Mesh | None = None) -> Mesh:
@@ -329,6 +332,15 @@ def _wrap(result: dict[str, Any], old: Mesh | None = None) -> Mesh:
         warnings.warn(
             "the quality pass failed on this step's points (near-degenerate geometry); the step kept their plain "
             f"constrained Delaunay triangulation (min angle {result['stats'].get('min_angle', float('nan')):.3g} deg)",
+            QualityWarning,
+            stacklevel=3,
+        )
+    if result["stats"].get("quality_capped"):
+        warnings.warn(
+            "the quality pass stopped at its bound on inserted points before every angle met min_angle (smallest "
+            f"angle {result['stats'].get('min_angle', float('nan')):.3g} deg, near ({result['stats'].get('min_angle_x', 0):.6g}, "
+            f"{result['stats'].get('min_angle_y', 0):.6g})): the domain has small input angles or features the "
+            "spacing does not resolve; refine there, or raise quality_max_fraction / quality_max_extra",
             QualityWarning,
             stacklevel=3,
         )
