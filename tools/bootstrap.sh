@@ -49,7 +49,9 @@ if [ "${EVOMESH_REINSTALL:-0}" != 1 ] && [ -f "$stamp" ] &&
 fi
 rm -f "$stamp"
 .venv/bin/python -m pip install -q --upgrade pip
-# The package (C++ extension built against Debian's CGAL) and the test tools.
-.venv/bin/python -m pip install -q ".[test]"
+# The package (C++ extension built against Debian's CGAL) and the test tools;
+# also its build requirements, so that the developers' in-place rebuild
+# (pip install --no-build-isolation -ve . -Cbuild-dir=build/dev) works.
+.venv/bin/python -m pip install -q ".[test]" "scikit-build-core>=0.10" "pybind11>=2.12"
 echo "$source_hash $(installed_module)" >"$stamp"
 echo "evomesh: installed in $(pwd)/.venv"
