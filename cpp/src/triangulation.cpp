@@ -4,17 +4,13 @@
 #include <CGAL/Triangulation_face_base_with_info_2.h>
 #include <CGAL/Triangulation_vertex_base_with_info_2.h>
 
-#include <CGAL/Spatial_sort_traits_adapter_2.h>
-#include <CGAL/hilbert_sort.h>
-#include <CGAL/property_map.h>
-
 #include <algorithm>
 #include <cmath>
 #include <limits>
-#include <numeric>
 #include <string>
 
 #include "evomesh/detail/domain.hpp"
+#include "evomesh/detail/spatial_order.hpp"
 #include "evomesh/kernel.hpp"
 
 namespace evomesh {
@@ -366,19 +362,14 @@ void locate_points(const std::vector<Vec2>& points, const std::vector<Triangle>&
   const std::size_t k = queries.size();
   triangle_out.assign(k, -1);
   barycentric_out.assign(k, {0, 0, 0});
-  std::vector<std::size_t> order(k);
-  std::iota(order.begin(), order.end(), 0);
-  std::vector<Point_2> qp;
-  qp.reserve(k);
-  for (const auto& q : queries) qp.push_back(to_cgal(q));
-  using Sort_traits = CGAL::Spatial_sort_traits_adapter_2<Kernel, CGAL::Pointer_property_map<Point_2>::type>;
-  CGAL::hilbert_sort(order.begin(), order.end(), Sort_traits(CGAL::make_property_map(qp)));
   Cdt::Face_handle hint;
   std::vector<Cdt::Face_handle> candidates;
-  for (std::size_t idx : order) {
+  for (const auto& q : detail::spatial_order(queries, detail::Spatial_order::hilbert)) {
+    const std::size_t idx = q.index;
+    const Point_2 point(q.x, q.y);
     Cdt::Locate_type lt;
     int li;
-    Cdt::Face_handle f = hint == Cdt::Face_handle() ? cdt.locate(qp[idx], lt, li) : cdt.locate(qp[idx], lt, li, hint);
+    Cdt::Face_handle f = hint == Cdt::Face_handle() ? cdt.locate(point, lt, li) : cdt.locate(point, lt, li, hint);
     hint = f;
     candidates.clear();
     candidates.push_back(f);
