@@ -10,6 +10,7 @@
 #include <string>
 
 #include "evomesh/detail/domain.hpp"
+#include "evomesh/detail/insert_points.hpp"
 #include "evomesh/detail/spatial_order.hpp"
 #include "evomesh/kernel.hpp"
 
@@ -28,17 +29,7 @@ using Cdt = CGAL::Constrained_Delaunay_triangulation_2<
 // For validation: any crossing or overlap of two constraints throws.
 using Cdt_strict = CGAL::Constrained_Delaunay_triangulation_2<Kernel, Tds, CGAL::No_constraint_intersection_tag>;
 
-template <class T>
-std::vector<typename T::Vertex_handle> insert_points(T& cdt, const std::vector<Vec2>& points) {
-  std::vector<std::pair<Point_2, Index>> input;
-  input.reserve(points.size());
-  for (std::size_t i = 0; i < points.size(); ++i) input.emplace_back(to_cgal(points[i]), static_cast<Index>(i));
-  cdt.insert(input.begin(), input.end());
-  if (cdt.number_of_vertices() != points.size()) throw Input_error("points contain duplicates");
-  std::vector<typename T::Vertex_handle> handles(points.size());
-  for (auto v = cdt.finite_vertices_begin(); v != cdt.finite_vertices_end(); ++v) handles[v->info()] = v;
-  return handles;
-}
+using detail::insert_points;
 
 std::string edge_name(Index a, Index b) {
   return "(" + std::to_string(a) + ", " + std::to_string(b) + ")";
