@@ -10,12 +10,14 @@
 
 namespace evomesh {
 
-std::vector<Vec2> repair_spacing(const Mesh_arrays& mesh, const Triangle_fans& fans, const std::vector<double>& delta,
-                                 const std::vector<double>& nn, const std::vector<double>& f, double reach,
-                                 std::uint64_t seed, const std::vector<Vec2>& centers,
-                                 const std::vector<Index>& segment_owner, double repair_ratio, int threads,
+std::vector<Vec2> repair_spacing(const Spacing_repair_input& input, const Frfc_options& options,
                                  std::vector<std::uint8_t>& kept, std::size_t& n_added) {
   using Delaunay = CGAL::Delaunay_triangulation_2<Kernel>;
+  const Mesh_arrays& mesh = input.mesh;
+  const std::vector<double>& delta = input.delta;
+  const std::vector<double>& nn = input.nn;
+  const std::vector<Vec2>& centers = input.centers;
+  const double repair_ratio = options.repair_ratio;
   const std::size_t n = mesh.points.size();
   n_added = 0;
   std::vector<Vec2> kept_points;
@@ -27,7 +29,7 @@ std::vector<Vec2> repair_spacing(const Mesh_arrays& mesh, const Triangle_fans& f
   }
   if (kept_points.size() < 2) return {};
   const detail::Point_tree tree(kept_points);
-  const std::vector<double> nn2 = tree.squared_nn(threads);
+  const std::vector<double> nn2 = tree.squared_nn(options.threads);
   std::vector<Index> needy;
   std::vector<std::uint8_t> is_needy(n, 0);
   for (std::size_t p = 0; p < n; ++p) {
@@ -41,8 +43,9 @@ std::vector<Vec2> repair_spacing(const Mesh_arrays& mesh, const Triangle_fans& f
   std::vector<Vec2> added;
   if (needy.empty()) return added;
   std::vector<std::vector<Index>> on_segments(n);  // segment ring candidates (centre indices) of needy points
-  for (std::size_t j = 0; j < segment_owner.size(); ++j) {
-    if (segment_owner[j] >= 0 && is_needy[segment_owner[j]]) on_segments[segment_owner[j]].push_back(static_cast<Index>(n + j));
+  const std::vector<Index>& owner = input.segment_owner;
+  for (std::size_t j = 0; j < owner.size(); ++j) {
+    if (owner[j] >= 0 && is_needy[owner[j]]) on_segments[owner[j]].push_back(static_cast<Index>(n + j));
   }
   Delaunay added_dt;  // every point added here (segment or interior)
   Delaunay::Vertex_handle hint;
@@ -55,6 +58,7 @@ std::vector<Vec2> repair_spacing(const Mesh_arrays& mesh, const Triangle_fans& f
     }
     return best;
   };
+  const double reach = ring_reach(options.radius_scale);
   std::array<Ring_candidate, kRingDirections> ring;
   for (Index p : needy) {
     // re-check: an earlier repair may have served p
@@ -78,7 +82,8 @@ std::vector<Vec2> repair_spacing(const Mesh_arrays& mesh, const Triangle_fans& f
         found = true;
       }
     }
-    const int count = ring_candidates_of(mesh, fans, f, reach, seed, static_cast<std::size_t>(p), ring);
+    const int count =
+        ring_candidates_of(mesh, input.fans, input.f, reach, options.seed, static_cast<std::size_t>(p), ring);
     for (int k = 0; k < count; ++k) {
       const Vec2& x = ring[k].x;
       const double e2 = nearest2(x);
