@@ -4,21 +4,6 @@
 
 namespace evomesh::detail {
 
-std::vector<Vertex_handle> insert_points(Cdt& cdt, const std::vector<Vec2>& points, const Scaling& scaling) {
-  std::vector<std::pair<Point_2, Vertex_info>> input;
-  input.reserve(points.size());
-  for (std::size_t i = 0; i < points.size(); ++i) {
-    Vertex_info info;
-    info.index = static_cast<Index>(i);
-    input.emplace_back(Point_2(points[i][0] * scaling.to_unit, points[i][1] * scaling.to_unit), info);
-  }
-  cdt.insert(input.begin(), input.end());
-  if (cdt.number_of_vertices() != points.size()) throw Input_error("points contain duplicates");
-  std::vector<Vertex_handle> handles(points.size());
-  for (auto v = cdt.finite_vertices_begin(); v != cdt.finite_vertices_end(); ++v) handles[v->info().index] = v;
-  return handles;
-}
-
 bool left_face(const Cdt& cdt, Vertex_handle a, Vertex_handle b, Face_handle& f, int& i) {
   if (!cdt.is_edge(a, b, f, i)) return false;
   if (f->vertex(Cdt::ccw(i)) != a) {

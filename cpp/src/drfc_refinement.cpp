@@ -14,7 +14,7 @@ Refined_mesh spacing_refine(const Mesh_arrays& mesh, const Spacing_function& spa
   if (!(min_angle >= 0 && min_angle < 60)) throw Input_error("min_angle must be in [0, 60)");
   Cdt cdt;
   const Scaling scaling = unit_scaling(mesh.points);
-  const auto handles = insert_points(cdt, mesh.points, scaling);
+  const auto handles = insert_points(cdt, mesh.points, scaling.to_unit);
   std::vector<Constraint_piece> pieces(mesh.segments.size());
   for (std::size_t k = 0; k < pieces.size(); ++k) {
     pieces[k] = {mesh.segments[k][0], mesh.segments[k][1], mesh.segment_is_boundary[k] != 0};

@@ -198,9 +198,8 @@ std::vector<Vec2> spacing_repair_stage(const Mesh_arrays& mesh, const Triangle_f
                                        const Candidates& on_segments, const Frfc_options& options, Packing& packing,
                                        std::size_t& n_repairs) {
   if (!(options.repair_ratio > 0 && options.ring_samples) && !(options.gap_repair_ratio > 0)) return {};
-  return repair_spacing(mesh, fans, delta, spacing.nn, spacing.f, ring_reach(options.radius_scale), options.seed,
-                        packing.centers, on_segments.owner, options.ring_samples ? options.repair_ratio : 0.0,
-                        options.gap_repair_ratio, options.threads, packing.kept, n_repairs);
+  const Spacing_repair_input input{mesh, fans, delta, spacing.nn, spacing.f, packing.centers, on_segments.owner};
+  return repair_spacing(input, options, packing.kept, n_repairs);
 }
 
 }  // namespace

@@ -46,115 +46,11 @@ std::vector<std::array<Index, 3>> triangle_neighbours(const std::vector<Triangle
 
 namespace {
 
-// Point location in the old mesh by visibility walks over its triangles.
-class Old_mesh_walker {
- public:
-  // `outside`: how far outside the old domain a point may lie and still be
-  // located (in its nearest boundary triangle); 0: by rounding only.
-  explicit Old_mesh_walker(const Mesh_arrays& old_mesh, double outside = 0)
-      : outside_(outside),
-        P_(old_mesh.points),
-        T_(old_mesh.triangles),
-        neighbour_(triangle_neighbours(old_mesh.triangles)),
-        triangle_at_(old_mesh.points.size(), -1),
-        fan_begin_(old_mesh.points.size() + 1, 0),
-        limit_(64 + 4 * static_cast<std::size_t>(std::sqrt(static_cast<double>(old_mesh.triangles.size())))) {
-    for (std::size_t t = 0; t < T_.size(); ++t) {
-      for (Index v : T_[t]) {
-        triangle_at_[v] = static_cast<Index>(t);
-        ++fan_begin_[v + 1];
-      }
-    }
-    std::partial_sum(fan_begin_.begin(), fan_begin_.end(), fan_begin_.begin());
-    fan_.resize(3 * T_.size());
-    std::vector<Index> fill(fan_begin_.begin(), fan_begin_.end() - 1);
-    for (std::size_t t = 0; t < T_.size(); ++t) {
-      for (Index v : T_[t]) fan_[fill[v]++] = static_cast<Index>(t);
-    }
-  }
-
-  // One old triangle at old point v.
-  Index triangle_at(Index v) const { return triangle_at_[v]; }
-
-  // Visibility walk from triangle t towards q: cross an edge that has q strictly
-  // on its outer side (the first in a rotating order, so that walks do not
-  // cycle); stop in a triangle that has q on no outer side (q inside or on it),
-  // or at a boundary edge with q beyond it by rounding (q outside the old domain
-  // as far as a step that kept the domain can put it). -1: blocked (a
-  // non-convex domain) or longer than the bound; the caller searches instead.
-  Index walk(Index t, const Vec2& q, std::size_t salt, std::size_t& steps) const {
-    for (std::size_t step = 0; step < limit_; ++step) {
-      const Triangle& tri = T_[t];
-      Index next = -1;
-      int boundary_side = -1;
-      for (int j = 0; j < 3; ++j) {
-        const int k = static_cast<int>((salt + step + j) % 3);
-        if (orientation(P_[tri[k]], P_[tri[(k + 1) % 3]], q) < 0) {
-          if (neighbour_[t][k] >= 0) {
-            next = neighbour_[t][k];
-            break;
-          }
-          boundary_side = k;
-        }
-      }
-      if (next >= 0) {
-        t = next;
-        ++steps;
-        continue;
-      }
-      if (boundary_side < 0) return t;
-      const Vec2& a = P_[tri[boundary_side]];
-      const Vec2& b = P_[tri[(boundary_side + 1) % 3]];
-      const double reach = std::max({std::abs(q[0]), std::abs(q[1]), std::abs(a[0]), std::abs(a[1]), std::abs(b[0]),
-                                     std::abs(b[1])});
-      if (distance_to_segment(q, a, b) <= std::max(outside_, boundary_rounding(reach))) return t;
-      return search(t, q);  // blocked by the boundary of a non-convex domain
-    }
-    return search(t, q);
-  }
-
-  // Best-first search over the old triangles from t, nearest to q first: the
-  // first within rounding of q, or -1 after kSearchBudget triangles. Finds q
-  // around holes and re-entrant corners, where a walk is blocked.
-  Index search(Index t, const Vec2& q) const {
-    constexpr std::size_t kSearchBudget = 1 << 16;
-    using Entry = std::pair<double, Index>;
-    std::priority_queue<Entry, std::vector<Entry>, std::greater<Entry>> open;
-    std::unordered_set<Index> seen{t};
-    open.push({distance_to_triangle(P_, T_[t], q), t});
-    for (std::size_t popped = 0; !open.empty() && popped < kSearchBudget; ++popped) {
-      const auto [d, u] = open.top();
-      open.pop();
-      double reach = std::max(std::abs(q[0]), std::abs(q[1]));
-      for (Index v : T_[u]) reach = std::max({reach, std::abs(P_[v][0]), std::abs(P_[v][1])});
-      if (d <= std::max(outside_, boundary_rounding(reach))) return u;
-      // across edges, and around vertices: where a domain touches itself at a
-      // vertex, the triangles on either side share no edge
-      for (Index v : T_[u]) {
-        for (Index a = fan_begin_[v]; a < fan_begin_[v + 1]; ++a) {
-          const Index w = fan_[a];
-          if (seen.insert(w).second) open.push({distance_to_triangle(P_, T_[w], q), w});
-        }
-      }
-    }
-    return -1;
-  }
-
- private:
-  double outside_;
-  const std::vector<Vec2>& P_;
-  const std::vector<Triangle>& T_;
-  std::vector<std::array<Index, 3>> neighbour_;
-  std::vector<Index> triangle_at_;
-  std::vector<Index> fan_begin_, fan_;  // the triangles around each old point (compressed lists)
-  std::size_t limit_;
-};
-
 // The old triangles of `queries` by walks from `hints` (an old triangle near
 // each), a search over the old mesh for those no walk reaches.
-std::vector<Index> locate_with_hints(const Mesh_arrays& old_mesh, const Old_mesh_walker& walker,
-                                     const std::vector<Vec2>& queries, const std::vector<Index>& hints,
-                                     std::size_t& n_searched) {
+std::vector<Index> locate_with_hints(const Old_mesh_walker& walker, const std::vector<Vec2>& queries,
+                                     const std::vector<Index>& hints, std::size_t& n_searched) {
+  const Mesh_arrays& old_mesh = walker.mesh();
   std::vector<Index> found(queries.size(), -1);
   std::vector<std::size_t> missed;
   std::size_t steps = 0;
@@ -176,8 +72,86 @@ std::vector<Index> locate_with_hints(const Mesh_arrays& old_mesh, const Old_mesh
 
 }  // namespace
 
-Parent_map parent_map(const Mesh_arrays& old_mesh, const Mesh_arrays& new_mesh, const std::vector<Index>& origin,
-                      double outside) {
+Old_mesh_walker::Old_mesh_walker(const Mesh_arrays& old_mesh, double outside)
+    : outside_(outside),
+      mesh_(old_mesh),
+      P_(old_mesh.points),
+      T_(old_mesh.triangles),
+      neighbour_(triangle_neighbours(old_mesh.triangles)),
+      triangle_at_(old_mesh.points.size(), -1),
+      fan_begin_(old_mesh.points.size() + 1, 0),
+      limit_(64 + 4 * static_cast<std::size_t>(std::sqrt(static_cast<double>(old_mesh.triangles.size())))) {
+  for (std::size_t t = 0; t < T_.size(); ++t) {
+    for (Index v : T_[t]) {
+      triangle_at_[v] = static_cast<Index>(t);
+      ++fan_begin_[v + 1];
+    }
+  }
+  std::partial_sum(fan_begin_.begin(), fan_begin_.end(), fan_begin_.begin());
+  fan_.resize(3 * T_.size());
+  std::vector<Index> fill(fan_begin_.begin(), fan_begin_.end() - 1);
+  for (std::size_t t = 0; t < T_.size(); ++t) {
+    for (Index v : T_[t]) fan_[fill[v]++] = static_cast<Index>(t);
+  }
+}
+
+Index Old_mesh_walker::walk(Index t, const Vec2& q, std::size_t salt, std::size_t& steps) const {
+  for (std::size_t step = 0; step < limit_; ++step) {
+    const Triangle& tri = T_[t];
+    Index next = -1;
+    int boundary_side = -1;
+    for (int j = 0; j < 3; ++j) {
+      const int k = static_cast<int>((salt + step + j) % 3);
+      if (orientation(P_[tri[k]], P_[tri[(k + 1) % 3]], q) < 0) {
+        if (neighbour_[t][k] >= 0) {
+          next = neighbour_[t][k];
+          break;
+        }
+        boundary_side = k;
+      }
+    }
+    if (next >= 0) {
+      t = next;
+      ++steps;
+      continue;
+    }
+    if (boundary_side < 0) return t;
+    const Vec2& a = P_[tri[boundary_side]];
+    const Vec2& b = P_[tri[(boundary_side + 1) % 3]];
+    const double reach = std::max({std::abs(q[0]), std::abs(q[1]), std::abs(a[0]), std::abs(a[1]), std::abs(b[0]),
+                                   std::abs(b[1])});
+    if (distance_to_segment(q, a, b) <= std::max(outside_, boundary_rounding(reach))) return t;
+    return search(t, q);  // blocked by the boundary of a non-convex domain
+  }
+  return search(t, q);
+}
+
+Index Old_mesh_walker::search(Index t, const Vec2& q) const {
+  constexpr std::size_t kSearchBudget = 1 << 16;
+  using Entry = std::pair<double, Index>;
+  std::priority_queue<Entry, std::vector<Entry>, std::greater<Entry>> open;
+  std::unordered_set<Index> seen{t};
+  open.push({distance_to_triangle(P_, T_[t], q), t});
+  for (std::size_t popped = 0; !open.empty() && popped < kSearchBudget; ++popped) {
+    const auto [d, u] = open.top();
+    open.pop();
+    double reach = std::max(std::abs(q[0]), std::abs(q[1]));
+    for (Index v : T_[u]) reach = std::max({reach, std::abs(P_[v][0]), std::abs(P_[v][1])});
+    if (d <= std::max(outside_, boundary_rounding(reach))) return u;
+    // across edges, and around vertices: where a domain touches itself at a
+    // vertex, the triangles on either side share no edge
+    for (Index v : T_[u]) {
+      for (Index a = fan_begin_[v]; a < fan_begin_[v + 1]; ++a) {
+        const Index w = fan_[a];
+        if (seen.insert(w).second) open.push({distance_to_triangle(P_, T_[w], q), w});
+      }
+    }
+  }
+  return -1;
+}
+
+Parent_map parent_map(const Old_mesh_walker& walker, const Mesh_arrays& new_mesh, const std::vector<Index>& origin) {
+  const Mesh_arrays& old_mesh = walker.mesh();
   const auto& P = old_mesh.points;
   const auto& T = old_mesh.triangles;
   const std::size_t n_new = new_mesh.points.size();
@@ -186,7 +160,6 @@ Parent_map parent_map(const Mesh_arrays& old_mesh, const Mesh_arrays& new_mesh, 
   map.triangle.assign(n_new, -1);
   map.barycentric.assign(n_new, {0.0, 0.0, 0.0});
   if (T.empty()) return map;
-  const Old_mesh_walker walker(old_mesh, outside);
   // New points around each new point (compressed lists).
   std::vector<Index> xadj(n_new + 1, 0), adj;
   for (const auto& t : new_mesh.triangles) {
@@ -249,8 +222,9 @@ Parent_map parent_map(const Mesh_arrays& old_mesh, const Mesh_arrays& new_mesh, 
   return map;
 }
 
-void carry_tags(const Mesh_arrays& old_mesh, const std::vector<Index>& origin, const Parent_map& parents,
-                Mesh_arrays& new_mesh, double outside) {
+void carry_tags(const Old_mesh_walker& walker, const std::vector<Index>& origin, const Parent_map& parents,
+                Mesh_arrays& new_mesh) {
+  const Mesh_arrays& old_mesh = walker.mesh();
   if (!old_mesh.required.empty()) {
     new_mesh.required.assign(new_mesh.points.size(), 0);
     for (std::size_t i = 0; i < origin.size(); ++i) {
@@ -260,7 +234,6 @@ void carry_tags(const Mesh_arrays& old_mesh, const std::vector<Index>& origin, c
   const bool segments_tagged = !old_mesh.segment_tags.empty();
   const bool triangles_tagged = !old_mesh.triangle_tags.empty();
   if (!segments_tagged && !triangles_tagged) return;
-  const Old_mesh_walker walker(old_mesh, outside);
   // An old triangle at (or near) every new point, to start walks from.
   auto hint_at = [&](Index v) { return origin[v] >= 0 ? walker.triangle_at(origin[v]) : parents.triangle[v]; };
   std::size_t searched = 0;
@@ -276,7 +249,7 @@ void carry_tags(const Mesh_arrays& old_mesh, const std::vector<Index>& origin, c
       centroids[t] = {(a[0] + b[0] + c[0]) / 3.0, (a[1] + b[1] + c[1]) / 3.0};
       hints[t] = hint_at(tri[0]);
     }
-    const auto found = locate_with_hints(old_mesh, walker, centroids, hints, searched);
+    const auto found = locate_with_hints(walker, centroids, hints, searched);
     new_mesh.triangle_tags.resize(m);
     for (std::size_t t = 0; t < m; ++t) {
       if (found[t] < 0) throw std::logic_error("carry_tags: a new triangle outside the old mesh");
@@ -297,7 +270,7 @@ void carry_tags(const Mesh_arrays& old_mesh, const std::vector<Index>& origin, c
       midpoints[s] = {0.5 * (a[0] + b[0]), 0.5 * (a[1] + b[1])};
       hints[s] = hint_at(e[0]);
     }
-    const auto found = locate_with_hints(old_mesh, walker, midpoints, hints, searched);
+    const auto found = locate_with_hints(walker, midpoints, hints, searched);
     const std::size_t n_old = old_mesh.points.size();
     std::vector<Index> xadj(n_old + 1, 0), adj(2 * old_mesh.segments.size());
     for (const auto& e : old_mesh.segments) {

@@ -99,7 +99,7 @@ Refined_mesh quality_triangulate(const std::vector<Vec2>& points, const std::vec
   options.validate();
   Cdt cdt;
   const Scaling scaling = unit_scaling(points);
-  const auto handles = insert_points(cdt, points, scaling);
+  const auto handles = insert_points(cdt, points, scaling.to_unit);
   return quality_pass(cdt, handles, scaling, points, kind, pieces, options, pinned);
 }
 
@@ -116,7 +116,7 @@ Early_triangulation::~Early_triangulation() = default;
 void Early_triangulation::insert_first(const std::vector<Vec2>& first) {
   Impl& impl = *impl_;
   impl.scaling = unit_scaling(first);
-  insert_points(impl.cdt, first, impl.scaling);
+  insert_points(impl.cdt, first, impl.scaling.to_unit);
   impl.n_first = first.size();
   impl.started = true;
 }

@@ -5,12 +5,6 @@
 #include <CGAL/Apollonius_graph_vertex_base_2.h>
 #include <CGAL/Mpzf.h>
 #include <CGAL/Simple_cartesian.h>
-#include <CGAL/spatial_sort.h>
-#include <CGAL/Spatial_sort_traits_adapter_2.h>
-#include <CGAL/property_map.h>
-#include <CGAL/algorithm.h>
-#include <boost/random/linear_congruential.hpp>
-#include <boost/random/random_number_generator.hpp>
 
 #include <algorithm>
 #include <array>
@@ -20,6 +14,7 @@
 #include <numeric>
 
 #include "evomesh/detail/point_tree.hpp"
+#include "evomesh/detail/spatial_order.hpp"
 #include "evomesh/kernel.hpp"
 #include "evomesh/parallel.hpp"
 
@@ -69,129 +64,6 @@ using Ag_point = Ag_traits::Point_2;
 // Answers are computed in chunks of this many queries (in Hilbert order), each
 // starting without a hint, so results are independent of the thread count.
 constexpr std::size_t kQueryChunk = 8192;
-
-// A query point with its index, sorted in place (contiguous, unlike sorting
-// indices into the point array).
-struct Query {
-  double x, y;
-  std::size_t index;
-};
-
-// CGAL::hilbert_sort with the median policy, on Query records: the same random
-// shuffle (boost::rand48, default seed), then the same recursive median splits
-// with the same comparisons, so it yields exactly the permutation
-// CGAL::hilbert_sort gives on indices. The subranges below the top levels are
-// independent and sorted in parallel; that does not change the result.
-template <int axis, bool up>
-bool hilbert_less(const Query& p, const Query& q) {
-  const double a = axis == 0 ? p.x : p.y;
-  const double b = axis == 0 ? q.x : q.y;
-  return up ? b < a : a < b;
-}
-
-template <int axis, bool up>
-Query* hilbert_split(Query* begin, Query* end) {
-  if (begin >= end) return begin;
-  Query* middle = begin + (end - begin) / 2;
-  std::nth_element(begin, middle, end, hilbert_less<axis, up>);
-  return middle;
-}
-
-using Hilbert_sort_fn = void (*)(Query*, Query*);
-struct Hilbert_task {
-  Query* begin;
-  Query* end;
-  Hilbert_sort_fn sort;
-};
-
-// Sorts [begin, end); with `tasks`, splits only `levels` levels and leaves the
-// subranges below as tasks.
-template <int x, bool upx, bool upy>
-void hilbert_sort_range(Query* begin, Query* end, int levels = -1, std::vector<Hilbert_task>* tasks = nullptr) {
-  constexpr int y = (x + 1) % 2;
-  if (end - begin <= 1) return;
-  if (tasks != nullptr && levels == 0) {
-    tasks->push_back({begin, end, [](Query* b, Query* e) { hilbert_sort_range<x, upx, upy>(b, e); }});
-    return;
-  }
-  Query* m2 = hilbert_split<x, upx>(begin, end);
-  Query* m1 = hilbert_split<y, upy>(begin, m2);
-  Query* m3 = hilbert_split<y, !upy>(m2, end);
-  hilbert_sort_range<y, upy, upx>(begin, m1, levels - 1, tasks);
-  hilbert_sort_range<x, upx, upy>(m1, m2, levels - 1, tasks);
-  hilbert_sort_range<x, upx, upy>(m2, m3, levels - 1, tasks);
-  hilbert_sort_range<y, !upy, !upx>(m3, end, levels - 1, tasks);
-}
-
-// Index of the cell (x, y) of a 2^16 x 2^16 grid along the Hilbert curve.
-std::uint32_t hilbert_index(std::uint32_t x, std::uint32_t y) {
-  std::uint32_t d = 0;
-  for (std::uint32_t s = 1u << 15; s > 0; s >>= 1) {
-    const std::uint32_t rx = (x & s) > 0, ry = (y & s) > 0;
-    d += s * s * ((3 * rx) ^ ry);
-    if (ry == 0) {  // rotate the quadrant
-      if (rx == 1) {
-        x = s - 1 - x;
-        y = s - 1 - y;
-      }
-      std::swap(x, y);
-    }
-  }
-  return d;
-}
-
-// Queries in Hilbert-curve order on a 2^16 grid over their bounding box, ties
-// in input order: O(n) (keys in parallel, two 16-bit radix passes).
-std::vector<Query> hilbert_key_order(const Vec2* queries, std::size_t n, int threads) {
-  double lo_x = std::numeric_limits<double>::infinity(), lo_y = lo_x, hi_x = -lo_x, hi_y = -lo_x;
-  for (std::size_t i = 0; i < n; ++i) {
-    lo_x = std::min(lo_x, queries[i][0]);
-    lo_y = std::min(lo_y, queries[i][1]);
-    hi_x = std::max(hi_x, queries[i][0]);
-    hi_y = std::max(hi_y, queries[i][1]);
-  }
-  const double extent = std::max(hi_x - lo_x, hi_y - lo_y);
-  const double scale = extent > 0 ? 65535.0 / extent : 0.0;
-  std::vector<std::uint32_t> key(n), order(n), tmp(n);
-  constexpr std::size_t kBlock = 1 << 16;
-  parallel_for((n + kBlock - 1) / kBlock, threads, [&](std::size_t b) {
-    for (std::size_t i = b * kBlock; i < std::min(n, (b + 1) * kBlock); ++i) {
-      const auto qx = static_cast<std::uint32_t>(std::min(65535.0, (queries[i][0] - lo_x) * scale));
-      const auto qy = static_cast<std::uint32_t>(std::min(65535.0, (queries[i][1] - lo_y) * scale));
-      key[i] = hilbert_index(qx, qy);
-    }
-  });
-  std::vector<std::size_t> count(65537);
-  for (std::size_t i = 0; i < n; ++i) ++count[(key[i] & 0xffff) + 1];
-  for (std::size_t d = 0; d < 65536; ++d) count[d + 1] += count[d];
-  for (std::size_t i = 0; i < n; ++i) tmp[count[key[i] & 0xffff]++] = static_cast<std::uint32_t>(i);
-  std::fill(count.begin(), count.end(), 0);
-  for (std::size_t i = 0; i < n; ++i) ++count[(key[i] >> 16) + 1];
-  for (std::size_t d = 0; d < 65536; ++d) count[d + 1] += count[d];
-  for (std::size_t k = 0; k < n; ++k) order[count[key[tmp[k]] >> 16]++] = tmp[k];
-  std::vector<Query> sorted(n);
-  parallel_for((n + kBlock - 1) / kBlock, threads, [&](std::size_t b) {
-    for (std::size_t k = b * kBlock; k < std::min(n, (b + 1) * kBlock); ++k) {
-      sorted[k] = {queries[order[k]][0], queries[order[k]][1], order[k]};
-    }
-  });
-  return sorted;
-}
-
-void hilbert_sort_queries(std::vector<Query>& queries, int threads) {
-  boost::rand48 random;
-  boost::random_number_generator<boost::rand48, std::ptrdiff_t> rng(random);
-  CGAL::cpp98::random_shuffle(queries.begin(), queries.end(), rng);
-  Query* begin = queries.data();
-  Query* end = begin + queries.size();
-  if (queries.size() < 65536) {
-    hilbert_sort_range<0, false, false>(begin, end);
-    return;
-  }
-  std::vector<Hilbert_task> tasks;
-  hilbert_sort_range<0, false, false>(begin, end, 2, &tasks);  // 16 subranges
-  parallel_for(tasks.size(), threads, [&](std::size_t k) { tasks[k].sort(tasks[k].begin, tasks[k].end); });
-}
 
 }  // namespace
 
@@ -244,21 +116,20 @@ constexpr std::size_t kMinSitesPerPart = std::size_t{1} << 12;
 template <class Skip>
 void build_graph(Apollonius_graph& graph, const std::vector<Vec2>& sites, const std::vector<double>& weights,
                  double shift, std::vector<std::size_t> members, const Skip& skip) {
-  std::vector<Ag_point> pts;
+  std::vector<Vec2> pts;
   pts.reserve(members.size());
-  for (std::size_t i : members) pts.emplace_back(sites[i][0], sites[i][1]);
-  std::vector<std::size_t> order(members.size());
-  std::iota(order.begin(), order.end(), 0);
-  using Sort_traits = CGAL::Spatial_sort_traits_adapter_2<Ag_kernel, CGAL::Pointer_property_map<Ag_point>::type>;
-  CGAL::spatial_sort(order.begin(), order.end(), Sort_traits(CGAL::make_property_map(pts)));
+  for (std::size_t i : members) pts.push_back(sites[i]);
+  const auto ordered = detail::spatial_order(pts, detail::Spatial_order::brio);
   // The insertion order of every member (the order of all members, filtered or
   // not, so the graph is built exactly as without the filter).
+  std::vector<std::size_t> order(ordered.size());
+  for (std::size_t k = 0; k < ordered.size(); ++k) order[k] = static_cast<std::size_t>(ordered[k].index);
   const std::vector<std::uint8_t> skipped = skip(members, order);
   Apollonius_graph::Vertex_handle hint;
-  for (std::size_t k : order) {
-    if (skipped[k]) continue;
-    const std::size_t i = members[k];
-    const Site_2 site(pts[k], shift - weights[i]);
+  for (const auto& q : ordered) {
+    if (skipped[q.index]) continue;
+    const std::size_t i = members[q.index];
+    const Site_2 site(Ag_point(q.x, q.y), shift - weights[i]);
     auto v = hint == Apollonius_graph::Vertex_handle() ? graph.insert(site) : graph.insert(site, hint);
     if (v != Apollonius_graph::Vertex_handle()) {
       v->index = static_cast<Index>(i);
@@ -490,14 +361,8 @@ void Spacing_function::evaluate(const Vec2* queries, std::size_t n, double* f_ou
   if (n == 0) return;
   // Certified queries in CGAL's median Hilbert order; the many uncertified ones
   // (sample radii) in the O(n) grid Hilbert order, which walks about as short.
-  std::vector<Query> sorted;
-  if (!certified) {
-    sorted = hilbert_key_order(queries, n, threads);
-  } else {
-    sorted.resize(n);
-    for (std::size_t i = 0; i < n; ++i) sorted[i] = {queries[i][0], queries[i][1], i};
-    hilbert_sort_queries(sorted, threads);
-  }
+  const std::vector<detail::Ordered_point> sorted = detail::spatial_order(
+      queries, n, certified ? detail::Spatial_order::hilbert : detail::Spatial_order::hilbert_grid, threads);
   const Impl& impl = *impl_;
   const auto& sites = impl.sites;
   const auto& weights = impl.weights;

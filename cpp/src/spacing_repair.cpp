@@ -84,12 +84,20 @@ void repair_coarse_points(const Mesh_arrays& mesh, const std::vector<double>& de
 
 }  // namespace
 
-std::vector<Vec2> repair_spacing(const Mesh_arrays& mesh, const Triangle_fans& fans, const std::vector<double>& delta,
-                                 const std::vector<double>& nn, const std::vector<double>& f, double reach,
-                                 std::uint64_t seed, const std::vector<Vec2>& centers,
-                                 const std::vector<Index>& segment_owner, double repair_ratio,
-                                 double gap_repair_ratio, int threads, std::vector<std::uint8_t>& kept,
-                                 std::size_t& n_added) {
+std::vector<Vec2> repair_spacing(const Spacing_repair_input& input, const Frfc_options& options,
+                                 std::vector<std::uint8_t>& kept, std::size_t& n_added) {
+  const Mesh_arrays& mesh = input.mesh;
+  const Triangle_fans& fans = input.fans;
+  const std::vector<double>& delta = input.delta;
+  const std::vector<double>& nn = input.nn;
+  const std::vector<double>& f = input.f;
+  const std::vector<Vec2>& centers = input.centers;
+  const std::vector<Index>& segment_owner = input.segment_owner;
+  const double reach = ring_reach(options.radius_scale);
+  const std::uint64_t seed = options.seed;
+  const double repair_ratio = options.ring_samples ? options.repair_ratio : 0.0;
+  const double gap_repair_ratio = options.gap_repair_ratio;
+  const int threads = options.threads;
   using Delaunay = CGAL::Delaunay_triangulation_2<Kernel>;
   const std::size_t n = mesh.points.size();
   n_added = 0;

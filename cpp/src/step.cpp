@@ -145,8 +145,9 @@ void triangulate_selection(Selection selected, const std::vector<Constraint_piec
 }
 
 void finish_step(const Mesh_arrays& input, Evolve_result& result, detail::Stage_timer& timer) {
-  result.parents = parent_map(input, result.mesh, result.origin, result.curve_reach);
-  carry_tags(input, result.origin, result.parents, result.mesh, result.curve_reach);
+  const Old_mesh_walker old_mesh(input, result.curve_reach);  // for both
+  result.parents = parent_map(old_mesh, result.mesh, result.origin);
+  carry_tags(old_mesh, result.origin, result.parents, result.mesh);
   timer.lap("parent_map");
   auto& stats = result.stats;
   double seconds = 0;

@@ -4,18 +4,15 @@
 #include <CGAL/Triangulation_face_base_with_info_2.h>
 #include <CGAL/Triangulation_vertex_base_with_info_2.h>
 
-#include <CGAL/Spatial_sort_traits_adapter_2.h>
-#include <CGAL/hilbert_sort.h>
-#include <CGAL/property_map.h>
-
 #include <algorithm>
 #include <cmath>
 #include <limits>
-#include <numeric>
 #include <string>
 
 #include "evomesh/boundary_geometry.hpp"
 #include "evomesh/detail/domain.hpp"
+#include "evomesh/detail/insert_points.hpp"
+#include "evomesh/detail/spatial_order.hpp"
 #include "evomesh/kernel.hpp"
 
 namespace evomesh {
@@ -33,17 +30,7 @@ using Cdt = CGAL::Constrained_Delaunay_triangulation_2<
 // For validation: any crossing or overlap of two constraints throws.
 using Cdt_strict = CGAL::Constrained_Delaunay_triangulation_2<Kernel, Tds, CGAL::No_constraint_intersection_tag>;
 
-template <class T>
-std::vector<typename T::Vertex_handle> insert_points(T& cdt, const std::vector<Vec2>& points) {
-  std::vector<std::pair<Point_2, Index>> input;
-  input.reserve(points.size());
-  for (std::size_t i = 0; i < points.size(); ++i) input.emplace_back(to_cgal(points[i]), static_cast<Index>(i));
-  cdt.insert(input.begin(), input.end());
-  if (cdt.number_of_vertices() != points.size()) throw Input_error("points contain duplicates");
-  std::vector<typename T::Vertex_handle> handles(points.size());
-  for (auto v = cdt.finite_vertices_begin(); v != cdt.finite_vertices_end(); ++v) handles[v->info()] = v;
-  return handles;
-}
+using detail::insert_points;
 
 std::string edge_name(Index a, Index b) {
   return "(" + std::to_string(a) + ", " + std::to_string(b) + ")";
@@ -589,19 +576,14 @@ void locate_points(const std::vector<Vec2>& points, const std::vector<Triangle>&
   const std::size_t k = queries.size();
   triangle_out.assign(k, -1);
   barycentric_out.assign(k, {0, 0, 0});
-  std::vector<std::size_t> order(k);
-  std::iota(order.begin(), order.end(), 0);
-  std::vector<Point_2> qp;
-  qp.reserve(k);
-  for (const auto& q : queries) qp.push_back(to_cgal(q));
-  using Sort_traits = CGAL::Spatial_sort_traits_adapter_2<Kernel, CGAL::Pointer_property_map<Point_2>::type>;
-  CGAL::hilbert_sort(order.begin(), order.end(), Sort_traits(CGAL::make_property_map(qp)));
   Cdt::Face_handle hint;
   std::vector<Cdt::Face_handle> candidates;
-  for (std::size_t idx : order) {
+  for (const auto& q : detail::spatial_order(queries, detail::Spatial_order::hilbert)) {
+    const std::size_t idx = q.index;
+    const Point_2 point(q.x, q.y);
     Cdt::Locate_type lt;
     int li;
-    Cdt::Face_handle f = hint == Cdt::Face_handle() ? cdt.locate(qp[idx], lt, li) : cdt.locate(qp[idx], lt, li, hint);
+    Cdt::Face_handle f = hint == Cdt::Face_handle() ? cdt.locate(point, lt, li) : cdt.locate(point, lt, li, hint);
     hint = f;
     candidates.clear();
     candidates.push_back(f);

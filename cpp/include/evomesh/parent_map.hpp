@@ -4,6 +4,7 @@
 #pragma once
 
 #include <array>
+#include <cstddef>
 #include <vector>
 
 #include "evomesh/types.hpp"
@@ -23,18 +24,54 @@ struct Parent_map {
   std::size_t n_located_globally = 0;  // points a walk did not reach (located by a search)
 };
 
-// The parent map of `new_mesh` in `old_mesh`; origin[i] is the old index of new
+// Point location in the mesh a step starts from (the old mesh), by visibility
+// walks over its triangles: built once per step (finish_step) for the parent
+// map and carry_tags. Keeps a reference to the mesh.
+class Old_mesh_walker {
+ public:
+  // `outside`: a step that moved boundary points onto curves (boundary_geometry.hpp)
+  // may put new points outside the old domain by up to this much; they are
+  // located in the nearest boundary triangle (with a negative coordinate). 0: by
+  // rounding only.
+  explicit Old_mesh_walker(const Mesh_arrays& old_mesh, double outside = 0);
+
+  const Mesh_arrays& mesh() const { return mesh_; }
+
+  // One old triangle at old point v (-1 for a point of no triangle).
+  Index triangle_at(Index v) const { return triangle_at_[v]; }
+
+  // Visibility walk from triangle t towards q: cross an edge that has q strictly
+  // on its outer side (the first in a rotating order, so that walks do not
+  // cycle); stop in a triangle that has q on no outer side (q inside or on it),
+  // or at a boundary edge with q beyond it by rounding (q outside the old domain
+  // as far as a step that kept the domain can put it). Blocked by the boundary
+  // of a non-convex domain, or longer than a bound, it searches instead (-1 when
+  // that fails too). `steps` counts the triangles crossed.
+  Index walk(Index t, const Vec2& q, std::size_t salt, std::size_t& steps) const;
+
+  // Best-first search over the old triangles from t, nearest to q first: the
+  // first within rounding of q, or -1 after a budget of triangles. Finds q
+  // around holes and re-entrant corners, where a walk is blocked.
+  Index search(Index t, const Vec2& q) const;
+
+ private:
+  double outside_;
+  const Mesh_arrays& mesh_;
+  const std::vector<Vec2>& P_;
+  const std::vector<Triangle>& T_;
+  std::vector<std::array<Index, 3>> neighbour_;  // across edge k (t[k] -> t[k+1]), -1 on the boundary
+  std::vector<Index> triangle_at_;
+  std::vector<Index> fan_begin_, fan_;  // the triangles around each old point (compressed lists)
+  std::size_t limit_;                   // of a walk's steps
+};
+
+// The parent map of `new_mesh` in the old mesh; origin[i] is the old index of new
 // point i or -1. Points are located in breadth-first order over the new mesh's
 // edges, from the kept points: each walk starts in the old triangle of a new
 // neighbour already placed, a few triangles away (a visibility walk with exact
 // orientation tests). Points a walk cannot reach (across a hole, or a walk longer
 // than its bound) are located by a search over the whole old mesh. O(n) walks.
-// `outside`: a step that moved boundary points onto curves (boundary_geometry.hpp)
-// may put new points outside the old domain by up to this much; they are
-// located in the nearest boundary triangle (with a negative coordinate). 0: by
-// rounding only.
-Parent_map parent_map(const Mesh_arrays& old_mesh, const Mesh_arrays& new_mesh, const std::vector<Index>& origin,
-                      double outside = 0);
+Parent_map parent_map(const Old_mesh_walker& old_mesh, const Mesh_arrays& new_mesh, const std::vector<Index>& origin);
 
 // The input's labels on the new mesh, through the parent map (no global search):
 // every new triangle gets the tag of the input triangle containing its centroid
@@ -42,7 +79,7 @@ Parent_map parent_map(const Mesh_arrays& old_mesh, const Mesh_arrays& new_mesh, 
 // the tag of the input segment it lies on (a tag change is a corner, kept by every
 // step, so a chain of segments has one tag), every kept point its `required` flag.
 // Labels the input does not have stay empty.
-void carry_tags(const Mesh_arrays& old_mesh, const std::vector<Index>& origin, const Parent_map& parents,
-                Mesh_arrays& new_mesh, double outside = 0);
+void carry_tags(const Old_mesh_walker& old_mesh, const std::vector<Index>& origin, const Parent_map& parents,
+                Mesh_arrays& new_mesh);
 
 }  // namespace evomesh

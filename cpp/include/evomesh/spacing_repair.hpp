@@ -6,9 +6,22 @@
 #include <vector>
 
 #include "evomesh/candidates.hpp"
+#include "evomesh/options.hpp"
 #include "evomesh/types.hpp"
 
 namespace evomesh {
+
+// What the spacing repair reads: the mesh being evolved, with delta, nn_M and f
+// at its points, and the packing's spheres (input points first).
+struct Spacing_repair_input {
+  const Mesh_arrays& mesh;
+  const Triangle_fans& fans;  // of `mesh`
+  const std::vector<double>& delta;
+  const std::vector<double>& nn;
+  const std::vector<double>& f;
+  const std::vector<Vec2>& centers;          // of all spheres: input points [0, n), then the candidates
+  const std::vector<Index>& segment_owner;   // per segment candidate (centre n + j): the point of its ring, or -1
+};
 
 // Spacing repair. The packing guarantees nn_M'(p) = Theta(f(p)) only up to a
 // constant; where an R-point p that was kept ends up with no kept point within
@@ -19,16 +32,13 @@ namespace evomesh {
 // dropped them; returned). That candidate lies just outside p's sphere, so
 // afterwards nn_M'(p) is about 1.2 f(p). Nearest kept points come from a static
 // kd-tree over the kept centres plus a Delaunay triangulation of the points
-// added here. Then (gap_repair_ratio > 0, issue 11) a kept point p with
+// added here (of the options: repair_ratio when ring_samples, the ring's reach
+// from radius_scale, seed, threads). Then (gap_repair_ratio > 0, issue 11) a kept point p with
 // delta(p) >= 1 and no kept point within gap_repair_ratio * delta(p) nn_M(p)
 // gets the point farthest from every kept point among six at distance
 // delta(p) nn_M(p) from it inside the old mesh (if at least 0.6 of that
 // distance from them). `n_added` receives the number of points added.
-std::vector<Vec2> repair_spacing(const Mesh_arrays& mesh, const Triangle_fans& fans, const std::vector<double>& delta,
-                                 const std::vector<double>& nn, const std::vector<double>& f, double reach,
-                                 std::uint64_t seed, const std::vector<Vec2>& centers,
-                                 const std::vector<Index>& segment_owner, double repair_ratio,
-                                 double gap_repair_ratio, int threads, std::vector<std::uint8_t>& kept,
-                                 std::size_t& n_added);
+std::vector<Vec2> repair_spacing(const Spacing_repair_input& input, const Frfc_options& options,
+                                 std::vector<std::uint8_t>& kept, std::size_t& n_added);
 
 }  // namespace evomesh

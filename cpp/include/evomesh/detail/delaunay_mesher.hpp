@@ -26,6 +26,7 @@
 #include <utility>
 #include <vector>
 
+#include "evomesh/detail/insert_points.hpp"
 #include "evomesh/kernel.hpp"
 #include "evomesh/refined_mesh.hpp"
 #include "evomesh/triangulation.hpp"
@@ -42,6 +43,8 @@ struct Vertex_info {
   Index site = -1;     // Apollonius site that attains f here
   bool exact = false;  // f evaluated exactly (else from the sites of neighbours)
 };
+// The input point of a vertex (for detail::insert_points).
+inline Index& vertex_index(Vertex_info& info) { return info.index; }
 
 using Vb = CGAL::Triangulation_vertex_base_with_info_2<Vertex_info, Kernel>;
 using Fb_info = CGAL::Triangulation_face_base_with_info_2<std::int8_t, Kernel>;  // flood-fill label
@@ -435,8 +438,6 @@ class Mesher {
   Faces_level faces_;
   Visitor visitor_;
 };
-
-std::vector<Vertex_handle> insert_points(Cdt& cdt, const std::vector<Vec2>& points, const Scaling& scaling);
 
 // The face on the left of a -> b (f, with the edge opposite vertex i), if ab is an edge.
 bool left_face(const Cdt& cdt, Vertex_handle a, Vertex_handle b, Face_handle& f, int& i);
