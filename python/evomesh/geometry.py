@@ -33,6 +33,7 @@ from typing import Any, Protocol
 import numpy as np
 
 from evomesh import _core
+from evomesh.fronts import _real
 
 #: Default of ``corner_angle`` (degrees): a boundary vertex of a curved tag
 #: where the polygon turns by more than this stays a corner. A circle drawn
@@ -53,15 +54,6 @@ def _points(points: Any) -> np.ndarray:
     if x.ndim != 2 or x.shape[1] != 2:
         raise ValueError(f"points must have shape (k, 2), got {x.shape}")
     return x
-
-
-def _real(value: Any, name: str) -> float:
-    if isinstance(value, bool) or not isinstance(value, numbers.Real):
-        raise TypeError(f"{name} must be a real number, got {type(value).__name__}")
-    v = float(value)
-    if not math.isfinite(v):
-        raise ValueError(f"{name} must be finite, got {v}")
-    return v
 
 
 def _centre(center: Any) -> np.ndarray:
