@@ -5,7 +5,8 @@ points): ``evolve`` alone, then ``Driver.step`` on the same mesh and delta
 (evolve + transfer of two fields + statistics), and ``transfer`` of a field with
 the step's lineage against the same transfer with a point location in the old
 mesh (what transfer did before the lineage). Medians of --repeats, measured in
-one process.
+one process; evolve and Driver.step alternate (A, B, A, B, ...) so that a
+shared machine's load falls on both alike.
 
     .venv/bin/python benchmarks/bench_driver.py --size 2e5 --repeats 5
 """
@@ -51,8 +52,13 @@ def main() -> None:
 
     new = evolve_alone()
     blind = Mesh._trusted(new.points, new.triangles, new.segments, new.segment_is_boundary, new.kind, new.origin)
-    evolve_s = median_seconds(evolve_alone, args.repeats)
-    step_s = median_seconds(driver_step, args.repeats)
+    evolve_times, step_times = [], []
+    for _ in range(args.repeats):  # alternated
+        for work, times in ((evolve_alone, evolve_times), (driver_step, step_times)):
+            t0 = time.perf_counter()
+            work()
+            times.append(time.perf_counter() - t0)
+    evolve_s, step_s = float(np.median(evolve_times)), float(np.median(step_times))
     with_lineage = median_seconds(lambda: evomesh.transfer(mesh, new, fields["u"]), args.repeats)
     located = median_seconds(lambda: evomesh.transfer(mesh, blind, fields["u"]), args.repeats)
     gap = float(np.abs(evomesh.transfer(mesh, new, fields["v"]) - new.points @ [1.0, 2.0]).max())
@@ -63,6 +69,9 @@ def main() -> None:
         "evolve_s": evolve_s,
         "driver_step_s": step_s,
         "driver_step_over_evolve": step_s / evolve_s,
+        "evolve_all_s": evolve_times,
+        "driver_step_all_s": step_times,
+        "pairwise_ratios": [b / a for a, b in zip(evolve_times, step_times)],
         "transfer_lineage_s": with_lineage,
         "transfer_point_location_s": located,
         "parent_map_s": float(new.stats["seconds_parent_map"]),
@@ -71,6 +80,8 @@ def main() -> None:
         "linear_field_error": gap,
     }
     for name, value in figures.items():
+        if isinstance(value, list):
+            value = "[" + ", ".join(f"{v:.4g}" for v in value) + "]"
         print(f"{name:34s} {value:.4g}" if isinstance(value, float) else f"{name:34s} {value}")
     if args.json:
         with open(args.json, "w") as f:
