@@ -7,7 +7,7 @@
 #include <unordered_map>
 
 #include "evomesh/boundary_geometry.hpp"
-#include "evomesh/triangulation.hpp"
+#include "evomesh/candidates.hpp"
 
 namespace evomesh {
 
@@ -41,31 +41,34 @@ constexpr double kInfinity = std::numeric_limits<double>::infinity();
 
 double cross(const Vec2& u, const Vec2& v) { return u[0] * v[1] - u[1] * v[0]; }
 
-// Triangles around each point (compressed lists) and across each edge.
+// The triangles around each point (Triangle_fans, O(m) counting) and the
+// segments by their end points: enough to walk across edges, with no global
+// sort of half-edges (only points on segments start walks, and walks are short).
 struct Mesh_walk {
   const Mesh_arrays& mesh;
-  std::vector<Index> xadj, adj;
-  std::vector<std::array<Index, 3>> neighbour;
+  Triangle_fans fans;
   std::unordered_map<std::uint64_t, Index> segment_of_edge;
 
   static std::uint64_t key(Index a, Index b) {
     return (static_cast<std::uint64_t>(std::min(a, b)) << 32) ^ static_cast<std::uint64_t>(std::max(a, b));
   }
 
-  explicit Mesh_walk(const Mesh_arrays& m) : mesh(m), xadj(m.points.size() + 1, 0), adj(3 * m.triangles.size()) {
-    for (const auto& t : m.triangles) {
-      for (Index v : t) ++xadj[v + 1];
-    }
-    for (std::size_t v = 0; v < m.points.size(); ++v) xadj[v + 1] += xadj[v];
-    std::vector<Index> fill(xadj.begin(), xadj.end() - 1);
-    for (std::size_t t = 0; t < m.triangles.size(); ++t) {
-      for (Index v : m.triangles[t]) adj[fill[v]++] = static_cast<Index>(t);
-    }
-    neighbour = triangle_neighbours(m.triangles);
+  explicit Mesh_walk(const Mesh_arrays& m) : mesh(m), fans(m) {
     segment_of_edge.reserve(2 * m.segments.size());
     for (std::size_t s = 0; s < m.segments.size(); ++s) {
       segment_of_edge[key(m.segments[s][0], m.segments[s][1])] = static_cast<Index>(s);
     }
+  }
+
+  // The triangle other than t on edge (a, b), -1 if none.
+  Index across(Index t, Index a, Index b) const {
+    for (Index k = fans.xadj[a]; k < fans.xadj[a + 1]; ++k) {
+      const Index u = fans.adj[k];
+      if (u == t) continue;
+      const Triangle& tri = mesh.triangles[u];
+      if (tri[0] == b || tri[1] == b || tri[2] == b) return u;
+    }
+    return -1;
   }
 
   // From point v along direction d (unit), through the triangles: the first
@@ -75,13 +78,13 @@ struct Mesh_walk {
     // the triangle at v whose angle contains d
     Index t = -1;
     int k = 0;  // t's vertex v
-    for (Index a = xadj[v]; a < xadj[v + 1] && t < 0; ++a) {
-      const Triangle& tri = mesh.triangles[adj[a]];
+    for (Index a = fans.xadj[v]; a < fans.xadj[v + 1] && t < 0; ++a) {
+      const Triangle& tri = mesh.triangles[fans.adj[a]];
       const int i = tri[0] == v ? 0 : tri[1] == v ? 1 : 2;
       const Vec2& b = mesh.points[tri[(i + 1) % 3]];
       const Vec2& c = mesh.points[tri[(i + 2) % 3]];
       if (cross({b[0] - p[0], b[1] - p[1]}, d) >= 0 && cross(d, {c[0] - p[0], c[1] - p[1]}) >= 0) {
-        t = adj[a];
+        t = fans.adj[a];
         k = i;
       }
     }
@@ -100,7 +103,7 @@ struct Mesh_walk {
       if (!(s <= limit)) return {-1, kInfinity};
       const auto found = segment_of_edge.find(key(a, b));
       if (found != segment_of_edge.end()) return {found->second, std::max(s, 0.0)};
-      const Index next = neighbour[t][exit_edge];
+      const Index next = across(t, a, b);
       if (next < 0) return {-1, kInfinity};
       // the edge of `next` other than (a, b) that the ray leaves through
       const Triangle& ntri = mesh.triangles[next];

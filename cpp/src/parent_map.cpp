@@ -15,6 +15,9 @@
 
 namespace evomesh {
 
+namespace {
+
+// Neighbour across edge k (t[k] -> t[k+1]) of every triangle, -1 on the boundary.
 std::vector<std::array<Index, 3>> triangle_neighbours(const std::vector<Triangle>& triangles) {
   struct Half {
     Index lo, hi, triangle;
@@ -43,8 +46,6 @@ std::vector<std::array<Index, 3>> triangle_neighbours(const std::vector<Triangle
   }
   return neighbour;
 }
-
-namespace {
 
 // The old triangles of `queries` by walks from `hints` (an old triangle near
 // each), a search over the old mesh for those no walk reaches.

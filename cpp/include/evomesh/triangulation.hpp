@@ -23,10 +23,6 @@ struct Constraint_piece {
 std::vector<Triangle> constrained_delaunay(const std::vector<Vec2>& points,
                                            const std::vector<Constraint_piece>& pieces);
 
-// The neighbour across edge k (t[k] -> t[k+1]) of every triangle, -1 where no
-// other triangle shares that edge. O(m log m).
-std::vector<std::array<Index, 3>> triangle_neighbours(const std::vector<Triangle>& triangles);
-
 // Checks that a mesh is planar: its triangles cover no point of the plane twice
 // and touch only in shared edges and points; throws Input_error naming the
 // problem. Preconditions: `triangles` counter-clockwise (orient_triangles), edge
