@@ -31,7 +31,7 @@ def test_the_paper_packing_is_still_there():
     """radius="exact", demote_ratio=None: old points first, as before issue 11 (it
     keeps the lattice at delta = 0.8)."""
     mesh = evomesh.unit_square_mesh(1000, seed=0)
-    new = evomesh.evolve(mesh, 0.8, seed=0, radius="exact", demote_ratio=None, gap_repair_ratio=None,
+    new = evomesh.evolve(mesh, 0.8, seed=0, radius="exact", demote_ratio=None, gap_repair_ratio=None, refine_gap_ratio=None,
                          quality=False)
     assert np.median(new.nn_spacing) / np.median(mesh.nn_spacing) > 0.95
 
@@ -109,7 +109,7 @@ def test_gap_repair_closes_the_gaps_of_a_coarsening():
         return out.nn_spacing[kept] / h[out.origin[kept]]
 
     repaired = evomesh.evolve(mesh, 2.0, seed=0, quality=False)
-    plain = evomesh.evolve(mesh, 2.0, seed=0, quality=False, gap_repair_ratio=None)
+    plain = evomesh.evolve(mesh, 2.0, seed=0, quality=False, gap_repair_ratio=None, refine_gap_ratio=None)
     assert repaired.stats["n_spacing_repairs"] > 0
     assert (ratios(repaired) > 1.1).sum() <= 0.5 * (ratios(plain) > 1.1).sum()
     assert ratios(repaired).max() <= 1.35

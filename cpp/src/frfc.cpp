@@ -197,7 +197,10 @@ std::vector<Vec2> spacing_repair_stage(const Mesh_arrays& mesh, const Triangle_f
                                        const std::vector<double>& delta, const Step_spacing& spacing,
                                        const Candidates& on_segments, const Frfc_options& options, Packing& packing,
                                        std::size_t& n_repairs) {
-  if (!(options.repair_ratio > 0 && options.ring_samples) && !(options.gap_repair_ratio > 0)) return {};
+  if (!(options.repair_ratio > 0 && options.ring_samples) && !(options.gap_repair_ratio > 0) &&
+      !(options.refine_gap_ratio > 0)) {
+    return {};
+  }
   const Spacing_repair_input input{mesh, fans, delta, spacing.nn, spacing.f, packing.centers, on_segments.owner};
   return repair_spacing(input, options, packing.kept, n_repairs);
 }

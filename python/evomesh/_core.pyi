@@ -65,6 +65,7 @@ class FrfcOptions:
     ring_samples: bool
     repair_ratio: float
     gap_repair_ratio: float
+    refine_gap_ratio: float
     demote_ratio: float
     samples: SampleMode
     adaptive_cells: bool

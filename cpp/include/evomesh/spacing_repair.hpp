@@ -33,11 +33,12 @@ struct Spacing_repair_input {
 // afterwards nn_M'(p) is about 1.2 f(p). Nearest kept points come from a static
 // kd-tree over the kept centres plus a Delaunay triangulation of the points
 // added here (of the options: repair_ratio when ring_samples, the ring's reach
-// from radius_scale, seed, threads). Then (gap_repair_ratio > 0, issue 11) a kept point p with
-// delta(p) >= 1 and no kept point within gap_repair_ratio * delta(p) nn_M(p)
-// gets the point farthest from every kept point among six at distance
-// delta(p) nn_M(p) from it inside the old mesh (if at least 0.6 of that
-// distance from them). `n_added` receives the number of points added.
+// from radius_scale, seed, threads). Then the gap repair (issue 11): an input
+// point p whose second nearest output point (the paper's nn_M'(p)) lies beyond
+// gap_repair_ratio * delta(p) nn_M(p) (refine_gap_ratio where delta(p) < 1)
+// gets the point farthest from every output point among eight at distance
+// delta(p) nn_M(p) from it, inside the old mesh and seen from p (if at least 0.6
+// of that distance from them). `n_added` receives the number of points added.
 std::vector<Vec2> repair_spacing(const Spacing_repair_input& input, const Frfc_options& options,
                                  std::vector<std::uint8_t>& kept, std::size_t& n_added);
 
