@@ -25,14 +25,17 @@ namespace {
 // distance h(p) from it (seeded phase) that lie strictly inside a triangle of
 // the old mesh seen from p (Mesh_walk::locate_from: no segment in between), the
 // one farthest from every output point, if that is at least kGapClearance h(p)
-// away. Points are served in input order; each sees the points added before.
+// away. Where the request refines and a fresh packing forms (p has delta(p) < 1
+// and was demoted or dropped), its spacing varies more and a bound of gap_ratio
+// adds points that compound over repeated steps: refine_ratio is used there.
+// Points are served in input order; each sees the points added before.
 constexpr double kGapClearance = 0.6;
-constexpr int kGapDirections = 8;
+constexpr int kGapDirections = 16;
 
 template <class Delaunay>
 void repair_gaps(const Mesh_arrays& mesh, const Triangle_fans& fans, const std::vector<double>& delta,
                  const std::vector<double>& nn, double gap_ratio, double refine_ratio, std::uint64_t seed,
-                 const detail::Point_tree& tree,
+                 const std::vector<std::uint8_t>& demoted, const detail::Point_tree& tree,
                  Delaunay& added_dt, std::vector<Vec2>& added, std::size_t& n_added) {
   constexpr double kTwoPi = 6.283185307179586;
   if (!(gap_ratio > 0) && !(refine_ratio > 0)) return;
@@ -55,14 +58,15 @@ void repair_gaps(const Mesh_arrays& mesh, const Triangle_fans& fans, const std::
   };
   const Mesh_walk walk(mesh, fans);
   for (std::size_t p = 0; p < mesh.points.size(); ++p) {
-    const double ratio = delta[p] < 1 ? refine_ratio : gap_ratio;
+    const Vec2& at = mesh.points[p];
+    const auto around = two_nearest(at);
+    const bool kept = around[0] == 0;
+    // refine_ratio where a fresh packing forms (see above)
+    const double ratio = delta[p] < 1 && (demoted[p] || !kept) ? refine_ratio : gap_ratio;
     if (!(ratio > 0)) continue;
     const double h = delta[p] * nn[p];
     const double target = ratio * h;
-    const Vec2& at = mesh.points[p];
-    const auto around = two_nearest(at);
     if (!(around[1] > target * target)) continue;
-    const bool kept = around[0] == 0;
     Random_stream rng(seed, (std::uint64_t{5} << 60) + static_cast<std::uint64_t>(p));
     const double phase = rng.uniform() * kTwoPi / kGapDirections;
     const double clearance2 = kGapClearance * kGapClearance * h * h;
@@ -187,7 +191,7 @@ std::vector<Vec2> repair_spacing(const Spacing_repair_input& input, const Frfc_o
     added_dt.insert(to_cgal(best_point));
     ++n_added;
   }
-  repair_gaps(mesh, fans, delta, nn, gap_repair_ratio, options.refine_gap_ratio, seed, tree, added_dt, added, n_added);
+  repair_gaps(mesh, fans, delta, nn, gap_repair_ratio, options.refine_gap_ratio, seed, input.demoted, tree, added_dt, added, n_added);
   return added;
 }
 

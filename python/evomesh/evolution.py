@@ -203,9 +203,11 @@ def evolve(mesh: Mesh, delta: Any = None, *, size: Any = None, method: str = "fr
             the output points, if at least 0.6 delta(p) nn_M(p) from them).
             None or 0 disables it.
         refine_gap_ratio : float >= 1 or None, default 1.3
-            The same for points with delta(p) < 1, at this ratio: where the
-            request refines, the packing already follows it, and a tighter bound
-            over-refines repeated steps. None or 0 disables it.
+            The same, at this ratio, for points with delta(p) < 1 that were
+            demoted (see demote_ratio) or dropped: where a fresh packing forms
+            its spacing varies more, and a tighter bound adds points that
+            compound over repeated steps (ten steps of delta = 0.8). None or 0
+            disables it.
         demote_ratio : float >= 1 or None, default 1.1
             An old point p with nn_M(q) > demote_ratio f(q) at p and at all its
             mesh neighbours q (the request refines its whole neighbourhood)

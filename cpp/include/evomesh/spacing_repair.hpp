@@ -21,6 +21,7 @@ struct Spacing_repair_input {
   const std::vector<double>& f;
   const std::vector<Vec2>& centers;          // of all spheres: input points [0, n), then the candidates
   const std::vector<Index>& segment_owner;   // per segment candidate (centre n + j): the point of its ring, or -1
+  const std::vector<std::uint8_t>& demoted;  // per input point: packed with the new points (packing.hpp)
 };
 
 // Spacing repair. The packing guarantees nn_M'(p) = Theta(f(p)) only up to a
@@ -35,7 +36,8 @@ struct Spacing_repair_input {
 // added here (of the options: repair_ratio when ring_samples, the ring's reach
 // from radius_scale, seed, threads). Then the gap repair (issue 11): an input
 // point p whose second nearest output point (the paper's nn_M'(p)) lies beyond
-// gap_repair_ratio * delta(p) nn_M(p) (refine_gap_ratio where delta(p) < 1)
+// gap_repair_ratio * delta(p) nn_M(p) (refine_gap_ratio where delta(p) < 1 and
+// p was demoted or dropped)
 // gets the point farthest from every output point among eight at distance
 // delta(p) nn_M(p) from it, inside the old mesh and seen from p (if at least 0.6
 // of that distance from them). `n_added` receives the number of points added.
