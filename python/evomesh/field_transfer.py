@@ -436,7 +436,7 @@ class Supermesh:
         raw = _core.supermesh(old.points, old.triangles, new.points, new.triangles, origin, parent, mass, threads)
         self.old = old
         self.new = new
-        self.threads = threads
+        self._threads = threads
         self.offsets = raw["offsets"]
         self.old_triangle = raw["old_triangle"]
         self.area = raw["area"]
@@ -476,7 +476,7 @@ class Supermesh:
         if self.mass.size == 0 and len(self.area):
             raise ValueError("this Supermesh was built with mass=False")
         if self._new_mass is None:
-            self._new_mass = _p1_mass(self.new, self.threads)
+            self._new_mass = _p1_mass(self.new, self._threads)
         columns = [flat.real, flat.imag] if np.iscomplexobj(flat) else [flat]
         # rhs = M_mix @ flat without assembling M_mix (per pair, the 3 x 3 block
         # times the old triangle's values, into the new triangle's rows), then
@@ -485,7 +485,7 @@ class Supermesh:
         for part in columns:
             rhs = _core.mixed_mass_times(self.offsets, self.old_triangle, self.mass, self.old.triangles,
                                          self.new.triangles, self.new.n_points, np.ascontiguousarray(part))
-            parts.append(_solve_mass(self._new_mass, rhs, self.threads))
+            parts.append(_solve_mass(self._new_mass, rhs, self._threads))
         out = parts[0] if len(parts) == 1 else parts[0] + 1j * parts[1]
         out = out.astype(dtype, copy=False)
         return out.reshape((self.new.n_points,) + array.shape[1:])
