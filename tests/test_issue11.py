@@ -31,8 +31,8 @@ def test_the_paper_packing_is_still_there():
     """radius="exact", demote_ratio=None: old points first, as before issue 11 (it
     keeps the lattice at delta = 0.8)."""
     mesh = evomesh.unit_square_mesh(1000, seed=0)
-    new = evomesh.evolve(mesh, 0.8, seed=0, radius="exact", demote_ratio=None, gap_repair_ratio=None, refine_gap_ratio=None,
-                         quality=False)
+    new = evomesh.evolve(mesh, 0.8, seed=0, radius="exact", demote_ratio=None, gap_repair_ratio=None,
+                         refine_gap_ratio=None, quality=False)
     assert np.median(new.nn_spacing) / np.median(mesh.nn_spacing) > 0.95
 
 
