@@ -11,7 +11,9 @@ machine is shared and noisy).
 
 Prints per scenario (compare_peers.py's front, band-coarsen, uniform-coarsen):
 input and output points, median wall and CPU seconds of evolve (defaults), of the
-limit, and their ratio (goal: at most 4), and the stage breakdown of the step.
+limit, and their ratio (goal: at most 4); the Apollonius graph of the input
+sites alone (``evomesh.spacing(mesh, delta)``, the design's f) against the same
+limit; and the stage breakdown of the step.
 """
 from __future__ import annotations
 
@@ -55,11 +57,11 @@ def main() -> None:
     args = parser.parse_args()
     rows = []
     print("| scenario | input points | output points | evolve wall s | limit wall s | ratio wall | "
-          "evolve CPU s | limit CPU s | ratio CPU |")
-    print("|---|---|---|---|---|---|---|---|---|")
+          "evolve CPU s | limit CPU s | ratio CPU | Apollonius graph alone CPU s | its ratio CPU |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|")
     for name in args.scenarios.split(","):
         mesh, delta, _ = scenario(name, args.size)
-        step_w, step_c, lim_w, lim_c = [], [], [], []
+        step_w, step_c, lim_w, lim_c, ag_w, ag_c = [], [], [], [], [], []
         stages: dict[str, list[float]] = {}
         for _ in range(args.repeats):  # alternating: step, limit, step, limit, ...
             out, w, c = timed(lambda: evomesh.evolve(mesh, delta, seed=0, threads=args.threads))
@@ -71,14 +73,19 @@ def main() -> None:
             _, w, c = timed(lambda: limit(mesh, out, args.threads))
             lim_w.append(w)
             lim_c.append(c)
+            _, w, c = timed(lambda: evomesh.spacing(mesh, delta))
+            ag_w.append(w)
+            ag_c.append(c)
         row = {"scenario": name, "input_points": mesh.n_points, "output_points": out.n_points,
                "evolve_wall": float(np.median(step_w)), "limit_wall": float(np.median(lim_w)),
                "evolve_cpu": float(np.median(step_c)), "limit_cpu": float(np.median(lim_c)),
+               "ag_wall": float(np.median(ag_w)), "ag_cpu": float(np.median(ag_c)),
                "stages": {k: float(np.median(v)) for k, v in stages.items()}}
         rows.append(row)
         print(f"| {name} | {row['input_points']} | {row['output_points']} | {row['evolve_wall']:.2f} | "
               f"{row['limit_wall']:.2f} | {row['evolve_wall'] / row['limit_wall']:.1f} | {row['evolve_cpu']:.2f} | "
-              f"{row['limit_cpu']:.2f} | {row['evolve_cpu'] / row['limit_cpu']:.1f} |", flush=True)
+              f"{row['limit_cpu']:.2f} | {row['evolve_cpu'] / row['limit_cpu']:.1f} | {row['ag_cpu']:.2f} | "
+              f"{row['ag_cpu'] / row['limit_cpu']:.1f} |", flush=True)
     print("\nstage seconds (median):")
     for row in rows:
         total = sum(row["stages"].values())
