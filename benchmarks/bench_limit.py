@@ -33,9 +33,9 @@ from evomesh import _core  # noqa: E402
 from compare_peers import SCENARIOS, scenario  # noqa: E402
 
 
-def timed(fn):
+def timed(fn, *args, **kwargs):
     w0, c0 = time.perf_counter(), time.process_time()
-    out = fn()
+    out = fn(*args, **kwargs)
     return out, time.perf_counter() - w0, time.process_time() - c0
 
 
@@ -64,16 +64,16 @@ def main() -> None:
         step_w, step_c, lim_w, lim_c, ag_w, ag_c = [], [], [], [], [], []
         stages: dict[str, list[float]] = {}
         for _ in range(args.repeats):  # alternating: step, limit, step, limit, ...
-            out, w, c = timed(lambda: evomesh.evolve(mesh, delta, seed=0, threads=args.threads))
+            out, w, c = timed(evomesh.evolve, mesh, delta, seed=0, threads=args.threads)
             step_w.append(w)
             step_c.append(c)
             for key, value in out.stats.items():
                 if key.startswith("seconds_") and key != "seconds_total":
                     stages.setdefault(key[8:], []).append(value)
-            _, w, c = timed(lambda: limit(mesh, out, args.threads))
+            _, w, c = timed(limit, mesh, out, args.threads)
             lim_w.append(w)
             lim_c.append(c)
-            _, w, c = timed(lambda: evomesh.spacing(mesh, delta))
+            _, w, c = timed(evomesh.spacing, mesh, delta)
             ag_w.append(w)
             ag_c.append(c)
         row = {"scenario": name, "input_points": mesh.n_points, "output_points": out.n_points,
