@@ -24,6 +24,12 @@ bool Stage_timer::memory_requested() {
   return value != nullptr && std::string(value) != "0";
 }
 
+void release_free_memory() {
+#if defined(__GLIBC__)
+  malloc_trim(0);
+#endif
+}
+
 void Stage_timer::record_memory(const std::string& name) {
   double peak_kib = -1;
   {

@@ -54,9 +54,16 @@ class Stage_timer {
   static bool memory_requested();
   bool memory_ = memory_requested();
 
+
   std::vector<std::pair<std::string, double>>& stats_;
   std::chrono::steady_clock::time_point last_ = std::chrono::steady_clock::now();
 };
+
+// Gives the free memory of every malloc arena back to the system (glibc's
+// malloc_trim; elsewhere nothing). The step's blocks are allocated on worker
+// threads, in their arenas, and freed later on the main thread: without this
+// the process keeps that memory resident while the next stage allocates anew.
+void release_free_memory();
 
 }  // namespace detail
 
