@@ -5,6 +5,7 @@
 #include <CGAL/exceptions.h>
 
 #include <algorithm>
+#include <ctime>
 #include <fstream>
 #include <cmath>
 #include <cstdlib>
@@ -20,7 +21,7 @@ namespace evomesh {
 namespace detail {
 
 bool Stage_timer::memory_requested() {
-  const char* value = std::getenv("EVOMESH_STAGE_MEMORY");
+  const char* value = std::getenv("EVOMESH_STAGE_PROFILE");
   return value != nullptr && std::string(value) != "0";
 }
 
@@ -30,7 +31,15 @@ void release_free_memory() {
 #endif
 }
 
+double Stage_timer::process_cpu_seconds() {
+  timespec t{};
+  if (clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &t) != 0) return 0.0;
+  return static_cast<double>(t.tv_sec) + 1e-9 * static_cast<double>(t.tv_nsec);
+}
+
 void Stage_timer::record_memory(const std::string& name) {
+  const double cpu = process_cpu_seconds();
+  add("cpu_seconds_" + name, cpu - last_cpu_, false);
   double peak_kib = -1;
   {
     std::ifstream status("/proc/self/status");
@@ -46,6 +55,7 @@ void Stage_timer::record_memory(const std::string& name) {
   add("memory_heap_mib_" + name, static_cast<double>(heap.uordblks + heap.hblkhd) / (1 << 20), true);
 #endif
   last_ = std::chrono::steady_clock::now();  // the reading is not the stage's time
+  last_cpu_ = process_cpu_seconds();
 }
 
 }  // namespace detail

@@ -47,12 +47,15 @@ class Stage_timer {
     }
     stats_.emplace_back(key, value);
   }
-  // With EVOMESH_STAGE_MEMORY set (diagnostics, Linux): "memory_peak_mib_" + stage,
-  // the process's peak RSS during the stage (VmHWM, reset after every lap), and
-  // "memory_heap_mib_" + stage, the malloc heap in use at its end.
+  // With EVOMESH_STAGE_PROFILE set (diagnostics, Linux): "memory_peak_mib_" + stage,
+  // the process's peak RSS during the stage (VmHWM, reset after every lap),
+  // "memory_heap_mib_" + stage, the malloc heap in use at its end (largest over
+  // its laps), and "cpu_seconds_" + stage, the process's CPU time (all threads).
   void record_memory(const std::string& name);
   static bool memory_requested();
+  static double process_cpu_seconds();
   bool memory_ = memory_requested();
+  double last_cpu_ = memory_ ? process_cpu_seconds() : 0.0;
 
 
   std::vector<std::pair<std::string, double>>& stats_;
