@@ -10,6 +10,7 @@
 #include "evomesh/detail/point_tree.hpp"
 #include "evomesh/kernel.hpp"
 #include "evomesh/mesh_walk.hpp"
+#include "evomesh/parallel.hpp"
 #include "evomesh/sampling.hpp"
 
 namespace evomesh {
@@ -35,7 +36,7 @@ constexpr int kGapDirections = 16;
 template <class Delaunay>
 void repair_gaps(const Mesh_arrays& mesh, const Triangle_fans& fans, const std::vector<double>& delta,
                  const std::vector<double>& nn, double gap_ratio, double refine_ratio, std::uint64_t seed,
-                 const std::vector<std::uint8_t>& demoted, const detail::Point_tree& tree,
+                 const std::vector<std::uint8_t>& demoted, const detail::Point_tree& tree, int threads,
                  Delaunay& added_dt, std::vector<Vec2>& added, std::size_t& n_added) {
   constexpr double kTwoPi = 6.283185307179586;
   if (!(gap_ratio > 0) && !(refine_ratio > 0)) return;
@@ -56,17 +57,32 @@ void repair_gaps(const Mesh_arrays& mesh, const Triangle_fans& fans, const std::
     return kept[0] <= a1 ? std::array<double, 2>{kept[0], std::min(kept[1], a1)}
                          : std::array<double, 2>{a1, std::min(a2, kept[0])};
   };
+  // The bound at p (refine_ratio where a fresh packing forms, see above), from
+  // whether p is kept (at distance 0 from a kept centre).
+  auto target2 = [&](std::size_t p, bool kept) {
+    const double ratio = delta[p] < 1 && (demoted[p] || !kept) ? refine_ratio : gap_ratio;
+    const double target = ratio * (delta[p] * nn[p]);
+    return ratio > 0 ? target * target : std::numeric_limits<double>::infinity();
+  };
+  // Points added later only bring output points nearer: the points whose kept
+  // centres alone leave a gap (found in parallel) are all that can need one.
+  const std::size_t n = mesh.points.size();
+  std::vector<std::uint8_t> open(n, 0);
+  constexpr std::size_t kChunk = 4096;
+  parallel_for((n + kChunk - 1) / kChunk, threads, [&](std::size_t chunk) {
+    for (std::size_t p = chunk * kChunk; p < std::min(n, (chunk + 1) * kChunk); ++p) {
+      const auto around = tree.squared_two_nearest(mesh.points[p]);
+      open[p] = around[1] > target2(p, around[0] == 0);
+    }
+  });
   const Mesh_walk walk(mesh, fans);
-  for (std::size_t p = 0; p < mesh.points.size(); ++p) {
+  for (std::size_t p = 0; p < n; ++p) {
+    if (!open[p]) continue;
     const Vec2& at = mesh.points[p];
     const auto around = two_nearest(at);
     const bool kept = around[0] == 0;
-    // refine_ratio where a fresh packing forms (see above)
-    const double ratio = delta[p] < 1 && (demoted[p] || !kept) ? refine_ratio : gap_ratio;
-    if (!(ratio > 0)) continue;
+    if (!(around[1] > target2(p, kept))) continue;
     const double h = delta[p] * nn[p];
-    const double target = ratio * h;
-    if (!(around[1] > target * target)) continue;
     Random_stream rng(seed, (std::uint64_t{5} << 60) + static_cast<std::uint64_t>(p));
     const double phase = rng.uniform() * kTwoPi / kGapDirections;
     const double clearance2 = kGapClearance * kGapClearance * h * h;
@@ -191,7 +207,7 @@ std::vector<Vec2> repair_spacing(const Spacing_repair_input& input, const Frfc_o
     added_dt.insert(to_cgal(best_point));
     ++n_added;
   }
-  repair_gaps(mesh, fans, delta, nn, gap_repair_ratio, options.refine_gap_ratio, seed, input.demoted, tree, added_dt, added, n_added);
+  repair_gaps(mesh, fans, delta, nn, gap_repair_ratio, options.refine_gap_ratio, seed, input.demoted, tree, threads, added_dt, added, n_added);
   return added;
 }
 
