@@ -98,7 +98,8 @@ Index Mesh_walk::locate_from(Index v, const Vec2& x, int max_steps) const {
     }
   }
   for (int step = 0; t >= 0 && step < max_steps; ++step) {
-    const int side = orientation(P[a], P[b], x);  // > 0: x on t's side of (a, b)
+    const int side = orientation(P[a], P[b], x);
+    if (std::getenv("EVOMESH_DEBUG_WALK")) std::fprintf(stderr, " t %d a %d b %d side %d seg %d\n", t, a, b, side, (int)is_segment(a, b));  // > 0: x on t's side of (a, b)
     if (side > 0) return t;
     if (side == 0 || is_segment(a, b)) return -1;
     const Index next = across(t, a, b);
@@ -106,7 +107,9 @@ Index Mesh_walk::locate_from(Index v, const Vec2& x, int max_steps) const {
     const Triangle& tri = mesh_.triangles[next];
     const Index c = tri[(index_in(tri, a) + 1) % 3];  // next = (b, a, c) counter-clockwise
     const int at_c = orientation(p, x, P[c]);
-    if (at_c == 0) return -1;  // the line passes through c
+    if (at_c == 0) {  // the line passes through c: beyond x (x inside `next`) or not
+      return orientation(P[a], P[c], x) > 0 && orientation(P[c], P[b], x) > 0 ? next : -1;
+    }
     // c left of v -> x (as b is): the line leaves through (a, c), else through (c, b)
     if (at_c > 0) b = c;
     else a = c;
