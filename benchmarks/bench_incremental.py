@@ -1,0 +1,188 @@
+"""Issue 13 goal 2, "cost follows the change": what one FRFC step costs against
+the fraction of the mesh that changes, and what a bit-identical incremental
+step would have to pay at least.
+
+The input is the output of a step (``unit_square_mesh(n)`` evolved with
+delta = 1, a quasi-uniform mesh that is a fixed point of delta = 1 steps; see
+benchmarks/README.md). The timed step has delta = 1 except in a front band
+``0.3 <= x < 0.3 + w`` (the whole square for 100 %) where
+``delta = 1 - 0.5 sin(2 pi (x - 0.3) / w)`` refines (down to 0.5) and coarsens (up to 1.5);
+the band touches about the fraction w of the points (the density is uniform).
+"0 %" is delta = 1 everywhere.
+
+For every fraction, ``--repeats`` alternating runs of
+
+* the full step (``evomesh.evolve``, wall seconds, and its stage seconds),
+* the floor of any bit-identical path: the triangle array of a step is CGAL's
+  face order of the constrained Delaunay triangulation of *all* selected
+  points, a function of the whole insertion history (``--order-evidence``
+  shows a 1 % band reorders every triangle far away). A step that returns the
+  same bits must therefore rebuild that triangulation and run the quality pass,
+  the parent map and the output checks on the whole mesh. Floor = the step's
+  ``quality`` + ``parent_map`` seconds + evolve's time outside the core + one
+  plain ``constrained_delaunay`` of the output (the quality pass's
+  triangulation starts on a second thread during the packing, so the
+  ``quality`` stage does not show it),
+
+and the medians, with the ratios taken run by run. The script also checks that
+the step reproduces the input outside the band (kept points, same triangles as
+sets): the fixed-point property an incremental step would rely on.
+
+Command (tables in benchmarks/README.md, "Issue 13 goal 2: cost follows the change")::
+
+    .venv/bin/python benchmarks/bench_incremental.py --sizes 1e5,1e6 --repeats 3 --order-evidence
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import time
+
+import numpy as np
+
+import evomesh
+from evomesh import _core
+
+FRACTIONS = (0.0, 0.01, 0.05, 0.2, 1.0)
+SELECTION_STAGES = ("nn", "apollonius", "spacing_at_points", "sampling", "sample_radii", "lfmis", "spacing_repair")
+
+
+def stepped_mesh(n: int) -> evomesh.Mesh:
+    """The output of one step on the quasi-uniform unit_square_mesh (not timed)."""
+    grid = evomesh.unit_square_mesh(n, seed=0)
+    return evomesh.evolve(grid, np.ones(grid.n_points), seed=0)
+
+
+def front_delta(mesh: evomesh.Mesh, fraction: float) -> tuple[np.ndarray, np.ndarray]:
+    """delta of a front band touching about `fraction` of the points, and the band mask."""
+    x = mesh.points[:, 0]
+    if fraction >= 1.0:
+        x0, w = 0.0, 1.0
+    else:
+        x0, w = 0.3, fraction
+    band = (x >= x0) & (x < x0 + w) if fraction > 0 else np.zeros(mesh.n_points, bool)
+    delta = np.where(band, 1.0 - 0.5 * np.sin(2 * np.pi * (x - x0) / max(w, 1e-300)), 1.0)
+    return delta, band
+
+
+def untouched_reproduced(old: evomesh.Mesh, new: evomesh.Mesh, band: np.ndarray, margin: float) -> tuple[int, int]:
+    """(input points farther than `margin` from the band that the step dropped or moved, triangles
+    there that differ as point sets): both 0 when the region away from the band is a fixed point."""
+    x = old.points[:, 0]
+    if band.any():
+        lo, hi = x[band].min() - margin, x[band].max() + margin
+        far = (x < lo) | (x > hi)
+    else:
+        far = np.ones(old.n_points, bool)
+    new_set = {tuple(p) for p in new.points}
+    lost = sum(tuple(p) not in new_set for p in old.points[far])
+
+    def far_triangles(mesh: evomesh.Mesh, keep: np.ndarray) -> set:
+        t = mesh.triangles[keep[mesh.triangles].all(axis=1)]
+        return {tuple(sorted(map(tuple, mesh.points[tri]))) for tri in t}
+
+    new_index = {tuple(p): i for i, p in enumerate(new.points)}
+    keep_new = np.zeros(new.n_points, bool)
+    for p in old.points[far]:
+        if tuple(p) in new_index:
+            keep_new[new_index[tuple(p)]] = True
+    diff = far_triangles(old, far) ^ far_triangles(new, keep_new)
+    return lost, len(diff)
+
+
+def order_evidence(mesh: evomesh.Mesh) -> dict[str, float]:
+    """Triangles far from a 1 % band (x > 0.5), present in the outputs of the delta = 1 step and
+    of the 1 % band step: how many have the same index and the same first vertex in both arrays."""
+    a = evomesh.evolve(mesh, np.ones(mesh.n_points), seed=1)
+    b = evomesh.evolve(mesh, front_delta(mesh, 0.01)[0], seed=1)
+
+    def keyed(m: evomesh.Mesh) -> dict:
+        out = {}
+        for i, t in enumerate(m.triangles):
+            pts = [tuple(m.points[v]) for v in t]
+            if min(p[0] for p in pts) > 0.5:
+                out[tuple(sorted(pts))] = (i, pts.index(min(pts)))
+        return out
+
+    ka, kb = keyed(a), keyed(b)
+    common = [k for k in ka if k in kb]
+    return {
+        "far_triangles": len(common),
+        "same_index": sum(ka[k][0] == kb[k][0] for k in common),
+        "same_rotation": sum(ka[k][1] == kb[k][1] for k in common),
+    }
+
+
+def run(n: int, repeats: int, evidence: bool) -> list[dict]:
+    t0 = time.perf_counter()
+    mesh = stepped_mesh(n)
+    print(f"# n = {n}: stepped mesh of {mesh.n_points} points in {time.perf_counter() - t0:.1f} s", flush=True)
+    spacing = float(np.median(mesh.nn_spacing))
+    if evidence:
+        print("# triangle order far from a 1 % band:", order_evidence(mesh), flush=True)
+    rows = []
+    for fraction in FRACTIONS:
+        delta, band = front_delta(mesh, fraction)
+        samples = []
+        for r in range(repeats):
+            t = time.perf_counter()
+            out = evomesh.evolve(mesh, delta, seed=1)
+            wall = time.perf_counter() - t
+            s = out.stats
+            core = s["seconds_total"]
+            seg = out.segments
+            t = time.perf_counter()
+            _core.constrained_delaunay(out.points, seg, out.segment_is_boundary.astype(np.uint8))
+            cdt = time.perf_counter() - t
+            floor = s["seconds_quality"] + s["seconds_parent_map"] + (wall - core) + cdt
+            selection = sum(s.get("seconds_" + k, 0.0) for k in SELECTION_STAGES)
+            samples.append({"wall": wall, "floor": floor, "cdt": cdt, "selection": selection,
+                            "floor_ratio": floor / wall})
+            if r == 0:
+                lost, diff = untouched_reproduced(mesh, out, band, margin=8 * spacing)
+                changed = 1.0 - len({tuple(p) for p in mesh.points} & {tuple(p) for p in out.points}) / mesh.n_points
+        med = {k: statistics.median(x[k] for x in samples) for k in samples[0]}
+        row = {"n": mesh.n_points, "fraction": fraction, "band_points": int(band.sum()),
+               "points_changed": changed, "lost_outside": lost, "triangles_differing_outside": diff, **med}
+        rows.append(row)
+        print(f"{mesh.n_points:>9} {100 * fraction:>5.0f}% band {row['band_points']:>8} changed "
+              f"{100 * changed:6.2f}% | full {med['wall']:7.2f} s  selection stages {med['selection']:6.2f} s  "
+              f"floor {med['floor']:6.2f} s (cdt {med['cdt']:5.2f})  floor/full {med['floor_ratio']:.2f} | "
+              f"outside band: lost {lost}, triangles differing {diff}", flush=True)
+    full = {row["fraction"]: row["wall"] for row in rows}
+    for row in rows:
+        row["full_vs_100"] = row["wall"] / full[1.0]
+    return rows
+
+
+def markdown(rows: list[dict]) -> str:
+    lines = [
+        "| points | band | points changed | full step (s) | full / full at 100 % | selection stages (s) "
+        "| floor of an exact path (s) | floor / full | outside the band: lost points, differing triangles |",
+        "|---:|---:|---:|---:|---:|---:|---:|---:|---|",
+    ]
+    for r in rows:
+        lines.append(
+            f"| {r['n']:,} | {100 * r['fraction']:.0f} % | {100 * r['points_changed']:.2f} % | {r['wall']:.2f} "
+            f"| {r['full_vs_100']:.2f} | {r['selection']:.2f} | {r['floor']:.2f} | {r['floor_ratio']:.2f} "
+            f"| {r['lost_outside']}, {r['triangles_differing_outside']} |"
+        )
+    return "\n".join(lines)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--sizes", default="1e5,1e6")
+    parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--order-evidence", action="store_true")
+    args = parser.parse_args()
+    rows = []
+    for size in args.sizes.split(","):
+        rows += run(int(float(size)), args.repeats, args.order_evidence)
+    print()
+    print(markdown(rows))
+
+
+if __name__ == "__main__":
+    main()

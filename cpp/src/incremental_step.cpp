@@ -1,0 +1,382 @@
+#include "evomesh/incremental_step.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <memory>
+#include <utility>
+
+#include "evomesh/candidates.hpp"
+#include "evomesh/detail/frfc_stages.hpp"
+#include "evomesh/packing.hpp"
+#include "evomesh/parallel.hpp"
+#include "evomesh/sampling.hpp"
+#include "evomesh/spacing.hpp"
+#include "evomesh/spacing_repair.hpp"
+
+namespace evomesh {
+
+namespace {
+
+using detail::Stage_timer;
+using namespace frfc_stages;
+
+// The step declines (the full one runs) when delta != 1 at more than this share
+// of the points: there the full step is as fast.
+constexpr double kMaxActiveShare = 0.5;
+
+// Relative slack of every distance bound below: far above rounding, so a bound
+// computed in floating point still holds for the exact value it stands for.
+constexpr double kSlack = 1e-7;
+
+// Points bucketed in a uniform grid (about two per cell) for range queries.
+class Point_grid {
+ public:
+  explicit Point_grid(const std::vector<Vec2>& points) : points_(points) {
+    const std::size_t n = points.size();
+    lo_ = {std::numeric_limits<double>::infinity(), std::numeric_limits<double>::infinity()};
+    Vec2 hi{-lo_[0], -lo_[1]};
+    for (const Vec2& p : points) {
+      lo_ = {std::min(lo_[0], p[0]), std::min(lo_[1], p[1])};
+      hi = {std::max(hi[0], p[0]), std::max(hi[1], p[1])};
+    }
+    side_ = std::max<std::int64_t>(1, static_cast<std::int64_t>(std::sqrt(static_cast<double>(n) / 2)));
+    for (int k = 0; k < 2; ++k) {
+      const double extent = hi[k] - lo_[k];
+      cell_[k] = extent > 0 ? extent / static_cast<double>(side_) : 1.0;
+    }
+    start_.assign(static_cast<std::size_t>(side_ * side_) + 1, 0);
+    std::vector<std::int64_t> cell_of(n);
+    for (std::size_t i = 0; i < n; ++i) {
+      cell_of[i] = cell(points[i][0], 0) + side_ * cell(points[i][1], 1);
+      ++start_[static_cast<std::size_t>(cell_of[i]) + 1];
+    }
+    for (std::size_t c = 0; c + 1 < start_.size(); ++c) start_[c + 1] += start_[c];
+    members_.resize(n);
+    std::vector<std::int64_t> fill(start_.begin(), start_.end() - 1);
+    for (std::size_t i = 0; i < n; ++i) members_[static_cast<std::size_t>(fill[cell_of[i]]++)] = static_cast<Index>(i);
+  }
+
+  // Calls visit(i) for every point within distance r of x (and perhaps a few
+  // slightly farther: callers only need a superset).
+  template <class Visit>
+  void visit_within(const Vec2& x, double r, Visit visit) const {
+    const std::int64_t x0 = cell(x[0] - r, 0), x1 = cell(x[0] + r, 0);
+    const std::int64_t y0 = cell(x[1] - r, 1), y1 = cell(x[1] + r, 1);
+    const double r2 = r * r * (1 + kSlack);
+    for (std::int64_t cy = y0; cy <= y1; ++cy) {
+      for (std::int64_t cx = x0; cx <= x1; ++cx) {
+        const std::size_t c = static_cast<std::size_t>(cx + side_ * cy);
+        for (std::int64_t k = start_[c]; k < start_[c + 1]; ++k) {
+          const Index i = members_[static_cast<std::size_t>(k)];
+          const double dx = points_[i][0] - x[0], dy = points_[i][1] - x[1];
+          if (dx * dx + dy * dy <= r2) visit(i);
+        }
+      }
+    }
+  }
+
+ private:
+  std::int64_t cell(double v, int axis) const {
+    const double c = std::floor((v - lo_[axis]) / cell_[axis]);
+    if (!(c > 0)) return 0;  // also NaN
+    return c >= static_cast<double>(side_ - 1) ? side_ - 1 : static_cast<std::int64_t>(c);
+  }
+  const std::vector<Vec2>& points_;
+  Vec2 lo_{0, 0};
+  std::array<double, 2> cell_{1, 1};
+  std::int64_t side_ = 1;
+  std::vector<std::int64_t> start_;
+  std::vector<Index> members_;
+};
+
+// The Apollonius graph of the sites `marked` (with their weights), for queries
+// at which every site that can attain f is marked. Eq. 3: f(x) = min_c (w_c +
+// |x - c|) with w_c >= 0, so a site c with w_c + |x - c| <= f(x) has |x - c| <=
+// f(x) <= u(x) for any upper bound u; marking every site within u(x) of every
+// query x (Mark_sites) keeps the minimising site of every query, so the exact
+// (certified) answers are those of the graph of all sites. The sample radii use
+// a walk in floating point (Spacing_function::evaluate, certified = false) that
+// ends at that same site unless two cones tie up to rounding at the query.
+class Restricted_spacing {
+ public:
+  Restricted_spacing(const std::vector<Vec2>& points, const std::vector<double>& weight,
+                     const std::vector<std::uint8_t>& marked) {
+    std::vector<Vec2> sites;
+    std::vector<double> weights;
+    for (std::size_t i = 0; i < marked.size(); ++i) {
+      if (!marked[i]) continue;
+      sites.push_back(points[i]);
+      weights.push_back(weight[i]);
+    }
+    n_sites_ = sites.size();
+    if (sites.empty()) {  // no query: a graph that is never asked
+      sites.push_back(points[0]);
+      weights.push_back(weight[0]);
+    }
+    function_ = std::make_unique<Spacing_function>(sites, weights);
+  }
+  const Spacing_function& function() const { return *function_; }
+  std::size_t n_sites() const { return n_sites_; }
+
+ private:
+  std::unique_ptr<Spacing_function> function_;
+  std::size_t n_sites_ = 0;
+};
+
+// Marks the sites within u of query points (Restricted_spacing).
+struct Mark_sites {
+  const Point_grid& grid;
+  std::vector<std::uint8_t> marked;
+  double absolute;  // rounding of the coordinates' magnitude
+  Mark_sites(const Point_grid& g, std::size_t n, double magnitude)
+      : grid(g), marked(n, 0), absolute(1e-12 * magnitude) {}
+  void near(const Vec2& x, double u) {
+    grid.visit_within(x, u * (1 + kSlack) + absolute, [&](Index i) { marked[i] = 1; });
+  }
+};
+
+// Triangles whose grid samples the packing certainly rejects, so that not
+// drawing them changes nothing (their candidate indices only order them among
+// themselves). A sample x of triangle T gets the sphere B(x, s f(x) / 2) (s =
+// radius_scale; interpolated radii only differ in triangles with a demoted
+// vertex, cheap ones are larger), and comes after every input point in the
+// packing order, so it is rejected when it overlaps the kept sphere B(v, r_v)
+// of a vertex v: |x - v| - r_v < s f(x) / 2. With H = max over x in T of
+// min_v (|x - v| - r_v), it suffices that f > 2H/s on T. f(x) = min_c (w_c +
+// |x - c|) over all sites c (Eq. 3); a site farther than 2H/s from T cannot go
+// below it, and one nearer needs w_c + dist(c, T) > 2H/s. So T is quiet when its
+// vertices are kept by the first pass and not demoted, and every site within
+// 2H/s of T passes that test. H <= max_x min_v |x - v| - min_v r_v, and the
+// maximum over T of the distance to the nearest vertex is attained at a vertex
+// of the Voronoi diagram of the three vertices clipped to T (the distance to one
+// point is convex on its cell): the circumcentre if it lies in T, or a point
+// where a bisector crosses an edge. Every bound carries the slack kSlack and the
+// rounding of the coordinates, far above the rounding of the packing's tests.
+std::vector<std::uint8_t> quiet_triangles(const Mesh_arrays& mesh, const Point_grid& grid,
+                                          const std::vector<double>& weight, const std::vector<double>& radius,
+                                          const std::vector<std::uint8_t>& kept,
+                                          const std::vector<std::uint8_t>& demoted, double radius_scale,
+                                          double magnitude, int threads) {
+  const std::size_t m = mesh.triangles.size();
+  std::vector<std::uint8_t> quiet(m, 0);
+  const double absolute = 64 * std::numeric_limits<double>::epsilon() * magnitude;
+  const auto& P = mesh.points;
+  constexpr std::size_t kBlock = 1 << 14;
+  parallel_for((m + kBlock - 1) / kBlock, threads, [&](std::size_t b) {
+    for (std::size_t t = b * kBlock; t < std::min(m, (b + 1) * kBlock); ++t) {
+      const Triangle& tri = mesh.triangles[t];
+      bool ok = true;
+      for (Index v : tri) ok = ok && kept[v] && (demoted.empty() || !demoted[v]);
+      if (!ok) continue;
+      const Vec2 &a = P[tri[0]], &b2 = P[tri[1]], &c = P[tri[2]];
+      const std::array<const Vec2*, 3> v{&a, &b2, &c};
+      auto nearest_vertex = [&](double x, double y) {
+        double best = std::numeric_limits<double>::infinity();
+        for (const Vec2* p : v) best = std::min(best, std::hypot(x - (*p)[0], y - (*p)[1]));
+        return best;
+      };
+      // The farthest point of T from its vertices: circumcentre (if inside) and bisector-edge crossings.
+      const double ax = b2[0] - a[0], ay = b2[1] - a[1], bx = c[0] - a[0], by = c[1] - a[1];
+      const double cross = ax * by - ay * bx;
+      const double la = ax * ax + ay * ay, lb = bx * bx + by * by;
+      if (!(std::abs(cross) > 1e-3 * std::sqrt(la * lb))) continue;  // near-degenerate: not certified
+      double far = 0;
+      const double ox = (la * by - lb * ay) / (2 * cross), oy = (ax * lb - bx * la) / (2 * cross);
+      const double s1 = (ox * by - oy * bx) / cross, s2 = (ax * oy - ay * ox) / cross;
+      if (s1 >= -1e-9 && s2 >= -1e-9 && s1 + s2 <= 1 + 1e-9) far = nearest_vertex(a[0] + ox, a[1] + oy);
+      for (int e = 0; e < 3; ++e) {
+        const Vec2& p = *v[e];
+        const Vec2& q = *v[(e + 1) % 3];
+        const double dx = q[0] - p[0], dy = q[1] - p[1];
+        for (int i = 0; i < 3; ++i) {
+          for (int j = i + 1; j < 3; ++j) {
+            // |y - v_i|^2 = |y - v_j|^2 on y = p + t (q - p): linear in t.
+            const Vec2& vi = *v[i];
+            const Vec2& vj = *v[j];
+            const double gx = vj[0] - vi[0], gy = vj[1] - vi[1];
+            const double rhs = 0.5 * ((vj[0] * vj[0] + vj[1] * vj[1]) - (vi[0] * vi[0] + vi[1] * vi[1])) -
+                               (gx * p[0] + gy * p[1]);
+            const double slope = gx * dx + gy * dy;
+            if (slope == 0) continue;
+            const double tt = std::clamp(rhs / slope, 0.0, 1.0);
+            far = std::max(far, nearest_vertex(p[0] + tt * dx, p[1] + tt * dy));
+          }
+        }
+      }
+      const double r_min = std::min({radius[tri[0]], radius[tri[1]], radius[tri[2]]});
+      const double h = (far * (1 + kSlack) + absolute) - r_min * (1 - kSlack);
+      if (h <= 0) {
+        quiet[t] = 1;
+        continue;
+      }
+      const double need = 2 * h / radius_scale * (1 + kSlack) + absolute;  // f must exceed this on T
+      const double gx = (a[0] + b2[0] + c[0]) / 3, gy = (a[1] + b2[1] + c[1]) / 3;
+      double reach = 0;
+      for (const Vec2* p : v) reach = std::max(reach, std::hypot((*p)[0] - gx, (*p)[1] - gy));
+      grid.visit_within({gx, gy}, reach + need, [&](Index site) {
+        if (!ok) return;
+        const Vec2& x = P[site];
+        // Distance from the site to T (0 inside), from below.
+        double d = std::numeric_limits<double>::infinity();
+        bool inside = true;
+        for (int e = 0; e < 3; ++e) {
+          const Vec2& p = *v[e];
+          const Vec2& q = *v[(e + 1) % 3];
+          const double dx = q[0] - p[0], dy = q[1] - p[1];
+          const double wx = x[0] - p[0], wy = x[1] - p[1];
+          inside = inside && dx * wy - dy * wx > 0;
+          const double tt = std::clamp((wx * dx + wy * dy) / (dx * dx + dy * dy), 0.0, 1.0);
+          d = std::min(d, std::hypot(wx - tt * dx, wy - tt * dy));
+        }
+        if (inside) d = 0;
+        ok = weight[site] + d * (1 - kSlack) - absolute > need;
+      });
+      quiet[t] = ok;
+    }
+  });
+  return quiet;
+}
+
+double coordinate_magnitude(const std::vector<Vec2>& points) {
+  double m = 0;
+  for (const Vec2& p : points) m = std::max({m, std::abs(p[0]), std::abs(p[1])});
+  return m;
+}
+
+}  // namespace
+
+std::optional<Evolve_result> incremental_frfc(const Mesh_arrays& mesh, const std::vector<double>& delta,
+                                              const Frfc_options& options) {
+  if (mesh.geometry || !options.filter_samples) return std::nullopt;
+  const std::size_t n = mesh.points.size();
+  std::size_t n_active = 0;
+  for (double d : delta) n_active += d != 1;
+  if (static_cast<double>(n_active) > kMaxActiveShare * static_cast<double>(n)) return std::nullopt;
+
+  Evolve_result result;
+  Stage_timer timer(result.stats);
+  const Thread_limit thread_limit(options.threads);
+  const double magnitude = coordinate_magnitude(mesh.points);
+
+  // Step 1: nn_M and the weights as in the full step; f at the points by Lemma
+  // 3.1, from a graph of the sites near the points that need it.
+  const auto chains = segment_chains(mesh);
+  Step_weights weights = step_weights(mesh, delta, timer, options.within_domain ? &chains : nullptr);
+  const std::vector<double>& weight = weights.weight;
+  const Point_grid grid(mesh.points);
+  std::vector<double> f = weight;
+  std::vector<Index> asked;
+  for (std::size_t i = 0; i < n; ++i) {
+    if (delta[i] > 1 || (!weights.evaluate.empty() && weights.evaluate[i])) asked.push_back(static_cast<Index>(i));
+  }
+  // One graph for f at the points and the radii of the segment candidates:
+  // a candidate x on segment ab has f(x) <= w_e + |x - e| for its end e of
+  // smaller weight, so its sites lie within 2 |ab| + w_e of e.
+  Mark_sites near_points(grid, n, magnitude);
+  for (Index i : asked) near_points.near(mesh.points[i], weight[i]);
+  for (const Edge& e : mesh.segments) {
+    const Index end = weight[e[0]] <= weight[e[1]] ? e[0] : e[1];
+    const Vec2& a = mesh.points[e[0]];
+    const Vec2& b = mesh.points[e[1]];
+    near_points.near(mesh.points[end], 2 * std::hypot(b[0] - a[0], b[1] - a[1]) + weight[end]);
+  }
+  timer.lap("nn");
+  const Restricted_spacing spacing_near_points(mesh.points, weight, near_points.marked);
+  timer.lap("apollonius");
+  {
+    std::vector<Vec2> at;
+    for (Index i : asked) at.push_back(mesh.points[i]);
+    std::vector<double> value(at.size());
+    spacing_near_points.function().evaluate(at.data(), at.size(), value.data(), nullptr, options.threads);
+    for (std::size_t k = 0; k < asked.size(); ++k) f[asked[k]] = std::min(value[k], weight[asked[k]]);
+  }
+  timer.lap("spacing_at_points");
+
+  // Steps 2-5 as in frfc.cpp.
+  std::size_t n_forced = 0;
+  const auto forced = forced_corners(mesh, chains, n_forced, mesh.required);
+  const auto demoted = demoted_points(mesh.triangles, weights.nn, f, forced, options.demote_ratio);
+  check_sample_budget(estimate_sample_count(mesh, f, options.cell_factor, options.max_samples, options.adaptive_cells),
+                      options.max_samples, "sampling");
+  Candidates on_segments = segment_candidates(mesh, delta, f, chains, options);
+  timer.lap("sampling");
+  candidate_radii(mesh, spacing_near_points.function(), f, demoted, options, /*on_segment=*/true, on_segments);
+  timer.lap("sample_radii");
+  Packing packing = first_packing_pass(mesh, f, on_segments, forced, n_forced, demoted, options);
+  Early_start early(packing, options, false);
+  timer.lap("lfmis");
+
+  const Triangle_fans fans(mesh);
+  const std::vector<Disc> cover = cover_discs(mesh, f, packing.radius, packing.kept, packing.blocker,
+                                              options.radius_scale, options.radius == Radius_rule::interpolated);
+  const std::vector<std::uint8_t> quiet = quiet_triangles(mesh, grid, weight, packing.radius, packing.kept, demoted,
+                                                          options.radius_scale, magnitude, options.threads);
+  std::size_t n_drawn = 0;
+  Candidates inside = interior_candidates(mesh, fans, delta, f, demoted, cover, options, n_drawn, &quiet);
+  timer.lap("sampling");
+  // The interior candidates' graph: x in triangle t has f(x) <= f(v) + |x - v| at its vertices v.
+  Mark_sites near_samples(grid, n, magnitude);
+  for (std::size_t j = 0; j < inside.size(); ++j) {
+    const Vec2& x = inside.samples.points[j];
+    double u = std::numeric_limits<double>::infinity();
+    for (Index v : mesh.triangles[inside.samples.parent[j]]) {
+      u = std::min(u, f[v] + std::hypot(x[0] - mesh.points[v][0], x[1] - mesh.points[v][1]));
+    }
+    near_samples.near(x, u);
+  }
+  const Restricted_spacing spacing_near_samples(mesh.points, weight, near_samples.marked);
+  timer.lap("apollonius");
+  candidate_radii(mesh, spacing_near_samples.function(), f, demoted, options, /*on_segment=*/false, inside);
+  timer.lap("sample_radii");
+  drop_blocked_candidates(mesh, packing.centers, packing.radius, packing.kept, packing.blocker, options.threads, inside);
+  second_packing_pass(inside, packing);
+  timer.lap("lfmis");
+
+  std::size_t n_repairs = 0;
+  std::vector<Vec2> repair_points;
+  if ((options.repair_ratio > 0 && options.ring_samples) || options.gap_repair_ratio > 0) {
+    const Spacing_repair_input input{mesh, fans, delta, weights.nn, f, packing.centers, on_segments.owner};
+    repair_points = repair_spacing(input, options, packing.kept, n_repairs);
+  }
+  timer.lap("spacing_repair");
+
+  // Step 6 as in frfc.cpp: the same selection, so the same triangulation.
+  std::vector<Index> out_index;
+  Selection selection = select_output(mesh, forced, packing, on_segments.size(), repair_points, out_index);
+  selection.pin(mesh.required);
+  const auto pieces = pieces_along_chains(mesh, chains, on_segments, out_index);
+  const Quality_options quality = options.quality_settings();
+  early.work.wait();
+  triangulate_selection(std::move(selection), pieces, options.quality ? &quality : nullptr, result,
+                        options.quality ? &early.triangulation : nullptr, nullptr);
+  timer.lap(options.quality ? "quality" : "cdt");
+  finish_step(mesh, result, timer);
+  std::size_t n_quiet = 0;
+  for (std::uint8_t q : quiet) n_quiet += q;
+  std::vector<std::uint8_t> in_region(n, 0);
+  for (std::size_t t = 0; t < quiet.size(); ++t) {
+    if (!quiet[t]) {
+      for (Index v : mesh.triangles[t]) in_region[v] = 1;
+    }
+  }
+  std::size_t n_region = 0;
+  for (std::uint8_t r : in_region) n_region += r;
+  add_step_counts(result, {{"n_input_points", n},
+                           {"n_segment_samples", on_segments.size()},
+                           {"n_interior_samples", inside.size()},
+                           {"n_interior_samples_drawn", n_drawn},
+                           {"n_candidates", packing.centers.size()},
+                           {"n_demoted_points", packing.n_demoted},
+                           {"n_spacing_repairs", n_repairs},
+                           {"n_hidden_sites", spacing_near_points.function().n_hidden()},
+                           {"n_filtered_sites", spacing_near_points.function().n_filtered()},
+                           {"incremental_region_points", n_region},
+                           {"incremental_quiet_triangles", n_quiet},
+                           {"incremental_sites", spacing_near_points.n_sites() + spacing_near_samples.n_sites()}});
+  result.input_nn = std::move(weights.nn);
+  result.input_f = std::move(f);
+  return result;
+}
+
+}  // namespace evomesh
