@@ -26,7 +26,8 @@ constexpr double kCoarseClearance = 0.6;
 template <class Nearest2, class Delaunay>
 void repair_coarse_points(const Mesh_arrays& mesh, const std::vector<double>& delta, const std::vector<double>& nn,
                           double gap_ratio, std::uint64_t seed, const std::vector<Index>& position_of, const std::vector<double>& nn2,
-                          Nearest2& nearest2, Delaunay& added_dt, std::vector<Vec2>& added, std::size_t& n_added) {
+                          Nearest2& nearest2, Delaunay& added_dt, std::vector<Vec2>& added, std::size_t& n_added,
+                          const Spacing_repair_input& input) {
   constexpr int kDirections = 6;
   constexpr double kTwoPi = 6.283185307179586;
   std::vector<Index> coarse;
@@ -50,7 +51,8 @@ void repair_coarse_points(const Mesh_arrays& mesh, const std::vector<double>& de
   }
   std::vector<Index> triangle;
   std::vector<std::array<double, 3>> barycentric;
-  locate_points(mesh.points, mesh.triangles, queries, triangle, barycentric);
+  if (input.locate) (*input.locate)(queries, triangle, barycentric);
+  else locate_points(mesh.points, mesh.triangles, queries, triangle, barycentric);
   for (std::size_t i = 0; i < coarse.size(); ++i) {
     const Index p = coarse[i];
     const double h = delta[p] * nn[p];
@@ -177,7 +179,7 @@ std::vector<Vec2> repair_spacing(const Spacing_repair_input& input, const Frfc_o
     added_dt.insert(to_cgal(best_point));
     ++n_added;
   }
-  repair_coarse_points(mesh, delta, nn, gap_repair_ratio, seed, position_of, nn2, nearest2, added_dt, added, n_added);
+  repair_coarse_points(mesh, delta, nn, gap_repair_ratio, seed, position_of, nn2, nearest2, added_dt, added, n_added, input);
   return added;
 }
 

@@ -1,6 +1,9 @@
 // Spacing repair after FRFC's packing (Section 6).
 #pragma once
 
+#include <array>
+#include <functional>
+
 #include <cstddef>
 #include <cstdint>
 #include <vector>
@@ -21,6 +24,11 @@ struct Spacing_repair_input {
   const std::vector<double>& f;
   const std::vector<Vec2>& centers;          // of all spheres: input points [0, n), then the candidates
   const std::vector<Index>& segment_owner;   // per segment candidate (centre n + j): the point of its ring, or -1
+  // Locates points in the mesh as locate_points(mesh.points, mesh.triangles, ...)
+  // does, for the points the repair asks about; null: that call. (The
+  // incremental step passes one over the triangles near the points it checks.)
+  const std::function<void(const std::vector<Vec2>&, std::vector<Index>&, std::vector<std::array<double, 3>>&)>*
+      locate = nullptr;
 };
 
 // Spacing repair. The packing guarantees nn_M'(p) = Theta(f(p)) only up to a
