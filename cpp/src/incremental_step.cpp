@@ -61,6 +61,26 @@ class Point_grid {
     for (std::size_t i = 0; i < n; ++i) members_[static_cast<std::size_t>(fill[cell_of[i]]++)] = static_cast<Index>(i);
   }
 
+  // The smallest of `weight` over the points of every cell (for min_weight_near).
+  void set_weights(const std::vector<double>& weight) {
+    cell_min_.assign(start_.size() - 1, std::numeric_limits<double>::infinity());
+    for (std::size_t c = 0; c + 1 < start_.size(); ++c) {
+      for (std::int64_t k = start_[c]; k < start_[c + 1]; ++k) {
+        cell_min_[c] = std::min(cell_min_[c], weight[members_[static_cast<std::size_t>(k)]]);
+      }
+    }
+  }
+  // A lower bound on the weight of the points within distance r of x.
+  double min_weight_near(const Vec2& x, double r) const {
+    const std::int64_t x0 = cell(x[0] - r, 0), x1 = cell(x[0] + r, 0);
+    const std::int64_t y0 = cell(x[1] - r, 1), y1 = cell(x[1] + r, 1);
+    double m = std::numeric_limits<double>::infinity();
+    for (std::int64_t cy = y0; cy <= y1; ++cy) {
+      for (std::int64_t cx = x0; cx <= x1; ++cx) m = std::min(m, cell_min_[static_cast<std::size_t>(cx + side_ * cy)]);
+    }
+    return m;
+  }
+
   // Calls visit(i) for every point within distance r of x (and perhaps a few
   // slightly farther: callers only need a superset).
   template <class Visit>
@@ -92,6 +112,7 @@ class Point_grid {
   std::int64_t side_ = 1;
   std::vector<std::int64_t> start_;
   std::vector<Index> members_;
+  std::vector<double> cell_min_;
 };
 
 // The Apollonius graph of the sites `marked` (with their weights), for queries
@@ -152,7 +173,8 @@ struct Mark_sites {
 // farther than 2H/s from T cannot go below 2H/s, and one nearer needs w_c +
 // dist(c, T) > 2H/s; the vertices' own cones are bounded through the distance to
 // the nearest vertex (below). So T is quiet when its vertices are kept by the
-// first pass and not demoted, and every site passes its test. H <= max_x min_v |x - v| - min_v r_v, and the
+// first pass and not demoted, and every site passes its test. H <= R - min_v
+// r_v, R the circumradius (below).
 // maximum over T of the distance to the nearest vertex is attained at a vertex
 // of the Voronoi diagram of the three vertices clipped to T (the distance to one
 // point is convex on its cell): the circumcentre if it lies in T, or a point
@@ -176,39 +198,15 @@ std::vector<std::uint8_t> quiet_triangles(const Mesh_arrays& mesh, const Point_g
       if (!ok) continue;
       const Vec2 &a = P[tri[0]], &b2 = P[tri[1]], &c = P[tri[2]];
       const std::array<const Vec2*, 3> v{&a, &b2, &c};
-      auto nearest_vertex = [&](double x, double y) {
-        double best = std::numeric_limits<double>::infinity();
-        for (const Vec2* p : v) best = std::min(best, std::hypot(x - (*p)[0], y - (*p)[1]));
-        return best;
-      };
-      // The farthest point of T from its vertices: circumcentre (if inside) and bisector-edge crossings.
+      // Every point of T is within the circumradius of a vertex (T is covered by
+      // the kites v - edge midpoints - circumcentre, or for an obtuse T by their
+      // parts cut off by the long edge, whose corners are all within R of v).
       const double ax = b2[0] - a[0], ay = b2[1] - a[1], bx = c[0] - a[0], by = c[1] - a[1];
       const double cross = ax * by - ay * bx;
       const double la = ax * ax + ay * ay, lb = bx * bx + by * by;
       if (!(std::abs(cross) > 1e-3 * std::sqrt(la * lb))) continue;  // near-degenerate: not certified
-      double far = 0;
       const double ox = (la * by - lb * ay) / (2 * cross), oy = (ax * lb - bx * la) / (2 * cross);
-      const double s1 = (ox * by - oy * bx) / cross, s2 = (ax * oy - ay * ox) / cross;
-      if (s1 >= -1e-9 && s2 >= -1e-9 && s1 + s2 <= 1 + 1e-9) far = nearest_vertex(a[0] + ox, a[1] + oy);
-      for (int e = 0; e < 3; ++e) {
-        const Vec2& p = *v[e];
-        const Vec2& q = *v[(e + 1) % 3];
-        const double dx = q[0] - p[0], dy = q[1] - p[1];
-        for (int i = 0; i < 3; ++i) {
-          for (int j = i + 1; j < 3; ++j) {
-            // |y - v_i|^2 = |y - v_j|^2 on y = p + t (q - p): linear in t.
-            const Vec2& vi = *v[i];
-            const Vec2& vj = *v[j];
-            const double gx = vj[0] - vi[0], gy = vj[1] - vi[1];
-            const double rhs = 0.5 * ((vj[0] * vj[0] + vj[1] * vj[1]) - (vi[0] * vi[0] + vi[1] * vi[1])) -
-                               (gx * p[0] + gy * p[1]);
-            const double slope = gx * dx + gy * dy;
-            if (slope == 0) continue;
-            const double tt = std::clamp(rhs / slope, 0.0, 1.0);
-            far = std::max(far, nearest_vertex(p[0] + tt * dx, p[1] + tt * dy));
-          }
-        }
-      }
+      double far = std::sqrt(ox * ox + oy * oy);
       const double r_min = std::min({radius[tri[0]], radius[tri[1]], radius[tri[2]]});
       const double w_min = std::min({weight[tri[0]], weight[tri[1]], weight[tri[2]]});
       far = far * (1 + kSlack) + absolute;
@@ -225,6 +223,11 @@ std::vector<std::uint8_t> quiet_triangles(const Mesh_arrays& mesh, const Point_g
       const double gx = (a[0] + b2[0] + c[0]) / 3, gy = (a[1] + b2[1] + c[1]) / 3;
       double reach = 0;
       for (const Vec2* p : v) reach = std::max(reach, std::hypot((*p)[0] - gx, (*p)[1] - gy));
+      // Most often every weight near T is above `need` already.
+      if (grid.min_weight_near({gx, gy}, reach + need) > need) {
+        quiet[t] = 1;
+        continue;
+      }
       grid.visit_within({gx, gy}, reach + need, [&](Index site) {
         if (!ok || site == tri[0] || site == tri[1] || site == tri[2]) return;
         const Vec2& x = P[site];
@@ -395,7 +398,8 @@ std::optional<Evolve_result> incremental_frfc(const Mesh_arrays& mesh, const std
   const auto chains = segment_chains(mesh);
   Step_weights weights = step_weights(mesh, delta, timer, options.within_domain ? &chains : nullptr);
   const std::vector<double>& weight = weights.weight;
-  const Point_grid grid(mesh.points);
+  Point_grid grid(mesh.points);
+  grid.set_weights(weight);
   std::vector<double> f = weight;
   std::vector<Index> asked;
   for (std::size_t i = 0; i < n; ++i) {
@@ -430,6 +434,7 @@ std::optional<Evolve_result> incremental_frfc(const Mesh_arrays& mesh, const std
   const auto demoted = demoted_points(mesh.triangles, weights.nn, f, forced, options.demote_ratio);
   check_sample_budget(estimate_sample_count(mesh, f, options.cell_factor, options.max_samples, options.adaptive_cells),
                       options.max_samples, "sampling");
+  timer.lap("incremental_budget");
   Candidates on_segments = segment_candidates(mesh, delta, f, chains, options);
   timer.lap("sampling");
   candidate_radii(mesh, spacing_near_points.function(), f, demoted, options, /*on_segment=*/true, on_segments);
@@ -439,10 +444,12 @@ std::optional<Evolve_result> incremental_frfc(const Mesh_arrays& mesh, const std
   timer.lap("lfmis");
 
   const Triangle_fans fans(mesh);
+  timer.lap("incremental_fans");
   const std::vector<Disc> cover = cover_discs(mesh, f, packing.radius, packing.kept, packing.blocker,
                                               options.radius_scale, options.radius == Radius_rule::interpolated);
   const std::vector<std::uint8_t> quiet = quiet_triangles(mesh, grid, weight, packing.radius, packing.kept, demoted,
                                                           options.radius_scale, magnitude, options.threads);
+  timer.lap("incremental_quiet");
   std::size_t n_drawn = 0;
   Candidates inside = interior_candidates(mesh, fans, delta, f, demoted, cover, options, n_drawn, &quiet);
   timer.lap("sampling");
