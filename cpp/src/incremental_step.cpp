@@ -175,10 +175,7 @@ struct Mark_sites {
 // the nearest vertex (below). So T is quiet when its vertices are kept by the
 // first pass and not demoted, and every site passes its test. H <= R - min_v
 // r_v, R the circumradius (below).
-// maximum over T of the distance to the nearest vertex is attained at a vertex
-// of the Voronoi diagram of the three vertices clipped to T (the distance to one
-// point is convex on its cell): the circumcentre if it lies in T, or a point
-// where a bisector crosses an edge. Every bound carries the slack kSlack and the
+// Every bound carries the slack kSlack and the
 // rounding of the coordinates, far above the rounding of the packing's tests.
 std::vector<std::uint8_t> quiet_triangles(const Mesh_arrays& mesh, const Point_grid& grid,
                                           const std::vector<double>& weight, const std::vector<double>& radius,
