@@ -66,31 +66,6 @@ def front_delta(mesh: evomesh.Mesh, fraction: float) -> tuple[np.ndarray, np.nda
     return delta, band
 
 
-def untouched_reproduced(old: evomesh.Mesh, new: evomesh.Mesh, band: np.ndarray, margin: float) -> tuple[int, int]:
-    """(input points farther than `margin` from the band that the step dropped or moved, triangles
-    there that differ as point sets): both 0 when the region away from the band is a fixed point."""
-    x = old.points[:, 0]
-    if band.any():
-        lo, hi = x[band].min() - margin, x[band].max() + margin
-        far = (x < lo) | (x > hi)
-    else:
-        far = np.ones(old.n_points, bool)
-    new_set = {tuple(p) for p in new.points}
-    lost = sum(tuple(p) not in new_set for p in old.points[far])
-
-    def far_triangles(mesh: evomesh.Mesh, keep: np.ndarray) -> set:
-        t = mesh.triangles[keep[mesh.triangles].all(axis=1)]
-        return {tuple(sorted(map(tuple, mesh.points[tri]))) for tri in t}
-
-    new_index = {tuple(p): i for i, p in enumerate(new.points)}
-    keep_new = np.zeros(new.n_points, bool)
-    for p in old.points[far]:
-        if tuple(p) in new_index:
-            keep_new[new_index[tuple(p)]] = True
-    diff = far_triangles(old, far) ^ far_triangles(new, keep_new)
-    return lost, len(diff)
-
-
 def order_evidence(mesh: evomesh.Mesh) -> dict[str, float]:
     """Triangles far from a 1 % band (x > 0.5), present in the outputs of the delta = 1 step and
     of the 1 % band step: how many have the same index and the same first vertex in both arrays."""
@@ -114,11 +89,21 @@ def order_evidence(mesh: evomesh.Mesh) -> dict[str, float]:
     }
 
 
+ARRAYS = ("points", "triangles", "segments", "segment_is_boundary", "kind", "origin")
+LINEAGE = ("parent_triangle", "barycentric", "old_nn", "old_f")
+
+
+def assert_same(full: evomesh.Mesh, fast: evomesh.Mesh) -> None:
+    for name in ARRAYS:
+        assert np.array_equal(getattr(full, name), getattr(fast, name)), name
+    for name in LINEAGE:
+        assert np.array_equal(getattr(full.lineage, name), getattr(fast.lineage, name)), name
+
+
 def run(n: int, repeats: int, evidence: bool) -> list[dict]:
     t0 = time.perf_counter()
     mesh = stepped_mesh(n)
     print(f"# n = {n}: stepped mesh of {mesh.n_points} points in {time.perf_counter() - t0:.1f} s", flush=True)
-    spacing = float(np.median(mesh.nn_spacing))
     if evidence:
         print("# triangle order far from a 1 % band:", order_evidence(mesh), flush=True)
     rows = []
@@ -126,47 +111,49 @@ def run(n: int, repeats: int, evidence: bool) -> list[dict]:
         delta, band = front_delta(mesh, fraction)
         samples = []
         for r in range(repeats):
+            # alternate the two paths; the ratio of each pair is measured in the same run
             t = time.perf_counter()
-            out = evomesh.evolve(mesh, delta, seed=1)
-            wall = time.perf_counter() - t
-            s = out.stats
-            core = s["seconds_total"]
-            seg = out.segments
+            full = evomesh.evolve(mesh, delta, seed=1, incremental=False)
+            wall_full = time.perf_counter() - t
             t = time.perf_counter()
-            _core.constrained_delaunay(out.points, seg, out.segment_is_boundary.astype(np.uint8))
+            fast = evomesh.evolve(mesh, delta, seed=1, incremental=True)
+            wall_fast = time.perf_counter() - t
+            assert_same(full, fast)
+            s = full.stats
+            t = time.perf_counter()
+            _core.constrained_delaunay(full.points, full.segments, full.segment_is_boundary.astype(np.uint8))
             cdt = time.perf_counter() - t
-            floor = s["seconds_quality"] + s["seconds_parent_map"] + (wall - core) + cdt
-            selection = sum(s.get("seconds_" + k, 0.0) for k in SELECTION_STAGES)
-            samples.append({"wall": wall, "floor": floor, "cdt": cdt, "selection": selection,
-                            "floor_ratio": floor / wall})
+            floor = s["seconds_quality"] + s["seconds_parent_map"] + (wall_full - s["seconds_total"]) + cdt
+            samples.append({"full": wall_full, "incremental": wall_fast, "ratio": wall_fast / wall_full,
+                            "floor": floor, "floor_ratio": floor / wall_full})
             if r == 0:
-                lost, diff = untouched_reproduced(mesh, out, band, margin=8 * spacing)
-                changed = 1.0 - len({tuple(p) for p in mesh.points} & {tuple(p) for p in out.points}) / mesh.n_points
+                changed = 1.0 - len({tuple(p) for p in mesh.points} & {tuple(p) for p in full.points}) / mesh.n_points
+                taken = "incremental_quiet_triangles" in fast.stats
+                region = fast.stats.get("incremental_region_points", float(mesh.n_points)) / mesh.n_points
+                stages = {k[8:]: v for k, v in fast.stats.items() if k.startswith("seconds_")}
         med = {k: statistics.median(x[k] for x in samples) for k in samples[0]}
-        row = {"n": mesh.n_points, "fraction": fraction, "band_points": int(band.sum()),
-               "points_changed": changed, "lost_outside": lost, "triangles_differing_outside": diff, **med}
+        row = {"n": mesh.n_points, "fraction": fraction, "band_points": int(band.sum()), "points_changed": changed,
+               "taken": taken, "region": region, **med}
         rows.append(row)
-        print(f"{mesh.n_points:>9} {100 * fraction:>5.0f}% band {row['band_points']:>8} changed "
-              f"{100 * changed:6.2f}% | full {med['wall']:7.2f} s  selection stages {med['selection']:6.2f} s  "
-              f"floor {med['floor']:6.2f} s (cdt {med['cdt']:5.2f})  floor/full {med['floor_ratio']:.2f} | "
-              f"outside band: lost {lost}, triangles differing {diff}", flush=True)
-    full = {row["fraction"]: row["wall"] for row in rows}
-    for row in rows:
-        row["full_vs_100"] = row["wall"] / full[1.0]
+        print(f"{mesh.n_points:>9} {100 * fraction:>5.0f}% band {row['band_points']:>8} changed {100 * changed:6.2f}% "
+              f"region {100 * region:6.2f}% | full {med['full']:7.2f} s  incremental {med['incremental']:7.2f} s  "
+              f"ratio {med['ratio']:.3f} | floor {med['floor']:6.2f} s ({med['floor_ratio']:.2f}) | same bits, "
+              f"{'incremental' if taken else 'full (declined)'}", flush=True)
+        print("   incremental stages:", {k: round(v, 3) for k, v in stages.items()}, flush=True)
     return rows
 
 
 def markdown(rows: list[dict]) -> str:
     lines = [
-        "| points | band | points changed | full step (s) | full / full at 100 % | selection stages (s) "
-        "| floor of an exact path (s) | floor / full | outside the band: lost points, differing triangles |",
-        "|---:|---:|---:|---:|---:|---:|---:|---:|---|",
+        "| points | band | points changed | region (sampled/packed) | full step (s) | incremental (s) "
+        "| **incremental / full** | path | floor (s) | floor / full |",
+        "|---:|---:|---:|---:|---:|---:|---:|---|---:|---:|",
     ]
     for r in rows:
         lines.append(
-            f"| {r['n']:,} | {100 * r['fraction']:.0f} % | {100 * r['points_changed']:.2f} % | {r['wall']:.2f} "
-            f"| {r['full_vs_100']:.2f} | {r['selection']:.2f} | {r['floor']:.2f} | {r['floor_ratio']:.2f} "
-            f"| {r['lost_outside']}, {r['triangles_differing_outside']} |"
+            f"| {r['n']:,} | {100 * r['fraction']:.0f} % | {100 * r['points_changed']:.2f} % "
+            f"| {100 * r['region']:.1f} % | {r['full']:.2f} | {r['incremental']:.2f} | **{r['ratio']:.3f}** "
+            f"| {'incremental' if r['taken'] else 'full (declined)'} | {r['floor']:.2f} | {r['floor_ratio']:.2f} |"
         )
     return "\n".join(lines)
 
