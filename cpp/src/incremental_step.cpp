@@ -249,6 +249,167 @@ std::vector<std::uint8_t> quiet_triangles(const Mesh_arrays& mesh, const Point_g
   return quiet;
 }
 
+// Old points whose sphere no earlier sphere of the first pass can reject and
+// that reject nothing but spheres they overlap: radius <= nn / 2 (with slack),
+// nn the Euclidean nearest-neighbour distance (not grown within the domain).
+// Two such spheres are disjoint (r_p + r_q <= (nn_p + nn_q) / 2 <= |p - q|), so
+// among old points only the others ("dangerous": delta > 1 with f > nn / 2 s,
+// radius_scale 1, nn grown within the domain) and the candidates can overlap one.
+std::vector<std::uint8_t> safe_old_points(const std::vector<double>& radius, const std::vector<double>& nn,
+                                          const std::vector<std::uint8_t>& evaluate, std::size_t n) {
+  std::vector<std::uint8_t> safe(n, 0);
+  for (std::size_t p = 0; p < n; ++p) {
+    safe[p] = (evaluate.empty() || !evaluate[p]) && radius[p] <= 0.5 * nn[p] * (1 - kSlack);
+  }
+  return safe;
+}
+
+// The first packing pass (frfc_stages::first_packing_pass) on the spheres whose
+// fate is not certain, with the same result. The lexical-first MIS restricted to
+// a set of spheres closed under overlap (every sphere overlapping a member is a
+// member) is the MIS of all spheres restricted to it. The set: the forced
+// corners, every segment candidate and dangerous old point, and every safe old
+// point that overlaps one of those. A safe old point p overlapping a sphere d
+// lies within 2 r_d of d when d is an old point (r_p <= nn_p / 2 <= |p - d| / 2)
+// and within |e - d| + 2 r_d of d when d is a candidate on a segment with end e
+// (r_p <= |p - e| / 2). Safe old points outside the set overlap nothing earlier:
+// they are kept. Blockers may differ from the full pass's (another kept sphere
+// that overlaps); they only feed the sample filters, which are exact with any.
+Packing first_pass_near(const Mesh_arrays& mesh, const std::vector<double>& f, const std::vector<double>& nn,
+                        const std::vector<std::uint8_t>& evaluate, const Candidates& on_segments,
+                        const std::vector<std::uint8_t>& forced, std::size_t n_forced,
+                        const std::vector<std::uint8_t>& demoted, const Frfc_options& options, const Point_grid& grid,
+                        double magnitude, std::vector<std::uint8_t>& safe, std::size_t& n_packed) {
+  const std::size_t n = mesh.points.size();
+  const std::size_t n_seg = on_segments.size();
+  Packing packing;
+  packing.centers = mesh.points;
+  packing.centers.insert(packing.centers.end(), on_segments.samples.points.begin(), on_segments.samples.points.end());
+  packing.radius = input_point_radii(mesh, f, options);
+  packing.radius.insert(packing.radius.end(), on_segments.radius.begin(), on_segments.radius.end());
+  std::vector<std::uint8_t> classes(n + n_seg);
+  for (std::size_t i = 0; i < n; ++i) {
+    classes[i] = old_point_class(mesh.kind[i], forced[i], demoted[i]);
+    packing.n_demoted += demoted[i];
+  }
+  const auto segment_classes = on_segments.classes(/*on_segment=*/true);
+  std::copy(segment_classes.begin(), segment_classes.end(), classes.begin() + static_cast<std::ptrdiff_t>(n));
+  safe = safe_old_points(packing.radius, nn, evaluate, n);
+  const double absolute = 1e-12 * magnitude;
+  std::vector<std::uint8_t> member(n + n_seg, 0);
+  auto add_near = [&](const Vec2& d, double reach) {
+    grid.visit_within(d, reach * (1 + kSlack) + absolute, [&](Index p) { member[p] = 1; });
+  };
+  for (std::size_t i = 0; i < n; ++i) {
+    if (safe[i] && !forced[i]) continue;
+    member[i] = 1;
+    add_near(mesh.points[i], 2 * packing.radius[i]);
+  }
+  for (std::size_t j = 0; j < n_seg; ++j) {
+    member[n + j] = 1;
+    const Edge& e = mesh.segments[on_segments.samples.parent[j]];
+    const Vec2& x = on_segments.samples.points[j];
+    double to_end = std::numeric_limits<double>::infinity();
+    for (Index v : e) to_end = std::min(to_end, std::hypot(x[0] - mesh.points[v][0], x[1] - mesh.points[v][1]));
+    add_near(x, to_end + 2 * on_segments.radius[j]);
+  }
+  std::vector<Index> members;
+  for (std::size_t c = 0; c < n + n_seg; ++c) {
+    if (member[c]) members.push_back(static_cast<Index>(c));
+  }
+  n_packed = members.size();
+  std::vector<Vec2> centers(members.size());
+  std::vector<double> radii(members.size());
+  std::vector<std::uint8_t> member_classes(members.size());
+  for (std::size_t k = 0; k < members.size(); ++k) {
+    centers[k] = packing.centers[members[k]];
+    radii[k] = packing.radius[members[k]];
+    member_classes[k] = classes[members[k]];
+  }
+  std::vector<Index> blocker;
+  const auto kept = lexical_first_mis(centers, radii, packing_order(member_classes, radii), n_forced, &blocker);
+  packing.kept.assign(n + n_seg, 0);
+  packing.blocker.assign(n + n_seg, -1);
+  for (std::size_t c = 0; c < n; ++c) packing.kept[c] = !member[c];  // safe and alone: kept
+  for (std::size_t k = 0; k < members.size(); ++k) {
+    packing.kept[members[k]] = kept[k];
+    packing.blocker[members[k]] = blocker[k] < 0 ? -1 : members[blocker[k]];
+  }
+  // As in first_packing_pass: demoted interior points go to the second pass.
+  std::vector<std::uint8_t> deferred(n + n_seg, 0);
+  for (std::size_t i = 0; i < n; ++i) {
+    if (classes[i] != class_new) continue;
+    deferred[i] = 1;
+    packing.deferred.push_back(static_cast<Index>(i));
+    packing.kept[i] = 0;
+    packing.blocker[i] = -1;
+  }
+  for (Index& b : packing.blocker) {
+    if (b >= 0 && deferred[b]) b = -1;
+  }
+  packing.kept_first = packing.kept;
+  return packing;
+}
+
+// The second pass (frfc_stages::second_packing_pass) with, of the first pass's
+// kept spheres (forced), those that can overlap a sphere of the pass: every
+// dangerous or segment one, and the safe old points near one: a safe p overlaps
+// B(x, r) only within 2 r + |x - v| of x for any mesh point v != p (r_p <= nn_p
+// / 2 <= |p - v| / 2), v a vertex of x's triangle, or x itself for a deferred
+// old point. The forced spheres' order among themselves does not matter.
+void second_pass_near(const Mesh_arrays& mesh, const Candidates& inside, const std::vector<std::uint8_t>& safe,
+                      const Point_grid& grid, double magnitude, Packing& packing, std::size_t& n_packed) {
+  const std::size_t n = mesh.points.size();
+  const std::size_t n_first = packing.kept.size();
+  const std::size_t n_deferred = packing.deferred.size();
+  std::vector<Vec2> centers;
+  std::vector<double> radii;
+  std::vector<std::uint8_t> classes;
+  for (Index c : packing.deferred) {
+    centers.push_back(packing.centers[c]);
+    radii.push_back(packing.radius[c]);
+    classes.push_back(class_new);
+  }
+  centers.insert(centers.end(), inside.samples.points.begin(), inside.samples.points.end());
+  radii.insert(radii.end(), inside.radius.begin(), inside.radius.end());
+  const auto inside_classes = inside.classes(/*on_segment=*/false);
+  classes.insert(classes.end(), inside_classes.begin(), inside_classes.end());
+  const double absolute = 1e-12 * magnitude;
+  std::vector<std::uint8_t> forced_member(n_first, 0);
+  for (std::size_t c = 0; c < n_first; ++c) forced_member[c] = packing.kept[c] && (c >= n || !safe[c]);
+  auto add_near = [&](const Vec2& x, double reach) {
+    grid.visit_within(x, reach * (1 + kSlack) + absolute, [&](Index p) { forced_member[p] = packing.kept[p]; });
+  };
+  for (std::size_t k = 0; k < n_deferred; ++k) add_near(centers[k], 2 * radii[k]);
+  for (std::size_t j = 0; j < inside.size(); ++j) {
+    const Vec2& x = inside.samples.points[j];
+    double to_vertex = std::numeric_limits<double>::infinity();
+    for (Index v : mesh.triangles[inside.samples.parent[j]]) {
+      to_vertex = std::min(to_vertex, std::hypot(x[0] - mesh.points[v][0], x[1] - mesh.points[v][1]));
+    }
+    add_near(x, 2 * inside.radius[j] + to_vertex);
+  }
+  std::vector<Vec2> all_centers;
+  std::vector<double> all_radii;
+  std::vector<Index> order;
+  for (std::size_t c = 0; c < n_first; ++c) {
+    if (!forced_member[c]) continue;
+    order.push_back(static_cast<Index>(all_centers.size()));
+    all_centers.push_back(packing.centers[c]);
+    all_radii.push_back(packing.radius[c]);
+  }
+  const std::size_t n_forced = order.size();
+  n_packed = n_forced + centers.size();
+  for (Index j : packing_order(classes, radii)) order.push_back(static_cast<Index>(n_forced) + j);
+  all_centers.insert(all_centers.end(), centers.begin(), centers.end());
+  all_radii.insert(all_radii.end(), radii.begin(), radii.end());
+  const auto kept = lexical_first_mis(all_centers, all_radii, order, n_forced);
+  for (std::size_t k = 0; k < n_deferred; ++k) packing.kept[packing.deferred[k]] = kept[n_forced + k];
+  packing.kept.insert(packing.kept.end(), kept.begin() + static_cast<std::ptrdiff_t>(n_forced + n_deferred),
+                      kept.end());
+  packing.centers.insert(packing.centers.end(), inside.samples.points.begin(), inside.samples.points.end());
+}
+
 // The spacing repair (spacing_repair.hpp) on the points it can act on. It acts
 // on kept points only: R-points (delta < 1) with no kept point within
 // repair_ratio delta nn, and points with delta >= 1 with none within
@@ -436,7 +597,10 @@ std::optional<Evolve_result> incremental_frfc(const Mesh_arrays& mesh, const std
   timer.lap("sampling");
   candidate_radii(mesh, spacing_near_points.function(), f, demoted, options, /*on_segment=*/true, on_segments);
   timer.lap("sample_radii");
-  Packing packing = first_packing_pass(mesh, f, on_segments, forced, n_forced, demoted, options);
+  std::vector<std::uint8_t> safe;
+  std::size_t n_packed_first = 0, n_packed_second = 0;
+  Packing packing = first_pass_near(mesh, f, weights.nn, weights.evaluate, on_segments, forced, n_forced, demoted,
+                                    options, grid, magnitude, safe, n_packed_first);
   Early_start early(packing, options, false);
   timer.lap("lfmis");
 
@@ -465,7 +629,7 @@ std::optional<Evolve_result> incremental_frfc(const Mesh_arrays& mesh, const std
   candidate_radii(mesh, spacing_near_samples.function(), f, demoted, options, /*on_segment=*/false, inside);
   timer.lap("sample_radii");
   drop_blocked_candidates(mesh, packing.centers, packing.radius, packing.kept, packing.blocker, options.threads, inside);
-  second_packing_pass(inside, packing);
+  second_pass_near(mesh, inside, safe, grid, magnitude, packing, n_packed_second);
   timer.lap("lfmis");
 
   std::size_t n_repairs = 0, n_checked = 0;
@@ -516,6 +680,8 @@ std::optional<Evolve_result> incremental_frfc(const Mesh_arrays& mesh, const std
                            {"incremental_region_points", n_region},
                            {"incremental_quiet_triangles", n_quiet},
                            {"incremental_repair_checked", n_checked},
+                           {"incremental_packed_first", n_packed_first},
+                           {"incremental_packed_second", n_packed_second},
                            {"incremental_sites", spacing_near_points.n_sites() + spacing_near_samples.n_sites()}});
   result.input_nn = std::move(weights.nn);
   result.input_f = std::move(f);
