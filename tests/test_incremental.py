@@ -5,6 +5,8 @@ where it does not apply."""
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 import pytest
 from hypothesis import given
@@ -36,8 +38,6 @@ def _check_same_step(mesh: evomesh.Mesh, delta: np.ndarray, seed: int = 1, **opt
 
 
 def evolve_quietly(mesh, delta, seed, **options):
-    import warnings
-
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", evomesh.QualityWarning)
         return evomesh.evolve(mesh, delta, seed=seed, **options)
@@ -184,7 +184,8 @@ def test_curved_boundaries_take_the_full_path():
     from evomesh.meshgen import HOLE_TAG, OUTER_TAG, disc_with_hole_mesh
 
     mesh = disc_with_hole_mesh(0.08)
-    geometry = evomesh.BoundaryGeometry({OUTER_TAG: evomesh.Circle((0, 0), 1.0), HOLE_TAG: evomesh.Circle((0, 0), 0.35)})
+    circles = {OUTER_TAG: evomesh.Circle((0, 0), 1.0), HOLE_TAG: evomesh.Circle((0, 0), 0.35)}
+    geometry = evomesh.BoundaryGeometry(circles)
     result = evomesh.evolve(mesh, np.ones(mesh.n_points), seed=0, geometry=geometry)
     assert not _taken(result)
     assert _taken(evomesh.evolve(mesh, np.ones(mesh.n_points), seed=0))

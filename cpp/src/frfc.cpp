@@ -1,5 +1,6 @@
 #include "evomesh/frfc.hpp"
 
+#include <exception>
 #include <optional>
 #include <utility>
 
@@ -184,8 +185,15 @@ Evolve_result frfc(const Mesh_arrays& input, const std::vector<double>& delta, c
   using namespace frfc_stages;
   // Where delta = 1 on most of the mesh, the same step at the cost of the
   // change (incremental_step.hpp); it declines when it does not apply.
+  // Whatever stops it (also a refused sample budget) is left to the full step to say.
   if (options.incremental && !input.geometry) {
-    if (auto incremental = incremental_frfc(input, delta, options)) return std::move(*incremental);
+    std::optional<Evolve_result> incremental;
+    try {
+      incremental = incremental_frfc(input, delta, options);
+    } catch (const std::exception&) {
+      incremental.reset();
+    }
+    if (incremental) return std::move(*incremental);
   }
   // With curved boundaries, the corners of curved chains come from the geometry.
   const Mesh_arrays with_curves = input.geometry ? with_curve_kinds(input) : Mesh_arrays{};
