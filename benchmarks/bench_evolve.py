@@ -77,7 +77,7 @@ def graded_case(target: float, threads: int | None) -> tuple[evomesh.Mesh, np.nd
     # The graded input is fixed: built with the packing of before issue 11 (exact radii,
     # old points first), so the timed step and compare_peers.py's front case keep their input.
     graded = evomesh.evolve(grid, setup_delta, seed=0, quality=False, max_samples=1e10, threads=threads,
-                            radius="exact", demote_ratio=None, gap_repair_ratio=None)
+                            radius="exact", demote_ratio=None, gap_repair_ratio=None, refine_gap_ratio=None)
     x = graded.points[:, 0]
     delta = np.clip(target_spacing(x, BAND_CENTER + BAND_SHIFT, s) / target_spacing(x, BAND_CENTER, s), 0.5, 2.0)
     return graded, delta, {"grid_side": k, "spacing_scale": s, "setup_seconds": time.perf_counter() - t0}

@@ -4,8 +4,9 @@ The mesh is ``evomesh.unit_square_mesh(N)``; the step's delta refines in a
 vertical band (x in [0.3, 0.4]) and coarsens elsewhere, as a moving-front step
 would. Times are medians over ``--repeats``: evolve, linear transfer of a
 vertex field, conservative transfer of a vertex field (supermesh with mass,
-assembly, SuperLU factorisation and solve), transfer_cells (supermesh without
-mass, P0 projection); also the relative drift of the integrals.
+the new mesh's mass matrix, the mixed-mass product and the preconditioned CG
+solve), transfer_cells (supermesh without mass, P0 projection); also the
+relative drift of the integrals.
 
 Usage::
 

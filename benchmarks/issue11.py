@@ -98,6 +98,25 @@ def main() -> None:
         print("\ngrowing circle: points " + ", ".join(str(int(x)) for x in run.column("points")) +
               "; original % " + ", ".join(f"{x:.1f}" for x in run.column("original_pct")) +
               "; min angle " + ", ".join(f"{x:.1f}" for x in run.column("min_angle_deg")))
+        print("largest share of original points the step's output allows (cells of 0.03): " +
+              ", ".join(f"{x:.1f}" for x in original_share_bound(run)) + " %")
+
+
+def original_share_bound(run: Any, cell: float = 0.03) -> list[float]:
+    """Per step: at most sum over cells of min(old points, new points) of the
+    new points can be old ones, whatever the step keeps, given how many points
+    the output has in each cell (the spacing it asked for): an upper bound on
+    "% original" for any output with that distribution of points."""
+    meshes = [run.initial] + [step.mesh for step in run.steps]
+    lo, hi = run.initial.points.min(axis=0), run.initial.points.max(axis=0)
+    bins = [int(np.ceil((hi[k] - lo[k]) / cell)) for k in range(2)]
+    box = [[lo[0], hi[0]], [lo[1], hi[1]]]
+    bound = []
+    for old, new in zip(meshes, meshes[1:]):
+        o, _, _ = np.histogram2d(old.points[:, 0], old.points[:, 1], bins=bins, range=box)
+        n, _, _ = np.histogram2d(new.points[:, 0], new.points[:, 1], bins=bins, range=box)
+        bound.append(100.0 * float(np.minimum(o, n).sum() / n.sum()))
+    return bound
 
 
 if __name__ == "__main__":

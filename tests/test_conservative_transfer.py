@@ -6,10 +6,12 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+import scipy.sparse
 from hypothesis import given, settings
 
 import evomesh
-from evomesh.field_transfer import Supermesh
+from evomesh import _core
+from evomesh.field_transfer import Supermesh, _p1_mass
 from strategies import grid_mesh, mesh_and_delta
 
 
@@ -120,6 +122,55 @@ def test_mapping_dtypes_and_errors():
 def test_thread_count_independent():
     mesh = grid_mesh(10, 10, jitter=0.25, seed=4)
     new = evomesh.evolve(mesh, np.clip(0.05 / mesh.nn_spacing, 0.2, 5), seed=0)
-    one, two = Supermesh(mesh, new, threads=1), Supermesh(mesh, new, threads=2)
-    assert np.array_equal(one.old_triangle, two.old_triangle)
-    assert np.array_equal(one.area, two.area) and np.array_equal(one.mass, two.mass)
+    one, two, three = (Supermesh(mesh, new, threads=k) for k in (1, 2, 3))
+    u = np.c_[np.sin(4 * mesh.points[:, 0]), mesh.points[:, 1] ** 2]
+    for other in (two, three):
+        assert np.array_equal(one.old_triangle, other.old_triangle) and np.array_equal(one.identical, other.identical)
+        assert np.array_equal(one.area, other.area) and np.array_equal(one.mass, other.mass)
+        # the mass matrix and the solve too: the projection is bit for bit the same
+        assert np.array_equal(one.project_vertices(u), other.project_vertices(u))
+
+
+@settings(max_examples=15, deadline=None)
+@given(mesh_and_delta(max_side=10))
+def test_identical_triangle_shortcut(case):
+    """A new triangle that is an old one (three kept points) gets its pair
+    without clipping: the same pairs, areas and mass entries as the clipping
+    (to 1e-14 of the triangle's area), and the same projection."""
+    mesh, delta = case
+    new = evomesh.evolve(mesh, delta, seed=2)
+    arguments = (mesh.points, mesh.triangles, new.points, new.triangles, new.origin, new.lineage.parent_triangle)
+    fast = _core.supermesh(*arguments, True, 1, True)
+    full = _core.supermesh(*arguments, True, 1, False)
+    assert (full["identical"] == -1).all()
+    identical = fast["identical"]
+    for t in np.flatnonzero(identical >= 0):  # same points, in any order
+        assert set(new.origin[new.triangles[t]]) == set(mesh.triangles[identical[t]])
+    assert np.array_equal(fast["offsets"], full["offsets"])
+    assert np.array_equal(fast["old_triangle"], full["old_triangle"])
+    scale = np.repeat(np.abs(new.triangle_areas), np.diff(fast["offsets"]))
+    assert np.all(np.abs(fast["area"] - full["area"]) <= 1e-14 * scale)
+    assert np.all(np.abs(fast["mass"] - full["mass"]).max(axis=(1, 2)) <= 1e-14 * scale)
+
+
+def test_identical_triangles_of_an_unchanged_mesh():
+    """delta = 1 on a grid keeps most triangles: they all take the shortcut,
+    and the projection of a field onto the same space is the field."""
+    mesh = grid_mesh(9, 9, jitter=0.2, seed=5)
+    new = evomesh.evolve(mesh, 1.0, seed=0)
+    s = Supermesh(mesh, new)
+    assert (s.identical >= 0).mean() > 0.5
+    same = np.flatnonzero(s.identical >= 0)
+    assert np.array_equal(np.diff(s.offsets)[same], np.ones(len(same), dtype=np.int64))
+    assert np.array_equal(s.old_triangle[s.offsets[same]], s.identical[same])
+
+
+def test_p1_mass_matrix():
+    mesh = grid_mesh(7, 6, jitter=0.3, seed=6)
+    t, area = mesh.triangles, np.abs(mesh.triangle_areas)
+    local = area[:, None, None] * (np.ones((3, 3)) + np.eye(3))[None] / 12.0
+    rows, cols = np.broadcast_to(t[:, :, None], local.shape), np.broadcast_to(t[:, None, :], local.shape)
+    expected = scipy.sparse.csr_matrix((local.ravel(), (rows.ravel(), cols.ravel())), shape=(mesh.n_points,) * 2)
+    got = _p1_mass(mesh)
+    assert got.has_sorted_indices and np.array_equal(got.indptr, expected.indptr)
+    assert np.abs((got - expected).toarray()).max() <= 1e-15 * area.max()  # areas rounded apart

@@ -171,7 +171,7 @@ def test_refining_a_tiny_square_raises_instead_of_returning_an_invalid_mesh():
             # the sizes and angle bound of before issue 11 (refine more slowly than the defaults, so the
             # float64 limit comes before the sample budget)
             mesh = evomesh.evolve(mesh, delta, seed=step, radius="exact", demote_ratio=None,
-                                   gap_repair_ratio=None, min_angle=20.0)
+                                   gap_repair_ratio=None, refine_gap_ratio=None, min_angle=20.0)
             # every output that is returned is one Mesh() accepts
             Mesh(mesh.points, mesh.triangles, mesh.segments, kind=mesh.kind)
 

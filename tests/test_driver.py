@@ -180,11 +180,12 @@ def test_plot_step_has_three_panels(small_run):
 def test_growing_circle_meets_the_paper_targets():
     """The paper's experiment with the paper's preference for old points (exact
     radii, old points first, no gap repair: radius="exact", demote_ratio=None,
-    gap_repair_ratio=None): at least 70% of
+    gap_repair_ratio=None, refine_gap_ratio=None): at least 70% of
     the points kept in every step and a minimum angle at least the paper's worst.
     With the defaults (issue 11) the band gets the spacing it asks for, which takes
     more new points: see test_growing_circle_with_the_defaults."""
-    result = evomesh.growing_circle(progress=False, radius="exact", demote_ratio=None, gap_repair_ratio=None)
+    result = evomesh.growing_circle(progress=False, radius="exact", demote_ratio=None, gap_repair_ratio=None,
+                                    refine_gap_ratio=None)
     assert 1050 <= result.initial.n_points <= 1150
     assert evomesh.quality(result.initial).min_angle > 30
     assert len(result.steps) == len(PAPER_TABLE1) == 6

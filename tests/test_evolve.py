@@ -32,7 +32,7 @@ def test_spacing_and_size_ratios(case):
     # default sizes and with the paper's (exact radii, old points first).
     f = evomesh.spacing(mesh, delta)
     mass = integral_inverse_square(mesh, f)
-    before = {"radius": "exact", "demote_ratio": None, "gap_repair_ratio": None}
+    before = {"radius": "exact", "demote_ratio": None, "gap_repair_ratio": None, "refine_gap_ratio": None}
     for options, bound in (({}, SIZE_BOUND_INTERPOLATED), (before, SIZE_BOUND)):
         new = evomesh.evolve(mesh, delta, seed=1, quality=False, **options)
         ratio = spacing_ratio(mesh, new, delta)
@@ -163,8 +163,9 @@ def test_spacing_repair_brings_every_kept_r_point_a_neighbour(seed):
         return ratio[delta[p] < 1].max()
 
     # (the gap repair of points with delta >= 1 off: it is tested in test_issue11.py)
-    repaired = evomesh.evolve(mesh, delta, quality=False, repair_ratio=1.75, gap_repair_ratio=None)
-    plain = evomesh.evolve(mesh, delta, quality=False, repair_ratio=None, gap_repair_ratio=None)
+    repaired = evomesh.evolve(mesh, delta, quality=False, repair_ratio=1.75, gap_repair_ratio=None,
+                              refine_gap_ratio=None)
+    plain = evomesh.evolve(mesh, delta, quality=False, repair_ratio=None, gap_repair_ratio=None, refine_gap_ratio=None)
     check_evolved(mesh, repaired)
     assert repaired.stats["n_spacing_repairs"] > 0
     assert plain.stats["n_spacing_repairs"] == 0

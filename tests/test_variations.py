@@ -62,8 +62,8 @@ def test_skip_coarse_adds_no_interior_samples_where_all_vertices_coarsen():
     mesh = grid_mesh(16, 16, jitter=0.2, seed=2)
     delta = np.full(mesh.n_points, 2.0)
     # (no gap repair: it adds points beside kept C-points, not samples)
-    plain = evomesh.evolve(mesh, delta, quality=False, gap_repair_ratio=None)
-    skipped = evomesh.evolve(mesh, delta, quality=False, skip_coarse=True, gap_repair_ratio=None)
+    plain = evomesh.evolve(mesh, delta, quality=False, gap_repair_ratio=None, refine_gap_ratio=None)
+    skipped = evomesh.evolve(mesh, delta, quality=False, skip_coarse=True, gap_repair_ratio=None, refine_gap_ratio=None)
     check_evolved(mesh, skipped)
     assert plain.stats["n_interior_samples"] > 0
     assert skipped.stats["n_interior_samples"] == 0
@@ -82,7 +82,7 @@ def test_deterministic_samples_are_barycentres_and_midpoints(samples):
     barycentre of an input triangle or a midpoint of an input edge."""
     mesh = grid_mesh(12, 12, jitter=0.25, seed=3)
     delta = np.full(mesh.n_points, 1.5)
-    new = evomesh.evolve(mesh, delta, samples=samples, quality=False, gap_repair_ratio=None)
+    new = evomesh.evolve(mesh, delta, samples=samples, quality=False, gap_repair_ratio=None, refine_gap_ratio=None)
     check_evolved(mesh, new)
     p, t = mesh.points, mesh.triangles
     allowed = set()

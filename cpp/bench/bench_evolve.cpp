@@ -121,6 +121,7 @@ Graded_case graded_case(double target, int threads, double max_samples) {
   setup_options.radius = Radius_rule::exact;
   setup_options.demote_ratio = 0;
   setup_options.gap_repair_ratio = 0;
+  setup_options.refine_gap_ratio = 0;
   Evolve_result setup = frfc(grid, setup_delta, setup_options);
   out.mesh = std::move(setup.mesh);
   out.delta.resize(out.mesh.points.size());

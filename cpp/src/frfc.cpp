@@ -170,10 +170,14 @@ Candidates interior_stage(const Mesh_arrays& mesh, const Triangle_fans& fans, co
 // The spacing repair (spacing_repair.hpp), when asked for and ring candidates were offered.
 std::vector<Vec2> spacing_repair_stage(const Mesh_arrays& mesh, const Triangle_fans& fans,
                                        const std::vector<double>& delta, const Step_spacing& spacing,
-                                       const Candidates& on_segments, const Frfc_options& options, Packing& packing,
-                                       std::size_t& n_repairs) {
-  if (!(options.repair_ratio > 0 && options.ring_samples) && !(options.gap_repair_ratio > 0)) return {};
-  const Spacing_repair_input input{mesh, fans, delta, spacing.nn, spacing.f, packing.centers, on_segments.owner};
+                                       const Candidates& on_segments, const std::vector<std::uint8_t>& demoted,
+                                       const Frfc_options& options, Packing& packing, std::size_t& n_repairs) {
+  if (!(options.repair_ratio > 0 && options.ring_samples) && !(options.gap_repair_ratio > 0) &&
+      !(options.refine_gap_ratio > 0)) {
+    return {};
+  }
+  const Spacing_repair_input input{mesh, fans, delta, spacing.nn, spacing.f, packing.centers, on_segments.owner,
+                                   demoted};
   return repair_spacing(input, options, packing.kept, n_repairs);
 }
 
@@ -221,7 +225,8 @@ Evolve_result frfc(const Mesh_arrays& input, const std::vector<double>& delta, c
   second_packing_pass(inside, packing);
   timer.lap("lfmis");
   std::size_t n_repairs = 0;
-  const auto repair_points = spacing_repair_stage(mesh, fans, delta, spacing, on_segments, options, packing, n_repairs);
+  const auto repair_points = spacing_repair_stage(mesh, fans, delta, spacing, on_segments, demoted, options, packing,
+                                                    n_repairs);
   timer.lap("spacing_repair");
 
   // Step 6: the kept points (on curves, moved onto them), the constraint pieces

@@ -3,7 +3,6 @@
 #include <algorithm>
 #include <cstdio>
 #include <cstdlib>
-#include <functional>
 #include <cmath>
 #include <limits>
 #include <memory>
@@ -16,7 +15,6 @@
 #include "evomesh/sampling.hpp"
 #include "evomesh/spacing.hpp"
 #include "evomesh/spacing_repair.hpp"
-#include "evomesh/triangulation.hpp"
 
 namespace evomesh {
 
@@ -410,126 +408,6 @@ void second_pass_near(const Mesh_arrays& mesh, const Candidates& inside, const s
   packing.centers.insert(packing.centers.end(), inside.samples.points.begin(), inside.samples.points.end());
 }
 
-// The spacing repair (spacing_repair.hpp) on the points it can act on. It acts
-// on kept points only: R-points (delta < 1) with no kept point within
-// repair_ratio delta nn, and points with delta >= 1 with none within
-// gap_repair_ratio delta nn. A point of the second kind with a kept mesh
-// neighbour that near is certainly left alone; the others are `checked`. The
-// repair then reads, around a checked point p, the nearest kept centres of p and
-// of its repair positions (at most 2 max(ring reach f(p), delta nn(p)) from p,
-// since p itself is kept), and where the gap positions lie in the mesh (within
-// delta nn(p) of p). So it runs with the kept input points within that reach of
-// a checked point (the unchecked ones among them with nn = infinity, which no
-// test passes), every kept candidate, and a locator over the triangles that can
-// hold a gap position (a vertex within delta nn(p) plus the longest edge of p);
-// it visits the checked points in the same order and adds the same points.
-std::vector<Vec2> restricted_repair(const Mesh_arrays& mesh, const Triangle_fans& fans,
-                                    const std::vector<double>& delta, const std::vector<double>& nn,
-                                    const std::vector<double>& f, const Candidates& on_segments,
-                                    const Point_grid& grid, const Frfc_options& options, double magnitude,
-                                    Packing& packing, std::size_t& n_repairs, std::size_t& n_checked) {
-  const bool ring_repair = options.repair_ratio > 0 && options.ring_samples;
-  const bool gap_repair = options.gap_repair_ratio > 0;
-  if (!ring_repair && !gap_repair) return {};
-  const std::size_t n = mesh.points.size();
-  const auto& P = mesh.points;
-  const std::vector<std::uint8_t>& kept = packing.kept;
-  std::vector<Index> checked;
-  for (std::size_t p = 0; p < n; ++p) {
-    if (!kept[p]) continue;
-    if (delta[p] < 1) {
-      if (ring_repair) checked.push_back(static_cast<Index>(p));
-      continue;
-    }
-    if (!gap_repair) continue;
-    const double target = options.gap_repair_ratio * delta[p] * nn[p];
-    const double bound = target * target * (1 - kSlack);
-    bool served = false;
-    for (Index a = fans.xadj[p]; a < fans.xadj[p + 1] && !served; ++a) {
-      for (Index q : mesh.triangles[fans.adj[a]]) {
-        if (q == static_cast<Index>(p) || !kept[q]) continue;
-        const double dx = P[q][0] - P[p][0], dy = P[q][1] - P[p][1];
-        served = served || dx * dx + dy * dy <= bound;
-      }
-    }
-    if (!served) checked.push_back(static_cast<Index>(p));
-  }
-  n_checked = checked.size();
-  const double absolute = 1e-12 * magnitude;
-  const double reach = ring_reach(options.radius_scale);
-  double longest = 0;  // the longest edge of the mesh
-  for (const Triangle& t : mesh.triangles) {
-    for (int k = 0; k < 3; ++k) {
-      const Vec2& a = P[t[k]];
-      const Vec2& b = P[t[(k + 1) % 3]];
-      longest = std::max(longest, (a[0] - b[0]) * (a[0] - b[0]) + (a[1] - b[1]) * (a[1] - b[1]));
-    }
-  }
-  longest = std::sqrt(longest);
-  std::vector<std::uint8_t> in_tree(n, 0), is_checked(n, 0), near_gap(n, 0);
-  bool any_gap = false;
-  for (Index p : checked) {
-    is_checked[p] = 1;
-    const double h = delta[p] * nn[p];
-    const double target = (delta[p] < 1 ? options.repair_ratio : options.gap_repair_ratio) * h;
-    const double rho = std::max({target, 2 * reach * f[p], 2 * h}) * (1 + kSlack) + absolute;
-    grid.visit_within(P[p], rho, [&](Index i) { in_tree[i] = kept[i]; });
-    if (delta[p] >= 1 && gap_repair) {
-      any_gap = true;
-      grid.visit_within(P[p], (h + longest) * (1 + kSlack) + absolute, [&](Index i) { near_gap[i] = 1; });
-    }
-  }
-  std::vector<std::uint8_t> kept_near = kept;
-  std::vector<double> nn_near = nn;
-  for (std::size_t c = 0; c < n; ++c) {
-    kept_near[c] = kept[c] && in_tree[c];
-    if (kept_near[c] && !is_checked[c]) nn_near[c] = std::numeric_limits<double>::infinity();
-  }
-  // The locator over the triangles near the gap positions (global triangle ids).
-  Mesh_arrays near;
-  std::vector<Index> near_triangle;
-  if (any_gap) {
-    std::vector<Index> local(n, -1);
-    std::vector<std::uint8_t> take(mesh.triangles.size(), 0);
-    for (std::size_t p = 0; p < n; ++p) {
-      if (!near_gap[p]) continue;
-      for (Index a = fans.xadj[p]; a < fans.xadj[p + 1]; ++a) take[fans.adj[a]] = 1;
-    }
-    for (std::size_t t = 0; t < take.size(); ++t) {
-      if (!take[t]) continue;
-      Triangle mapped;
-      for (int k = 0; k < 3; ++k) {
-        const Index v = mesh.triangles[t][k];
-        if (local[v] < 0) {
-          local[v] = static_cast<Index>(near.points.size());
-          near.points.push_back(P[v]);
-        }
-        mapped[k] = local[v];
-      }
-      near.triangles.push_back(mapped);
-      near_triangle.push_back(static_cast<Index>(t));
-    }
-  }
-  const std::function<void(const std::vector<Vec2>&, std::vector<Index>&, std::vector<std::array<double, 3>>&)>
-      locate = [&](const std::vector<Vec2>& queries, std::vector<Index>& triangle,
-                   std::vector<std::array<double, 3>>& barycentric) {
-        if (near.triangles.empty()) {
-          triangle.assign(queries.size(), -1);
-          barycentric.assign(queries.size(), {0.0, 0.0, 0.0});
-          return;
-        }
-        locate_points(near.points, near.triangles, queries, triangle, barycentric);
-        for (Index& t : triangle) {
-          if (t >= 0) t = near_triangle[t];
-        }
-      };
-  Spacing_repair_input input{mesh, fans, delta, nn_near, f, packing.centers, on_segments.owner};
-  input.locate = &locate;
-  std::vector<Vec2> added = repair_spacing(input, options, kept_near, n_repairs);
-  for (std::size_t c = n; c < kept_near.size(); ++c) packing.kept[c] = kept_near[c];
-  return added;
-}
-
 double coordinate_magnitude(const std::vector<Vec2>& points) {
   double m = 0;
   for (const Vec2& p : points) m = std::max({m, std::abs(p[0]), std::abs(p[1])});
@@ -632,9 +510,15 @@ std::optional<Evolve_result> incremental_frfc(const Mesh_arrays& mesh, const std
   second_pass_near(mesh, inside, safe, grid, magnitude, packing, n_packed_second);
   timer.lap("lfmis");
 
-  std::size_t n_repairs = 0, n_checked = 0;
-  const std::vector<Vec2> repair_points = restricted_repair(mesh, fans, delta, weights.nn, f, on_segments, grid, options,
-                                                            magnitude, packing, n_repairs, n_checked);
+  // The spacing repair as in the full step: its gap repair visits every input
+  // point (its second nearest output point against delta nn), so it stays global.
+  std::size_t n_repairs = 0;
+  std::vector<Vec2> repair_points;
+  if ((options.repair_ratio > 0 && options.ring_samples) || options.gap_repair_ratio > 0 ||
+      options.refine_gap_ratio > 0) {
+    const Spacing_repair_input input{mesh, fans, delta, weights.nn, f, packing.centers, on_segments.owner, demoted};
+    repair_points = repair_spacing(input, options, packing.kept, n_repairs);
+  }
   timer.lap("spacing_repair");
 
   // Step 6 as in frfc.cpp: the same selection, so the same triangulation.
@@ -679,7 +563,6 @@ std::optional<Evolve_result> incremental_frfc(const Mesh_arrays& mesh, const std
                            {"n_filtered_sites", spacing_near_points.function().n_filtered()},
                            {"incremental_region_points", n_region},
                            {"incremental_quiet_triangles", n_quiet},
-                           {"incremental_repair_checked", n_checked},
                            {"incremental_packed_first", n_packed_first},
                            {"incremental_packed_second", n_packed_second},
                            {"incremental_sites", spacing_near_points.n_sites() + spacing_near_samples.n_sites()}});

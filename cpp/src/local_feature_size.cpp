@@ -4,10 +4,10 @@
 #include <array>
 #include <cmath>
 #include <limits>
-#include <unordered_map>
 
 #include "evomesh/boundary_geometry.hpp"
 #include "evomesh/candidates.hpp"
+#include "evomesh/mesh_walk.hpp"
 
 namespace evomesh {
 
@@ -39,87 +39,6 @@ namespace {
 
 constexpr double kInfinity = std::numeric_limits<double>::infinity();
 
-double cross(const Vec2& u, const Vec2& v) { return u[0] * v[1] - u[1] * v[0]; }
-
-// The triangles around each point (Triangle_fans, O(m) counting) and the
-// segments by their end points: enough to walk across edges, with no global
-// sort of half-edges (only points on segments start walks, and walks are short).
-struct Mesh_walk {
-  const Mesh_arrays& mesh;
-  Triangle_fans fans;
-  std::unordered_map<std::uint64_t, Index> segment_of_edge;
-
-  static std::uint64_t key(Index a, Index b) {
-    return (static_cast<std::uint64_t>(std::min(a, b)) << 32) ^ static_cast<std::uint64_t>(std::max(a, b));
-  }
-
-  explicit Mesh_walk(const Mesh_arrays& m) : mesh(m), fans(m) {
-    segment_of_edge.reserve(2 * m.segments.size());
-    for (std::size_t s = 0; s < m.segments.size(); ++s) {
-      segment_of_edge[key(m.segments[s][0], m.segments[s][1])] = static_cast<Index>(s);
-    }
-  }
-
-  // The triangle other than t on edge (a, b), -1 if none.
-  Index across(Index t, Index a, Index b) const {
-    for (Index k = fans.xadj[a]; k < fans.xadj[a + 1]; ++k) {
-      const Index u = fans.adj[k];
-      if (u == t) continue;
-      const Triangle& tri = mesh.triangles[u];
-      if (tri[0] == b || tri[1] == b || tri[2] == b) return u;
-    }
-    return -1;
-  }
-
-  // From point v along direction d (unit), through the triangles: the first
-  // segment crossed and the distance to it, or (-1, inf) beyond `limit`.
-  std::pair<Index, double> cast(Index v, const Vec2& d, double limit) const {
-    const Vec2& p = mesh.points[v];
-    // the triangle at v whose angle contains d
-    Index t = -1;
-    int k = 0;  // t's vertex v
-    for (Index a = fans.xadj[v]; a < fans.xadj[v + 1] && t < 0; ++a) {
-      const Triangle& tri = mesh.triangles[fans.adj[a]];
-      const int i = tri[0] == v ? 0 : tri[1] == v ? 1 : 2;
-      const Vec2& b = mesh.points[tri[(i + 1) % 3]];
-      const Vec2& c = mesh.points[tri[(i + 2) % 3]];
-      if (cross({b[0] - p[0], b[1] - p[1]}, d) >= 0 && cross(d, {c[0] - p[0], c[1] - p[1]}) >= 0) {
-        t = fans.adj[a];
-        k = i;
-      }
-    }
-    if (t < 0) return {-1, kInfinity};  // d points out of the domain
-    int exit_edge = (k + 1) % 3;  // the edge opposite v
-    for (int step = 0; step < 1000; ++step) {
-      const Triangle& tri = mesh.triangles[t];
-      const Index a = tri[exit_edge], b = tri[(exit_edge + 1) % 3];
-      const Vec2& pa = mesh.points[a];
-      const Vec2& pb = mesh.points[b];
-      // where the ray p + s d crosses the line ab
-      const Vec2 ab{pb[0] - pa[0], pb[1] - pa[1]};
-      const double denominator = cross(d, ab);
-      if (denominator == 0) return {-1, kInfinity};
-      const double s = cross({pa[0] - p[0], pa[1] - p[1]}, ab) / denominator;
-      if (!(s <= limit)) return {-1, kInfinity};
-      const auto found = segment_of_edge.find(key(a, b));
-      if (found != segment_of_edge.end()) return {found->second, std::max(s, 0.0)};
-      const Index next = across(t, a, b);
-      if (next < 0) return {-1, kInfinity};
-      // the edge of `next` other than (a, b) that the ray leaves through
-      const Triangle& ntri = mesh.triangles[next];
-      int m = 0;
-      while (!((ntri[m] == b && ntri[(m + 1) % 3] == a))) ++m;
-      const Index c = ntri[(m + 2) % 3];
-      const Vec2& pc = mesh.points[c];
-      const double side = cross(d, {pc[0] - p[0], pc[1] - p[1]});
-      // the ray passes c on its left: it leaves through (c, b)... by orientation of the pieces
-      exit_edge = side > 0 ? (m + 1) % 3 : (m + 2) % 3;
-      t = next;
-    }
-    return {-1, kInfinity};
-  }
-};
-
 }  // namespace
 
 std::vector<double> local_feature_size(const Mesh_arrays& mesh, const std::vector<Segment_chain>& chains,
@@ -137,7 +56,8 @@ std::vector<double> local_feature_size(const Mesh_arrays& mesh, const std::vecto
     const auto& b = chains[c2].vertices;
     return a.front() == b.front() || a.front() == b.back() || a.back() == b.front() || a.back() == b.back();
   };
-  const Mesh_walk walk(mesh);
+  const Triangle_fans fans(mesh);
+  const Mesh_walk walk(mesh, fans);
   const Boundary_geometry* geometry = mesh.geometry.get();
   for (std::size_t c = 0; c < chains.size(); ++c) {
     const auto& chain = chains[c];

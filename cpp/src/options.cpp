@@ -40,6 +40,7 @@ Frfc_options Frfc_options::paper() {
   o.repair_ratio = 0.0;
   o.demote_ratio = 0.0;
   o.gap_repair_ratio = 0.0;
+  o.refine_gap_ratio = 0.0;
   o.samples = Sample_mode::random_grid;
   o.adaptive_cells = false;
   o.skip_coarse = false;
@@ -60,6 +61,8 @@ void Frfc_options::validate() const {
   require(demote_ratio == 0 || (std::isfinite(demote_ratio) && demote_ratio >= 1), "demote_ratio",
           "None, 0 or a finite number >= 1");
   require(gap_repair_ratio == 0 || (std::isfinite(gap_repair_ratio) && gap_repair_ratio >= 1), "gap_repair_ratio",
+          "None, 0 or a finite number >= 1");
+  require(refine_gap_ratio == 0 || (std::isfinite(refine_gap_ratio) && refine_gap_ratio >= 1), "refine_gap_ratio",
           "None, 0 or a finite number >= 1");
   require(static_cast<int>(samples) <= 3, "samples", "a Sample_mode");
   require(static_cast<int>(radius) <= 2, "radius", "'exact', 'cheap' or 'interpolated'");

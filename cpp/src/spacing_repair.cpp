@@ -3,83 +3,95 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <limits>
 
 #include <CGAL/Delaunay_triangulation_2.h>
 
 #include "evomesh/detail/point_tree.hpp"
 #include "evomesh/kernel.hpp"
+#include "evomesh/mesh_walk.hpp"
 #include "evomesh/sampling.hpp"
-#include "evomesh/triangulation.hpp"
 
 namespace evomesh {
 
 namespace {
 
-// Kept points with delta >= 1 (issue 11): the packing leaves gaps of up to about
-// 2 radius_scale f between kept spheres, so a kept point p can end up with no
-// kept point within 1.4 h(p), h = delta nn_M. One with none within
-// gap_ratio h(p) gets, of six points at distance h(p) from it (seeded phase)
-// that lie strictly inside a triangle of the old mesh, the one farthest from
-// every kept point, if that is at least kCoarseClearance h(p) away.
-constexpr double kCoarseClearance = 0.6;
+// The gap repair (issue 11): the paper's nn_M'(p) of an input point is the
+// distance from p to its second nearest output point (its nearest other one
+// when p is kept). The packing leaves gaps of up to about 2 radius_scale f
+// between kept spheres, so nn_M'(p) can reach 1.4 h(p), h = delta nn_M: next
+// to a kept point, and where a point was dropped beside a near neighbour. An
+// input point with nn_M'(p) > gap_ratio h(p) gets, of kGapDirections points at
+// distance h(p) from it (seeded phase) that lie strictly inside a triangle of
+// the old mesh seen from p (Mesh_walk::locate_from: no segment in between), the
+// one farthest from every output point, if that is at least kGapClearance h(p)
+// away. Where the request refines and a fresh packing forms (p has delta(p) < 1
+// and was demoted or dropped), its spacing varies more and a bound of gap_ratio
+// adds points that compound over repeated steps: refine_ratio is used there.
+// Points are served in input order; each sees the points added before.
+constexpr double kGapClearance = 0.6;
+constexpr int kGapDirections = 16;
 
-template <class Nearest2, class Delaunay>
-void repair_coarse_points(const Mesh_arrays& mesh, const std::vector<double>& delta, const std::vector<double>& nn,
-                          double gap_ratio, std::uint64_t seed, const std::vector<Index>& position_of, const std::vector<double>& nn2,
-                          Nearest2& nearest2, Delaunay& added_dt, std::vector<Vec2>& added, std::size_t& n_added,
-                          const Spacing_repair_input& input) {
-  constexpr int kDirections = 6;
+template <class Delaunay>
+void repair_gaps(const Mesh_arrays& mesh, const Triangle_fans& fans, const std::vector<double>& delta,
+                 const std::vector<double>& nn, double gap_ratio, double refine_ratio, std::uint64_t seed,
+                 const std::vector<std::uint8_t>& demoted, const detail::Point_tree& tree,
+                 Delaunay& added_dt, std::vector<Vec2>& added, std::size_t& n_added) {
   constexpr double kTwoPi = 6.283185307179586;
-  std::vector<Index> coarse;
-  if (!(gap_ratio > 0)) return;
-  for (std::size_t p = 0; p < position_of.size(); ++p) {
-    if (position_of[p] < 0 || !(delta[p] >= 1)) continue;
-    const double target = gap_ratio * delta[p] * nn[p];
-    if (nn2[position_of[p]] > target * target) coarse.push_back(static_cast<Index>(p));
-  }
-  if (coarse.empty()) return;
-  std::vector<Vec2> queries;
-  queries.reserve(kDirections * coarse.size());
-  for (Index p : coarse) {
+  if (!(gap_ratio > 0) && !(refine_ratio > 0)) return;
+  using Vertex_handle = typename Delaunay::Vertex_handle;
+  // squared distances from x to its nearest and second nearest output points
+  auto two_nearest = [&](const Vec2& x) {
+    const std::array<double, 2> kept = tree.squared_two_nearest(x);
+    if (added_dt.number_of_vertices() == 0) return kept;
+    const Point_2 q = to_cgal(x);
+    const Vertex_handle v = added_dt.nearest_vertex(q);
+    const double a1 = CGAL::squared_distance(q, v->point());
+    double a2 = std::numeric_limits<double>::infinity();
+    // a second nearest vertex of a Delaunay triangulation is a neighbour of the nearest
+    auto c = added_dt.incident_vertices(v), done = c;
+    if (c != nullptr) do {
+      if (!added_dt.is_infinite(c)) a2 = std::min(a2, CGAL::squared_distance(q, c->point()));
+    } while (++c != done);
+    return kept[0] <= a1 ? std::array<double, 2>{kept[0], std::min(kept[1], a1)}
+                         : std::array<double, 2>{a1, std::min(a2, kept[0])};
+  };
+  const Mesh_walk walk(mesh, fans);
+  for (std::size_t p = 0; p < mesh.points.size(); ++p) {
+    const Vec2& at = mesh.points[p];
+    const auto around = two_nearest(at);
+    const bool kept = around[0] == 0;
+    // refine_ratio where a fresh packing forms (see above)
+    const double ratio = delta[p] < 1 && (demoted[p] || !kept) ? refine_ratio : gap_ratio;
+    if (!(ratio > 0)) continue;
     const double h = delta[p] * nn[p];
+    const double target = ratio * h;
+    if (!(around[1] > target * target)) continue;
     Random_stream rng(seed, (std::uint64_t{5} << 60) + static_cast<std::uint64_t>(p));
-    const double phase = rng.uniform() * kTwoPi / kDirections;
-    for (int k = 0; k < kDirections; ++k) {
-      const double angle = phase + kTwoPi * k / kDirections;
-      queries.push_back({mesh.points[p][0] + h * std::cos(angle), mesh.points[p][1] + h * std::sin(angle)});
-    }
-  }
-  std::vector<Index> triangle;
-  std::vector<std::array<double, 3>> barycentric;
-  if (input.locate) (*input.locate)(queries, triangle, barycentric);
-  else locate_points(mesh.points, mesh.triangles, queries, triangle, barycentric);
-  for (std::size_t i = 0; i < coarse.size(); ++i) {
-    const Index p = coarse[i];
-    const double h = delta[p] * nn[p];
-    const double target = gap_ratio * h;
-    double d2 = nn2[position_of[p]];
-    if (added_dt.number_of_vertices() > 0) {
-      const Point_2 q = to_cgal(mesh.points[p]);
-      d2 = std::min(d2, CGAL::squared_distance(q, added_dt.nearest_vertex(q)->point()));
-    }
-    if (d2 <= target * target) continue;  // an earlier repair served p
-    double best_d2 = kCoarseClearance * kCoarseClearance * h * h;
-    int best = -1;
-    for (int k = 0; k < kDirections; ++k) {
-      const std::size_t j = kDirections * i + k;
-      if (triangle[j] < 0) continue;
-      // strictly inside its triangle (not on an edge: a segment, or a crack)
-      if (!(barycentric[j][0] > 1e-9 && barycentric[j][1] > 1e-9 && barycentric[j][2] > 1e-9)) continue;
-      const double e2 = nearest2(queries[j]);
-      if (e2 >= best_d2) {
-        best_d2 = e2;
-        best = k;
+    const double phase = rng.uniform() * kTwoPi / kGapDirections;
+    const double clearance2 = kGapClearance * kGapClearance * h * h;
+    double best_d2 = -1;
+    bool found = false;
+    Vec2 best{0.0, 0.0};
+    for (int k = 0; k < kGapDirections; ++k) {
+      const double angle = phase + kTwoPi * k / kGapDirections;
+      const Vec2 x{at[0] + h * std::cos(angle), at[1] + h * std::sin(angle)};
+      if (walk.locate_from(static_cast<Index>(p), x) < 0) continue;
+      const auto e = two_nearest(x);
+      if (!(e[0] >= clearance2)) continue;
+      // farthest from the output points other than p: a kept p is at distance h
+      // from every direction (a tie that rounding would break)
+      const double dx = x[0] - at[0], dy = x[1] - at[1];
+      const double other = kept && e[0] == dx * dx + dy * dy ? e[1] : e[0];
+      if (other > best_d2) {
+        best_d2 = other;
+        best = x;
+        found = true;
       }
     }
-    if (best < 0) continue;
-    const Vec2& x = queries[kDirections * i + best];
-    added.push_back(x);
-    added_dt.insert(to_cgal(x));
+    if (!found) continue;
+    added.push_back(best);
+    added_dt.insert(to_cgal(best));
     ++n_added;
   }
 }
@@ -179,7 +191,7 @@ std::vector<Vec2> repair_spacing(const Spacing_repair_input& input, const Frfc_o
     added_dt.insert(to_cgal(best_point));
     ++n_added;
   }
-  repair_coarse_points(mesh, delta, nn, gap_repair_ratio, seed, position_of, nn2, nearest2, added_dt, added, n_added, input);
+  repair_gaps(mesh, fans, delta, nn, gap_repair_ratio, options.refine_gap_ratio, seed, input.demoted, tree, added_dt, added, n_added);
   return added;
 }
 

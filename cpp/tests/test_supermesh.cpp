@@ -1,7 +1,10 @@
 // The local supermesh: for random pairs of meshes of the unit square, the
 // intersection areas of each new triangle sum to its area and those of each old
 // triangle to its area; the mixed mass entries sum to the areas; the result does
-// not depend on the thread count.
+// not depend on the thread count. A new triangle that is an old one (three kept
+// points) takes the shortcut and gets the pair the clipping gives; the P1 mass
+// matrix, the mixed mass product and the mass solve against brute force.
+#include <algorithm>
 #include <cmath>
 #include <cstdint>
 #include <random>
@@ -140,6 +143,159 @@ void check_missing_seed() {
   CHECK(threw);
 }
 
+// The same points as g, each cell split along a diagonal drawn again.
+Grid redrawn_diagonals(const Grid& g, int k, std::mt19937_64& rng) {
+  Grid out;
+  out.points = g.points;
+  std::bernoulli_distribution flip(0.5);
+  for (int j = 0; j + 1 < k; ++j)
+    for (int i = 0; i + 1 < k; ++i) {
+      const Index a = i + k * j, b = a + 1, c = a + k + 1, d = a + k;
+      if (flip(rng)) {
+        out.triangles.push_back({a, b, c});
+        out.triangles.push_back({a, c, d});
+      } else {
+        out.triangles.push_back({a, b, d});
+        out.triangles.push_back({b, c, d});
+      }
+    }
+  return out;
+}
+
+void check_identical_shortcut() {
+  std::mt19937_64 rng(99);
+  for (int trial = 0; trial < 10; ++trial) {
+    const int k = 5 + trial;
+    const Grid old = jittered_grid(k, 0.25, rng);
+    const Grid fresh = redrawn_diagonals(old, k, rng);
+    std::vector<Index> origin(fresh.points.size());
+    for (std::size_t v = 0; v < origin.size(); ++v) origin[v] = static_cast<Index>(v);
+    const auto seed = supermesh_seeds(old.points.size(), old.triangles, origin, std::vector<Index>(origin.size(), -1));
+    const auto identical = identical_old_triangles(old.points.size(), old.triangles, fresh.triangles, origin, 1);
+    std::size_t n_identical = 0;
+    for (std::size_t t = 0; t < identical.size(); ++t) {
+      if (identical[t] < 0) continue;
+      ++n_identical;
+      Triangle a = fresh.triangles[t], b = old.triangles[identical[t]];
+      std::sort(a.begin(), a.end());
+      std::sort(b.begin(), b.end());
+      CHECK(a == b) << "trial " << trial << ", triangle " << t;
+    }
+    CHECK(n_identical > 0 && n_identical < identical.size()) << "trial " << trial << ": " << n_identical;
+    const Supermesh full = build_supermesh(old.points, old.triangles, fresh.points, fresh.triangles, seed, true, 1);
+    const Supermesh fast =
+        build_supermesh(old.points, old.triangles, fresh.points, fresh.triangles, seed, true, 1, identical);
+    CHECK(full.offsets == fast.offsets && full.old_triangle == fast.old_triangle) << "trial " << trial;
+    if (full.old_triangle != fast.old_triangle) continue;
+    double worst = 0.0;
+    for (std::size_t t = 0; t < fresh.triangles.size(); ++t) {
+      const double a = area(fresh, fresh.triangles[t]);
+      for (Index p = full.offsets[t]; p < full.offsets[t + 1]; ++p) {
+        worst = std::max(worst, std::abs(full.area[p] - fast.area[p]) / a);
+        for (int e = 0; e < 9; ++e) worst = std::max(worst, std::abs(full.mass[9 * p + e] - fast.mass[9 * p + e]) / a);
+      }
+    }
+    CHECK(worst < 1e-14) << "trial " << trial << ": shortcut off the clipping by " << worst;
+    for (int threads : {2, 3}) {
+      const Supermesh other =
+          build_supermesh(old.points, old.triangles, fresh.points, fresh.triangles, seed, true, threads, identical);
+      CHECK(other.offsets == fast.offsets && other.old_triangle == fast.old_triangle && other.area == fast.area &&
+            other.mass == fast.mass)
+          << "trial " << trial << ", " << threads << " threads";
+      CHECK(identical_old_triangles(old.points.size(), old.triangles, fresh.triangles, origin, threads) == identical);
+    }
+  }
+  // A wrong identical entry (a triangle with other points) is refused.
+  const Grid g = jittered_grid(4, 0.0, rng);
+  std::vector<Index> origin(g.points.size());
+  for (std::size_t v = 0; v < origin.size(); ++v) origin[v] = static_cast<Index>(v);
+  const auto seed = supermesh_seeds(g.points.size(), g.triangles, origin, std::vector<Index>(origin.size(), -1));
+  std::vector<Index> wrong(g.triangles.size(), -1);
+  wrong[0] = static_cast<Index>(g.triangles.size() - 1);
+  bool threw = false;
+  try {
+    build_supermesh(g.points, g.triangles, g.points, g.triangles, seed, true, 1, wrong);
+  } catch (const Input_error&) {
+    threw = true;
+  }
+  CHECK(threw);
+}
+
+void check_mass_matrix_and_solve() {
+  std::mt19937_64 rng(5);
+  for (int trial = 0; trial < 6; ++trial) {
+    const int k = 4 + 3 * trial;
+    const Grid g = jittered_grid(k, 0.3, rng);
+    const std::size_t n = g.points.size();
+    // brute force: dense accumulation per triangle
+    std::vector<double> dense(n * n, 0.0);
+    for (const Triangle& t : g.triangles) {
+      const double a = area(g, t);
+      for (int i = 0; i < 3; ++i)
+        for (int j = 0; j < 3; ++j) dense[t[i] * n + t[j]] += (i == j ? 2.0 : 1.0) * a / 12.0;
+    }
+    const Csr_matrix m = p1_mass_matrix(g.points, g.triangles, 1);
+    CHECK(m.indptr.size() == n + 1);
+    double worst = 0.0;
+    std::size_t nonzero = 0;
+    for (std::size_t i = 0; i < n; ++i) {
+      for (Index p = m.indptr[i]; p < m.indptr[i + 1]; ++p) {
+        if (p > m.indptr[i]) CHECK(m.indices[p - 1] < m.indices[p]) << "columns sorted";
+        worst = std::max(worst, std::abs(m.data[p] - dense[i * n + m.indices[p]]));
+      }
+      nonzero += static_cast<std::size_t>(m.indptr[i + 1] - m.indptr[i]);
+    }
+    CHECK(nonzero == static_cast<std::size_t>(std::count_if(dense.begin(), dense.end(), [](double x) { return x != 0; })));
+    CHECK(worst < 1e-16) << "trial " << trial << ": " << worst;
+    for (int threads : {2, 3}) {
+      const Csr_matrix other = p1_mass_matrix(g.points, g.triangles, threads);
+      CHECK(other.indptr == m.indptr && other.indices == m.indices && other.data == m.data);
+    }
+    // solve: two columns, a constant and a random one
+    std::uniform_real_distribution<double> u(-1.0, 1.0);
+    std::vector<double> x(2 * n);
+    for (std::size_t i = 0; i < n; ++i) x[2 * i] = 0.7, x[2 * i + 1] = u(rng);
+    std::vector<double> rhs(2 * n, 0.0);
+    for (std::size_t i = 0; i < n; ++i)
+      for (std::size_t j = 0; j < n; ++j)
+        for (int c = 0; c < 2; ++c) rhs[2 * i + c] += dense[i * n + j] * x[2 * j + c];
+    int iterations = 0;
+    const std::vector<double> solved = solve_p1_mass(m, rhs, 2, 1, &iterations);
+    double error = 0.0;
+    for (std::size_t i = 0; i < 2 * n; ++i) error = std::max(error, std::abs(solved[i] - x[i]));
+    CHECK(error < 1e-12) << "trial " << trial << ": solve off by " << error;
+    CHECK(iterations > 0 && iterations < 60) << iterations;
+    for (int threads : {2, 3}) CHECK(solve_p1_mass(m, rhs, 2, threads) == solved) << threads << " threads";
+  }
+}
+
+void check_mixed_mass_times() {
+  std::mt19937_64 rng(11);
+  const Grid old = jittered_grid(7, 0.25, rng);
+  const Grid fresh = jittered_grid(9, 0.25, rng);
+  const auto seed = brute_seeds(old, fresh);
+  const Supermesh sm = build_supermesh(old.points, old.triangles, fresh.points, fresh.triangles, seed, true, 1);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  const std::size_t columns = 3;
+  std::vector<double> values(old.points.size() * columns);
+  for (double& v : values) v = u(rng);
+  std::vector<double> expected(fresh.points.size() * columns, 0.0);
+  for (std::size_t t = 0; t < fresh.triangles.size(); ++t)
+    for (Index p = sm.offsets[t]; p < sm.offsets[t + 1]; ++p)
+      for (int a = 0; a < 3; ++a)
+        for (int b = 0; b < 3; ++b)
+          for (std::size_t c = 0; c < columns; ++c)
+            expected[fresh.triangles[t][a] * columns + c] +=
+                sm.mass[9 * p + 3 * a + b] * values[old.triangles[sm.old_triangle[p]][b] * columns + c];
+  std::vector<double> rhs(expected.size(), 1.0);
+  mixed_mass_times(fresh.triangles.size(), sm.offsets.data(), sm.old_triangle.data(), sm.mass.data(),
+                   old.triangles.data(), fresh.triangles.data(), values.data(), columns, fresh.points.size(),
+                   rhs.data());
+  double worst = 0.0;
+  for (std::size_t i = 0; i < rhs.size(); ++i) worst = std::max(worst, std::abs(rhs[i] - expected[i]));
+  CHECK(worst < 1e-15) << worst;
+}
+
 }  // namespace
 
 int main() {
@@ -147,5 +303,8 @@ int main() {
     check_intersection_area();
     check_random_pairs();
     check_missing_seed();
+    check_identical_shortcut();
+    check_mass_matrix_and_solve();
+    check_mixed_mass_times();
   });
 }

@@ -65,6 +65,7 @@ class FrfcOptions:
     ring_samples: bool
     repair_ratio: float
     gap_repair_ratio: float
+    refine_gap_ratio: float
     demote_ratio: float
     samples: SampleMode
     adaptive_cells: bool
@@ -250,6 +251,7 @@ class SupermeshResult(TypedDict):
     old_triangle: NDArray[np.int64]  # (pairs,)
     area: NDArray[np.float64]  # (pairs,), |t n s|
     mass: NDArray[np.float64]  # (pairs, 3, 3), int phi^new_a phi^old_b; (0, 3, 3) when mass=False
+    identical: NDArray[np.int64]  # (n_new_triangles,), the old triangle a new one is (three kept points), else -1
 
 def supermesh(
     old_points: ArrayLike,
@@ -260,8 +262,31 @@ def supermesh(
     parent_triangle: ArrayLike,
     mass: bool = True,
     threads: int = 0,
+    shortcut: bool = True,
 ) -> SupermeshResult:
-    """Local supermesh of new over old (cpp/src/supermesh.cpp), seeded by the step's origin and parent_triangle."""
+    """Local supermesh of new over old (cpp/src/supermesh.cpp), seeded by the step's origin and parent_triangle;
+    shortcut=False clips the new triangles that are old ones too (for the tests)."""
+
+def p1_mass_matrix(
+    points: ArrayLike, triangles: ArrayLike, threads: int = 0
+) -> tuple[NDArray[np.float64], NDArray[np.int64], NDArray[np.int64]]:
+    """The P1 mass matrix in compressed rows: (data, indices, indptr), columns sorted in each row."""
+
+def mixed_mass_times(
+    offsets: ArrayLike,
+    old_triangle: ArrayLike,
+    mass: ArrayLike,
+    old_triangles: ArrayLike,
+    new_triangles: ArrayLike,
+    n_new_points: int,
+    values: ArrayLike,
+) -> NDArray[np.float64]:
+    """A supermesh's mixed mass matrix times old values (n_old_points, columns): (n_new_points, columns)."""
+
+def solve_p1_mass(
+    data: ArrayLike, indices: ArrayLike, indptr: ArrayLike, rhs: ArrayLike, threads: int = 0
+) -> tuple[NDArray[np.float64], int]:
+    """M u = rhs (n, columns) for a P1 mass matrix in compressed rows, to rounding: (u, iterations)."""
 
 def locate_points(
     points: ArrayLike, triangles: ArrayLike, queries: ArrayLike

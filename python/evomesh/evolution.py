@@ -41,7 +41,7 @@ def _python_value(name: str, value: Any) -> Any:
         return next(key for key, member in _ENUMS[name][1].items() if member == value)
     if name == "threads":
         return value or None
-    if name in ("repair_ratio", "gap_repair_ratio", "demote_ratio"):
+    if name in ("repair_ratio", "gap_repair_ratio", "refine_gap_ratio", "demote_ratio"):
         return value or None
     return value
 
@@ -71,7 +71,7 @@ def _set_field(options: Any, name: str, value: Any) -> None:
             value = 0
         elif isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Integral) or not 1 <= value < 2**31:
             raise ValueError(f"threads must be None or an integer in [1, 2**31), got {value!r}")
-    elif name in ("repair_ratio", "gap_repair_ratio", "demote_ratio") and value is None:
+    elif name in ("repair_ratio", "gap_repair_ratio", "refine_gap_ratio", "demote_ratio") and value is None:
         value = 0.0
     elif isinstance(default, bool):
         if not isinstance(value, (bool, np.bool_)):
@@ -195,10 +195,19 @@ def evolve(mesh: Mesh, delta: Any = None, *, size: Any = None, method: str = "fr
             (a candidate just outside its sphere). None or 0 disables it (the
             paper's plain packing).
         gap_repair_ratio : float >= 1 or None, default 1.1
-            Gap repair (issue 11): a kept point p with delta(p) >= 1 and no kept
-            point within gap_repair_ratio delta(p) nn_M(p) gets one more point
-            at distance delta(p) nn_M(p) (of six directions, inside the mesh,
-            the one farthest from the kept points). None or 0 disables it.
+            Gap repair (issue 11): an input point p with delta(p) >= 1 whose
+            second nearest output point (the paper's nn_M'(p); the nearest other
+            one when p is kept) lies beyond gap_repair_ratio delta(p) nn_M(p)
+            gets one more point at distance delta(p) nn_M(p) (of eight
+            directions, inside the mesh and seen from p, the one farthest from
+            the output points, if at least 0.6 delta(p) nn_M(p) from them).
+            None or 0 disables it.
+        refine_gap_ratio : float >= 1 or None, default 1.3
+            The same, at this ratio, for points with delta(p) < 1 that were
+            demoted (see demote_ratio) or dropped: where a fresh packing forms
+            its spacing varies more, and a tighter bound adds points that
+            compound over repeated steps (ten steps of delta = 0.8). None or 0
+            disables it.
         demote_ratio : float >= 1 or None, default 1.1
             An old point p with nn_M(q) > demote_ratio f(q) at p and at all its
             mesh neighbours q (the request refines its whole neighbourhood)

@@ -68,10 +68,17 @@ struct Frfc_options {
   // of old points and is packed with the new points by size (packing.hpp,
   // demoted_points). 0: old points always first (the paper).
   double demote_ratio = 1.1;
-  // Gap repair (issue 11): a kept point p with delta(p) >= 1 and no kept point
-  // within gap_repair_ratio * delta(p) nn_M(p) gets one more point at distance
-  // delta(p) nn_M(p) (spacing_repair.hpp). 0 disables (the paper).
+  // Gap repair (issue 11): an input point p with delta(p) >= 1 whose second
+  // nearest output point (the paper's nn_M'(p): its nearest other one when p is
+  // kept) lies beyond gap_repair_ratio * delta(p) nn_M(p) gets one more point at
+  // distance delta(p) nn_M(p) (spacing_repair.hpp). 0 disables (the paper).
   double gap_repair_ratio = 1.1;
+  // The same, at this ratio, for points with delta(p) < 1 that were demoted or
+  // dropped: where a fresh packing forms, its spacing varies more and a bound
+  // of 1.1 adds points that compound over repeated steps (ten steps of delta =
+  // 0.8 at 1.1: 0.57 of 0.8^10; at 1.3: 0.97; benchmarks/README.md, issue 11).
+  // Kept R-points that were not demoted use gap_repair_ratio. 0 disables.
+  double refine_gap_ratio = 1.3;
   Sample_mode samples = Sample_mode::random_grid;
   // Grid cells grow where f's Lipschitz bound from the triangle's vertices
   // allows (sampling.cpp); false: the paper's uniform cells of side c f(q)/(2 sqrt 2).

@@ -1,9 +1,6 @@
 // Spacing repair after FRFC's packing (Section 6).
 #pragma once
 
-#include <array>
-#include <functional>
-
 #include <cstddef>
 #include <cstdint>
 #include <vector>
@@ -24,11 +21,7 @@ struct Spacing_repair_input {
   const std::vector<double>& f;
   const std::vector<Vec2>& centers;          // of all spheres: input points [0, n), then the candidates
   const std::vector<Index>& segment_owner;   // per segment candidate (centre n + j): the point of its ring, or -1
-  // Locates points in the mesh as locate_points(mesh.points, mesh.triangles, ...)
-  // does, for the points the repair asks about; null: that call. (The
-  // incremental step passes one over the triangles near the points it checks.)
-  const std::function<void(const std::vector<Vec2>&, std::vector<Index>&, std::vector<std::array<double, 3>>&)>*
-      locate = nullptr;
+  const std::vector<std::uint8_t>& demoted;  // per input point: packed with the new points (packing.hpp)
 };
 
 // Spacing repair. The packing guarantees nn_M'(p) = Theta(f(p)) only up to a
@@ -41,11 +34,13 @@ struct Spacing_repair_input {
 // afterwards nn_M'(p) is about 1.2 f(p). Nearest kept points come from a static
 // kd-tree over the kept centres plus a Delaunay triangulation of the points
 // added here (of the options: repair_ratio when ring_samples, the ring's reach
-// from radius_scale, seed, threads). Then (gap_repair_ratio > 0, issue 11) a kept point p with
-// delta(p) >= 1 and no kept point within gap_repair_ratio * delta(p) nn_M(p)
-// gets the point farthest from every kept point among six at distance
-// delta(p) nn_M(p) from it inside the old mesh (if at least 0.6 of that
-// distance from them). `n_added` receives the number of points added.
+// from radius_scale, seed, threads). Then the gap repair (issue 11): an input
+// point p whose second nearest output point (the paper's nn_M'(p)) lies beyond
+// gap_repair_ratio * delta(p) nn_M(p) (refine_gap_ratio where delta(p) < 1 and
+// p was demoted or dropped)
+// gets the point farthest from every output point among eight at distance
+// delta(p) nn_M(p) from it, inside the old mesh and seen from p (if at least 0.6
+// of that distance from them). `n_added` receives the number of points added.
 std::vector<Vec2> repair_spacing(const Spacing_repair_input& input, const Frfc_options& options,
                                  std::vector<std::uint8_t>& kept, std::size_t& n_added);
 

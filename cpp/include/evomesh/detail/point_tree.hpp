@@ -3,6 +3,7 @@
 #pragma once
 
 #include <algorithm>
+#include <array>
 #include <cstddef>
 #include <limits>
 #include <vector>
@@ -35,6 +36,33 @@ class Point_tree {
       if (squared_distance(tree_.node(m), x[0], x[1]) > best) return false;
       if (tree_.is_leaf(m)) {
         best = leaf_min<false>(tree_.leaf(m), x, 0, best);
+      } else if (squared_distance(tree_.node(2 * m), x[0], x[1]) <=
+                 squared_distance(tree_.node(2 * m + 1), x[0], x[1])) {  // nearer child first
+        stack.push_children(m);
+      } else {
+        stack.push_children_right_first(m);
+      }
+      return false;
+    });
+    return best;
+  }
+
+  // Squared distances from x to its nearest and second nearest points of the
+  // tree (+inf where the tree has fewer).
+  std::array<double, 2> squared_two_nearest(const Vec2& x) const {
+    std::array<double, 2> best{std::numeric_limits<double>::infinity(), std::numeric_limits<double>::infinity()};
+    if (points_.empty()) return best;
+    tree_.depth_first(1, [&](std::size_t m, Kd_stack& stack) {
+      if (squared_distance(tree_.node(m), x[0], x[1]) > best[1]) return false;
+      if (tree_.is_leaf(m)) {
+        const std::size_t leaf = tree_.leaf(m);
+        for (std::size_t k = tree_.leaf_begin(leaf); k < tree_.leaf_begin(leaf + 1); ++k) {
+          const double dx = x[0] - points_[k][0];
+          const double dy = x[1] - points_[k][1];
+          const double d = dx * dx + dy * dy;
+          if (d < best[0]) best = {d, best[0]};
+          else if (d < best[1]) best[1] = d;
+        }
       } else if (squared_distance(tree_.node(2 * m), x[0], x[1]) <=
                  squared_distance(tree_.node(2 * m + 1), x[0], x[1])) {  // nearer child first
         stack.push_children(m);
