@@ -8,16 +8,16 @@
 //   f is asked (Eq. 3: a site c matters at x only if |x - c| <= f(x));
 // - a triangle whose every grid sample lies in a cover disc of a kept vertex is
 //   not sampled (those samples are dropped by the sample filter anyway);
-// - the packing passes and the spacing repair run on the spheres and points
-//   that can interact with a sphere whose fate is not certain; the others are
-//   old points with f <= nn, which no earlier sphere can reject (Lemma 3.1:
-//   f(p) = delta(p) nn(p) = nn(p) at delta = 1, and two such spheres, of radii
-//   at most nn / 2, are disjoint), and which keep a kept mesh neighbour within
-//   the repair's reach.
+// - the packing passes run on the spheres that can overlap a sphere whose fate
+//   is not certain; the others are old points with radius <= nn / 2, which no
+//   earlier sphere can reject (Lemma 3.1: f(p) = delta(p) nn(p) = nn(p) at
+//   delta = 1, and two such spheres are disjoint).
 //
 // What stays global is what fixes the bits of the output: the triangulation and
 // quality pass of all selected points (the triangle array is CGAL's face order,
-// a function of the whole insertion history), the parent map, and O(n) loops.
+// a function of the whole insertion history), the parent map, nn_M (returned
+// in the lineage), the spacing repair (its gap repair visits every input
+// point), and O(n) loops.
 #pragma once
 
 #include <optional>
