@@ -57,6 +57,18 @@ def malloc_trim() -> bool:
         return False
 
 
+def output_hash(mesh) -> str:
+    """sha256 of the output mesh's arrays, as tests/pinned.py digests them (16 hex digits)."""
+    import hashlib
+
+    import numpy as np
+
+    h = hashlib.sha256()
+    for name in ("points", "triangles", "segments", "segment_is_boundary", "kind", "origin"):
+        h.update(np.ascontiguousarray(getattr(mesh, name)).tobytes())
+    return h.hexdigest()[:16]
+
+
 def worker(name: str, size: float, repeats: int, trim: bool = False, max_samples: float | None = None) -> dict:
     import numpy as np
 
@@ -67,7 +79,9 @@ def worker(name: str, size: float, repeats: int, trim: bool = False, max_samples
     t0 = time.perf_counter()
     mesh, delta, _ = scenario(name, size)
     setup = time.perf_counter() - t0
-    walls, cpus, stages, marks = [], [], {}, None
+    walls, cpus, stages, stage_cpus, marks = [], [], {}, {}, None
+    stage_peaks: dict = {}
+    digest = ""
     step_peak = input_rss = float("nan")
     for r in range(repeats):
         if trim:
@@ -86,9 +100,18 @@ def worker(name: str, size: float, repeats: int, trim: bool = False, max_samples
                 step_peak = status_mib("VmHWM")
             stage_order = [k[len("seconds_"):] for k in out.stats if k.startswith("seconds_")]
             first_stages = {k: float(out.stats["seconds_" + k]) for k in stage_order}
+            # EVOMESH_STAGE_PROFILE (--profile): the step resets VmHWM at every stage, so its peak is the
+            # largest stage peak (or what came after the last stage)
+            stage_peaks = {k[len("memory_peak_mib_"):]: float(v) for k, v in out.stats.items()
+                           if k.startswith("memory_peak_mib_")}
+            if stage_peaks:
+                step_peak = max(step_peak, *stage_peaks.values())
+            digest = output_hash(out)
         for k, v in out.stats.items():
             if k.startswith("seconds_"):
                 stages.setdefault(k[len("seconds_"):], []).append(float(v))
+            if k.startswith("cpu_seconds_"):
+                stage_cpus.setdefault(k[len("cpu_seconds_"):], []).append(float(v))
         del out
     n = mesh.n_points
     return {
@@ -101,6 +124,9 @@ def worker(name: str, size: float, repeats: int, trim: bool = False, max_samples
         "step_peak_mib": step_peak, "input_rss_mib": input_rss,
         "step_peak_bytes_per_point": step_peak * 2**20 / n,
         "step_marks": marks,
+        "output_hash": digest,
+        "stage_cpu_seconds": {k: float(np.median(v)) for k, v in stage_cpus.items()},
+        "stage_peak_mib": stage_peaks,
     }
 
 
@@ -149,7 +175,10 @@ def run(args: argparse.Namespace) -> None:
                 cmd.append("--trim")
             if args.max_samples is not None:
                 cmd += ["--max-samples", str(args.max_samples)]
-            proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+            env = dict(os.environ)
+            if args.profile:
+                env["EVOMESH_STAGE_PROFILE"] = "1"
+            proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
             samples: list = []
             stop = threading.Event()
             th = threading.Thread(target=sample_rss, args=(proc.pid, samples, stop), daemon=True)
@@ -164,12 +193,14 @@ def run(args: argparse.Namespace) -> None:
             row["loadavg_before"] = load
             row["loadavg_after"] = os.getloadavg()
             row.update(peak_stage(row, samples))
+            if row.get("stage_peak_mib"):  # measured in the step itself (--profile)
+                row["peak_stage"] = max(row["stage_peak_mib"], key=row["stage_peak_mib"].get)
             rows.append(row)
             print(f"{name:16s} {size:8.0e} n={row['n_input_points']:9d} wall {row['wall_seconds']:8.3f} s "
                   f"({row['wall_per_point'] * 1e6:.2f} us/pt) CPU {row['cpu_seconds']:8.2f} s "
                   f"({row['cpu_per_point'] * 1e6:.2f} us/pt) peak {row['step_peak_mib']:.0f} MiB "
                   f"({row['step_peak_bytes_per_point']:.0f} B/pt, at {row.get('peak_stage')}) "
-                  f"load {load[0]:.2f}->{row['loadavg_after'][0]:.2f}", flush=True)
+                  f"load {load[0]:.2f}->{row['loadavg_after'][0]:.2f} output {row['output_hash']}", flush=True)
             if args.json:
                 with open(args.json, "w") as f:
                     json.dump(rows, f, indent=1)
@@ -204,7 +235,10 @@ def plot(path: str, png: str) -> None:
 
 
 def locate_peak(row: dict) -> str:
-    """The stage whose (end-to-end) time span holds the highest RSS sample."""
+    """The stage whose (end-to-end) time span holds the highest RSS sample (with --profile: the stage
+    whose own peak RSS is highest)."""
+    if row.get("stage_peak_mib"):
+        return max(row["stage_peak_mib"], key=row["stage_peak_mib"].get)
     if "peak_offset_s" not in row:
         return "?"
     clock = 0.0
@@ -249,7 +283,15 @@ def tables(path: str) -> None:
         rest = r["wall_seconds"] - sum(st[k] for k in names)
         print("| s | " + " | ".join(f"{st[k]:.2f}" for k in names) + f" | {rest:.2f} | {r['wall_seconds']:.2f} |")
         print("| % of evolve | " + " | ".join(f"{100 * st[k] / r['wall_seconds']:.1f}" for k in names)
-              + f" | {100 * rest / r['wall_seconds']:.1f} | 100 |\n")
+              + f" | {100 * rest / r['wall_seconds']:.1f} | 100 |")
+        cpu = r.get("stage_cpu_seconds") or {}
+        if cpu:
+            print("| CPU s / wall s | " + " | ".join(f"{cpu[k] / st[k]:.2f}" if k in cpu and st[k] > 0 else "-"
+                                                     for k in names) + " | | |")
+        peaks = r.get("stage_peak_mib") or {}
+        if peaks:
+            print("| peak RSS (MiB) | " + " | ".join(f"{peaks[k]:,.0f}" if k in peaks else "-" for k in names) + " | | |")
+        print(f"\noutput {r.get('output_hash', '?')}\n")
 
 
 def main() -> None:
@@ -266,6 +308,8 @@ def main() -> None:
                         help="malloc_trim(0) before each step, so the input RSS is the live heap, not the set-up's leftovers")
     parser.add_argument("--max-samples", type=float, default=None,
                         help="evolve's max_samples (the default 5e7 refuses the front step above about 6e6 points)")
+    parser.add_argument("--profile", action="store_true",
+                        help="EVOMESH_STAGE_PROFILE=1: CPU seconds and peak RSS of every stage, measured in the step")
     parser.add_argument("--worker", nargs=2, help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.worker:

@@ -61,29 +61,35 @@ Packing first_packing_pass(const Mesh_arrays& mesh, const std::vector<double>& f
 }
 
 // The second pass: the kept spheres of the first (in their order, forced), then
-// the deferred input points and the interior candidates by class, radius and index.
-void second_packing_pass(const Candidates& inside, Packing& packing) {
-  const std::size_t n_first = packing.kept.size();
+// the deferred input points and the interior candidates by class, radius and
+// index. The interior candidates' centres and radii move to the end of the
+// packing's arrays (candidates n + n_seg, ...); `inside` is emptied.
+void second_packing_pass(Candidates& inside, Packing& packing) {
+  const std::size_t n_first = packing.centers.size();
   const std::size_t n_deferred = packing.deferred.size();
-  std::vector<Vec2> centers;
-  std::vector<double> radii;
-  std::vector<std::uint8_t> classes;
-  centers.reserve(n_deferred + inside.size());
-  for (Index c : packing.deferred) {
-    centers.push_back(packing.centers[c]);
-    radii.push_back(packing.radius[c]);
-    classes.push_back(class_new);
+  std::vector<std::uint8_t> classes(n_deferred, class_new);
+  {
+    const auto inside_classes = inside.classes(/*on_segment=*/false);
+    classes.insert(classes.end(), inside_classes.begin(), inside_classes.end());
   }
-  centers.insert(centers.end(), inside.samples.points.begin(), inside.samples.points.end());
+  std::vector<double> radii;
+  radii.reserve(n_deferred + inside.size());
+  packing.radius.reserve(n_first + inside.size());
+  packing.centers.reserve(n_first + inside.size());
+  for (Index c : packing.deferred) radii.push_back(packing.radius[c]);
   radii.insert(radii.end(), inside.radius.begin(), inside.radius.end());
-  const auto inside_classes = inside.classes(/*on_segment=*/false);
-  classes.insert(classes.end(), inside_classes.begin(), inside_classes.end());
-  extend_packing(packing.centers, packing.radius, packing.first_order, centers, radii, packing_order(classes, radii),
-                 packing.kept);
-  for (std::size_t k = 0; k < n_deferred; ++k) packing.kept[packing.deferred[k]] = packing.kept[n_first + k];
-  packing.kept.erase(packing.kept.begin() + static_cast<std::ptrdiff_t>(n_first),
-                     packing.kept.begin() + static_cast<std::ptrdiff_t>(n_first + n_deferred));
+  packing.radius.insert(packing.radius.end(), inside.radius.begin(), inside.radius.end());
   packing.centers.insert(packing.centers.end(), inside.samples.points.begin(), inside.samples.points.end());
+  inside = Candidates();
+  // Positions in (deferred, interior candidates) -> candidate indices.
+  std::vector<Index> order = packing_order(classes, radii);
+  classes = std::vector<std::uint8_t>();
+  radii = std::vector<double>();
+  for (Index& k : order) {
+    k = static_cast<std::size_t>(k) < n_deferred ? packing.deferred[k]
+                                                 : static_cast<Index>(n_first + (static_cast<std::size_t>(k) - n_deferred));
+  }
+  packing.kept = extend_packing(packing.centers, packing.radius, packing.first_order, packing.kept, std::move(order));
 }
 
 // Output points: kept input points in input order and kept segment candidates
@@ -156,6 +162,8 @@ Candidates interior_stage(const Mesh_arrays& mesh, const Triangle_fans& fans, co
                         options.radius == Radius_rule::interpolated);
   }
   Candidates inside = interior_candidates(mesh, fans, delta, f, demoted, cover, options, n_drawn);
+  cover = std::vector<Disc>();
+  detail::release_free_memory();  // the sampling threads' blocks
   timer.lap("sampling");
   candidate_radii(mesh, *spacing.function, f, demoted, options, /*on_segment=*/false, inside);
   timer.lap("sample_radii");
@@ -210,6 +218,7 @@ Evolve_result frfc(const Mesh_arrays& input, const std::vector<double>& delta, c
   const auto chains = segment_chains(mesh);
   Step_spacing spacing = step_spacing(mesh, delta, F_at_points::lemma_3_1, options.threads, timer,
                                       options.within_domain ? &chains : nullptr);
+  detail::release_free_memory();  // what building the Apollonius graphs in parallel freed
   // Steps 2-5: candidates on segments, first packing pass; interior candidates, second pass.
   // Old points whose neighbourhood the request refines lose their priority.
   std::size_t n_forced = 0;
@@ -219,15 +228,22 @@ Evolve_result frfc(const Mesh_arrays& input, const std::vector<double>& delta, c
   Packing packing = first_packing_pass(mesh, spacing.f, on_segments, forced, n_forced, demoted, options);
   Early_start early(packing, options, mesh.geometry != nullptr);
   timer.lap("lfmis");
-  const Triangle_fans fans(mesh);
+  std::optional<Triangle_fans> fans(mesh);
   std::size_t n_drawn = 0;
-  const Candidates inside = interior_stage(mesh, fans, delta, spacing, packing, demoted, options, timer, n_drawn);
+  Candidates inside = interior_stage(mesh, *fans, delta, spacing, packing, demoted, options, timer, n_drawn);
+  const std::size_t n_interior = inside.size();
+  // Memory (issue 13): what a stage leaves behind goes as soon as nothing reads it.
+  const std::size_t n_hidden = spacing.function->n_hidden();
+  const std::size_t n_filtered = spacing.function->n_filtered();
+  spacing.function.reset();  // the Apollonius graph: the radii of the candidates were its last use
   second_packing_pass(inside, packing);
+  detail::release_free_memory();
   timer.lap("lfmis");
   std::size_t n_repairs = 0;
-  const auto repair_points = spacing_repair_stage(mesh, fans, delta, spacing, on_segments, demoted, options, packing,
+  const auto repair_points = spacing_repair_stage(mesh, *fans, delta, spacing, on_segments, demoted, options, packing,
                                                     n_repairs);
   timer.lap("spacing_repair");
+  fans.reset();
 
   // Step 6: the kept points (on curves, moved onto them), the constraint pieces
   // between them, their triangulation.
@@ -239,22 +255,29 @@ Evolve_result frfc(const Mesh_arrays& input, const std::vector<double>& delta, c
   Selection selection = select_output(mesh, forced, packing, on_segments.size(), repair_points, out_index);
   selection.pin(mesh.required);
   const auto pieces = pieces_along_chains(mesh, chains, on_segments, out_index);
+  const std::size_t n_candidates = packing.centers.size();
+  const std::size_t n_demoted = packing.n_demoted;
+  packing = Packing();
+  out_index = std::vector<Index>();
   const Quality_options quality = options.quality_settings();
   early.work.wait();
+  early.points = std::vector<Vec2>();
+  detail::release_free_memory();
   const bool early_started = options.quality && !mesh.geometry;
   triangulate_selection(std::move(selection), pieces, options.quality ? &quality : nullptr, result,
                         early_started ? &early.triangulation : nullptr, mesh.geometry.get());
+  detail::release_free_memory();
   timer.lap(options.quality ? "quality" : "cdt");
   finish_step(input, result, timer);
   add_step_counts(result, {{"n_input_points", mesh.points.size()},
                            {"n_segment_samples", on_segments.size()},
-                           {"n_interior_samples", inside.size()},
+                           {"n_interior_samples", n_interior},
                            {"n_interior_samples_drawn", n_drawn},
-                           {"n_candidates", packing.centers.size()},
-                           {"n_demoted_points", packing.n_demoted},
+                           {"n_candidates", n_candidates},
+                           {"n_demoted_points", n_demoted},
                            {"n_spacing_repairs", n_repairs},
-                           {"n_hidden_sites", spacing.function->n_hidden()},
-                           {"n_filtered_sites", spacing.function->n_filtered()}});
+                           {"n_hidden_sites", n_hidden},
+                           {"n_filtered_sites", n_filtered}});
   result.input_nn = std::move(spacing.nn);
   result.input_f = std::move(spacing.f);
   return result;

@@ -406,6 +406,7 @@ void second_pass_near(const Mesh_arrays& mesh, const Candidates& inside, const s
   packing.kept.insert(packing.kept.end(), kept.begin() + static_cast<std::ptrdiff_t>(n_forced + n_deferred),
                       kept.end());
   packing.centers.insert(packing.centers.end(), inside.samples.points.begin(), inside.samples.points.end());
+  packing.radius.insert(packing.radius.end(), inside.radius.begin(), inside.radius.end());
 }
 
 double coordinate_magnitude(const std::vector<Vec2>& points) {

@@ -27,19 +27,21 @@ namespace {
 // every pair; which kept sphere it meets first (the blocker) does.
 class Kept_sphere_tree {
  public:
-  // `order`: the visiting order (a permutation of the sphere indices).
+  // `order`: the visiting order (distinct sphere indices; the tree holds every sphere).
   Kept_sphere_tree(const std::vector<Vec2>& centers, const std::vector<double>& radii, const std::vector<Index>& order)
-      : tree_(centers, kLeafSize, tree_centers_) {
+      : tree_(centers, kLeafSize) {
     const std::size_t n = centers.size();
     const auto& sphere_at = tree_.point_at();
     slots_.resize(n);
-    for (std::size_t k = 0; k < n; ++k) slots_[k] = {tree_centers_[k][0], tree_centers_[k][1], radii[sphere_at[k]]};
-    tree_centers_ = std::vector<Vec2>();
+    for (std::size_t k = 0; k < n; ++k) {
+      const std::size_t i = sphere_at[k];
+      slots_[k] = {centers[i][0], centers[i][1], radii[i]};
+    }
     {
       std::vector<std::uint32_t> position_of(n);
       for (std::size_t k = 0; k < n; ++k) position_of[sphere_at[k]] = static_cast<std::uint32_t>(k);
-      visit_.resize(n);
-      for (std::size_t k = 0; k < n; ++k) visit_[k] = position_of[order[k]];
+      visit_.resize(order.size());
+      for (std::size_t k = 0; k < order.size(); ++k) visit_[k] = position_of[order[k]];
     }
     kept_in_leaf_.assign(tree_.n_leaves(), 0);
   }
@@ -118,7 +120,6 @@ class Kept_sphere_tree {
     return kNone;
   }
 
-  std::vector<Vec2> tree_centers_;  // the centres in tree order, while the tree is built
   detail::Static_kd_tree<Node> tree_;
   std::vector<Slot> slots_;                  // in tree order
   std::vector<std::uint32_t> visit_;         // position of each sphere of the visiting order
@@ -127,17 +128,24 @@ class Kept_sphere_tree {
 
 }  // namespace
 
-std::vector<std::uint8_t> lexical_first_mis(const std::vector<Vec2>& centers,
-                                            const std::vector<double>& radii,
-                                            const std::vector<Index>& order, std::size_t n_forced,
-                                            std::vector<Index>* blocker) {
+namespace {
+
+// The lexical-first MIS of the spheres listed in `order` (distinct indices; with
+// `permutation`, all of them); spheres not listed are neither kept nor met.
+std::vector<std::uint8_t> mis_in_order(const std::vector<Vec2>& centers, const std::vector<double>& radii,
+                                       const std::vector<Index>& order, std::size_t n_forced,
+                                       std::vector<Index>* blocker, bool permutation) {
   const std::size_t n = centers.size();
-  if (radii.size() != n || order.size() != n) throw Input_error("centers, radii and order must have the same length");
-  if (n_forced > n) throw Input_error("more forced spheres than spheres");
+  if (radii.size() != n || (permutation && order.size() != n)) {
+    throw Input_error("centers, radii and order must have the same length");
+  }
+  if (n_forced > order.size()) throw Input_error("more forced spheres than spheres");
   if (n >= std::numeric_limits<std::uint32_t>::max()) throw Input_error("too many spheres (at most 2^32 - 2)");
   std::vector<std::uint8_t> kept(n, 0);
   for (Index i : order) {
-    if (i < 0 || static_cast<std::size_t>(i) >= n || kept[i]) throw Input_error("order must be a permutation of 0..n-1");
+    if (i < 0 || static_cast<std::size_t>(i) >= n || kept[i]) {
+      throw Input_error(permutation ? "order must be a permutation of 0..n-1" : "order must list distinct spheres");
+    }
     kept[i] = 1;
   }
   for (std::size_t i = 0; i < n; ++i) {
@@ -150,8 +158,9 @@ std::vector<std::uint8_t> lexical_first_mis(const std::vector<Vec2>& centers,
   // The loop prefetches a few spheres ahead: which sphere comes next never
   // depends on the decisions.
   constexpr std::size_t kAhead = 8;
-  for (std::size_t k = 0; k < n; ++k) {
-    if (k + kAhead < n) tree.prefetch(tree.visit(k + kAhead));
+  const std::size_t m = order.size();
+  for (std::size_t k = 0; k < m; ++k) {
+    if (k + kAhead < m) tree.prefetch(tree.visit(k + kAhead));
     const std::size_t hit = k < n_forced ? Kept_sphere_tree::kNone : tree.conflicting_kept(tree.visit(k));
     if (hit == Kept_sphere_tree::kNone) {
       kept[order[k]] = 1;
@@ -161,6 +170,15 @@ std::vector<std::uint8_t> lexical_first_mis(const std::vector<Vec2>& centers,
     }
   }
   return kept;
+}
+
+}  // namespace
+
+std::vector<std::uint8_t> lexical_first_mis(const std::vector<Vec2>& centers,
+                                            const std::vector<double>& radii,
+                                            const std::vector<Index>& order, std::size_t n_forced,
+                                            std::vector<Index>* blocker) {
+  return mis_in_order(centers, radii, order, n_forced, blocker, /*permutation=*/true);
 }
 
 std::vector<Index> packing_order(const std::vector<std::uint8_t>& priority_class,
@@ -241,25 +259,18 @@ Packing_class new_point_class(bool on_segment, int round) {
   return static_cast<Packing_class>((on_segment ? class_boundary_ring : class_ring) + round);
 }
 
-void extend_packing(const std::vector<Vec2>& centers, const std::vector<double>& radii,
-                    const std::vector<Index>& first_order, const std::vector<Vec2>& more_centers,
-                    const std::vector<double>& more_radii, const std::vector<Index>& more_order,
-                    std::vector<std::uint8_t>& kept) {
+std::vector<std::uint8_t> extend_packing(const std::vector<Vec2>& centers, const std::vector<double>& radii,
+                                         const std::vector<Index>& first_order, const std::vector<std::uint8_t>& kept,
+                                         std::vector<Index> more_order) {
   std::vector<Index> order;
-  std::vector<Vec2> all_centers;
-  std::vector<double> all_radii;
   for (Index c : first_order) {
-    if (!kept[c]) continue;
-    order.push_back(static_cast<Index>(all_centers.size()));
-    all_centers.push_back(centers[c]);
-    all_radii.push_back(radii[c]);
+    if (kept[c]) order.push_back(c);
   }
   const std::size_t n_first = order.size();
-  for (Index j : more_order) order.push_back(static_cast<Index>(n_first + j));
-  all_centers.insert(all_centers.end(), more_centers.begin(), more_centers.end());
-  all_radii.insert(all_radii.end(), more_radii.begin(), more_radii.end());
-  const auto more_kept = lexical_first_mis(all_centers, all_radii, order, n_first);
-  kept.insert(kept.end(), more_kept.begin() + static_cast<std::ptrdiff_t>(n_first), more_kept.end());
+  order.reserve(n_first + more_order.size());
+  order.insert(order.end(), more_order.begin(), more_order.end());
+  more_order = std::vector<Index>();
+  return mis_in_order(centers, radii, order, n_first, nullptr, /*permutation=*/false);
 }
 
 }  // namespace evomesh

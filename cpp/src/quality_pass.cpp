@@ -143,7 +143,9 @@ Refined_mesh Early_triangulation::finish(const std::vector<Vec2>& points, const 
   if (cdt.number_of_vertices() != points.size()) throw Input_error("points contain duplicates");
   std::vector<Vertex_handle> handles(points.size());
   for (auto v = cdt.finite_vertices_begin(); v != cdt.finite_vertices_end(); ++v) handles[v->info().index] = v;
-  return quality_pass(cdt, handles, impl.scaling, points, kind, pieces, options, pinned);
+  Refined_mesh refined = quality_pass(cdt, handles, impl.scaling, points, kind, pieces, options, pinned);
+  impl_ = std::make_unique<Impl>();  // the triangulation's memory goes before the step's next stage
+  return refined;
 }
 
 std::pair<double, Vec2> smallest_angle(const std::vector<Vec2>& points, const std::vector<Triangle>& triangles) {

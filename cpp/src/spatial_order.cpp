@@ -111,8 +111,11 @@ std::uint32_t hilbert_index(std::uint32_t x, std::uint32_t y) {
   return d;
 }
 
+}  // namespace
+
 // Keys in parallel, then two 16-bit radix passes: O(n).
-std::vector<Ordered_point> hilbert_grid_order(const Vec2* points, std::size_t n, int threads) {
+std::vector<std::uint32_t> hilbert_grid_permutation(const Vec2* points, std::size_t n, int threads) {
+  if (n >= std::numeric_limits<std::uint32_t>::max()) throw Input_error("too many points (at most 2^32 - 2)");
   double lo_x = std::numeric_limits<double>::infinity(), lo_y = lo_x, hi_x = -lo_x, hi_y = -lo_x;
   for (std::size_t i = 0; i < n; ++i) {
     lo_x = std::min(lo_x, points[i][0]);
@@ -139,7 +142,15 @@ std::vector<Ordered_point> hilbert_grid_order(const Vec2* points, std::size_t n,
   for (std::size_t i = 0; i < n; ++i) ++count[(key[i] >> 16) + 1];
   for (std::size_t d = 0; d < 65536; ++d) count[d + 1] += count[d];
   for (std::size_t k = 0; k < n; ++k) order[count[key[tmp[k]] >> 16]++] = tmp[k];
+  return order;
+}
+
+namespace {
+
+std::vector<Ordered_point> hilbert_grid_order(const Vec2* points, std::size_t n, int threads) {
+  const std::vector<std::uint32_t> order = hilbert_grid_permutation(points, n, threads);
   std::vector<Ordered_point> sorted(n);
+  constexpr std::size_t kBlock = 1 << 16;
   parallel_for((n + kBlock - 1) / kBlock, threads, [&](std::size_t b) {
     for (std::size_t k = b * kBlock; k < std::min(n, (b + 1) * kBlock); ++k) {
       sorted[k] = {points[order[k]][0], points[order[k]][1], order[k]};

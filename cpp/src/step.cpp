@@ -5,12 +5,60 @@
 #include <CGAL/exceptions.h>
 
 #include <algorithm>
+#include <ctime>
+#include <fstream>
 #include <cmath>
 #include <cstdlib>
 #include <string>
 #include <stdexcept>
 
+#if defined(__GLIBC__)
+#include <malloc.h>
+#endif
+
 namespace evomesh {
+
+namespace detail {
+
+bool Stage_timer::memory_requested() {
+  const char* value = std::getenv("EVOMESH_STAGE_PROFILE");
+  return value != nullptr && std::string(value) != "0";
+}
+
+void release_free_memory() {
+#if defined(__GLIBC__)
+  malloc_trim(0);
+#endif
+}
+
+double Stage_timer::process_cpu_seconds() {
+  timespec t{};
+  if (clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &t) != 0) return 0.0;
+  return static_cast<double>(t.tv_sec) + 1e-9 * static_cast<double>(t.tv_nsec);
+}
+
+void Stage_timer::record_memory(const std::string& name) {
+  const double cpu = process_cpu_seconds();
+  add("cpu_seconds_" + name, cpu - last_cpu_, false);
+  double peak_kib = -1;
+  {
+    std::ifstream status("/proc/self/status");
+    std::string line;
+    while (std::getline(status, line)) {
+      if (line.rfind("VmHWM:", 0) == 0) peak_kib = std::stod(line.substr(6));
+    }
+  }
+  if (peak_kib >= 0) add("memory_peak_mib_" + name, peak_kib / 1024, true);
+  std::ofstream("/proc/self/clear_refs") << "5";
+#if defined(__GLIBC__) && (__GLIBC__ > 2 || (__GLIBC__ == 2 && __GLIBC_MINOR__ >= 33))
+  const struct mallinfo2 heap = mallinfo2();
+  add("memory_heap_mib_" + name, static_cast<double>(heap.uordblks + heap.hblkhd) / (1 << 20), true);
+#endif
+  last_ = std::chrono::steady_clock::now();  // the reading is not the stage's time
+  last_cpu_ = process_cpu_seconds();
+}
+
+}  // namespace detail
 
 void check_delta(const Mesh_arrays& mesh, const std::vector<double>& delta) {
   if (delta.size() != mesh.points.size()) throw Input_error("delta must have one value per mesh point");

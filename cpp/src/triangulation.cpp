@@ -544,10 +544,16 @@ void locate_points(const std::vector<Vec2>& points, const std::vector<Triangle>&
                    std::vector<std::array<double, 3>>& barycentric_out) {
   Cdt cdt;
   auto handles = insert_points(cdt, points);
-  const auto edges = sorted_edges(triangles);
-  for (std::size_t i = 0; i < edges.size(); ++i) {
-    if (i > 0 && edges[i].lo == edges[i - 1].lo && edges[i].hi == edges[i - 1].hi) continue;
-    cdt.insert_constraint(handles[edges[i].lo], handles[edges[i].hi]);
+  {
+    // Every edge once, in (lo, hi) order, straight from the buckets (sorted_edges'
+    // order without its 16-byte records: the same constraints in the same order).
+    const Edge_buckets buckets = edge_buckets(triangles);
+    for (std::size_t v = 0; v < buckets.n_buckets(); ++v) {
+      for (std::size_t k = buckets.start[v]; k < buckets.start[v + 1]; ++k) {
+        if (k > buckets.start[v] && buckets.entries[k].hi == buckets.entries[k - 1].hi) continue;
+        cdt.insert_constraint(handles[v], handles[buckets.entries[k].hi]);
+      }
+    }
   }
   for (auto f = cdt.all_faces_begin(); f != cdt.all_faces_end(); ++f) f->info() = -1;
   for (std::size_t t = 0; t < triangles.size(); ++t) {

@@ -70,12 +70,12 @@ Packing_class new_point_class(bool on_segment, int round = -1);
 
 // The second pass of a packing whose first pass (over the spheres `first_order`
 // of centers/radii, kept flags `kept`) is final: the kept spheres of the first
-// pass, in their order and forced, then the spheres `more_centers`/`more_radii`
-// in the order `more_order`. Appends their kept flags to `kept`. Equals the
-// lexical-first MIS over both sets in the order first_order, more_order.
-void extend_packing(const std::vector<Vec2>& centers, const std::vector<double>& radii,
-                    const std::vector<Index>& first_order, const std::vector<Vec2>& more_centers,
-                    const std::vector<double>& more_radii, const std::vector<Index>& more_order,
-                    std::vector<std::uint8_t>& kept);
+// pass, in their order and forced, then the spheres more_order (distinct, none
+// of them kept; centers/radii hold the spheres of both passes, the first
+// pass's rejected spheres take no part). Returns the kept flags of all
+// spheres: the lexical-first MIS over both sets in the order first_order, more_order.
+std::vector<std::uint8_t> extend_packing(const std::vector<Vec2>& centers, const std::vector<double>& radii,
+                                         const std::vector<Index>& first_order, const std::vector<std::uint8_t>& kept,
+                                         std::vector<Index> more_order);
 
 }  // namespace evomesh

@@ -3,6 +3,7 @@
 // map and the stage timings.
 #pragma once
 
+#include <algorithm>
 #include <chrono>
 #include <initializer_list>
 #include <memory>
@@ -32,19 +33,40 @@ class Stage_timer {
     const auto now = std::chrono::steady_clock::now();
     const double seconds = std::chrono::duration<double>(now - last_).count();
     last_ = now;
-    for (auto& entry : stats_) {
-      if (entry.first == "seconds_" + name) {
-        entry.second += seconds;
-        return;
-      }
-    }
-    stats_.emplace_back("seconds_" + name, seconds);
+    add("seconds_" + name, seconds, false);
+    if (memory_) record_memory(name);
   }
 
  private:
+  void add(const std::string& key, double value, bool max) {
+    for (auto& entry : stats_) {
+      if (entry.first == key) {
+        entry.second = max ? std::max(entry.second, value) : entry.second + value;
+        return;
+      }
+    }
+    stats_.emplace_back(key, value);
+  }
+  // With EVOMESH_STAGE_PROFILE set (diagnostics, Linux): "memory_peak_mib_" + stage,
+  // the process's peak RSS during the stage (VmHWM, reset after every lap),
+  // "memory_heap_mib_" + stage, the malloc heap in use at its end (largest over
+  // its laps), and "cpu_seconds_" + stage, the process's CPU time (all threads).
+  void record_memory(const std::string& name);
+  static bool memory_requested();
+  static double process_cpu_seconds();
+  bool memory_ = memory_requested();
+  double last_cpu_ = memory_ ? process_cpu_seconds() : 0.0;
+
+
   std::vector<std::pair<std::string, double>>& stats_;
   std::chrono::steady_clock::time_point last_ = std::chrono::steady_clock::now();
 };
+
+// Gives the free memory of every malloc arena back to the system (glibc's
+// malloc_trim; elsewhere nothing). The step's blocks are allocated on worker
+// threads, in their arenas, and freed later on the main thread: without this
+// the process keeps that memory resident while the next stage allocates anew.
+void release_free_memory();
 
 }  // namespace detail
 

@@ -52,7 +52,7 @@ Packing first_packing_pass(const Mesh_arrays& mesh, const std::vector<double>& f
                            const std::vector<std::uint8_t>& demoted, const Frfc_options& options);
 
 // The second pass: deferred input points and interior candidates.
-void second_packing_pass(const Candidates& inside, Packing& packing);
+void second_packing_pass(Candidates& inside, Packing& packing);
 
 // The output points in output order; `out_index` receives the output index of every candidate.
 Selection select_output(const Mesh_arrays& mesh, const std::vector<std::uint8_t>& forced, const Packing& packing,

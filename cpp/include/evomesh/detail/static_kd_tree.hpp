@@ -73,6 +73,13 @@ class Static_kd_tree {
  public:
   // `tree_points` receives the points in tree order (for the user's leaves).
   Static_kd_tree(const std::vector<Vec2>& points, std::size_t leaf_size, std::vector<Vec2>& tree_points)
+      : Static_kd_tree(points, leaf_size, &tree_points) {}
+  // The same tree without the copy of the points (the user gathers its own
+  // leaf records through point_at()).
+  Static_kd_tree(const std::vector<Vec2>& points, std::size_t leaf_size) : Static_kd_tree(points, leaf_size, nullptr) {}
+
+ private:
+  Static_kd_tree(const std::vector<Vec2>& points, std::size_t leaf_size, std::vector<Vec2>* tree_points)
       : n_(points.size()) {
     if (n_ >= std::numeric_limits<std::uint32_t>::max()) {
       throw Input_error("too many points for a kd-tree (at most 2^32 - 2)");
@@ -105,15 +112,17 @@ class Static_kd_tree {
       parallel_for(first, 0, [&](std::size_t k) { build(items, first + k, top); });
       for (std::size_t k = 0; k < n_; ++k) point_at_[k] = items[k].index;
     }
-    tree_points.resize(n_);
-    for (std::size_t k = 0; k < n_; ++k) tree_points[k] = points[point_at_[k]];
+    if (tree_points) {
+      tree_points->resize(n_);
+      for (std::size_t k = 0; k < n_; ++k) (*tree_points)[k] = points[point_at_[k]];
+    }
     nodes_.resize(2 * n_leaves_);
     for (std::size_t leaf = 0; leaf < n_leaves_; ++leaf) {
       Box& box = nodes_[n_leaves_ + leaf];
       box.lo_x = box.lo_y = std::numeric_limits<double>::infinity();
       box.hi_x = box.hi_y = -std::numeric_limits<double>::infinity();
       for (std::size_t k = leaf_begin(leaf); k < leaf_begin(leaf + 1); ++k) {
-        const Vec2& p = tree_points[k];
+        const Vec2& p = tree_points ? (*tree_points)[k] : points[point_at_[k]];
         box.lo_x = std::min(box.lo_x, p[0]);
         box.lo_y = std::min(box.lo_y, p[1]);
         box.hi_x = std::max(box.hi_x, p[0]);
@@ -128,6 +137,7 @@ class Static_kd_tree {
     }
   }
 
+ public:
   std::size_t size() const { return n_; }
   std::size_t n_leaves() const { return n_leaves_; }
   bool is_leaf(std::size_t node) const { return node >= n_leaves_; }
