@@ -1,8 +1,6 @@
 #include "evomesh/incremental_step.hpp"
 
 #include <algorithm>
-#include <cstdio>
-#include <cstdlib>
 #include <cmath>
 #include <limits>
 #include <memory>
@@ -535,16 +533,6 @@ std::optional<Evolve_result> incremental_frfc(const Mesh_arrays& mesh, const std
   finish_step(mesh, result, timer);
   std::size_t n_quiet = 0;
   for (std::uint8_t q : quiet) n_quiet += q;
-  if (std::getenv("EVOMESH_DEBUG_QUIET")) {
-    int hist[10] = {0};
-    for (std::size_t t = 0; t < quiet.size(); ++t) {
-      if (quiet[t]) continue;
-      double gx = 0; for (Index v : mesh.triangles[t]) gx += mesh.points[v][0] / 3;
-      hist[std::clamp(static_cast<int>(gx * 10), 0, 9)]++;
-    }
-    for (int k = 0; k < 10; ++k) std::fprintf(stderr, "%d ", hist[k]);
-    std::fprintf(stderr, "\n");
-  }
   std::vector<std::uint8_t> in_region(n, 0);
   for (std::size_t t = 0; t < quiet.size(); ++t) {
     if (!quiet[t]) {
