@@ -136,7 +136,8 @@ def test_defaults_are_documented():
 def test_sample_filter_changes_nothing_but_the_work(case, samples, radius, cell_factor, seed):
     """Dropping samples that certainly overlap a kept sphere (the Lipschitz bound) keeps the same spheres."""
     mesh, delta = case
-    opts = dict(samples=samples, radius=radius, cell_factor=cell_factor, seed=seed, quality=False)
+    # (the full step: the incremental one does not draw samples it certainly rejects, test_incremental.py)
+    opts = dict(samples=samples, radius=radius, cell_factor=cell_factor, seed=seed, quality=False, incremental=False)
     filtered = evomesh.evolve(mesh, delta, **opts)
     full = evomesh.evolve(mesh, delta, filter_samples=False, **opts)
     assert np.array_equal(filtered.points, full.points)
@@ -148,9 +149,9 @@ def test_sample_filter_changes_nothing_but_the_work(case, samples, radius, cell_
 
 def test_sample_filter_drops_most_samples_where_nothing_changes():
     mesh = grid_mesh(30, 30, jitter=0.2, seed=3)
-    out = evomesh.evolve(mesh, np.ones(mesh.n_points), cell_factor=1.0)
+    out = evomesh.evolve(mesh, np.ones(mesh.n_points), cell_factor=1.0, incremental=False)
     assert out.stats["n_interior_samples"] < 0.3 * out.stats["n_interior_samples_drawn"]
-    out = evomesh.evolve(mesh, np.ones(mesh.n_points), cell_factor=2.0)
+    out = evomesh.evolve(mesh, np.ones(mesh.n_points), cell_factor=2.0, incremental=False)
     assert out.stats["n_interior_samples"] < 0.5 * out.stats["n_interior_samples_drawn"]
     with pytest.raises(TypeError, match="filter_samples"):
         evomesh.evolve(mesh, np.ones(mesh.n_points), filter_samples=1)

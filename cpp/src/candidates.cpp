@@ -260,7 +260,8 @@ Candidates segment_candidates(const Mesh_arrays& mesh, const std::vector<double>
 Candidates interior_candidates(const Mesh_arrays& mesh, const Triangle_fans& fans, const std::vector<double>& delta,
                                const std::vector<double>& f, const std::vector<std::uint8_t>& demoted,
                                const std::vector<Disc>& cover,
-                               const Frfc_options& options, std::size_t& n_drawn) {
+                               const Frfc_options& options, std::size_t& n_drawn,
+                               const std::vector<std::uint8_t>* quiet) {
   std::vector<std::uint8_t> skip;
   if (options.skip_coarse) {
     skip.resize(mesh.triangles.size());
@@ -268,6 +269,10 @@ Candidates interior_candidates(const Mesh_arrays& mesh, const Triangle_fans& fan
       const auto& tri = mesh.triangles[t];
       skip[t] = delta[tri[0]] > 1 && delta[tri[1]] > 1 && delta[tri[2]] > 1;
     }
+  }
+  if (quiet != nullptr) {
+    if (skip.empty()) skip = *quiet;
+    else for (std::size_t t = 0; t < skip.size(); ++t) skip[t] = skip[t] || (*quiet)[t];
   }
   n_drawn = 0;
   Candidates inside;

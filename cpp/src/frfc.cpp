@@ -1,5 +1,6 @@
 #include "evomesh/frfc.hpp"
 
+#include <exception>
 #include <optional>
 #include <utility>
 
@@ -8,25 +9,15 @@
 #include "evomesh/parallel.hpp"
 #include "evomesh/sampling.hpp"
 #include "evomesh/spacing_repair.hpp"
+#include "evomesh/incremental_step.hpp"
+#include "evomesh/detail/frfc_stages.hpp"
 
 namespace evomesh {
 
-namespace {
+namespace frfc_stages {
 
 using detail::Stage_timer;
 
-// The spheres of the packing in candidate order: input points [0, n), segment
-// candidates [n, n + n_seg), then interior candidates.
-struct Packing {
-  std::vector<Vec2> centers;
-  std::vector<double> radius;            // of the first pass's spheres
-  std::vector<Index> first_order;        // the first pass's order
-  std::vector<Index> blocker;            // first pass: a kept sphere that rejected the sphere, -1 if kept
-  std::vector<std::uint8_t> kept_first;  // kept by the first pass
-  std::vector<std::uint8_t> kept;        // kept by either pass or the spacing repair
-  std::vector<Index> deferred;           // demoted interior input points: packed in the second pass
-  std::size_t n_demoted = 0;             // demoted input points (deferred or on segments)
-};
 
 // Steps 3-5: order the spheres, lexical-first MIS; corners are always kept.
 // Every interior candidate comes after every input point and segment candidate
@@ -158,23 +149,6 @@ Candidates segment_stage(const Mesh_arrays& mesh, const std::vector<double>& del
   return on_segments;
 }
 
-// The points the first packing pass keeps are final: the quality pass's
-// triangulation of them starts at once, on a second thread, beside the
-// interior sampling and packing (members destroyed in reverse: the thread is
-// joined before the points it reads go).
-struct Early_start {
-  std::vector<Vec2> points;
-  Early_triangulation triangulation;
-  Background work;
-  Early_start(const Packing& packing, const Frfc_options& options, bool curved) {
-    // (with curved boundaries, kept segment candidates move before the triangulation)
-    if (!options.quality || curved) return;
-    for (std::size_t c = 0; c < packing.kept_first.size(); ++c) {
-      if (packing.kept_first[c]) points.push_back(packing.centers[c]);
-    }
-    work.start([this]() { triangulation.insert_first(points); }, resolve_threads(options.threads) > 1);
-  }
-};
 
 // Step 2b: interior candidates (grid samples and ring candidates, less those
 // the first pass certainly blocks) and their spheres.
@@ -215,11 +189,24 @@ std::vector<Vec2> spacing_repair_stage(const Mesh_arrays& mesh, const Triangle_f
   return repair_spacing(input, options, packing.kept, n_repairs);
 }
 
-}  // namespace
+}  // namespace frfc_stages
 
 Evolve_result frfc(const Mesh_arrays& input, const std::vector<double>& delta, const Frfc_options& options) {
   check_delta(input, delta);
   options.validate();
+  using namespace frfc_stages;
+  // Where delta = 1 on most of the mesh, the same step at the cost of the
+  // change (incremental_step.hpp); it declines when it does not apply.
+  // Whatever stops it (also a refused sample budget) is left to the full step to say.
+  if (options.incremental && !input.geometry) {
+    std::optional<Evolve_result> incremental;
+    try {
+      incremental = incremental_frfc(input, delta, options);
+    } catch (const std::exception&) {
+      incremental.reset();
+    }
+    if (incremental) return std::move(*incremental);
+  }
   // With curved boundaries, the corners of curved chains come from the geometry.
   const Mesh_arrays with_curves = input.geometry ? with_curve_kinds(input) : Mesh_arrays{};
   const Mesh_arrays& mesh = input.geometry ? with_curves : input;

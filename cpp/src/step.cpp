@@ -67,24 +67,35 @@ void check_delta(const Mesh_arrays& mesh, const std::vector<double>& delta) {
   }
 }
 
-Step_spacing step_spacing(const Mesh_arrays& mesh, const std::vector<double>& delta, F_at_points how, int threads,
-                          detail::Stage_timer& timer, const std::vector<Segment_chain>* within_domain) {
+Step_weights step_weights(const Mesh_arrays& mesh, const std::vector<double>& delta, detail::Stage_timer& timer,
+                          const std::vector<Segment_chain>* within_domain) {
   const std::size_t n = mesh.points.size();
-  Step_spacing spacing;
-  spacing.nn = nn_spacing(mesh.points);
+  Step_weights out;
+  out.nn = nn_spacing(mesh.points);
   // Within the domain (local_feature_size.hpp): nn of points whose nearest point
   // hides behind a constraint is taken within the domain, and the weights are
   // capped by what the domain carries. Lemma 3.1 needs w_p <= nn(p) <= |p - q|,
   // so f is evaluated at the points whose nn grew.
-  std::vector<std::uint8_t> evaluate;
-  if (within_domain) evaluate = keep_within_domain(mesh.points, mesh.triangles, spacing.nn);
-  std::vector<double> weight(n);
-  for (std::size_t i = 0; i < n; ++i) weight[i] = delta[i] * spacing.nn[i];
+  if (within_domain) out.evaluate = keep_within_domain(mesh.points, mesh.triangles, out.nn);
+  std::vector<double>& weight = out.weight;
+  weight.resize(n);
+  for (std::size_t i = 0; i < n; ++i) weight[i] = delta[i] * out.nn[i];
   if (within_domain) {
     const auto lfs = local_feature_size(mesh, *within_domain, weight);
     for (std::size_t i = 0; i < n; ++i) weight[i] = std::min(weight[i], lfs[i]);
   }
   timer.lap("nn");
+  return out;
+}
+
+Step_spacing step_spacing(const Mesh_arrays& mesh, const std::vector<double>& delta, F_at_points how, int threads,
+                          detail::Stage_timer& timer, const std::vector<Segment_chain>* within_domain) {
+  const std::size_t n = mesh.points.size();
+  Step_spacing spacing;
+  Step_weights weights = step_weights(mesh, delta, timer, within_domain);
+  spacing.nn = std::move(weights.nn);
+  const std::vector<std::uint8_t>& evaluate = weights.evaluate;
+  const std::vector<double>& weight = weights.weight;
   // Sites hidden by a mesh neighbour are left out of the Apollonius graph (issue
   // 13; f is the same). EVOMESH_SITE_FILTER=0 keeps them, for benchmarks only.
   const char* filter = std::getenv("EVOMESH_SITE_FILTER");

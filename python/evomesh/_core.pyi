@@ -80,6 +80,7 @@ class FrfcOptions:
     crowding_angle: float
     quality_max_fraction: float
     quality_max_extra: float
+    incremental: bool
     def __init__(self) -> None: ...
     @staticmethod
     def paper() -> FrfcOptions: ...

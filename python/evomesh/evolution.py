@@ -261,6 +261,18 @@ def evolve(mesh: Mesh, delta: Any = None, *, size: Any = None, method: str = "fr
             default 30 (issue 11; was 20) costs a few % more points on smooth
             size maps and up to about half more on rough ones.
 
+        incremental : bool, default True
+            Where delta = 1 on most of the mesh (at least half of the points),
+            skip the work that certainly changes nothing there (issue 13: the
+            Apollonius graph holds only the sites near the points where f is
+            asked, triangles whose samples the packing certainly rejects are not
+            sampled, the packing and the spacing repair run near spheres whose
+            fate is not certain; cpp/include/evomesh/incremental_step.hpp). The
+            output is the full algorithm's, bit for bit; only ``stats`` differ
+            (``incremental_region_points``, ``incremental_quiet_triangles``, ...
+            when it was used). Not used with ``geometry``. False: always the
+            full algorithm.
+
         For "drfc" (defaults in :data:`DRFC_DEFAULTS`): ``min_angle`` (also the
         shape criterion of the refinement stage), ``quality``, ``within_domain``, ``max_samples``
         (refuse a step whose refinement needs more points), ``threads`` as

@@ -69,10 +69,13 @@ Candidates segment_candidates(const Mesh_arrays& mesh, const std::vector<double>
 // Candidates inside triangles: grid samples and (options.ring_samples) the ring
 // candidates of every R-point, except those in a cover disc of their triangle
 // (cover empty: none dropped). `n_drawn` receives the number of grid samples drawn.
+// `quiet` (optional, one flag per triangle): triangles whose grid samples all lie
+// in a cover disc (incremental_step.cpp); they are not sampled, the result is the same.
 Candidates interior_candidates(const Mesh_arrays& mesh, const Triangle_fans& fans, const std::vector<double>& delta,
                                const std::vector<double>& f, const std::vector<std::uint8_t>& demoted,
                                const std::vector<Disc>& cover,
-                               const Frfc_options& options, std::size_t& n_drawn);
+                               const Frfc_options& options, std::size_t& n_drawn,
+                               const std::vector<std::uint8_t>* quiet = nullptr);
 
 // Sphere radii of the input points: radius_scale f(p) / 2 (times boundary_scale on segments).
 std::vector<double> input_point_radii(const Mesh_arrays& mesh, const std::vector<double>& f,

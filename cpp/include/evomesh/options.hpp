@@ -95,6 +95,10 @@ struct Frfc_options {
   // (local_feature_size.hpp); false: the paper's Euclidean nn_M.
   bool within_domain = true;
   double min_angle = 30.0;      // its angle bound (degrees; issue 11: kMaxMinAngle, was 20)
+  // Where delta = 1 on most of the mesh, skip the work that certainly changes
+  // nothing there (incremental_step.hpp): the same output, bit for bit, at a
+  // cost that follows the change. false: always the full algorithm.
+  bool incremental = true;
   double crowding_angle = 120.0;
   double quality_max_fraction = 0.5;
   double quality_max_extra = 1000;

@@ -83,6 +83,18 @@ struct Evolve_result {
 // Throws Input_error unless delta has one positive finite value per point.
 void check_delta(const Mesh_arrays& mesh, const std::vector<double>& delta);
 
+// The first part of step 1: nn_M at the input points and the weights w_p =
+// delta(p) nn_M(p) (within the domain, capped by the local feature size, see
+// step_spacing), timed as "nn". `evaluate` flags the points whose nn grew
+// (empty without within_domain): f there comes from the Apollonius graph.
+struct Step_weights {
+  std::vector<double> nn;
+  std::vector<double> weight;
+  std::vector<std::uint8_t> evaluate;
+};
+Step_weights step_weights(const Mesh_arrays& mesh, const std::vector<double>& delta, detail::Stage_timer& timer,
+                          const std::vector<Segment_chain>* within_domain);
+
 // Step 1 of both methods (Section 3.1): nn_M at the input points, the weights
 // w_p = delta(p) nn_M(p), the spacing function f = min_p (w_p + |x - p|) and f
 // at the input points (timed as "nn", "apollonius", "spacing_at_points").

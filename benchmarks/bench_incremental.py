@@ -1,0 +1,177 @@
+"""Issue 13 goal 2, "cost follows the change": what one FRFC step costs against
+the fraction of the mesh that changes, and what a bit-identical incremental
+step would have to pay at least.
+
+The input is the output of a step (``unit_square_mesh(n)`` evolved with
+delta = 1, a quasi-uniform mesh that is a fixed point of delta = 1 steps; see
+benchmarks/README.md). The timed step has delta = 1 except in a front band
+``0.3 <= x < 0.3 + w`` (the whole square for 100 %) where
+``delta = 1 - 0.5 sin(2 pi (x - 0.3) / w)`` refines (down to 0.5) and coarsens (up to 1.5);
+the band touches about the fraction w of the points (the density is uniform).
+"0 %" is delta = 1 everywhere.
+
+For every fraction, ``--repeats`` alternating runs of
+
+* the full step (``evomesh.evolve(..., incremental=False)``, wall seconds),
+* the incremental step (``incremental=True``, the default), asserted equal;
+* the floor of any bit-identical path: the triangle array of a step is CGAL's
+  face order of the constrained Delaunay triangulation of *all* selected
+  points, a function of the whole insertion history (``--order-evidence``
+  shows a 1 % band reorders every triangle far away). A step that returns the
+  same bits must therefore rebuild that triangulation and run the quality pass,
+  the parent map and the output checks on the whole mesh: "whole-mesh stages" =
+  the incremental run's ``quality`` + ``parent_map`` seconds + evolve's time
+  outside the core. The triangulation itself runs on the second thread beside
+  the packing (in both paths), so its time is given apart: one plain
+  ``constrained_delaunay`` of the output,
+
+and the medians, with the ratios taken run by run.
+
+Command (tables in benchmarks/README.md, "Issue 13 goal 2: cost follows the change")::
+
+    .venv/bin/python benchmarks/bench_incremental.py --sizes 1e5,1e6 --repeats 3 --order-evidence
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import time
+
+import numpy as np
+
+import evomesh
+from evomesh import _core
+
+FRACTIONS = (0.0, 0.01, 0.05, 0.2, 1.0)
+SELECTION_STAGES = ("nn", "apollonius", "spacing_at_points", "sampling", "sample_radii", "lfmis", "spacing_repair")
+
+
+def stepped_mesh(n: int) -> evomesh.Mesh:
+    """The output of one step on the quasi-uniform unit_square_mesh (not timed)."""
+    grid = evomesh.unit_square_mesh(n, seed=0)
+    return evomesh.evolve(grid, np.ones(grid.n_points), seed=0)
+
+
+def front_delta(mesh: evomesh.Mesh, fraction: float) -> tuple[np.ndarray, np.ndarray]:
+    """delta of a front band touching about `fraction` of the points, and the band mask."""
+    x = mesh.points[:, 0]
+    if fraction >= 1.0:
+        x0, w = 0.0, 1.0
+    else:
+        x0, w = 0.3, fraction
+    band = (x >= x0) & (x < x0 + w) if fraction > 0 else np.zeros(mesh.n_points, bool)
+    delta = np.where(band, 1.0 - 0.5 * np.sin(2 * np.pi * (x - x0) / max(w, 1e-300)), 1.0)
+    return delta, band
+
+
+def order_evidence(mesh: evomesh.Mesh) -> dict[str, float]:
+    """Triangles far from a 1 % band (x > 0.5), present in the outputs of the delta = 1 step and
+    of the 1 % band step: how many have the same index and the same first vertex in both arrays."""
+    a = evomesh.evolve(mesh, np.ones(mesh.n_points), seed=1)
+    b = evomesh.evolve(mesh, front_delta(mesh, 0.01)[0], seed=1)
+
+    def keyed(m: evomesh.Mesh) -> dict:
+        out = {}
+        for i, t in enumerate(m.triangles):
+            pts = [tuple(m.points[v]) for v in t]
+            if min(p[0] for p in pts) > 0.5:
+                out[tuple(sorted(pts))] = (i, pts.index(min(pts)))
+        return out
+
+    ka, kb = keyed(a), keyed(b)
+    common = [k for k in ka if k in kb]
+    return {
+        "far_triangles": len(common),
+        "same_index": sum(ka[k][0] == kb[k][0] for k in common),
+        "same_rotation": sum(ka[k][1] == kb[k][1] for k in common),
+    }
+
+
+ARRAYS = ("points", "triangles", "segments", "segment_is_boundary", "kind", "origin")
+LINEAGE = ("parent_triangle", "barycentric", "old_nn", "old_f")
+
+
+def assert_same(full: evomesh.Mesh, fast: evomesh.Mesh) -> None:
+    for name in ARRAYS:
+        assert np.array_equal(getattr(full, name), getattr(fast, name)), name
+    for name in LINEAGE:
+        assert np.array_equal(getattr(full.lineage, name), getattr(fast.lineage, name)), name
+
+
+def run(n: int, repeats: int, evidence: bool) -> list[dict]:
+    t0 = time.perf_counter()
+    mesh = stepped_mesh(n)
+    print(f"# n = {n}: stepped mesh of {mesh.n_points} points in {time.perf_counter() - t0:.1f} s", flush=True)
+    if evidence:
+        print("# triangle order far from a 1 % band:", order_evidence(mesh), flush=True)
+    rows = []
+    for fraction in FRACTIONS:
+        delta, band = front_delta(mesh, fraction)
+        samples = []
+        for r in range(repeats):
+            # alternate the two paths; the ratio of each pair is measured in the same run
+            t = time.perf_counter()
+            full = evomesh.evolve(mesh, delta, seed=1, incremental=False)
+            wall_full = time.perf_counter() - t
+            t = time.perf_counter()
+            fast = evomesh.evolve(mesh, delta, seed=1, incremental=True)
+            wall_fast = time.perf_counter() - t
+            assert_same(full, fast)
+            s = fast.stats
+            t = time.perf_counter()
+            _core.constrained_delaunay(full.points, full.segments, full.segment_is_boundary.astype(np.uint8))
+            cdt = time.perf_counter() - t
+            # the whole-mesh stages of the incremental run (the same code as the full step's)
+            floor = s["seconds_quality"] + s["seconds_parent_map"] + (wall_fast - s["seconds_total"])
+            samples.append({"full": wall_full, "incremental": wall_fast, "ratio": wall_fast / wall_full,
+                            "floor": floor, "floor_ratio": floor / wall_full, "cdt": cdt, "cdt_ratio": cdt / wall_full})
+            if r == 0:
+                changed = 1.0 - len({tuple(p) for p in mesh.points} & {tuple(p) for p in full.points}) / mesh.n_points
+                taken = "incremental_quiet_triangles" in fast.stats
+                region = fast.stats.get("incremental_region_points", float(mesh.n_points)) / mesh.n_points
+                stages = {k[8:]: v for k, v in fast.stats.items() if k.startswith("seconds_")}
+        med = {k: statistics.median(x[k] for x in samples) for k in samples[0]}
+        row = {"n": mesh.n_points, "fraction": fraction, "band_points": int(band.sum()), "points_changed": changed,
+               "taken": taken, "region": region, **med}
+        rows.append(row)
+        print(f"{mesh.n_points:>9} {100 * fraction:>5.0f}% band {row['band_points']:>8} changed {100 * changed:6.2f}% "
+              f"region {100 * region:6.2f}% | full {med['full']:7.2f} s  incremental {med['incremental']:7.2f} s  "
+              f"ratio {med['ratio']:.3f} | floor {med['floor']:6.2f} s ({med['floor_ratio']:.2f}), cdt "
+              f"{med['cdt']:5.2f} s ({med['cdt_ratio']:.2f}) | same bits, "
+              f"{'incremental' if taken else 'full (declined)'}", flush=True)
+        print("   incremental stages:", {k: round(v, 3) for k, v in stages.items()}, flush=True)
+    return rows
+
+
+def markdown(rows: list[dict]) -> str:
+    lines = [
+        "| points | band | points changed | region (sampled/packed) | full step (s) | incremental (s) "
+        "| **incremental / full** | path | whole-mesh stages (s) | / full | CDT of the output (s) | / full |",
+        "|---:|---:|---:|---:|---:|---:|---:|---|---:|---:|---:|---:|",
+    ]
+    for r in rows:
+        lines.append(
+            f"| {r['n']:,} | {100 * r['fraction']:.0f} % | {100 * r['points_changed']:.2f} % "
+            f"| {100 * r['region']:.1f} % | {r['full']:.2f} | {r['incremental']:.2f} | **{r['ratio']:.3f}** "
+            f"| {'incremental' if r['taken'] else 'full (declined)'} | {r['floor']:.2f} | {r['floor_ratio']:.2f} "
+            f"| {r['cdt']:.2f} | {r['cdt_ratio']:.2f} |"
+        )
+    return "\n".join(lines)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--sizes", default="1e5,1e6")
+    parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--order-evidence", action="store_true")
+    args = parser.parse_args()
+    rows = []
+    for size in args.sizes.split(","):
+        rows += run(int(float(size)), args.repeats, args.order_evidence)
+    print()
+    print(markdown(rows))
+
+
+if __name__ == "__main__":
+    main()

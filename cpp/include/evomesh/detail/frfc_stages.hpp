@@ -1,0 +1,65 @@
+// FRFC's stages (frfc.cpp) that the incremental step (incremental_step.cpp)
+// shares with the full one. Internal: include from .cpp files only.
+#pragma once
+
+#include <cstdint>
+#include <vector>
+
+#include "evomesh/candidates.hpp"
+#include "evomesh/options.hpp"
+#include "evomesh/parallel.hpp"
+#include "evomesh/quality_pass.hpp"
+#include "evomesh/segment_chains.hpp"
+#include "evomesh/step.hpp"
+#include "evomesh/types.hpp"
+
+namespace evomesh::frfc_stages {
+
+// The spheres of the packing in candidate order: input points [0, n), segment
+// candidates [n, n + n_seg), then interior candidates.
+struct Packing {
+  std::vector<Vec2> centers;
+  std::vector<double> radius;            // of the first pass's spheres
+  std::vector<Index> first_order;        // the first pass's order
+  std::vector<Index> blocker;            // first pass: a kept sphere that rejected the sphere, -1 if kept
+  std::vector<std::uint8_t> kept_first;  // kept by the first pass
+  std::vector<std::uint8_t> kept;        // kept by either pass or the spacing repair
+  std::vector<Index> deferred;           // demoted interior input points: packed in the second pass
+  std::size_t n_demoted = 0;             // demoted input points (deferred or on segments)
+};
+
+// The points the first packing pass keeps are final: the quality pass's
+// triangulation of them starts at once, on a second thread, beside the
+// interior sampling and packing (members destroyed in reverse: the thread is
+// joined before the points it reads go).
+struct Early_start {
+  std::vector<Vec2> points;
+  Early_triangulation triangulation;
+  Background work;
+  Early_start(const Packing& packing, const Frfc_options& options, bool curved) {
+    // (with curved boundaries, kept segment candidates move before the triangulation)
+    if (!options.quality || curved) return;
+    for (std::size_t c = 0; c < packing.kept_first.size(); ++c) {
+      if (packing.kept_first[c]) points.push_back(packing.centers[c]);
+    }
+    work.start([this]() { triangulation.insert_first(points); }, resolve_threads(options.threads) > 1);
+  }
+};
+
+// Steps 3-5, first pass: input points and segment candidates (frfc.cpp).
+Packing first_packing_pass(const Mesh_arrays& mesh, const std::vector<double>& f, const Candidates& on_segments,
+                           const std::vector<std::uint8_t>& forced, std::size_t n_forced,
+                           const std::vector<std::uint8_t>& demoted, const Frfc_options& options);
+
+// The second pass: deferred input points and interior candidates.
+void second_packing_pass(Candidates& inside, Packing& packing);
+
+// The output points in output order; `out_index` receives the output index of every candidate.
+Selection select_output(const Mesh_arrays& mesh, const std::vector<std::uint8_t>& forced, const Packing& packing,
+                        std::size_t n_seg, const std::vector<Vec2>& repair_points, std::vector<Index>& out_index);
+
+// Constraint pieces between consecutive kept points along every chain.
+std::vector<Constraint_piece> pieces_along_chains(const Mesh_arrays& mesh, const std::vector<Segment_chain>& chains,
+                                                  const Candidates& on_segments, const std::vector<Index>& out_index);
+
+}  // namespace evomesh::frfc_stages

@@ -1,0 +1,42 @@
+// Issue 13 goal 2, "cost follows the change": FRFC where delta = 1 on most of
+// the mesh, with the output of the full algorithm (frfc.hpp), bit for bit.
+//
+// The step is frfc() stage for stage; what changes is that work which certainly
+// changes nothing is not done (the certificates are in incremental_step.cpp):
+//
+// - the Apollonius graph holds only the sites that can attain f at a point where
+//   f is asked (Eq. 3: a site c matters at x only if |x - c| <= f(x));
+// - a triangle whose every grid sample lies in a cover disc of a kept vertex is
+//   not sampled (those samples are dropped by the sample filter anyway);
+// - the packing passes run on the spheres that can overlap a sphere whose fate
+//   is not certain; the others are old points with radius <= nn / 2, which no
+//   earlier sphere can reject (Lemma 3.1: f(p) = delta(p) nn(p) = nn(p) at
+//   delta = 1, and two such spheres are disjoint).
+//
+// What stays global is what fixes the bits of the output: the triangulation and
+// quality pass of all selected points (the triangle array is CGAL's face order,
+// a function of the whole insertion history), the parent map, nn_M (returned
+// in the lineage), the spacing repair (its gap repair visits every input
+// point), and O(n) loops.
+#pragma once
+
+#include <optional>
+#include <vector>
+
+#include "evomesh/options.hpp"
+#include "evomesh/step.hpp"
+#include "evomesh/types.hpp"
+
+namespace evomesh {
+
+// frfc(mesh, delta, options) when it applies (no curved boundaries, the sample
+// filter on, delta != 1 at no more than half of the points); std::nullopt
+// otherwise (the caller runs the full step). Preconditions: those of frfc,
+// checked by it (check_delta, options.validate()).
+// Adds the stats "incremental_region_points" (points of triangles sampled or of
+// spheres packed), "incremental_quiet_triangles" and "incremental_sites" (sites
+// of the Apollonius graphs).
+std::optional<Evolve_result> incremental_frfc(const Mesh_arrays& mesh, const std::vector<double>& delta,
+                                              const Frfc_options& options);
+
+}  // namespace evomesh

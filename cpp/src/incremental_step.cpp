@@ -1,0 +1,563 @@
+#include "evomesh/incremental_step.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <memory>
+#include <utility>
+
+#include "evomesh/candidates.hpp"
+#include "evomesh/detail/frfc_stages.hpp"
+#include "evomesh/packing.hpp"
+#include "evomesh/parallel.hpp"
+#include "evomesh/sampling.hpp"
+#include "evomesh/spacing.hpp"
+#include "evomesh/spacing_repair.hpp"
+
+namespace evomesh {
+
+namespace {
+
+using detail::Stage_timer;
+using namespace frfc_stages;
+
+// The step declines (the full one runs) when delta != 1 at more than this share
+// of the points: there the full step is as fast.
+constexpr double kMaxActiveShare = 0.5;
+
+// Relative slack of every distance bound below: far above rounding, so a bound
+// computed in floating point still holds for the exact value it stands for.
+constexpr double kSlack = 1e-7;
+
+// Points bucketed in a uniform grid (about two per cell) for range queries.
+class Point_grid {
+ public:
+  explicit Point_grid(const std::vector<Vec2>& points) : points_(points) {
+    const std::size_t n = points.size();
+    lo_ = {std::numeric_limits<double>::infinity(), std::numeric_limits<double>::infinity()};
+    Vec2 hi{-lo_[0], -lo_[1]};
+    for (const Vec2& p : points) {
+      lo_ = {std::min(lo_[0], p[0]), std::min(lo_[1], p[1])};
+      hi = {std::max(hi[0], p[0]), std::max(hi[1], p[1])};
+    }
+    side_ = std::max<std::int64_t>(1, static_cast<std::int64_t>(std::sqrt(static_cast<double>(n) / 2)));
+    for (int k = 0; k < 2; ++k) {
+      const double extent = hi[k] - lo_[k];
+      cell_[k] = extent > 0 ? extent / static_cast<double>(side_) : 1.0;
+    }
+    start_.assign(static_cast<std::size_t>(side_ * side_) + 1, 0);
+    std::vector<std::int64_t> cell_of(n);
+    for (std::size_t i = 0; i < n; ++i) {
+      cell_of[i] = cell(points[i][0], 0) + side_ * cell(points[i][1], 1);
+      ++start_[static_cast<std::size_t>(cell_of[i]) + 1];
+    }
+    for (std::size_t c = 0; c + 1 < start_.size(); ++c) start_[c + 1] += start_[c];
+    members_.resize(n);
+    std::vector<std::int64_t> fill(start_.begin(), start_.end() - 1);
+    for (std::size_t i = 0; i < n; ++i) members_[static_cast<std::size_t>(fill[cell_of[i]]++)] = static_cast<Index>(i);
+  }
+
+  // The smallest of `weight` over the points of every cell (for min_weight_near).
+  void set_weights(const std::vector<double>& weight) {
+    cell_min_.assign(start_.size() - 1, std::numeric_limits<double>::infinity());
+    for (std::size_t c = 0; c + 1 < start_.size(); ++c) {
+      for (std::int64_t k = start_[c]; k < start_[c + 1]; ++k) {
+        cell_min_[c] = std::min(cell_min_[c], weight[members_[static_cast<std::size_t>(k)]]);
+      }
+    }
+  }
+  // A lower bound on the weight of the points within distance r of x.
+  double min_weight_near(const Vec2& x, double r) const {
+    const std::int64_t x0 = cell(x[0] - r, 0), x1 = cell(x[0] + r, 0);
+    const std::int64_t y0 = cell(x[1] - r, 1), y1 = cell(x[1] + r, 1);
+    double m = std::numeric_limits<double>::infinity();
+    for (std::int64_t cy = y0; cy <= y1; ++cy) {
+      for (std::int64_t cx = x0; cx <= x1; ++cx) m = std::min(m, cell_min_[static_cast<std::size_t>(cx + side_ * cy)]);
+    }
+    return m;
+  }
+
+  // Calls visit(i) for every point within distance r of x (and perhaps a few
+  // slightly farther: callers only need a superset).
+  template <class Visit>
+  void visit_within(const Vec2& x, double r, Visit visit) const {
+    const std::int64_t x0 = cell(x[0] - r, 0), x1 = cell(x[0] + r, 0);
+    const std::int64_t y0 = cell(x[1] - r, 1), y1 = cell(x[1] + r, 1);
+    const double r2 = r * r * (1 + kSlack);
+    for (std::int64_t cy = y0; cy <= y1; ++cy) {
+      for (std::int64_t cx = x0; cx <= x1; ++cx) {
+        const std::size_t c = static_cast<std::size_t>(cx + side_ * cy);
+        for (std::int64_t k = start_[c]; k < start_[c + 1]; ++k) {
+          const Index i = members_[static_cast<std::size_t>(k)];
+          const double dx = points_[i][0] - x[0], dy = points_[i][1] - x[1];
+          if (dx * dx + dy * dy <= r2) visit(i);
+        }
+      }
+    }
+  }
+
+ private:
+  std::int64_t cell(double v, int axis) const {
+    const double c = std::floor((v - lo_[axis]) / cell_[axis]);
+    if (!(c > 0)) return 0;  // also NaN
+    return c >= static_cast<double>(side_ - 1) ? side_ - 1 : static_cast<std::int64_t>(c);
+  }
+  const std::vector<Vec2>& points_;
+  Vec2 lo_{0, 0};
+  std::array<double, 2> cell_{1, 1};
+  std::int64_t side_ = 1;
+  std::vector<std::int64_t> start_;
+  std::vector<Index> members_;
+  std::vector<double> cell_min_;
+};
+
+// The Apollonius graph of the sites `marked` (with their weights), for queries
+// at which every site that can attain f is marked. Eq. 3: f(x) = min_c (w_c +
+// |x - c|) with w_c >= 0, so a site c with w_c + |x - c| <= f(x) has |x - c| <=
+// f(x) <= u(x) for any upper bound u; marking every site within u(x) of every
+// query x (Mark_sites) keeps the minimising site of every query, so the exact
+// (certified) answers are those of the graph of all sites. The sample radii use
+// a walk in floating point (Spacing_function::evaluate, certified = false) that
+// ends at that same site unless two cones tie up to rounding at the query.
+class Restricted_spacing {
+ public:
+  Restricted_spacing(const std::vector<Vec2>& points, const std::vector<double>& weight,
+                     const std::vector<std::uint8_t>& marked) {
+    std::vector<Vec2> sites;
+    std::vector<double> weights;
+    for (std::size_t i = 0; i < marked.size(); ++i) {
+      if (!marked[i]) continue;
+      sites.push_back(points[i]);
+      weights.push_back(weight[i]);
+    }
+    n_sites_ = sites.size();
+    if (sites.empty()) {  // no query: a graph that is never asked
+      sites.push_back(points[0]);
+      weights.push_back(weight[0]);
+    }
+    function_ = std::make_unique<Spacing_function>(sites, weights);
+  }
+  const Spacing_function& function() const { return *function_; }
+  std::size_t n_sites() const { return n_sites_; }
+
+ private:
+  std::unique_ptr<Spacing_function> function_;
+  std::size_t n_sites_ = 0;
+};
+
+// Marks the sites within u of query points (Restricted_spacing).
+struct Mark_sites {
+  const Point_grid& grid;
+  std::vector<std::uint8_t> marked;
+  double absolute;  // rounding of the coordinates' magnitude
+  Mark_sites(const Point_grid& g, std::size_t n, double magnitude)
+      : grid(g), marked(n, 0), absolute(1e-12 * magnitude) {}
+  void near(const Vec2& x, double u) {
+    grid.visit_within(x, u * (1 + kSlack) + absolute, [&](Index i) { marked[i] = 1; });
+  }
+};
+
+// Triangles whose grid samples the packing certainly rejects, so that not
+// drawing them changes nothing (their candidate indices only order them among
+// themselves). A sample x of triangle T gets the sphere B(x, s f(x) / 2) (s =
+// radius_scale; interpolated radii only differ in triangles with a demoted
+// vertex, cheap ones are larger), and comes after every input point in the
+// packing order, so it is rejected when it overlaps the kept sphere B(v, r_v)
+// of a vertex v: |x - v| - r_v < s f(x) / 2. With H = max over x in T of
+// min_v (|x - v| - r_v), it suffices that f > 2H/s on T. f(x) = min_c (w_c +
+// |x - c|) over all sites c (Eq. 3). A site other than T's vertices that is
+// farther than 2H/s from T cannot go below 2H/s, and one nearer needs w_c +
+// dist(c, T) > 2H/s; the vertices' own cones are bounded through the distance to
+// the nearest vertex (below). So T is quiet when its vertices are kept by the
+// first pass and not demoted, and every site passes its test. H <= R - min_v
+// r_v, R the circumradius (below).
+// Every bound carries the slack kSlack and the
+// rounding of the coordinates, far above the rounding of the packing's tests.
+std::vector<std::uint8_t> quiet_triangles(const Mesh_arrays& mesh, const Point_grid& grid,
+                                          const std::vector<double>& weight, const std::vector<double>& radius,
+                                          const std::vector<std::uint8_t>& kept,
+                                          const std::vector<std::uint8_t>& demoted, double radius_scale,
+                                          double magnitude, int threads) {
+  const std::size_t m = mesh.triangles.size();
+  std::vector<std::uint8_t> quiet(m, 0);
+  const double absolute = 64 * std::numeric_limits<double>::epsilon() * magnitude;
+  const auto& P = mesh.points;
+  constexpr std::size_t kBlock = 1 << 14;
+  parallel_for((m + kBlock - 1) / kBlock, threads, [&](std::size_t b) {
+    for (std::size_t t = b * kBlock; t < std::min(m, (b + 1) * kBlock); ++t) {
+      const Triangle& tri = mesh.triangles[t];
+      bool ok = true;
+      for (Index v : tri) ok = ok && kept[v] && (demoted.empty() || !demoted[v]);
+      if (!ok) continue;
+      const Vec2 &a = P[tri[0]], &b2 = P[tri[1]], &c = P[tri[2]];
+      const std::array<const Vec2*, 3> v{&a, &b2, &c};
+      // Every point of T is within the circumradius of a vertex (T is covered by
+      // the kites v - edge midpoints - circumcentre, or for an obtuse T by their
+      // parts cut off by the long edge, whose corners are all within R of v).
+      const double ax = b2[0] - a[0], ay = b2[1] - a[1], bx = c[0] - a[0], by = c[1] - a[1];
+      const double cross = ax * by - ay * bx;
+      const double la = ax * ax + ay * ay, lb = bx * bx + by * by;
+      if (!(std::abs(cross) > 1e-3 * std::sqrt(la * lb))) continue;  // near-degenerate: not certified
+      const double ox = (la * by - lb * ay) / (2 * cross), oy = (ax * lb - bx * la) / (2 * cross);
+      double far = std::sqrt(ox * ox + oy * oy);
+      const double r_min = std::min({radius[tri[0]], radius[tri[1]], radius[tri[2]]});
+      const double w_min = std::min({weight[tri[0]], weight[tri[1]], weight[tri[2]]});
+      far = far * (1 + kSlack) + absolute;
+      const double h = far - r_min * (1 - kSlack);
+      if (h <= 0) {
+        quiet[t] = 1;
+        continue;
+      }
+      // The cones of the vertices: with d(x) the distance to the nearest vertex,
+      // h(x) <= d(x) - r_min and w_u + |x - u| >= w_min + d(x), so they need
+      // (1 - s/2) d < r_min + s/2 w_min at d = far.
+      if (!((1 - radius_scale / 2) * far < (r_min + radius_scale / 2 * w_min) * (1 - kSlack))) continue;
+      const double need = 2 * h / radius_scale * (1 + kSlack) + absolute;  // the other cones must exceed this on T
+      const double gx = (a[0] + b2[0] + c[0]) / 3, gy = (a[1] + b2[1] + c[1]) / 3;
+      double reach = 0;
+      for (const Vec2* p : v) reach = std::max(reach, std::hypot((*p)[0] - gx, (*p)[1] - gy));
+      // Most often every weight near T is above `need` already.
+      if (grid.min_weight_near({gx, gy}, reach + need) > need) {
+        quiet[t] = 1;
+        continue;
+      }
+      grid.visit_within({gx, gy}, reach + need, [&](Index site) {
+        if (!ok || site == tri[0] || site == tri[1] || site == tri[2]) return;
+        const Vec2& x = P[site];
+        // Distance from the site to T (0 inside), from below.
+        double d = std::numeric_limits<double>::infinity();
+        bool inside = true;
+        for (int e = 0; e < 3; ++e) {
+          const Vec2& p = *v[e];
+          const Vec2& q = *v[(e + 1) % 3];
+          const double dx = q[0] - p[0], dy = q[1] - p[1];
+          const double wx = x[0] - p[0], wy = x[1] - p[1];
+          inside = inside && dx * wy - dy * wx > 0;
+          const double tt = std::clamp((wx * dx + wy * dy) / (dx * dx + dy * dy), 0.0, 1.0);
+          d = std::min(d, std::hypot(wx - tt * dx, wy - tt * dy));
+        }
+        if (inside) d = 0;
+        ok = weight[site] + d * (1 - kSlack) - absolute > need;
+      });
+      quiet[t] = ok;
+    }
+  });
+  return quiet;
+}
+
+// Old points whose sphere no earlier sphere of the first pass can reject and
+// that reject nothing but spheres they overlap: radius <= nn / 2 (with slack),
+// nn the Euclidean nearest-neighbour distance (not grown within the domain).
+// Two such spheres are disjoint (r_p + r_q <= (nn_p + nn_q) / 2 <= |p - q|), so
+// among old points only the others ("dangerous": delta > 1 with f > nn / 2 s,
+// radius_scale 1, nn grown within the domain) and the candidates can overlap one.
+std::vector<std::uint8_t> safe_old_points(const std::vector<double>& radius, const std::vector<double>& nn,
+                                          const std::vector<std::uint8_t>& evaluate, std::size_t n) {
+  std::vector<std::uint8_t> safe(n, 0);
+  for (std::size_t p = 0; p < n; ++p) {
+    safe[p] = (evaluate.empty() || !evaluate[p]) && radius[p] <= 0.5 * nn[p] * (1 - kSlack);
+  }
+  return safe;
+}
+
+// The first packing pass (frfc_stages::first_packing_pass) on the spheres whose
+// fate is not certain, with the same result. The lexical-first MIS restricted to
+// a set of spheres closed under overlap (every sphere overlapping a member is a
+// member) is the MIS of all spheres restricted to it. The set: the forced
+// corners, every segment candidate and dangerous old point, and every safe old
+// point that overlaps one of those. A safe old point p overlapping a sphere d
+// lies within 2 r_d of d when d is an old point (r_p <= nn_p / 2 <= |p - d| / 2)
+// and within |e - d| + 2 r_d of d when d is a candidate on a segment with end e
+// (r_p <= |p - e| / 2). Safe old points outside the set overlap nothing earlier:
+// they are kept. Blockers may differ from the full pass's (another kept sphere
+// that overlaps); they only feed the sample filters, which are exact with any.
+Packing first_pass_near(const Mesh_arrays& mesh, const std::vector<double>& f, const std::vector<double>& nn,
+                        const std::vector<std::uint8_t>& evaluate, const Candidates& on_segments,
+                        const std::vector<std::uint8_t>& forced, std::size_t n_forced,
+                        const std::vector<std::uint8_t>& demoted, const Frfc_options& options, const Point_grid& grid,
+                        double magnitude, std::vector<std::uint8_t>& safe, std::size_t& n_packed) {
+  const std::size_t n = mesh.points.size();
+  const std::size_t n_seg = on_segments.size();
+  Packing packing;
+  packing.centers = mesh.points;
+  packing.centers.insert(packing.centers.end(), on_segments.samples.points.begin(), on_segments.samples.points.end());
+  packing.radius = input_point_radii(mesh, f, options);
+  packing.radius.insert(packing.radius.end(), on_segments.radius.begin(), on_segments.radius.end());
+  std::vector<std::uint8_t> classes(n + n_seg);
+  for (std::size_t i = 0; i < n; ++i) {
+    classes[i] = old_point_class(mesh.kind[i], forced[i], demoted[i]);
+    packing.n_demoted += demoted[i];
+  }
+  const auto segment_classes = on_segments.classes(/*on_segment=*/true);
+  std::copy(segment_classes.begin(), segment_classes.end(), classes.begin() + static_cast<std::ptrdiff_t>(n));
+  safe = safe_old_points(packing.radius, nn, evaluate, n);
+  const double absolute = 1e-12 * magnitude;
+  std::vector<std::uint8_t> member(n + n_seg, 0);
+  auto add_near = [&](const Vec2& d, double reach) {
+    grid.visit_within(d, reach * (1 + kSlack) + absolute, [&](Index p) { member[p] = 1; });
+  };
+  for (std::size_t i = 0; i < n; ++i) {
+    if (safe[i] && !forced[i]) continue;
+    member[i] = 1;
+    add_near(mesh.points[i], 2 * packing.radius[i]);
+  }
+  for (std::size_t j = 0; j < n_seg; ++j) {
+    member[n + j] = 1;
+    const Edge& e = mesh.segments[on_segments.samples.parent[j]];
+    const Vec2& x = on_segments.samples.points[j];
+    double to_end = std::numeric_limits<double>::infinity();
+    for (Index v : e) to_end = std::min(to_end, std::hypot(x[0] - mesh.points[v][0], x[1] - mesh.points[v][1]));
+    add_near(x, to_end + 2 * on_segments.radius[j]);
+  }
+  std::vector<Index> members;
+  for (std::size_t c = 0; c < n + n_seg; ++c) {
+    if (member[c]) members.push_back(static_cast<Index>(c));
+  }
+  n_packed = members.size();
+  std::vector<Vec2> centers(members.size());
+  std::vector<double> radii(members.size());
+  std::vector<std::uint8_t> member_classes(members.size());
+  for (std::size_t k = 0; k < members.size(); ++k) {
+    centers[k] = packing.centers[members[k]];
+    radii[k] = packing.radius[members[k]];
+    member_classes[k] = classes[members[k]];
+  }
+  std::vector<Index> blocker;
+  const auto kept = lexical_first_mis(centers, radii, packing_order(member_classes, radii), n_forced, &blocker);
+  packing.kept.assign(n + n_seg, 0);
+  packing.blocker.assign(n + n_seg, -1);
+  for (std::size_t c = 0; c < n; ++c) packing.kept[c] = !member[c];  // safe and alone: kept
+  for (std::size_t k = 0; k < members.size(); ++k) {
+    packing.kept[members[k]] = kept[k];
+    packing.blocker[members[k]] = blocker[k] < 0 ? -1 : members[blocker[k]];
+  }
+  // As in first_packing_pass: demoted interior points go to the second pass.
+  std::vector<std::uint8_t> deferred(n + n_seg, 0);
+  for (std::size_t i = 0; i < n; ++i) {
+    if (classes[i] != class_new) continue;
+    deferred[i] = 1;
+    packing.deferred.push_back(static_cast<Index>(i));
+    packing.kept[i] = 0;
+    packing.blocker[i] = -1;
+  }
+  for (Index& b : packing.blocker) {
+    if (b >= 0 && deferred[b]) b = -1;
+  }
+  packing.kept_first = packing.kept;
+  return packing;
+}
+
+// The second pass (frfc_stages::second_packing_pass) with, of the first pass's
+// kept spheres (forced), those that can overlap a sphere of the pass: every
+// dangerous or segment one, and the safe old points near one: a safe p overlaps
+// B(x, r) only within 2 r + |x - v| of x for any mesh point v != p (r_p <= nn_p
+// / 2 <= |p - v| / 2), v a vertex of x's triangle, or x itself for a deferred
+// old point. The forced spheres' order among themselves does not matter.
+void second_pass_near(const Mesh_arrays& mesh, const Candidates& inside, const std::vector<std::uint8_t>& safe,
+                      const Point_grid& grid, double magnitude, Packing& packing, std::size_t& n_packed) {
+  const std::size_t n = mesh.points.size();
+  const std::size_t n_first = packing.kept.size();
+  const std::size_t n_deferred = packing.deferred.size();
+  std::vector<Vec2> centers;
+  std::vector<double> radii;
+  std::vector<std::uint8_t> classes;
+  for (Index c : packing.deferred) {
+    centers.push_back(packing.centers[c]);
+    radii.push_back(packing.radius[c]);
+    classes.push_back(class_new);
+  }
+  centers.insert(centers.end(), inside.samples.points.begin(), inside.samples.points.end());
+  radii.insert(radii.end(), inside.radius.begin(), inside.radius.end());
+  const auto inside_classes = inside.classes(/*on_segment=*/false);
+  classes.insert(classes.end(), inside_classes.begin(), inside_classes.end());
+  const double absolute = 1e-12 * magnitude;
+  std::vector<std::uint8_t> forced_member(n_first, 0);
+  for (std::size_t c = 0; c < n_first; ++c) forced_member[c] = packing.kept[c] && (c >= n || !safe[c]);
+  auto add_near = [&](const Vec2& x, double reach) {
+    grid.visit_within(x, reach * (1 + kSlack) + absolute, [&](Index p) { forced_member[p] = packing.kept[p]; });
+  };
+  for (std::size_t k = 0; k < n_deferred; ++k) add_near(centers[k], 2 * radii[k]);
+  for (std::size_t j = 0; j < inside.size(); ++j) {
+    const Vec2& x = inside.samples.points[j];
+    double to_vertex = std::numeric_limits<double>::infinity();
+    for (Index v : mesh.triangles[inside.samples.parent[j]]) {
+      to_vertex = std::min(to_vertex, std::hypot(x[0] - mesh.points[v][0], x[1] - mesh.points[v][1]));
+    }
+    add_near(x, 2 * inside.radius[j] + to_vertex);
+  }
+  std::vector<Vec2> all_centers;
+  std::vector<double> all_radii;
+  std::vector<Index> order;
+  for (std::size_t c = 0; c < n_first; ++c) {
+    if (!forced_member[c]) continue;
+    order.push_back(static_cast<Index>(all_centers.size()));
+    all_centers.push_back(packing.centers[c]);
+    all_radii.push_back(packing.radius[c]);
+  }
+  const std::size_t n_forced = order.size();
+  n_packed = n_forced + centers.size();
+  for (Index j : packing_order(classes, radii)) order.push_back(static_cast<Index>(n_forced) + j);
+  all_centers.insert(all_centers.end(), centers.begin(), centers.end());
+  all_radii.insert(all_radii.end(), radii.begin(), radii.end());
+  const auto kept = lexical_first_mis(all_centers, all_radii, order, n_forced);
+  for (std::size_t k = 0; k < n_deferred; ++k) packing.kept[packing.deferred[k]] = kept[n_forced + k];
+  packing.kept.insert(packing.kept.end(), kept.begin() + static_cast<std::ptrdiff_t>(n_forced + n_deferred),
+                      kept.end());
+  packing.centers.insert(packing.centers.end(), inside.samples.points.begin(), inside.samples.points.end());
+  packing.radius.insert(packing.radius.end(), inside.radius.begin(), inside.radius.end());
+}
+
+double coordinate_magnitude(const std::vector<Vec2>& points) {
+  double m = 0;
+  for (const Vec2& p : points) m = std::max({m, std::abs(p[0]), std::abs(p[1])});
+  return m;
+}
+
+}  // namespace
+
+std::optional<Evolve_result> incremental_frfc(const Mesh_arrays& mesh, const std::vector<double>& delta,
+                                              const Frfc_options& options) {
+  if (mesh.geometry || !options.filter_samples) return std::nullopt;
+  const std::size_t n = mesh.points.size();
+  std::size_t n_active = 0;
+  for (double d : delta) n_active += d != 1;
+  if (static_cast<double>(n_active) > kMaxActiveShare * static_cast<double>(n)) return std::nullopt;
+
+  Evolve_result result;
+  Stage_timer timer(result.stats);
+  const Thread_limit thread_limit(options.threads);
+  const double magnitude = coordinate_magnitude(mesh.points);
+
+  // Step 1: nn_M and the weights as in the full step; f at the points by Lemma
+  // 3.1, from a graph of the sites near the points that need it.
+  const auto chains = segment_chains(mesh);
+  Step_weights weights = step_weights(mesh, delta, timer, options.within_domain ? &chains : nullptr);
+  const std::vector<double>& weight = weights.weight;
+  Point_grid grid(mesh.points);
+  grid.set_weights(weight);
+  std::vector<double> f = weight;
+  std::vector<Index> asked;
+  for (std::size_t i = 0; i < n; ++i) {
+    if (delta[i] > 1 || (!weights.evaluate.empty() && weights.evaluate[i])) asked.push_back(static_cast<Index>(i));
+  }
+  // One graph for f at the points and the radii of the segment candidates:
+  // a candidate x on segment ab has f(x) <= w_e + |x - e| for its end e of
+  // smaller weight, so its sites lie within 2 |ab| + w_e of e.
+  Mark_sites near_points(grid, n, magnitude);
+  for (Index i : asked) near_points.near(mesh.points[i], weight[i]);
+  for (const Edge& e : mesh.segments) {
+    const Index end = weight[e[0]] <= weight[e[1]] ? e[0] : e[1];
+    const Vec2& a = mesh.points[e[0]];
+    const Vec2& b = mesh.points[e[1]];
+    near_points.near(mesh.points[end], 2 * std::hypot(b[0] - a[0], b[1] - a[1]) + weight[end]);
+  }
+  timer.lap("nn");
+  const Restricted_spacing spacing_near_points(mesh.points, weight, near_points.marked);
+  timer.lap("apollonius");
+  {
+    std::vector<Vec2> at;
+    for (Index i : asked) at.push_back(mesh.points[i]);
+    std::vector<double> value(at.size());
+    spacing_near_points.function().evaluate(at.data(), at.size(), value.data(), nullptr, options.threads);
+    for (std::size_t k = 0; k < asked.size(); ++k) f[asked[k]] = std::min(value[k], weight[asked[k]]);
+  }
+  timer.lap("spacing_at_points");
+
+  // Steps 2-5 as in frfc.cpp.
+  std::size_t n_forced = 0;
+  const auto forced = forced_corners(mesh, chains, n_forced, mesh.required);
+  const auto demoted = demoted_points(mesh.triangles, weights.nn, f, forced, options.demote_ratio);
+  check_sample_budget(estimate_sample_count(mesh, f, options.cell_factor, options.max_samples, options.adaptive_cells),
+                      options.max_samples, "sampling");
+  timer.lap("incremental_budget");
+  Candidates on_segments = segment_candidates(mesh, delta, f, chains, options);
+  timer.lap("sampling");
+  candidate_radii(mesh, spacing_near_points.function(), f, demoted, options, /*on_segment=*/true, on_segments);
+  timer.lap("sample_radii");
+  std::vector<std::uint8_t> safe;
+  std::size_t n_packed_first = 0, n_packed_second = 0;
+  Packing packing = first_pass_near(mesh, f, weights.nn, weights.evaluate, on_segments, forced, n_forced, demoted,
+                                    options, grid, magnitude, safe, n_packed_first);
+  Early_start early(packing, options, false);
+  timer.lap("lfmis");
+
+  const Triangle_fans fans(mesh);
+  timer.lap("incremental_fans");
+  const std::vector<Disc> cover = cover_discs(mesh, f, packing.radius, packing.kept, packing.blocker,
+                                              options.radius_scale, options.radius == Radius_rule::interpolated);
+  const std::vector<std::uint8_t> quiet = quiet_triangles(mesh, grid, weight, packing.radius, packing.kept, demoted,
+                                                          options.radius_scale, magnitude, options.threads);
+  timer.lap("incremental_quiet");
+  std::size_t n_drawn = 0;
+  Candidates inside = interior_candidates(mesh, fans, delta, f, demoted, cover, options, n_drawn, &quiet);
+  timer.lap("sampling");
+  // The interior candidates' graph: x in triangle t has f(x) <= f(v) + |x - v| at its vertices v.
+  Mark_sites near_samples(grid, n, magnitude);
+  for (std::size_t j = 0; j < inside.size(); ++j) {
+    const Vec2& x = inside.samples.points[j];
+    double u = std::numeric_limits<double>::infinity();
+    for (Index v : mesh.triangles[inside.samples.parent[j]]) {
+      u = std::min(u, f[v] + std::hypot(x[0] - mesh.points[v][0], x[1] - mesh.points[v][1]));
+    }
+    near_samples.near(x, u);
+  }
+  const Restricted_spacing spacing_near_samples(mesh.points, weight, near_samples.marked);
+  timer.lap("apollonius");
+  candidate_radii(mesh, spacing_near_samples.function(), f, demoted, options, /*on_segment=*/false, inside);
+  timer.lap("sample_radii");
+  drop_blocked_candidates(mesh, packing.centers, packing.radius, packing.kept, packing.blocker, options.threads, inside);
+  second_pass_near(mesh, inside, safe, grid, magnitude, packing, n_packed_second);
+  timer.lap("lfmis");
+
+  // The spacing repair as in the full step: its gap repair visits every input
+  // point (its second nearest output point against delta nn), so it stays global.
+  std::size_t n_repairs = 0;
+  std::vector<Vec2> repair_points;
+  if ((options.repair_ratio > 0 && options.ring_samples) || options.gap_repair_ratio > 0 ||
+      options.refine_gap_ratio > 0) {
+    const Spacing_repair_input input{mesh, fans, delta, weights.nn, f, packing.centers, on_segments.owner, demoted};
+    repair_points = repair_spacing(input, options, packing.kept, n_repairs);
+  }
+  timer.lap("spacing_repair");
+
+  // Step 6 as in frfc.cpp: the same selection, so the same triangulation.
+  std::vector<Index> out_index;
+  Selection selection = select_output(mesh, forced, packing, on_segments.size(), repair_points, out_index);
+  selection.pin(mesh.required);
+  const auto pieces = pieces_along_chains(mesh, chains, on_segments, out_index);
+  const Quality_options quality = options.quality_settings();
+  early.work.wait();
+  triangulate_selection(std::move(selection), pieces, options.quality ? &quality : nullptr, result,
+                        options.quality ? &early.triangulation : nullptr, nullptr);
+  timer.lap(options.quality ? "quality" : "cdt");
+  finish_step(mesh, result, timer);
+  std::size_t n_quiet = 0;
+  for (std::uint8_t q : quiet) n_quiet += q;
+  std::vector<std::uint8_t> in_region(n, 0);
+  for (std::size_t t = 0; t < quiet.size(); ++t) {
+    if (!quiet[t]) {
+      for (Index v : mesh.triangles[t]) in_region[v] = 1;
+    }
+  }
+  std::size_t n_region = 0;
+  for (std::uint8_t r : in_region) n_region += r;
+  add_step_counts(result, {{"n_input_points", n},
+                           {"n_segment_samples", on_segments.size()},
+                           {"n_interior_samples", inside.size()},
+                           {"n_interior_samples_drawn", n_drawn},
+                           {"n_candidates", packing.centers.size()},
+                           {"n_demoted_points", packing.n_demoted},
+                           {"n_spacing_repairs", n_repairs},
+                           {"n_hidden_sites", spacing_near_points.function().n_hidden()},
+                           {"n_filtered_sites", spacing_near_points.function().n_filtered()},
+                           {"incremental_region_points", n_region},
+                           {"incremental_quiet_triangles", n_quiet},
+                           {"incremental_packed_first", n_packed_first},
+                           {"incremental_packed_second", n_packed_second},
+                           {"incremental_sites", spacing_near_points.n_sites() + spacing_near_samples.n_sites()}});
+  result.input_nn = std::move(weights.nn);
+  result.input_f = std::move(f);
+  return result;
+}
+
+}  // namespace evomesh

@@ -1,0 +1,191 @@
+"""Issue 13 goal 2: the incremental step (cpp/src/incremental_step.cpp) returns
+what the full algorithm returns, bit for bit, on every array of the new mesh
+and its lineage; it is taken where delta = 1 on most of the mesh and declines
+where it does not apply."""
+
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+import evomesh
+from evomesh.fronts import CircleFront
+from strategies import grid_mesh, meshes
+
+ARRAYS = ("points", "triangles", "segments", "segment_is_boundary", "kind", "origin", "segment_tags",
+          "triangle_tags", "required")
+LINEAGE = ("parent_triangle", "barycentric", "old_nn", "old_f")
+
+
+def _check_same_step(mesh: evomesh.Mesh, delta: np.ndarray, seed: int = 1, **options) -> evomesh.Mesh:
+    """Both paths on the same step; every returned array equal (stats excepted). Returns the incremental one."""
+    full = evolve_quietly(mesh, delta, seed, incremental=False, **options)
+    fast = evolve_quietly(mesh, delta, seed, incremental=True, **options)
+    for name in ARRAYS:
+        a, b = getattr(full, name), getattr(fast, name)
+        assert (a is None) == (b is None), name
+        if a is not None:
+            assert a.dtype == b.dtype and np.array_equal(a, b), f"{name} differs"
+    for name in LINEAGE:
+        a, b = getattr(full.lineage, name), getattr(fast.lineage, name)
+        assert np.array_equal(a, b), f"lineage.{name} differs"
+    assert "incremental_quiet_triangles" not in full.stats
+    return fast
+
+
+def evolve_quietly(mesh, delta, seed, **options):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", evomesh.QualityWarning)
+        return evomesh.evolve(mesh, delta, seed=seed, **options)
+
+
+def _taken(result: evomesh.Mesh) -> bool:
+    return "incremental_quiet_triangles" in result.stats
+
+
+def _stepped_mesh(n: int, seed: int) -> evomesh.Mesh:
+    """The output of a step (the typical input): unit_square_mesh evolved once."""
+    base = evomesh.unit_square_mesh(n, seed=seed)
+    return evomesh.evolve(base, np.ones(base.n_points), seed=seed)
+
+
+def _front_delta(mesh: evomesh.Mesh, center, radius: float, width: float, amplitude: float) -> np.ndarray:
+    """delta = 1 except within `width` of a circle: refines inside the band's inner half, coarsens outside."""
+    d = CircleFront(center, radius).signed_distance(mesh.points)
+    band = np.abs(d) < width
+    return np.where(band, 1.0 - amplitude * np.sin(np.pi * d / width), 1.0)
+
+
+@given(
+    n=st.integers(300, 2500),
+    mesh_seed=st.integers(0, 3),
+    center=st.tuples(st.floats(0.1, 0.9), st.floats(0.1, 0.9)),
+    radius=st.floats(0.05, 0.5),
+    width=st.floats(0.02, 0.1),
+    amplitude=st.sampled_from([0.3, 0.5, 0.7]),
+    seed=st.integers(0, 2**16),
+)
+def test_random_fronts_on_stepped_meshes_match_the_full_step(n, mesh_seed, center, radius, width, amplitude, seed):
+    mesh = _stepped_mesh(n, mesh_seed)
+    delta = _front_delta(mesh, center, radius, width, amplitude)
+    fast = _check_same_step(mesh, delta, seed)
+    if np.count_nonzero(delta != 1) <= mesh.n_points // 2:
+        assert _taken(fast)
+        # Most of the mesh is certified untouched: the path did less than the full step.
+        assert fast.stats["incremental_quiet_triangles"] > 0
+        assert fast.stats["incremental_region_points"] < mesh.n_points
+    else:
+        assert not _taken(fast)
+
+
+@given(
+    mesh=meshes(max_side=14),
+    center=st.tuples(st.floats(0.0, 1.0), st.floats(0.0, 1.0)),
+    radius=st.floats(0.1, 0.6),
+    width=st.floats(0.05, 0.2),
+    amplitude=st.sampled_from([0.4, 0.8]),
+    seed=st.integers(0, 2**16),
+)
+def test_random_fronts_on_raw_meshes_match_the_full_step(mesh, center, radius, width, amplitude, seed):
+    # Raw meshes (grids, holes, reflex corners, exact lattices, tiny and large scales): the
+    # certificates decide, the output must not depend on the path.
+    lo, hi = mesh.points.min(axis=0), mesh.points.max(axis=0)
+    unit = (mesh.points - lo) / (hi - lo)
+    d = np.hypot(unit[:, 0] - center[0], unit[:, 1] - center[1]) - radius
+    delta = np.where(np.abs(d) < width, 1.0 - amplitude * np.sin(np.pi * d / width), 1.0)
+    _check_same_step(mesh, delta, seed)
+
+
+@pytest.mark.parametrize(
+    "options",
+    [
+        {},
+        {"radius": "exact", "demote_ratio": None, "gap_repair_ratio": None},
+        {"radius": "cheap"},
+        {"samples": "barycentre", "cell_factor": 1.0},
+        {"samples": "midpoints"},
+        {"quality": False},
+        {"repair_ratio": None, "gap_repair_ratio": None},
+        {"within_domain": False},
+        {"ring_samples": False},
+        {"threads": 1},
+        {"radius_scale": 1.0, "boundary_scale": 1.0},
+        {"skip_coarse": True},
+    ],
+    ids=lambda o: ",".join(f"{k}={v}" for k, v in o.items()) or "defaults",
+)
+def test_options_match_the_full_step(options):
+    mesh = _stepped_mesh(3000, 0)
+    for center, radius in (((0.3, 0.4), 0.2), ((0.0, 0.0), 0.5), ((0.95, 0.5), 0.1)):
+        fast = _check_same_step(mesh, _front_delta(mesh, center, radius, 0.06, 0.5), 3, **options)
+        assert _taken(fast)
+
+
+@pytest.mark.parametrize("shape", ["hole", "notch", "crack"])
+def test_holes_reflex_corners_and_interior_constraints(shape):
+    if shape == "crack":
+        base = grid_mesh(25, 25, jitter=0.0)
+        p = np.asarray(base.points)
+        on_line = np.flatnonzero(np.isclose(p[:, 1], 0.5) & (p[:, 0] > 0.25) & (p[:, 0] < 0.75))
+        on_line = on_line[np.argsort(p[on_line, 0])]
+        mesh = evomesh.Mesh(p, base.triangles, np.c_[on_line[:-1], on_line[1:]])
+    else:
+        mesh = grid_mesh(25, 25, jitter=0.0, hole=shape == "hole", notch=shape == "notch")
+    for step in range(3):
+        x = mesh.points[:, 0]
+        band = np.abs(x - (0.2 + 0.25 * step)) < 0.08
+        delta = np.where(band, 0.6, 1.0)
+        fast = _check_same_step(mesh, delta, step)
+        assert _taken(fast)
+        mesh = fast
+
+
+def test_tags_and_required_points_follow_both_paths():
+    base = _stepped_mesh(1500, 1)
+    centroid_x = base.points[base.triangles].mean(axis=1)[:, 0]
+    boundary = base.segment_is_boundary
+    seg_tags = np.where(boundary, np.arange(len(base.segments)) % 3 + 1, 7)
+    required = np.zeros(base.n_points, bool)
+    required[:: 97] = True
+    mesh = evomesh.Mesh(base.points, base.triangles, base.segments, segment_tags=seg_tags,
+                        triangle_tags=(centroid_x > 0.5).astype(np.int64) + 10, required=required)
+    fast = _check_same_step(mesh, _front_delta(mesh, (0.5, 0.5), 0.3, 0.08, 0.6), 5)
+    assert _taken(fast)
+
+
+def test_a_time_loop_of_fronts_stays_on_the_full_path():
+    # Steps of a moving front, each from the previous output: every step identical.
+    mesh = _stepped_mesh(2000, 2)
+    for step in range(4):
+        delta = _front_delta(mesh, (0.5, 0.5), 0.15 + 0.08 * step, 0.05, 0.5)
+        mesh = _check_same_step(mesh, delta, step)
+        assert _taken(mesh)
+
+
+def test_declines_where_it_does_not_apply():
+    mesh = _stepped_mesh(800, 0)
+    x = mesh.points[:, 0]
+    # delta != 1 at most points: the full step.
+    assert not _taken(_check_same_step(mesh, np.where(x < 0.9, 0.7, 1.0)))
+    # delta = 1 everywhere: taken, and nothing is sampled.
+    fast = _check_same_step(mesh, np.ones(mesh.n_points))
+    assert _taken(fast)
+    assert fast.stats["incremental_quiet_triangles"] > 0.9 * mesh.n_triangles
+    # Switched off: never.
+    off = evomesh.evolve(mesh, np.ones(mesh.n_points), seed=1, incremental=False)
+    assert not _taken(off)
+
+
+def test_curved_boundaries_take_the_full_path():
+    from evomesh.meshgen import HOLE_TAG, OUTER_TAG, disc_with_hole_mesh
+
+    mesh = disc_with_hole_mesh(0.08)
+    circles = {OUTER_TAG: evomesh.Circle((0, 0), 1.0), HOLE_TAG: evomesh.Circle((0, 0), 0.35)}
+    geometry = evomesh.BoundaryGeometry(circles)
+    result = evomesh.evolve(mesh, np.ones(mesh.n_points), seed=0, geometry=geometry)
+    assert not _taken(result)
+    assert _taken(evomesh.evolve(mesh, np.ones(mesh.n_points), seed=0))
