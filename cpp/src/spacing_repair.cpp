@@ -42,11 +42,16 @@ void repair_gaps(const Mesh_arrays& mesh, const Triangle_fans& fans, const std::
   if (!(gap_ratio > 0) && !(refine_ratio > 0)) return;
   using Vertex_handle = typename Delaunay::Vertex_handle;
   // squared distances from x to its nearest and second nearest output points
+  // (the nearest-vertex walks start at the last answer: points come in input
+  // order, neighbours mostly, so a walk is short however many points were added)
+  Vertex_handle hint;
   auto two_nearest = [&](const Vec2& x) {
     const std::array<double, 2> kept = tree.squared_two_nearest(x);
     if (added_dt.number_of_vertices() == 0) return kept;
     const Point_2 q = to_cgal(x);
-    const Vertex_handle v = added_dt.nearest_vertex(q);
+    const Vertex_handle v = added_dt.nearest_vertex(q, hint == Vertex_handle() ? typename Delaunay::Face_handle()
+                                                                                : hint->face());
+    hint = v;
     const double a1 = CGAL::squared_distance(q, v->point());
     double a2 = std::numeric_limits<double>::infinity();
     // a second nearest vertex of a Delaunay triangulation is a neighbour of the nearest
