@@ -44,8 +44,13 @@ Packing first_packing_pass(const Mesh_arrays& mesh, const std::vector<double>& f
   classes.insert(classes.end(), segment_classes.begin(), segment_classes.end());
   packing.first_order = packing_order(classes, packing.radius);
   packing.kept = lexical_first_mis(packing.centers, packing.radius, packing.first_order, n_forced, &packing.blocker);
-  std::vector<std::uint8_t> deferred(packing.centers.size(), 0);
-  for (std::size_t i = 0; i < mesh.points.size(); ++i) {
+  defer_demoted_points(classes, mesh.points.size(), packing);
+  return packing;
+}
+
+void defer_demoted_points(const std::vector<std::uint8_t>& classes, std::size_t n_points, Packing& packing) {
+  std::vector<std::uint8_t> deferred(packing.blocker.size(), 0);
+  for (std::size_t i = 0; i < n_points; ++i) {
     if (classes[i] != class_new) continue;
     deferred[i] = 1;
     packing.deferred.push_back(static_cast<Index>(i));
@@ -57,7 +62,6 @@ Packing first_packing_pass(const Mesh_arrays& mesh, const std::vector<double>& f
     if (b >= 0 && deferred[b]) b = -1;
   }
   packing.kept_first = packing.kept;
-  return packing;
 }
 
 // The second pass: the kept spheres of the first (in their order, forced), then

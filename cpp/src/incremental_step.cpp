@@ -332,18 +332,7 @@ Packing first_pass_near(const Mesh_arrays& mesh, const std::vector<double>& f, c
     packing.blocker[members[k]] = blocker[k] < 0 ? -1 : members[blocker[k]];
   }
   // As in first_packing_pass: demoted interior points go to the second pass.
-  std::vector<std::uint8_t> deferred(n + n_seg, 0);
-  for (std::size_t i = 0; i < n; ++i) {
-    if (classes[i] != class_new) continue;
-    deferred[i] = 1;
-    packing.deferred.push_back(static_cast<Index>(i));
-    packing.kept[i] = 0;
-    packing.blocker[i] = -1;
-  }
-  for (Index& b : packing.blocker) {
-    if (b >= 0 && deferred[b]) b = -1;
-  }
-  packing.kept_first = packing.kept;
+  defer_demoted_points(classes, n, packing);
   return packing;
 }
 

@@ -51,6 +51,12 @@ Packing first_packing_pass(const Mesh_arrays& mesh, const std::vector<double>& f
                            const std::vector<std::uint8_t>& forced, std::size_t n_forced,
                            const std::vector<std::uint8_t>& demoted, const Frfc_options& options);
 
+// After the first pass's MIS: demoted interior input points (packing class
+// class_new, classes[i] of input point i) leave it for the second pass
+// (Packing::deferred); a blocker that is one of them is forgotten (only a
+// deferred point comes after a deferred point). Sets kept_first.
+void defer_demoted_points(const std::vector<std::uint8_t>& classes, std::size_t n_points, Packing& packing);
+
 // The second pass: deferred input points and interior candidates.
 void second_packing_pass(Candidates& inside, Packing& packing);
 
