@@ -120,8 +120,8 @@ int main() {
         const Index got = walk.locate_from(v, x);
         const Index want = expected(m, v, x);
         if (got != want && wrong < 5) {
-          std::fprintf(stderr, "v %d (%.17g %.17g) x (%.17g %.17g): got %d, brute force %d\n", v, m.points[v][0],
-                       m.points[v][1], x[0], x[1], got, want);
+          std::fprintf(stderr, "v %ld (%.17g %.17g) x (%.17g %.17g): got %ld, brute force %ld\n", static_cast<long>(v),
+                       m.points[v][0], m.points[v][1], x[0], x[1], static_cast<long>(got), static_cast<long>(want));
         }
         wrong += got != want;
         (got >= 0 ? located : refused) += 1;

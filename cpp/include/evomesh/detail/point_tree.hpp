@@ -32,18 +32,7 @@ class Point_tree {
   double squared_nearest(const Vec2& x) const {
     double best = std::numeric_limits<double>::infinity();
     if (points_.empty()) return best;
-    tree_.depth_first(1, [&](std::size_t m, Kd_stack& stack) {
-      if (squared_distance(tree_.node(m), x[0], x[1]) > best) return false;
-      if (tree_.is_leaf(m)) {
-        best = leaf_min<false>(tree_.leaf(m), x, 0, best);
-      } else if (squared_distance(tree_.node(2 * m), x[0], x[1]) <=
-                 squared_distance(tree_.node(2 * m + 1), x[0], x[1])) {  // nearer child first
-        stack.push_children(m);
-      } else {
-        stack.push_children_right_first(m);
-      }
-      return false;
-    });
+    nearer_first(x, [&] { return best; }, [&](std::size_t leaf) { best = leaf_min<false>(leaf, x, 0, best); });
     return best;
   }
 
@@ -52,24 +41,14 @@ class Point_tree {
   std::array<double, 2> squared_two_nearest(const Vec2& x) const {
     std::array<double, 2> best{std::numeric_limits<double>::infinity(), std::numeric_limits<double>::infinity()};
     if (points_.empty()) return best;
-    tree_.depth_first(1, [&](std::size_t m, Kd_stack& stack) {
-      if (squared_distance(tree_.node(m), x[0], x[1]) > best[1]) return false;
-      if (tree_.is_leaf(m)) {
-        const std::size_t leaf = tree_.leaf(m);
-        for (std::size_t k = tree_.leaf_begin(leaf); k < tree_.leaf_begin(leaf + 1); ++k) {
-          const double dx = x[0] - points_[k][0];
-          const double dy = x[1] - points_[k][1];
-          const double d = dx * dx + dy * dy;
-          if (d < best[0]) best = {d, best[0]};
-          else if (d < best[1]) best[1] = d;
-        }
-      } else if (squared_distance(tree_.node(2 * m), x[0], x[1]) <=
-                 squared_distance(tree_.node(2 * m + 1), x[0], x[1])) {  // nearer child first
-        stack.push_children(m);
-      } else {
-        stack.push_children_right_first(m);
+    nearer_first(x, [&] { return best[1]; }, [&](std::size_t leaf) {
+      for (std::size_t k = tree_.leaf_begin(leaf); k < tree_.leaf_begin(leaf + 1); ++k) {
+        const double dx = x[0] - points_[k][0];
+        const double dy = x[1] - points_[k][1];
+        const double d = dx * dx + dy * dy;
+        if (d < best[0]) best = {d, best[0]};
+        else if (d < best[1]) best[1] = d;
       }
-      return false;
     });
     return best;
   }
@@ -103,6 +82,24 @@ class Point_tree {
       best = std::min(best, dx * dx + dy * dy);
     }
     return best;
+  }
+
+  // Depth-first from the root, the nearer child first; a node farther from x
+  // than bound() (the current best) is pruned, a leaf goes to visit(leaf).
+  template <class Bound, class Visit>
+  void nearer_first(const Vec2& x, Bound&& bound, Visit&& visit) const {
+    tree_.depth_first(1, [&](std::size_t m, Kd_stack& stack) {
+      if (squared_distance(tree_.node(m), x[0], x[1]) > bound()) return false;
+      if (tree_.is_leaf(m)) {
+        visit(tree_.leaf(m));
+      } else if (squared_distance(tree_.node(2 * m), x[0], x[1]) <=
+                 squared_distance(tree_.node(2 * m + 1), x[0], x[1])) {  // nearer child first
+        stack.push_children(m);
+      } else {
+        stack.push_children_right_first(m);
+      }
+      return false;
+    });
   }
 
   // Whether another point has the same coordinates: a squared distance of 0 is
