@@ -176,6 +176,21 @@ std::shared_ptr<const Boundary_geometry> to_geometry(const std::optional<Int_arr
   return geometry;
 }
 
+// nn_M within the domain and where it grew (Mesh.nn_spacing), if the caller has them.
+void add_known_nn(Mesh_arrays& mesh, const std::optional<Float_array>& nn, const std::optional<Int_array>& nn_grew) {
+  if (!nn && !nn_grew) return;
+  if (!nn || !nn_grew) throw Input_error("nn and nn_grew go together");
+  mesh.nn_within_domain = to_vector<double>(*nn);
+  mesh.nn_grew = to_vector<Index>(*nn_grew);
+  if (mesh.nn_within_domain.size() != mesh.points.size()) throw Input_error("nn: one value per point");
+  for (double d : mesh.nn_within_domain) {
+    if (!std::isfinite(d) || !(d > 0)) throw Input_error("nn must be finite and > 0");
+  }
+  for (Index i : mesh.nn_grew) {
+    if (i < 0 || static_cast<std::size_t>(i) >= mesh.points.size()) throw Input_error("nn_grew: point index out of range");
+  }
+}
+
 // The arrays of a mesh and the input index of every point (-1 for a new one).
 py::dict mesh_dict(const Mesh_arrays& mesh, const std::vector<Index>& origin) {
   py::dict out;
@@ -317,9 +332,11 @@ void bind_step(py::module_& m, const char* name, Result (*run)(const Mesh_arrays
                      const Byte_array& segment_is_boundary, const Byte_array& kind, const Float_array& delta,
                      const Options& options, std::optional<Int_array> segment_tags,
                      std::optional<Int_array> triangle_tags, std::optional<Byte_array> required,
-                     std::optional<Int_array> curved_tags, double corner_angle, std::optional<py::function> project) {
+                     std::optional<Int_array> curved_tags, double corner_angle, std::optional<py::function> project,
+                     std::optional<Float_array> nn, std::optional<Int_array> nn_grew) {
         Mesh_arrays mesh = to_mesh(points, triangles, segments, segment_is_boundary, kind);
         add_labels(mesh, segment_tags, triangle_tags, required);
+        add_known_nn(mesh, nn, nn_grew);
         mesh.geometry = to_geometry(curved_tags, corner_angle, project);
         auto d = to_vector<double>(delta);
         Result r;
@@ -333,7 +350,7 @@ void bind_step(py::module_& m, const char* name, Result (*run)(const Mesh_arrays
       py::arg("kind"), py::arg("delta"), py::arg("options") = Options::recommended(),
       py::arg("segment_tags") = py::none(), py::arg("triangle_tags") = py::none(), py::arg("required") = py::none(),
       py::arg("curved_tags") = py::none(), py::arg("corner_angle") = kDefaultCornerAngle,
-      py::arg("project") = py::none(), doc);
+      py::arg("project") = py::none(), py::arg("nn") = py::none(), py::arg("nn_grew") = py::none(), doc);
 }
 
 PYBIND11_MODULE(_core, m) {
@@ -441,6 +458,32 @@ PYBIND11_MODULE(_core, m) {
       "nn_M: the distance from every point to the nearest other point; with the triangles, within the domain "
       "(a point whose nearest point is no edge neighbour gets its shortest edge, local_feature_size.hpp). "
       "`euclidean`: the Euclidean distances if already known.");
+
+  m.def(
+      "nn_within_domain",
+      [](const Float_array& points, const Int_array& triangles, std::optional<Float_array> euclidean) {
+        auto pts = to_points(points);
+        auto tris = to_index_rows<3>(triangles, "triangles");
+        require_indices(tris, pts.size(), "triangles");
+        std::vector<double> nn;
+        if (euclidean) {
+          nn = to_vector<double>(*euclidean);
+          if (nn.size() != pts.size()) throw Input_error("euclidean: one value per point");
+        }
+        std::vector<Index> grew;
+        {
+          py::gil_scoped_release release;
+          if (!euclidean) nn = nn_spacing(pts);
+          const auto changed = keep_within_domain(pts, tris, nn);
+          for (std::size_t i = 0; i < changed.size(); ++i) {
+            if (changed[i]) grew.push_back(static_cast<Index>(i));
+          }
+        }
+        return py::make_tuple(vector_array(nn), vector_array(grew));
+      },
+      py::arg("points"), py::arg("triangles"), py::arg("euclidean") = py::none(),
+      "(nn_M within the domain, the points where it exceeds the Euclidean distance): what Mesh keeps for its "
+      "steps (nn_spacing with triangles, and where keep_within_domain changed it).");
 
   py::class_<Spacing_function>(m, "SpacingFunction")
       .def(py::init([](const Float_array& sites, const Float_array& weights, std::size_t min_sites_per_part,

@@ -36,8 +36,8 @@ constexpr int kGapDirections = 16;
 template <class Delaunay>
 void repair_gaps(const Mesh_arrays& mesh, const Triangle_fans& fans, const std::vector<double>& delta,
                  const std::vector<double>& nn, double gap_ratio, double refine_ratio, std::uint64_t seed,
-                 const std::vector<std::uint8_t>& demoted, const detail::Point_tree& tree, int threads,
-                 Delaunay& added_dt, std::vector<Vec2>& added, std::size_t& n_added) {
+                 const std::vector<std::uint8_t>& demoted, const std::vector<std::uint8_t>& kept_centre,
+                 const detail::Point_tree& tree, int threads, Delaunay& added_dt, std::vector<Vec2>& added, std::size_t& n_added) {
   constexpr double kTwoPi = 6.283185307179586;
   if (!(gap_ratio > 0) && !(refine_ratio > 0)) return;
   using Vertex_handle = typename Delaunay::Vertex_handle;
@@ -71,11 +71,30 @@ void repair_gaps(const Mesh_arrays& mesh, const Triangle_fans& fans, const std::
   };
   // Points added later only bring output points nearer: the points whose kept
   // centres alone leave a gap (found in parallel) are all that can need one.
+  // A kept point with a kept mesh neighbour within its bound has none (its
+  // second nearest kept centre is at most that far; the margin keeps the two
+  // computations of that distance apart): most points of a step, found from
+  // their triangle fans without a tree query.
   const std::size_t n = mesh.points.size();
-  std::vector<std::uint8_t> open(n, 0);
+  std::vector<std::uint8_t> open(n, 1);
   constexpr std::size_t kChunk = 4096;
   parallel_for((n + kChunk - 1) / kChunk, threads, [&](std::size_t chunk) {
     for (std::size_t p = chunk * kChunk; p < std::min(n, (chunk + 1) * kChunk); ++p) {
+      if (!kept_centre[p]) continue;
+      const double bound2 = target2(p, true);
+      const Vec2& a = mesh.points[p];
+      for (Index k = fans.xadj[p]; k < fans.xadj[p + 1] && open[p]; ++k) {
+        for (Index q : mesh.triangles[fans.adj[k]]) {
+          if (static_cast<std::size_t>(q) == p || !kept_centre[q]) continue;
+          const double dx = a[0] - mesh.points[q][0], dy = a[1] - mesh.points[q][1];
+          if ((dx * dx + dy * dy) * (1 + 1e-9) <= bound2) open[p] = 0;
+        }
+      }
+    }
+  });
+  parallel_for((n + kChunk - 1) / kChunk, threads, [&](std::size_t chunk) {
+    for (std::size_t p = chunk * kChunk; p < std::min(n, (chunk + 1) * kChunk); ++p) {
+      if (!open[p]) continue;
       const auto around = tree.squared_two_nearest(mesh.points[p]);
       open[p] = around[1] > target2(p, around[0] == 0);
     }
@@ -145,13 +164,23 @@ std::vector<Vec2> repair_spacing(const Spacing_repair_input& input, const Frfc_o
   }
   if (kept_points.size() < 2) return {};
   const detail::Point_tree tree(kept_points);
-  const std::vector<double> nn2 = tree.squared_nn(threads);
+  // nn2 of the kept R-points (delta < 1): the second nearest kept centre, the
+  // nearest being the point itself (kept centres are distinct).
+  std::vector<double> nn2(n, 0.0);
+  if (repair_ratio > 0) {
+    constexpr std::size_t kChunk = 4096;
+    parallel_for((n + kChunk - 1) / kChunk, threads, [&](std::size_t chunk) {
+      for (std::size_t p = chunk * kChunk; p < std::min(n, (chunk + 1) * kChunk); ++p) {
+        if (position_of[p] >= 0 && delta[p] < 1) nn2[p] = tree.squared_two_nearest(mesh.points[p])[1];
+      }
+    });
+  }
   std::vector<Index> needy;
   std::vector<std::uint8_t> is_needy(n, 0);
   for (std::size_t p = 0; p < n; ++p) {
     if (!(repair_ratio > 0) || position_of[p] < 0 || !(delta[p] < 1)) continue;
     const double target = repair_ratio * delta[p] * nn[p];
-    if (nn2[position_of[p]] > target * target) {
+    if (nn2[p] > target * target) {
       is_needy[p] = 1;
       needy.push_back(static_cast<Index>(p));
     }
@@ -176,7 +205,7 @@ std::vector<Vec2> repair_spacing(const Spacing_repair_input& input, const Frfc_o
   for (Index p : needy) {
     // re-check: an earlier repair may have served p
     const double target = repair_ratio * delta[p] * nn[p];
-    double d2 = nn2[position_of[p]];
+    double d2 = nn2[p];
     if (added_dt.number_of_vertices() > 0) {
       const Point_2 q = to_cgal(mesh.points[p]);
       d2 = std::min(d2, CGAL::squared_distance(q, added_dt.nearest_vertex(q)->point()));
@@ -212,7 +241,8 @@ std::vector<Vec2> repair_spacing(const Spacing_repair_input& input, const Frfc_o
     added_dt.insert(to_cgal(best_point));
     ++n_added;
   }
-  repair_gaps(mesh, fans, delta, nn, gap_repair_ratio, options.refine_gap_ratio, seed, input.demoted, tree, threads, added_dt, added, n_added);
+  repair_gaps(mesh, fans, delta, nn, gap_repair_ratio, options.refine_gap_ratio, seed, input.demoted, kept, tree,
+              threads, added_dt, added, n_added);
   return added;
 }
 

@@ -71,12 +71,18 @@ Step_weights step_weights(const Mesh_arrays& mesh, const std::vector<double>& de
                           const std::vector<Segment_chain>* within_domain) {
   const std::size_t n = mesh.points.size();
   Step_weights out;
-  out.nn = nn_spacing(mesh.points);
   // Within the domain (local_feature_size.hpp): nn of points whose nearest point
   // hides behind a constraint is taken within the domain, and the weights are
   // capped by what the domain carries. Lemma 3.1 needs w_p <= nn(p) <= |p - q|,
-  // so f is evaluated at the points whose nn grew.
-  if (within_domain) out.evaluate = keep_within_domain(mesh.points, mesh.triangles, out.nn);
+  // so f is evaluated at the points whose nn grew. The input may bring both.
+  if (within_domain && !mesh.nn_within_domain.empty()) {
+    out.nn = mesh.nn_within_domain;
+    out.evaluate.assign(n, 0);
+    for (Index i : mesh.nn_grew) out.evaluate[i] = 1;
+  } else {
+    out.nn = nn_spacing(mesh.points);
+    if (within_domain) out.evaluate = keep_within_domain(mesh.points, mesh.triangles, out.nn);
+  }
   std::vector<double>& weight = out.weight;
   weight.resize(n);
   for (std::size_t i = 0; i < n; ++i) weight[i] = delta[i] * out.nn[i];

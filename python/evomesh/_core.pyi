@@ -187,6 +187,9 @@ def first_flat_triangles(
 def nn_spacing(
     points: ArrayLike, triangles: ArrayLike | None = None, euclidean: ArrayLike | None = None
 ) -> NDArray[np.float64]: ...
+def nn_within_domain(
+    points: ArrayLike, triangles: ArrayLike, euclidean: ArrayLike | None = None
+) -> tuple[NDArray[np.float64], NDArray[np.int64]]: ...
 def default_thread_count() -> int: ...
 def lexical_first_mis(
     centers: ArrayLike, radii: ArrayLike, order: ArrayLike, n_forced: int = 0
@@ -206,6 +209,8 @@ def frfc(
     curved_tags: ArrayLike | None = None,
     corner_angle: float = ...,
     project: Callable[[NDArray[np.float64], NDArray[np.int64]], ArrayLike] | None = None,
+    nn: ArrayLike | None = None,
+    nn_grew: ArrayLike | None = None,
 ) -> EvolveResult:
     """Functional-Refining-Functional-Coarsening (Section 3.2): one step; returns a dict of arrays and stats."""
 
@@ -223,6 +228,8 @@ def drfc(
     curved_tags: ArrayLike | None = None,
     corner_angle: float = ...,
     project: Callable[[NDArray[np.float64], NDArray[np.int64]], ArrayLike] | None = None,
+    nn: ArrayLike | None = None,
+    nn_grew: ArrayLike | None = None,
 ) -> EvolveResult:
     """Delaunay-Refining-Functional-Coarsening (Section 5); returns the same dict as frfc."""
 

@@ -325,7 +325,7 @@ def evolve(mesh: Mesh, delta: Any = None, *, size: Any = None, method: str = "fr
         raise ValueError("geometry (curved boundaries) is supported by method='frfc' only")
     core = _core.frfc if method == "frfc" else _core.drfc
     result = core(mesh.points, mesh.triangles, mesh.segments, mesh.segment_is_boundary.astype(np.uint8), mesh.kind, d, o,
-                  **mesh._labels(), **({} if g is None else g._core_arguments()))
+                  **mesh._labels(), **mesh._known_nn(), **({} if g is None else g._core_arguments()))
     return _wrap(result, mesh)
 
 

@@ -237,7 +237,7 @@ class Mesh:
     """
 
     __slots__ = ("points", "triangles", "segments", "segment_is_boundary", "kind", "origin", "stats", "lineage", "_nn",
-                 "segment_tags", "triangle_tags", "required")
+                 "_nn_grew", "segment_tags", "triangle_tags", "required")
 
     points: np.ndarray
     triangles: np.ndarray
@@ -315,7 +315,7 @@ class Mesh:
                      tri_tags, req)
 
     def _assign(self, points, triangles, segments, segment_is_boundary, kind, origin, stats, lineage, nn,
-                segment_tags=None, triangle_tags=None, required=None) -> None:
+                segment_tags=None, triangle_tags=None, required=None, nn_grew=None) -> None:
         set_ = object.__setattr__
         set_(self, "points", _frozen(np.asarray(points, dtype=np.float64)))
         set_(self, "triangles", _frozen(np.asarray(triangles, dtype=np.int64)))
@@ -332,17 +332,20 @@ class Mesh:
                                             else np.asarray(triangle_tags, dtype=np.int64)))
         set_(self, "required", _frozen(np.zeros(n_points, bool) if required is None
                                        else np.asarray(required, dtype=bool)))
-        if nn is not None:  # the Euclidean distances, made distances within the domain
-            nn = _core.nn_spacing(points, triangles, np.asarray(nn, dtype=np.float64))
-        set_(self, "_nn", None if nn is None else _frozen(nn))
+        # nn: the Euclidean distances, made distances within the domain, unless
+        # nn_grew (the points where that made them larger) says it was done.
+        if nn is not None and nn_grew is None:
+            nn, nn_grew = _core.nn_within_domain(points, triangles, np.asarray(nn, dtype=np.float64))
+        set_(self, "_nn", None if nn is None else _frozen(np.asarray(nn, dtype=np.float64)))
+        set_(self, "_nn_grew", None if nn is None else _frozen(np.asarray(nn_grew, dtype=np.int64)))
 
     @classmethod
     def _trusted(cls, points, triangles, segments, segment_is_boundary, kind, origin, stats=None, lineage=None,
-                 nn=None, segment_tags=None, triangle_tags=None, required=None) -> "Mesh":
+                 nn=None, segment_tags=None, triangle_tags=None, required=None, nn_grew=None) -> "Mesh":
         """Wrap arrays that evomesh itself produced (already valid); no checks."""
         mesh = cls.__new__(cls)
         mesh._assign(points, triangles, segments, segment_is_boundary, kind, origin, stats or {}, lineage, nn,
-                     segment_tags, triangle_tags, required)
+                     segment_tags, triangle_tags, required, nn_grew)
         return mesh
 
     def _labels(self) -> dict[str, Any]:
@@ -364,8 +367,15 @@ class Mesh:
         is the Euclidean nearest-neighbour distance of the paper. Steps use the
         same (``within_domain``, the default)."""
         if self._nn is None:
-            object.__setattr__(self, "_nn", _frozen(_core.nn_spacing(self.points, self.triangles)))
+            nn, grew = _core.nn_within_domain(self.points, self.triangles)
+            object.__setattr__(self, "_nn", _frozen(nn))
+            object.__setattr__(self, "_nn_grew", _frozen(grew))
         return self._nn
+
+    def _known_nn(self) -> dict[str, Any]:
+        """nn_M within the domain and where it grew, for a step (which then skips
+        computing them); empty when not computed yet."""
+        return {} if self._nn is None else {"nn": self._nn, "nn_grew": self._nn_grew}
 
     def __setattr__(self, name: str, value: Any) -> None:
         raise AttributeError("Mesh is immutable; evolve() returns a new mesh")
@@ -375,7 +385,8 @@ class Mesh:
         return (
             _unpickle_mesh,
             (self.points, self.triangles, self.segments, self.segment_is_boundary, self.kind, self.origin,
-             dict(self.stats), self.lineage, self._nn, self.segment_tags, self.triangle_tags, self.required),
+             dict(self.stats), self.lineage, self._nn, self.segment_tags, self.triangle_tags, self.required,
+             self._nn_grew),
         )
 
     def __copy__(self) -> "Mesh":
@@ -668,9 +679,11 @@ class Mesh:
 
 
 def _unpickle_mesh(points, triangles, segments, segment_is_boundary, kind, origin, stats, lineage=None,
-                   nn=None, segment_tags=None, triangle_tags=None, required=None) -> Mesh:
-    return Mesh._trusted(points, triangles, segments, segment_is_boundary, kind, origin, stats, lineage, nn,
-                         segment_tags, triangle_tags, required)
+                   nn=None, segment_tags=None, triangle_tags=None, required=None, nn_grew=None) -> Mesh:
+    # A pickle without nn_grew (before 2026-12) holds nn within the domain but
+    # not where it grew: nn is then computed again, when first needed.
+    return Mesh._trusted(points, triangles, segments, segment_is_boundary, kind, origin, stats, lineage,
+                         None if nn_grew is None else nn, segment_tags, triangle_tags, required, nn_grew)
 
 
 def _as_tags(values: Any, length: int, name: str, rows: str) -> np.ndarray:

@@ -60,6 +60,12 @@ struct Mesh_arrays {
   // Optional (null: the polygon is the domain, exactly): the curves behind
   // segments of some tags (boundary_geometry.hpp). A step's input only.
   std::shared_ptr<const Boundary_geometry> geometry;
+  // Optional, a step's input only (empty: the step computes them): nn_M within
+  // the domain at every point and the points where that exceeds the Euclidean
+  // distance (keep_within_domain in local_feature_size.hpp), as Mesh.nn_spacing
+  // holds them. Used when the step measures nn within the domain.
+  std::vector<double> nn_within_domain;
+  std::vector<Index> nn_grew;
 };
 
 }  // namespace evomesh
