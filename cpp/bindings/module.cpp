@@ -418,6 +418,18 @@ PYBIND11_MODULE(_core, m) {
       "check before issue 13) instead of the boundary-winding check; for tests and benchmarks.");
 
   m.def(
+      "first_inverted_triangle",
+      [](const Float_array& points, const Int_array& triangles) {
+        auto pts = to_points(points);
+        auto tris = to_index_rows<3>(triangles, "triangles");
+        require_indices(tris, pts.size(), "triangles");
+        py::gil_scoped_release release;
+        return first_inverted_triangle(pts, tris);
+      },
+      py::arg("points"), py::arg("triangles"),
+      "The first triangle with zero or negative area in floating point, -1 for none (check_mesh_limits).");
+
+  m.def(
       "first_flat_triangles",
       [](const Float_array& points, const Int_array& triangles, double min_relative_height, double min_height_ulps) {
         auto pts = to_points(points);

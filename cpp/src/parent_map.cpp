@@ -11,41 +11,12 @@
 #include <numeric>
 
 #include "evomesh/kernel.hpp"
+#include "evomesh/parallel.hpp"
 #include "evomesh/triangulation.hpp"
 
 namespace evomesh {
 
 namespace {
-
-// Neighbour across edge k (t[k] -> t[k+1]) of every triangle, -1 on the boundary.
-std::vector<std::array<Index, 3>> triangle_neighbours(const std::vector<Triangle>& triangles) {
-  struct Half {
-    Index lo, hi, triangle;
-    int side;
-  };
-  std::vector<Half> halves;
-  halves.reserve(3 * triangles.size());
-  for (std::size_t t = 0; t < triangles.size(); ++t) {
-    for (int k = 0; k < 3; ++k) {
-      const Index a = triangles[t][k], b = triangles[t][(k + 1) % 3];
-      halves.push_back({std::min(a, b), std::max(a, b), static_cast<Index>(t), k});
-    }
-  }
-  std::sort(halves.begin(), halves.end(), [](const Half& x, const Half& y) {
-    return x.lo != y.lo ? x.lo < y.lo : (x.hi != y.hi ? x.hi < y.hi : x.triangle < y.triangle);
-  });
-  std::vector<std::array<Index, 3>> neighbour(triangles.size(), {-1, -1, -1});
-  for (std::size_t i = 0; i + 1 < halves.size(); ++i) {
-    const Half& x = halves[i];
-    const Half& y = halves[i + 1];
-    if (x.lo == y.lo && x.hi == y.hi) {
-      neighbour[x.triangle][x.side] = y.triangle;
-      neighbour[y.triangle][y.side] = x.triangle;
-      ++i;
-    }
-  }
-  return neighbour;
-}
 
 // The old triangles of `queries` by walks from `hints` (an old triangle near
 // each), a search over the old mesh for those no walk reaches.
@@ -78,7 +49,6 @@ Old_mesh_walker::Old_mesh_walker(const Mesh_arrays& old_mesh, double outside)
       mesh_(old_mesh),
       P_(old_mesh.points),
       T_(old_mesh.triangles),
-      neighbour_(triangle_neighbours(old_mesh.triangles)),
       triangle_at_(old_mesh.points.size(), -1),
       fan_begin_(old_mesh.points.size() + 1, 0),
       limit_(64 + 4 * static_cast<std::size_t>(std::sqrt(static_cast<double>(old_mesh.triangles.size())))) {
@@ -94,6 +64,26 @@ Old_mesh_walker::Old_mesh_walker(const Mesh_arrays& old_mesh, double outside)
   for (std::size_t t = 0; t < T_.size(); ++t) {
     for (Index v : T_[t]) fan_[fill[v]++] = static_cast<Index>(t);
   }
+  // The neighbour across edge k (a -> b): the other triangle around a that has
+  // b (a mesh is an oriented manifold: at most one), in parallel blocks.
+  neighbour_.assign(T_.size(), {-1, -1, -1});
+  constexpr std::size_t kBlock = 1 << 14;
+  parallel_for((T_.size() + kBlock - 1) / kBlock, 0, [&](std::size_t block) {
+    for (std::size_t t = block * kBlock; t < std::min(T_.size(), (block + 1) * kBlock); ++t) {
+      for (int k = 0; k < 3; ++k) {
+        const Index a = T_[t][k], b = T_[t][(k + 1) % 3];
+        for (Index f = fan_begin_[a]; f < fan_begin_[a + 1]; ++f) {
+          const Index u = fan_[f];
+          if (static_cast<std::size_t>(u) == t) continue;
+          const Triangle& other = T_[u];
+          if (other[0] == b || other[1] == b || other[2] == b) {
+            neighbour_[t][k] = u;
+            break;
+          }
+        }
+      }
+    }
+  });
 }
 
 Index Old_mesh_walker::walk(Index t, const Vec2& q, std::size_t salt, std::size_t& steps) const {

@@ -495,6 +495,19 @@ std::array<Index, 2> first_flat_triangles(const std::vector<Vec2>& points, const
   return first;
 }
 
+Index first_inverted_triangle(const std::vector<Vec2>& points, const std::vector<Triangle>& triangles) {
+  // Python's check_mesh_limits, operation for operation (as first_flat_triangles).
+  for (std::size_t t = 0; t < triangles.size(); ++t) {
+    const Vec2& p0 = points[static_cast<std::size_t>(triangles[t][0])];
+    const Vec2& p1 = points[static_cast<std::size_t>(triangles[t][1])];
+    const Vec2& p2 = points[static_cast<std::size_t>(triangles[t][2])];
+    const double d1x = p1[0] - p0[0], d1y = p1[1] - p0[1];
+    const double d2x = p2[0] - p0[0], d2y = p2[1] - p0[1];
+    if (!(d1x * d2y - d1y * d2x > 0)) return static_cast<Index>(t);
+  }
+  return -1;
+}
+
 std::vector<Triangle> constrained_delaunay(const std::vector<Vec2>& points,
                                            const std::vector<Constraint_piece>& pieces) {
   Cdt cdt;

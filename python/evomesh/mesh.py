@@ -171,12 +171,9 @@ def check_mesh_limits(points: np.ndarray, triangles: np.ndarray) -> np.ndarray:
     if points.size and np.abs(points).max() > _MAX_COORDINATE:
         raise ValueError(f"point coordinates must be below {_MAX_COORDINATE:g} in magnitude")
     nn = _check_point_distances(points)
-    p = points[triangles]
-    d1 = p[:, 1] - p[:, 0]
-    d2 = p[:, 2] - p[:, 0]
-    inverted = d1[:, 0] * d2[:, 1] - d1[:, 1] * d2[:, 0] <= 0
-    if inverted.any():
-        raise ValueError(f"triangle {int(np.argmax(inverted))} has zero or negative area")
+    inverted = _core.first_inverted_triangle(points, triangles)
+    if inverted >= 0:
+        raise ValueError(f"triangle {inverted} has zero or negative area")
     _check_not_flat(points, triangles)
     return nn
 

@@ -53,6 +53,10 @@ void check_planar_mesh_cdt(const std::vector<Vec2>& points, const std::vector<Tr
 std::array<Index, 2> first_flat_triangles(const std::vector<Vec2>& points, const std::vector<Triangle>& triangles,
                                           double min_relative_height, double min_height_ulps);
 
+// The first triangle whose signed area (floating point, as Mesh's check in
+// Python) is not positive, -1 for none.
+Index first_inverted_triangle(const std::vector<Vec2>& points, const std::vector<Triangle>& triangles);
+
 // Orients every triangle counter-clockwise (exact predicate); throws Input_error
 // for a zero-area triangle. Returns the number of triangles flipped.
 std::size_t orient_triangles(const std::vector<Vec2>& points, std::vector<Triangle>& triangles);
