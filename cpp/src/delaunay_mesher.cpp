@@ -15,8 +15,8 @@ bool left_face(const Cdt& cdt, Vertex_handle a, Vertex_handle b, Face_handle& f,
 }
 
 void mark_domain(Cdt& cdt, const std::vector<Vertex_handle>& handles, const std::vector<Constraint_piece>& pieces) {
-  label_domain(cdt, handles, pieces, "refinement");
-  for (auto f = cdt.all_faces_begin(); f != cdt.all_faces_end(); ++f) f->set_in_domain(f->info() == domain_inside);
+  label_domain(cdt, handles, pieces, "refinement",
+               [](const Face_handle& f) { f->set_in_domain(f->info() == domain_inside); });
 }
 
 std::size_t run_mesher(Mesher& mesher, std::size_t budget, Refinement_report& report) {
@@ -76,6 +76,7 @@ Refined_mesh extract(Cdt& cdt, const std::vector<Vec2>& input_points, const std:
     result.f[o] = inserted[k]->info().f * scaling.from_unit;
   }
   result.source.resize(n_out, -1);
+  out.triangles.reserve(cdt.number_of_faces());
   for (auto f = cdt.finite_faces_begin(); f != cdt.finite_faces_end(); ++f) {
     if (f->is_in_domain()) {
       out.triangles.push_back({f->vertex(0)->info().out, f->vertex(1)->info().out, f->vertex(2)->info().out});
@@ -83,18 +84,22 @@ Refined_mesh extract(Cdt& cdt, const std::vector<Vec2>& input_points, const std:
   }
   // Constraint edges: boundary ones oriented with the domain on their left.
   std::vector<std::pair<Edge, std::uint8_t>> segments;
-  for (auto e = cdt.finite_edges_begin(); e != cdt.finite_edges_end(); ++e) {
-    const Face_handle f = e->first;
-    const int i = e->second;
-    if (!f->is_constrained(i)) continue;
-    const Face_handle g = f->neighbor(i);
-    const bool f_in = !cdt.is_infinite(f) && f->is_in_domain();
-    const bool g_in = !cdt.is_infinite(g) && g->is_in_domain();
-    const Index a = f->vertex(Cdt::ccw(i))->info().out, b = f->vertex(Cdt::cw(i))->info().out;
-    if (f_in && g_in) segments.push_back({{std::min(a, b), std::max(a, b)}, 0});
-    else if (f_in) segments.push_back({{a, b}, 1});
-    else if (g_in) segments.push_back({{b, a}, 1});
-    else throw std::runtime_error("refinement: a constraint lies outside the domain");
+  // (A sweep over the faces, each constraint edge from one side: the one with
+  // the smaller address when both are finite; sorted below.)
+  for (auto fit = cdt.finite_faces_begin(); fit != cdt.finite_faces_end(); ++fit) {
+    for (int i = 0; i < 3; ++i) {
+      const Face_handle f = fit;
+      if (!f->is_constrained(i)) continue;
+      const Face_handle g = f->neighbor(i);
+      if (!cdt.is_infinite(g) && &*g < &*f) continue;
+      const bool f_in = !cdt.is_infinite(f) && f->is_in_domain();
+      const bool g_in = !cdt.is_infinite(g) && g->is_in_domain();
+      const Index a = f->vertex(Cdt::ccw(i))->info().out, b = f->vertex(Cdt::cw(i))->info().out;
+      if (f_in && g_in) segments.push_back({{std::min(a, b), std::max(a, b)}, 0});
+      else if (f_in) segments.push_back({{a, b}, 1});
+      else if (g_in) segments.push_back({{b, a}, 1});
+      else throw std::runtime_error("refinement: a constraint lies outside the domain");
+    }
   }
   std::sort(segments.begin(), segments.end());
   for (const auto& s : segments) {

@@ -18,12 +18,13 @@ enum Domain_label : int { domain_unknown = 0, domain_inside = 1, domain_outside 
 // constraints are flood-filled from those seeds. A piece split by a point lying
 // on it is skipped (its sub-edges still bound the same regions). Throws
 // std::runtime_error naming `who` when the pieces do not bound a consistent domain.
-template <class Cdt, class Handles>
-void label_domain(Cdt& cdt, const Handles& handles, const std::vector<Constraint_piece>& pieces, const char* who) {
+// `each_face(f)` is called on every face once its label is final.
+template <class Cdt, class Handles, class Each_face>
+void label_domain(Cdt& cdt, const Handles& handles, const std::vector<Constraint_piece>& pieces, const char* who,
+                  Each_face each_face) {
   using Face_handle = typename Cdt::Face_handle;
   using Info = typename Cdt::Face::Info;
   const auto fail = [who](const char* what) { throw std::runtime_error(std::string(who) + ": " + what); };
-  for (auto f = cdt.all_faces_begin(); f != cdt.all_faces_end(); ++f) f->info() = Info(domain_unknown);
   std::vector<Face_handle> queue;
   auto seed = [&](Face_handle f, int label) {
     if (cdt.is_infinite(f)) label = domain_outside;
@@ -35,6 +36,7 @@ void label_domain(Cdt& cdt, const Handles& handles, const std::vector<Constraint
     }
   };
   for (auto f = cdt.all_faces_begin(); f != cdt.all_faces_end(); ++f) {
+    f->info() = Info(domain_unknown);
     if (cdt.is_infinite(f)) seed(f, domain_outside);
   }
   for (const auto& piece : pieces) {
@@ -62,7 +64,13 @@ void label_domain(Cdt& cdt, const Handles& handles, const std::vector<Constraint
   }
   for (auto f = cdt.all_faces_begin(); f != cdt.all_faces_end(); ++f) {
     if (f->info() == Info(domain_unknown)) fail("a region has no seed");
+    each_face(f);
   }
+}
+
+template <class Cdt, class Handles>
+void label_domain(Cdt& cdt, const Handles& handles, const std::vector<Constraint_piece>& pieces, const char* who) {
+  label_domain(cdt, handles, pieces, who, [](const auto&) {});
 }
 
 }  // namespace evomesh::detail
