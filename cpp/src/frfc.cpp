@@ -268,11 +268,12 @@ Evolve_result frfc(const Mesh_arrays& input, const std::vector<double>& delta, c
   early.points = std::vector<Vec2>();
   detail::release_free_memory();
   const bool early_started = options.quality && !mesh.geometry;
+  Old_mesh_start old_mesh(input, options.threads);
   triangulate_selection(std::move(selection), pieces, options.quality ? &quality : nullptr, result,
                         early_started ? &early.triangulation : nullptr, mesh.geometry.get());
   detail::release_free_memory();
   timer.lap(options.quality ? "quality" : "cdt");
-  finish_step(input, result, timer);
+  finish_step(input, result, timer, &old_mesh);
   add_step_counts(result, {{"n_input_points", mesh.points.size()},
                            {"n_segment_samples", on_segments.size()},
                            {"n_interior_samples", n_interior},

@@ -516,10 +516,11 @@ std::optional<Evolve_result> incremental_frfc(const Mesh_arrays& mesh, const std
   const auto pieces = pieces_along_chains(mesh, chains, on_segments, out_index);
   const Quality_options quality = options.quality_settings();
   early.work.wait();
+  Old_mesh_start old_mesh(mesh, options.threads);
   triangulate_selection(std::move(selection), pieces, options.quality ? &quality : nullptr, result,
                         options.quality ? &early.triangulation : nullptr, nullptr);
   timer.lap(options.quality ? "quality" : "cdt");
-  finish_step(mesh, result, timer);
+  finish_step(mesh, result, timer, &old_mesh);
   std::size_t n_quiet = 0;
   for (std::uint8_t q : quiet) n_quiet += q;
   std::vector<std::uint8_t> in_region(n, 0);

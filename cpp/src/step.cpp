@@ -209,8 +209,16 @@ void triangulate_selection(Selection selected, const std::vector<Constraint_piec
   stats.emplace_back("min_angle_y", angle.second[1]);
 }
 
-void finish_step(const Mesh_arrays& input, Evolve_result& result, detail::Stage_timer& timer) {
-  const Old_mesh_walker old_mesh(input, result.curve_reach);  // for both
+void finish_step(const Mesh_arrays& input, Evolve_result& result, detail::Stage_timer& timer, Old_mesh_start* start) {
+  std::unique_ptr<Old_mesh_walker> walker;
+  if (start != nullptr) {
+    start->work.wait();
+    walker = std::move(start->walker);
+    walker->set_outside(result.curve_reach);
+  } else {
+    walker = std::make_unique<Old_mesh_walker>(input, result.curve_reach);
+  }
+  const Old_mesh_walker& old_mesh = *walker;  // for both
   result.parents = parent_map(old_mesh, result.mesh, result.origin);
   carry_tags(old_mesh, result.origin, result.parents, result.mesh);
   timer.lap("parent_map");

@@ -36,6 +36,8 @@ class Old_mesh_walker {
   explicit Old_mesh_walker(const Mesh_arrays& old_mesh, double outside = 0);
 
   const Mesh_arrays& mesh() const { return mesh_; }
+  // The `outside` of the constructor, when known only after construction.
+  void set_outside(double outside) { outside_ = outside; }
 
   // One old triangle at old point v (-1 for a point of no triangle).
   Index triangle_at(Index v) const { return triangle_at_[v]; }

@@ -13,6 +13,7 @@
 
 #include "evomesh/boundary_geometry.hpp"
 #include "evomesh/options.hpp"
+#include "evomesh/parallel.hpp"
 #include "evomesh/parent_map.hpp"
 #include "evomesh/quality_pass.hpp"
 #include "evomesh/segment_chains.hpp"
@@ -158,9 +159,21 @@ void triangulate_selection(Selection selected, const std::vector<Constraint_piec
                            Early_triangulation* early = nullptr, const Boundary_geometry* geometry = nullptr);
 
 
+// The old mesh's walker for finish_step, built on the other thread while the
+// step triangulates (it reads only the input mesh; the quality pass is CGAL's
+// sequential mesher): started before triangulate_selection.
+struct Old_mesh_start {
+  std::unique_ptr<Old_mesh_walker> walker;
+  Background work;
+  Old_mesh_start(const Mesh_arrays& input, int threads) {
+    work.start([this, &input]() { walker = std::make_unique<Old_mesh_walker>(input); }, resolve_threads(threads) > 1);
+  }
+};
+
 // After triangulate_selection: the parent map of the new mesh in `input` (timed
-// as "parent_map") and the step's total time.
-void finish_step(const Mesh_arrays& input, Evolve_result& result, detail::Stage_timer& timer);
+// as "parent_map") and the step's total time; the walker from `start` if given.
+void finish_step(const Mesh_arrays& input, Evolve_result& result, detail::Stage_timer& timer,
+                 Old_mesh_start* start = nullptr);
 
 // Appends the counts (name, value) to result.stats, then the output's point and
 // triangle counts.
