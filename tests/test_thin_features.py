@@ -130,3 +130,32 @@ def test_slit_nn_is_taken_within_the_domain(slit: evomesh.Mesh) -> None:
         warnings.simplefilter("ignore", evomesh.QualityWarning)  # the paper's nn refines the slit's walls
         paper = evomesh.evolve(slit, 1.0, within_domain=False)
     assert (paper.lineage.old_nn[wall] <= GAP * (1 + 1e-12)).any()
+
+
+@pytest.mark.parametrize("delta", [0.5, 1.0, 2.0])
+def test_a_steps_output_carries_its_nn_within_the_domain(slit: evomesh.Mesh, delta: float) -> None:
+    """The step computes its output's nn beside the parent map (and the points
+    where nn within the domain grew, which the next step evaluates f at); they
+    equal what a fresh Mesh computes, also after a pickle round trip, and the
+    next step gives the same bits either way."""
+    import pickle
+
+    from evomesh import _core
+    from evomesh.mesh import _unpickle_mesh
+
+    new = evomesh.evolve(slit, delta, seed=1)
+    nn, grew = _core.nn_within_domain(new.points, new.triangles)
+    assert len(grew) > 0  # the slit's walls
+    np.testing.assert_array_equal(new.nn_spacing, nn)
+    np.testing.assert_array_equal(new._nn_grew, grew)
+    again = pickle.loads(pickle.dumps(new))
+    np.testing.assert_array_equal(again._nn_grew, grew)
+    # the same mesh without nn: the step computes it itself
+    bare = _unpickle_mesh(*new.__reduce__()[1][:-1])
+    assert bare._nn is None
+    a = evomesh.evolve(new, 1.0, seed=2)
+    b = evomesh.evolve(bare, 1.0, seed=2)
+    c = evomesh.evolve(again, 1.0, seed=2)
+    for other in (b, c):
+        np.testing.assert_array_equal(a.points, other.points)
+        np.testing.assert_array_equal(a.triangles, other.triangles)

@@ -210,6 +210,11 @@ py::dict evolve_result_dict(const Evolve_result& r) {
   py::dict out = mesh_dict(r.mesh, r.origin);
   out["input_f"] = vector_array(r.input_f);
   out["input_nn"] = vector_array(r.input_nn);
+  if (!r.output_nn.empty()) {
+    out["output_nn"] = vector_array(r.output_nn);
+    out["output_nn_grew"] = vector_array(r.output_nn_grew);
+    out["output_nn_grown"] = vector_array(r.output_nn_grown);
+  }
   out["parent_triangle"] = vector_array(r.parents.triangle);
   Float_array bary({static_cast<py::ssize_t>(r.parents.barycentric.size()), py::ssize_t{3}});
   if (!r.parents.barycentric.empty()) {

@@ -219,8 +219,31 @@ void finish_step(const Mesh_arrays& input, Evolve_result& result, detail::Stage_
     walker = std::make_unique<Old_mesh_walker>(input, result.curve_reach);
   }
   const Old_mesh_walker& old_mesh = *walker;  // for both
+  // The output's nn (for the output Mesh) on the other thread: the walks below
+  // are sequential. Both only read the output's points and triangles.
+  Background output_nn;
+  output_nn.start(
+      [&result]() {
+        try {
+          std::vector<double> nn = nn_spacing(result.mesh.points);
+          std::vector<double> within = nn;
+          const auto grew = keep_within_domain(result.mesh.points, result.mesh.triangles, within);
+          for (std::size_t i = 0; i < grew.size(); ++i) {
+            if (!grew[i]) continue;
+            result.output_nn_grew.push_back(static_cast<Index>(i));
+            result.output_nn_grown.push_back(within[i]);
+          }
+          result.output_nn = std::move(nn);
+        } catch (const std::exception&) {  // (duplicates: the caller's check says so)
+          result.output_nn.clear();
+          result.output_nn_grew.clear();
+          result.output_nn_grown.clear();
+        }
+      },
+      resolve_threads(0) > 1);
   result.parents = parent_map(old_mesh, result.mesh, result.origin);
   carry_tags(old_mesh, result.origin, result.parents, result.mesh);
+  output_nn.wait();
   timer.lap("parent_map");
   auto& stats = result.stats;
   double seconds = 0;

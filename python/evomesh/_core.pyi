@@ -129,6 +129,9 @@ class EvolveResult(TypedDict):
     origin: NDArray[np.int64]  # (n,), -1 for a new point
     input_f: NDArray[np.float64]  # (n_input,)
     input_nn: NDArray[np.float64]  # (n_input,)
+    output_nn: NotRequired[NDArray[np.float64]]  # (n,), Euclidean nn of the output points
+    output_nn_grew: NotRequired[NDArray[np.int64]]  # where nn within the domain is larger
+    output_nn_grown: NotRequired[NDArray[np.float64]]  # its value there
     parent_triangle: NDArray[np.int64]  # (n,), input triangle of a new point, -1 for kept ones
     segment_tags: NotRequired[NDArray[np.int64]]  # when the input had tags
     triangle_tags: NotRequired[NDArray[np.int64]]

@@ -341,8 +341,12 @@ class QualityWarning(UserWarning):
 def _wrap(result: dict[str, Any], old: Mesh | None = None) -> Mesh:
     # Every output satisfies the limits Mesh() puts on inputs, or the step fails
     # here, saying why (issue 9: a square of side 1e-70 refined step after step).
+    # The step brings its output's nn (Euclidean, and within the domain where that is larger).
+    known = result.get("output_nn")
+    if known is not None and len(known) != len(result["points"]):
+        known = None
     try:
-        nn = check_mesh_limits(result["points"], result["triangles"])
+        nn = check_mesh_limits(result["points"], result["triangles"], known)
     except ValueError as error:
         raise ValueError(
             f"the step's output is not a valid mesh in float64: {error}. The requested spacing is beyond what "
@@ -369,6 +373,11 @@ def _wrap(result: dict[str, Any], old: Mesh | None = None) -> Mesh:
     if old is not None and "parent_triangle" in result:
         lineage = Lineage(old.n_points, old.n_triangles, result["parent_triangle"], result["barycentric"],
                           result["input_nn"], result["input_f"])
+    nn_grew = None
+    if known is not None:
+        nn_grew = result["output_nn_grew"]
+        nn = nn.copy()
+        nn[nn_grew] = result["output_nn_grown"]
     return Mesh._trusted(
         result["points"],
         result["triangles"],
@@ -382,6 +391,7 @@ def _wrap(result: dict[str, Any], old: Mesh | None = None) -> Mesh:
         result.get("segment_tags"),
         result.get("triangle_tags"),
         result.get("required"),
+        nn_grew,
     )
 
 

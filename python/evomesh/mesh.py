@@ -107,9 +107,10 @@ def _check_topology(points: np.ndarray, triangles: np.ndarray) -> None:
         raise ValueError(f"points {a} and {b} are duplicates")
 
 
-def _check_point_distances(points: np.ndarray) -> np.ndarray:
-    """nn_M at every point (returned); raises when two points are too close."""
-    nn = _core.nn_spacing(points)
+def _check_point_distances(points: np.ndarray, nn: np.ndarray | None = None) -> np.ndarray:
+    """nn_M at every point (returned; `nn` when already known); raises when two points are too close."""
+    if nn is None:
+        nn = _core.nn_spacing(points)
     if nn.min() < _MIN_POINT_DISTANCE:
         k = int(np.argmin(nn))
         raise ValueError(
@@ -161,16 +162,17 @@ def _check_not_flat(points: np.ndarray, triangles: np.ndarray) -> None:
         )
 
 
-def check_mesh_limits(points: np.ndarray, triangles: np.ndarray) -> np.ndarray:
+def check_mesh_limits(points: np.ndarray, triangles: np.ndarray, nn: np.ndarray | None = None) -> np.ndarray:
     """Raise ValueError unless points and counter-clockwise triangles satisfy the
     numeric limits of :class:`Mesh`: coordinates within 1e75, no two points closer
     than 1e-75, every triangle positively oriented and not flat. O(n log n).
-    Returns nn_M at the points (computed on the way)."""
+    Returns nn_M at the points (computed on the way, unless given as `nn`: the
+    Euclidean distances of _core.nn_spacing)."""
     if points.size and not np.isfinite(points).all():
         raise ValueError("points contain NaN or infinite coordinates")
     if points.size and np.abs(points).max() > _MAX_COORDINATE:
         raise ValueError(f"point coordinates must be below {_MAX_COORDINATE:g} in magnitude")
-    nn = _check_point_distances(points)
+    nn = _check_point_distances(points, nn)
     inverted = _core.first_inverted_triangle(points, triangles)
     if inverted >= 0:
         raise ValueError(f"triangle {inverted} has zero or negative area")

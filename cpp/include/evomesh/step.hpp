@@ -78,6 +78,12 @@ struct Evolve_result {
   std::vector<double> input_nn;
   Parent_map parents;          // where every new point lies in the input mesh
   double curve_reach = 0;      // how far outside the input's domain curved boundaries put new points
+  // nn_M of the output points (finish_step, beside the parent map): Euclidean,
+  // and where nn within the domain exceeds it (keep_within_domain) its value
+  // there. Empty if it could not be computed (the caller checks the output).
+  std::vector<double> output_nn;
+  std::vector<Index> output_nn_grew;
+  std::vector<double> output_nn_grown;
   std::vector<std::pair<std::string, double>> stats;  // stage timings (s) and counts
 };
 
