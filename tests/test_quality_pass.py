@@ -239,3 +239,26 @@ def test_lower_min_angle_adds_fewer_points():
         assert min_angle(new) >= angle - ANGLE_TOLERANCE
         added.append(new.stats["quality_points_added"])
     assert added[0] <= added[1] <= added[2]
+
+
+def test_smallest_angle_stats_are_the_first_smallest_over_many_blocks() -> None:
+    """stats min_angle / min_angle_x / min_angle_y come from blocks of triangles
+    in parallel (2^15 each): the first smallest angle in triangle order, as one
+    sequential sweep finds it, for any thread count."""
+    mesh = evomesh.unit_square_mesh(50_000, seed=3)
+    results = [evomesh.evolve(mesh, 1.0, seed=0, threads=t) for t in (1, 2)]
+    new = results[0]
+    assert new.n_triangles > 3 * 2**15
+    p = new.points[new.triangles]  # (t, 3, 2)
+    angles = []
+    for k in range(3):
+        u = p[:, (k + 1) % 3] - p[:, k]
+        v = p[:, (k + 2) % 3] - p[:, k]
+        angles.append(np.degrees(np.arctan2(np.abs(u[:, 0] * v[:, 1] - u[:, 1] * v[:, 0]), (u * v).sum(axis=1))))
+    a = np.stack(angles, axis=1).ravel()  # triangle by triangle, corner by corner: the sweep's order
+    first = int(np.argmin(a))
+    best, where = a[first], p[first // 3].mean(axis=0)
+    for r in results:
+        assert r.stats["min_angle"] == pytest.approx(best, abs=1e-12)
+        np.testing.assert_allclose([r.stats["min_angle_x"], r.stats["min_angle_y"]], where, rtol=0, atol=1e-15)
+    assert results[0].stats["min_angle_x"] == results[1].stats["min_angle_x"]

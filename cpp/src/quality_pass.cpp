@@ -4,6 +4,7 @@
 #include <cmath>
 
 #include "evomesh/detail/delaunay_mesher.hpp"
+#include "evomesh/parallel.hpp"
 
 namespace evomesh {
 
@@ -149,9 +150,27 @@ Refined_mesh Early_triangulation::finish(const std::vector<Vec2>& points, const 
 }
 
 std::pair<double, Vec2> smallest_angle(const std::vector<Vec2>& points, const std::vector<Triangle>& triangles) {
+  // Blocks in parallel, each its first smallest angle; the first smallest of
+  // theirs in block order is the first smallest of all (any thread count).
+  constexpr std::size_t kBlock = 1 << 15;
+  const std::size_t n_blocks = (triangles.size() + kBlock - 1) / kBlock;
+  std::vector<std::pair<double, Vec2>> in_block(n_blocks);
+  parallel_for(n_blocks, 0, [&](std::size_t b) {
+    in_block[b] = smallest_angle_in(points, triangles, b * kBlock, std::min(triangles.size(), (b + 1) * kBlock));
+  });
+  std::pair<double, Vec2> best{180.0, Vec2{0, 0}};
+  for (const auto& candidate : in_block) {
+    if (candidate.first < best.first) best = candidate;
+  }
+  return best;
+}
+
+std::pair<double, Vec2> smallest_angle_in(const std::vector<Vec2>& points, const std::vector<Triangle>& triangles,
+                                          std::size_t begin, std::size_t end) {
   double best = 180.0;
   Vec2 where{0, 0};
-  for (const auto& t : triangles) {
+  for (std::size_t i = begin; i < end; ++i) {
+    const Triangle& t = triangles[i];
     for (int k = 0; k < 3; ++k) {
       const Vec2& p = points[t[k]];
       const Vec2& q = points[t[(k + 1) % 3]];

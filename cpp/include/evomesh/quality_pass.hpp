@@ -58,5 +58,8 @@ class Early_triangulation {
 // Smallest interior angle (degrees) over `triangles` and the centroid of the
 // triangle that has it.
 std::pair<double, Vec2> smallest_angle(const std::vector<Vec2>& points, const std::vector<Triangle>& triangles);
+// The same over triangles [begin, end) (the first smallest of them).
+std::pair<double, Vec2> smallest_angle_in(const std::vector<Vec2>& points, const std::vector<Triangle>& triangles,
+                                          std::size_t begin, std::size_t end);
 
 }  // namespace evomesh
