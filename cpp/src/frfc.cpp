@@ -242,6 +242,7 @@ Evolve_result frfc(const Mesh_arrays& input, const std::vector<double>& delta, c
   spacing.function.reset();  // the Apollonius graph: the radii of the candidates were its last use
   second_packing_pass(inside, packing);
   detail::release_free_memory();
+  early.insert_late(packing, mesh.points.size(), mesh.points.size() + on_segments.size());
   timer.lap("lfmis");
   std::size_t n_repairs = 0;
   const auto repair_points = spacing_repair_stage(mesh, *fans, delta, spacing, on_segments, demoted, options, packing,

@@ -496,6 +496,7 @@ std::optional<Evolve_result> incremental_frfc(const Mesh_arrays& mesh, const std
   timer.lap("sample_radii");
   drop_blocked_candidates(mesh, packing.centers, packing.radius, packing.kept, packing.blocker, options.threads, inside);
   second_pass_near(mesh, inside, safe, grid, magnitude, packing, n_packed_second);
+  early.insert_late(packing, n, n + on_segments.size());
   timer.lap("lfmis");
 
   // The spacing repair as in the full step: its gap repair visits every input

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <stdexcept>
 
 #include "evomesh/detail/delaunay_mesher.hpp"
 #include "evomesh/parallel.hpp"
@@ -107,8 +108,9 @@ Refined_mesh quality_triangulate(const std::vector<Vec2>& points, const std::vec
 struct Early_triangulation::Impl {
   Cdt cdt;
   Scaling scaling;
-  std::size_t n_first = 0;
+  std::size_t n_first = 0;  // points inserted so far
   bool started = false;
+  bool unscaled = false;  // a later batch did not scale exactly: finish() starts afresh
 };
 
 Early_triangulation::Early_triangulation() : impl_(std::make_unique<Impl>()) {}
@@ -122,12 +124,31 @@ void Early_triangulation::insert_first(const std::vector<Vec2>& first) {
   impl.started = true;
 }
 
+void Early_triangulation::insert_more(const std::vector<Vec2>& more) {
+  Impl& impl = *impl_;
+  if (!impl.started || impl.unscaled) return;
+  if (!scales_exactly(more.data(), more.data() + more.size(), impl.scaling)) {
+    impl.unscaled = true;
+    return;
+  }
+  std::vector<std::pair<Point_2, Vertex_info>> input;
+  input.reserve(more.size());
+  for (std::size_t k = 0; k < more.size(); ++k) {
+    Vertex_info info;
+    info.index = static_cast<Index>(impl.n_first + k);
+    input.emplace_back(Point_2(more[k][0] * impl.scaling.to_unit, more[k][1] * impl.scaling.to_unit), info);
+  }
+  impl.cdt.insert(input.begin(), input.end());
+  impl.n_first += more.size();
+  if (impl.cdt.number_of_vertices() != impl.n_first) throw Input_error("points contain duplicates");
+}
+
 Refined_mesh Early_triangulation::finish(const std::vector<Vec2>& points, const std::vector<Point_kind>& kind,
                                          const std::vector<Constraint_piece>& pieces, const Quality_options& options,
                                          const std::vector<std::uint8_t>& pinned) {
   Impl& impl = *impl_;
   options.validate();
-  if (!impl.started || impl.n_first > points.size() ||
+  if (!impl.started || impl.unscaled || impl.n_first > points.size() ||
       !scales_exactly(points.data() + impl.n_first, points.data() + points.size(), impl.scaling) ||
       unit_scaling(points).to_unit != impl.scaling.to_unit) {
     return quality_triangulate(points, kind, pieces, options, pinned);
@@ -143,7 +164,15 @@ Refined_mesh Early_triangulation::finish(const std::vector<Vec2>& points, const 
   cdt.insert(input.begin(), input.end());
   if (cdt.number_of_vertices() != points.size()) throw Input_error("points contain duplicates");
   std::vector<Vertex_handle> handles(points.size());
-  for (auto v = cdt.finite_vertices_begin(); v != cdt.finite_vertices_end(); ++v) handles[v->info().index] = v;
+  for (auto v = cdt.finite_vertices_begin(); v != cdt.finite_vertices_end(); ++v) {
+    const Index i = v->info().index;
+    // the batches inserted early are the first points of the final list
+    if (v->point().x() * impl.scaling.from_unit != points[i][0] ||
+        v->point().y() * impl.scaling.from_unit != points[i][1]) {
+      throw std::logic_error("Early_triangulation: a point inserted early is not the final point at its index");
+    }
+    handles[i] = v;
+  }
   Refined_mesh refined = quality_pass(cdt, handles, impl.scaling, points, kind, pieces, options, pinned);
   impl_ = std::make_unique<Impl>();  // the triangulation's memory goes before the step's next stage
   return refined;

@@ -43,6 +43,12 @@ class Early_triangulation {
   // usually scale alike; finish() checks).
   void insert_first(const std::vector<Vec2>& first);
 
+  // Inserts `more`, the points that follow those inserted so far (a second
+  // batch before finish(), possibly on another thread; the scaling stays the
+  // first batch's). finish() checks that every point inserted is the one the
+  // final point list has at its index.
+  void insert_more(const std::vector<Vec2>& more);
+
   // quality_triangulate(points, ...) where points starts with the `first` points.
   // Falls back to a triangulation from scratch when the rest does not scale
   // exactly with the first points' scaling.

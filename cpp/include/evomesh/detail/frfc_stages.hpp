@@ -32,17 +32,41 @@ struct Packing {
 // triangulation of them starts at once, on a second thread, beside the
 // interior sampling and packing (members destroyed in reverse: the thread is
 // joined before the points it reads go).
+//
+// After the second pass, the points it keeps (the interior candidates and the
+// deferred input points) are final too and come next in the output order
+// (select_output): insert_late adds them on the second thread while the
+// spacing repair runs; finish() inserts the rest (what the repair adds).
 struct Early_start {
   std::vector<Vec2> points;
   Early_triangulation triangulation;
   Background work;
+  bool started = false;
+  bool on_thread = false;
   Early_start(const Packing& packing, const Frfc_options& options, bool curved) {
     // (with curved boundaries, kept segment candidates move before the triangulation)
     if (!options.quality || curved) return;
     for (std::size_t c = 0; c < packing.kept_first.size(); ++c) {
       if (packing.kept_first[c]) points.push_back(packing.centers[c]);
     }
-    work.start([this]() { triangulation.insert_first(points); }, resolve_threads(options.threads) > 1);
+    started = true;
+    on_thread = resolve_threads(options.threads) > 1;
+    work.start([this]() { triangulation.insert_first(points); }, on_thread);
+  }
+  // `n_first_range`: input points and segment candidates (n + n_seg), whose
+  // kept ones after the first pass (the deferred input points) follow the
+  // interior candidates in the output order.
+  void insert_late(const Packing& packing, std::size_t n_points, std::size_t n_first_range) {
+    if (!started) return;
+    work.wait();
+    points.clear();
+    for (std::size_t c = n_first_range; c < packing.kept.size(); ++c) {
+      if (packing.kept[c]) points.push_back(packing.centers[c]);
+    }
+    for (std::size_t c = 0; c < n_points; ++c) {
+      if (packing.kept[c] && !packing.kept_first[c]) points.push_back(packing.centers[c]);
+    }
+    work.start([this]() { triangulation.insert_more(points); }, on_thread);
   }
 };
 
