@@ -477,32 +477,49 @@ std::vector<Index> packing_order(const std::vector<std::uint8_t>& priority_class
   // digit radix sort on (class, radius) of the indices in increasing order gives
   // it: the bits of a positive double order like the double, so the radius is
   // sorted in six 11-bit passes (passes whose digit is the same everywhere are
-  // skipped), then the class in one 8-bit pass.
+  // skipped), then the class in one 8-bit pass. Each pass counts and moves the
+  // items in chunks on parallel_for's default threads, each chunk's items of a
+  // digit after those of the chunks before: the same stable order.
   const std::size_t n = radii.size();
   struct Item {
     std::uint64_t radius_bits;
     std::uint64_t class_and_index;  // class in the top byte
   };
+  constexpr std::size_t kChunk = std::size_t{1} << 16;
+  const std::size_t n_chunks = std::max<std::size_t>(1, (n + kChunk - 1) / kChunk);
+  auto for_chunks = [&](auto body) {
+    parallel_for(n_chunks, 0, [&](std::size_t c) { body(c, c * kChunk, std::min(n, (c + 1) * kChunk)); });
+  };
   std::vector<Item> items(n), next(n);
-  for (std::size_t i = 0; i < n; ++i) {
-    if (!(radii[i] > 0)) throw Input_error("sphere radii must be > 0");
-    std::memcpy(&items[i].radius_bits, &radii[i], sizeof(double));
-    items[i].class_and_index = (std::uint64_t{priority_class[i]} << 56) | i;
-  }
-  std::vector<std::size_t> count(std::size_t{1} << 11);
-  auto pass = [&](auto digit_of, std::size_t n_buckets) {
-    std::fill(count.begin(), count.begin() + static_cast<std::ptrdiff_t>(n_buckets), 0);
-    for (const Item& item : items) ++count[digit_of(item)];
-    for (std::size_t d = 0; d < n_buckets; ++d) {
-      if (count[d] == n) return;  // one digit everywhere: the order stays
+  for_chunks([&](std::size_t, std::size_t begin, std::size_t end) {
+    for (std::size_t i = begin; i < end; ++i) {
+      if (!(radii[i] > 0)) throw Input_error("sphere radii must be > 0");
+      std::memcpy(&items[i].radius_bits, &radii[i], sizeof(double));
+      items[i].class_and_index = (std::uint64_t{priority_class[i]} << 56) | i;
     }
+  });
+  std::vector<std::size_t> count(n_chunks << 11);  // chunk c, digit d: count[c * n_buckets + d]
+  auto pass = [&](auto digit_of, std::size_t n_buckets) {
+    for_chunks([&](std::size_t c, std::size_t begin, std::size_t end) {
+      std::size_t* chunk_count = &count[c * n_buckets];
+      std::fill(chunk_count, chunk_count + n_buckets, 0);
+      for (std::size_t i = begin; i < end; ++i) ++chunk_count[digit_of(items[i])];
+    });
     std::size_t sum = 0;
     for (std::size_t d = 0; d < n_buckets; ++d) {
-      const std::size_t c = count[d];
-      count[d] = sum;
-      sum += c;
+      std::size_t total = 0;
+      for (std::size_t c = 0; c < n_chunks; ++c) total += count[c * n_buckets + d];
+      if (total == n) return;  // one digit everywhere: the order stays
+      for (std::size_t c = 0; c < n_chunks; ++c) {
+        const std::size_t k = count[c * n_buckets + d];
+        count[c * n_buckets + d] = sum;
+        sum += k;
+      }
     }
-    for (const Item& item : items) next[count[digit_of(item)]++] = item;
+    for_chunks([&](std::size_t c, std::size_t begin, std::size_t end) {
+      std::size_t* chunk_count = &count[c * n_buckets];
+      for (std::size_t i = begin; i < end; ++i) next[chunk_count[digit_of(items[i])]++] = items[i];
+    });
     items.swap(next);
   };
   for (int shift = 0; shift < 64; shift += 11) {
@@ -512,7 +529,9 @@ std::vector<Index> packing_order(const std::vector<std::uint8_t>& priority_class
   pass([](const Item& item) { return static_cast<std::size_t>(item.class_and_index >> 56); }, 256);
   std::vector<Index> order(n);
   constexpr std::uint64_t kIndexMask = (std::uint64_t{1} << 56) - 1;
-  for (std::size_t k = 0; k < n; ++k) order[k] = static_cast<Index>(items[k].class_and_index & kIndexMask);
+  for_chunks([&](std::size_t, std::size_t begin, std::size_t end) {
+    for (std::size_t k = begin; k < end; ++k) order[k] = static_cast<Index>(items[k].class_and_index & kIndexMask);
+  });
   return order;
 }
 

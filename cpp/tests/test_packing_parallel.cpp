@@ -11,6 +11,7 @@
 #include <numeric>
 #include <random>
 #include <string>
+#include <tuple>
 #include <vector>
 
 #include "check.hpp"
@@ -80,8 +81,10 @@ void compare(const System& s, const std::vector<Index>& order, std::size_t n_for
   std::size_t n_kept = 0;
   for (auto k : kept_ref) n_kept += k;
   const std::size_t m = order.size();
+  // (a parallel_for per block: blocks of 1 and 3 spheres on the small systems only)
   for (std::size_t block : {std::size_t{1}, std::size_t{3}, std::size_t{17}, std::size_t{64}, std::size_t{500},
                             m / 2 + 1, m + 5}) {
+    if (block < 10 && m > 400) continue;
     for (int threads : {1, 2, 3, 8}) {
       std::vector<Index> blocker;
       detail::Mis_block_counts counts;
@@ -160,6 +163,13 @@ void check_public_path(std::size_t n, std::uint64_t seed) {
   std::mt19937_64 rng(seed);
   const System s = make_system(n, Layout::clustered, 1.0, 2.0, rng);
   const std::vector<Index> order = packing_order(s.priority, s.radii);
+  // packing_order sorts in chunks of 2^16 on several threads: the order of (class, radius, index).
+  std::vector<Index> expected(n);
+  std::iota(expected.begin(), expected.end(), 0);
+  std::sort(expected.begin(), expected.end(), [&](Index a, Index b) {
+    return std::make_tuple(s.priority[a], s.radii[a], a) < std::make_tuple(s.priority[b], s.radii[b], b);
+  });
+  CHECK(order == expected) << "packing_order, n = " << n;
   std::vector<Index> blocker_1, blocker_2;
   const auto kept_1 = lexical_first_mis(s.centers, s.radii, order, 5, &blocker_1, 1);
   const auto kept_2 = lexical_first_mis(s.centers, s.radii, order, 5, &blocker_2, 2);
@@ -176,12 +186,14 @@ int main() {
     check_system(1, Layout::uniform, 1.0, 2.0, 1);
     check_system(2, Layout::uniform, 1.0, 2.0, 2);
     check_system(300, Layout::uniform, 1.0, 2.0, 3);
+    check_system(400, Layout::clustered, 2.0, 2.0, 11);
     check_system(1500, Layout::clustered, 1.0, 2.0, 4);
     check_system(1500, Layout::uniform, 4.0, 3.0, 5);   // dense: many conflicts per sphere
     check_system(1200, Layout::uniform, 30.0, 1.0, 6);  // every sphere overlaps very many: reruns
     check_system(1600, Layout::grid, 1.0, 0.0, 7);      // equal radii on a lattice: ties everywhere
     check_system(4000, Layout::uniform, 0.5, 4.0, 8);   // sparse, radii over four decades
     check_public_path(70000, 9);
+    check_public_path(300000, 10);
     std::printf("pass counts: %zu met, %zu blocked in block, %zu blockers in block, %zu reruns\n", g_total.met,
                 g_total.blocked_in_block, g_total.blocker_in_block, g_total.reruns);
     CHECK(g_total.blocked_in_block > 0) << "no sphere was rejected by one kept earlier in its block";
