@@ -48,7 +48,8 @@ std::vector<std::uint8_t> lexical_first_mis_in_blocks(const std::vector<Vec2>& c
                                                       bool permutation = true, Mis_block_counts* counts = nullptr);
 }  // namespace detail
 
-// Packing order: by increasing priority class, then increasing radius, then index.
+// Packing order: by increasing priority class, then increasing radius, then index
+// (a radix sort on parallel_for's default threads).
 std::vector<Index> packing_order(const std::vector<std::uint8_t>& priority_class,
                                  const std::vector<double>& radii);
 
