@@ -43,7 +43,8 @@ Packing first_packing_pass(const Mesh_arrays& mesh, const std::vector<double>& f
   const auto segment_classes = on_segments.classes(/*on_segment=*/true);
   classes.insert(classes.end(), segment_classes.begin(), segment_classes.end());
   packing.first_order = packing_order(classes, packing.radius);
-  packing.kept = lexical_first_mis(packing.centers, packing.radius, packing.first_order, n_forced, &packing.blocker);
+  packing.kept = lexical_first_mis(packing.centers, packing.radius, packing.first_order, n_forced, &packing.blocker,
+                                    options.threads);
   defer_demoted_points(classes, mesh.points.size(), packing);
   return packing;
 }

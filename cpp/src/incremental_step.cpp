@@ -323,7 +323,8 @@ Packing first_pass_near(const Mesh_arrays& mesh, const std::vector<double>& f, c
     member_classes[k] = classes[members[k]];
   }
   std::vector<Index> blocker;
-  const auto kept = lexical_first_mis(centers, radii, packing_order(member_classes, radii), n_forced, &blocker);
+  const auto kept =
+      lexical_first_mis(centers, radii, packing_order(member_classes, radii), n_forced, &blocker, options.threads);
   packing.kept.assign(n + n_seg, 0);
   packing.blocker.assign(n + n_seg, -1);
   for (std::size_t c = 0; c < n; ++c) packing.kept[c] = !member[c];  // safe and alone: kept

@@ -20,13 +20,36 @@ namespace evomesh {
 // `blocker` (optional) receives, for every rejected sphere, a kept sphere it
 // conflicts with (the first one the search meets), and -1 for kept spheres.
 // Preconditions: radii finite and > 0, centres finite.
+// The queries run on up to `threads` threads (0: parallel_for's default,
+// parallel.hpp); the result (kept flags and blockers) is the same for any count.
 std::vector<std::uint8_t> lexical_first_mis(const std::vector<Vec2>& centers,
                                             const std::vector<double>& radii,
                                             const std::vector<Index>& order,
                                             std::size_t n_forced = 0,
-                                            std::vector<Index>* blocker = nullptr);
+                                            std::vector<Index>* blocker = nullptr,
+                                            int threads = 0);
 
-// Packing order: by increasing priority class, then increasing radius, then index.
+namespace detail {
+// How often the parallel path's pass over a block took each way (packing.cpp, mis_in_blocks).
+struct Mis_block_counts {
+  std::size_t met = 0;               // pending conflicts listed by the frozen queries
+  std::size_t blocked_in_block = 0;  // frozen query free, rejected by a sphere kept earlier in the block
+  std::size_t blocker_in_block = 0;  // frozen query blocked, the blocker kept earlier in the block
+  std::size_t reruns = 0;            // too many pending conflicts: the sequential query
+};
+// For tests: lexical_first_mis (permutation: `order` lists every sphere) or
+// extend_packing's pass (otherwise: distinct spheres, the first n_forced of
+// them forced) through the parallel path with blocks of `block` spheres,
+// whatever the size and the thread count; block = 0: the sequential loop.
+std::vector<std::uint8_t> lexical_first_mis_in_blocks(const std::vector<Vec2>& centers,
+                                                      const std::vector<double>& radii,
+                                                      const std::vector<Index>& order, std::size_t n_forced,
+                                                      std::vector<Index>* blocker, int threads, std::size_t block,
+                                                      bool permutation = true, Mis_block_counts* counts = nullptr);
+}  // namespace detail
+
+// Packing order: by increasing priority class, then increasing radius, then index
+// (a radix sort on parallel_for's default threads).
 std::vector<Index> packing_order(const std::vector<std::uint8_t>& priority_class,
                                  const std::vector<double>& radii);
 
@@ -74,8 +97,9 @@ Packing_class new_point_class(bool on_segment, int round = -1);
 // of them kept; centers/radii hold the spheres of both passes, the first
 // pass's rejected spheres take no part). Returns the kept flags of all
 // spheres: the lexical-first MIS over both sets in the order first_order, more_order.
+// `threads` as for lexical_first_mis.
 std::vector<std::uint8_t> extend_packing(const std::vector<Vec2>& centers, const std::vector<double>& radii,
                                          const std::vector<Index>& first_order, const std::vector<std::uint8_t>& kept,
-                                         std::vector<Index> more_order);
+                                         std::vector<Index> more_order, int threads = 0);
 
 }  // namespace evomesh

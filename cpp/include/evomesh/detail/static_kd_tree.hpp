@@ -87,48 +87,77 @@ class Static_kd_tree {
     while ((n_ >> depth_) > leaf_size) ++depth_;
     n_leaves_ = std::size_t{1} << depth_;
     point_at_.resize(n_);
+    // The loops over points run in chunks on parallel_for's default threads
+    // (min and max are exact: the same box whatever the chunks).
+    const std::size_t n_chunks = (n_ + kChunk - 1) / kChunk;
+    auto chunk_range = [this](std::size_t c) { return std::pair{c * kChunk, std::min(n_, (c + 1) * kChunk)}; };
     if (n_ > 0) {
+      std::vector<Box> chunk_box(n_chunks);
+      parallel_for(n_chunks, 0, [&](std::size_t c) {
+        double lo_x = std::numeric_limits<double>::infinity(), lo_y = lo_x, hi_x = -lo_x, hi_y = -lo_x;
+        const auto [begin, end] = chunk_range(c);
+        for (std::size_t i = begin; i < end; ++i) {
+          const auto& p = points[i];
+          lo_x = std::min(lo_x, p[0]);
+          lo_y = std::min(lo_y, p[1]);
+          hi_x = std::max(hi_x, p[0]);
+          hi_y = std::max(hi_y, p[1]);
+        }
+        chunk_box[c] = {lo_x, lo_y, hi_x, hi_y};
+      });
       double lo_x = std::numeric_limits<double>::infinity(), lo_y = lo_x, hi_x = -lo_x, hi_y = -lo_x;
-      for (const auto& c : points) {
-        lo_x = std::min(lo_x, c[0]);
-        lo_y = std::min(lo_y, c[1]);
-        hi_x = std::max(hi_x, c[0]);
-        hi_y = std::max(hi_y, c[1]);
+      for (const Box& b : chunk_box) {
+        lo_x = std::min(lo_x, b.lo_x);
+        lo_y = std::min(lo_y, b.lo_y);
+        hi_x = std::max(hi_x, b.hi_x);
+        hi_y = std::max(hi_y, b.hi_y);
       }
       const double extent = std::max(hi_x - lo_x, hi_y - lo_y);
       const double scale = extent > 0 ? 1.0 / extent : 1.0;
       std::vector<Build_item> items(n_);
-      for (std::size_t i = 0; i < n_; ++i) {
-        items[i] = {static_cast<float>((points[i][0] - lo_x) * scale),
-                    static_cast<float>((points[i][1] - lo_y) * scale), static_cast<std::uint32_t>(i)};
-      }
+      parallel_for(n_chunks, 0, [&](std::size_t c) {
+        const auto [begin, end] = chunk_range(c);
+        for (std::size_t i = begin; i < end; ++i) {
+          items[i] = {static_cast<float>((points[i][0] - lo_x) * scale),
+                      static_cast<float>((points[i][1] - lo_y) * scale), static_cast<std::uint32_t>(i)};
+        }
+      });
+      // The root is split alone, the nodes of the next level side by side.
       const int top = std::min(depth_, 2);
       for (int level = 0; level < top; ++level) {
-        for (std::size_t node = std::size_t{1} << level; node < (std::size_t{2} << level); ++node) {
-          split(items, node, level);
-        }
+        const std::size_t first = std::size_t{1} << level;
+        parallel_for(first, 0, [&](std::size_t k) { split(items, first + k, level); });
       }
       const std::size_t first = std::size_t{1} << top;
       parallel_for(first, 0, [&](std::size_t k) { build(items, first + k, top); });
-      for (std::size_t k = 0; k < n_; ++k) point_at_[k] = items[k].index;
+      parallel_for(n_chunks, 0, [&](std::size_t c) {
+        const auto [begin, end] = chunk_range(c);
+        for (std::size_t k = begin; k < end; ++k) point_at_[k] = items[k].index;
+      });
     }
     if (tree_points) {
       tree_points->resize(n_);
-      for (std::size_t k = 0; k < n_; ++k) (*tree_points)[k] = points[point_at_[k]];
+      parallel_for(n_chunks, 0, [&](std::size_t c) {
+        const auto [begin, end] = chunk_range(c);
+        for (std::size_t k = begin; k < end; ++k) (*tree_points)[k] = points[point_at_[k]];
+      });
     }
     nodes_.resize(2 * n_leaves_);
-    for (std::size_t leaf = 0; leaf < n_leaves_; ++leaf) {
-      Box& box = nodes_[n_leaves_ + leaf];
-      box.lo_x = box.lo_y = std::numeric_limits<double>::infinity();
-      box.hi_x = box.hi_y = -std::numeric_limits<double>::infinity();
-      for (std::size_t k = leaf_begin(leaf); k < leaf_begin(leaf + 1); ++k) {
-        const Vec2& p = tree_points ? (*tree_points)[k] : points[point_at_[k]];
-        box.lo_x = std::min(box.lo_x, p[0]);
-        box.lo_y = std::min(box.lo_y, p[1]);
-        box.hi_x = std::max(box.hi_x, p[0]);
-        box.hi_y = std::max(box.hi_y, p[1]);
+    constexpr std::size_t kLeafChunk = 1024;
+    parallel_for((n_leaves_ + kLeafChunk - 1) / kLeafChunk, 0, [&](std::size_t c) {
+      for (std::size_t leaf = c * kLeafChunk; leaf < std::min(n_leaves_, (c + 1) * kLeafChunk); ++leaf) {
+        Box& box = nodes_[n_leaves_ + leaf];
+        box.lo_x = box.lo_y = std::numeric_limits<double>::infinity();
+        box.hi_x = box.hi_y = -std::numeric_limits<double>::infinity();
+        for (std::size_t k = leaf_begin(leaf); k < leaf_begin(leaf + 1); ++k) {
+          const Vec2& p = tree_points ? (*tree_points)[k] : points[point_at_[k]];
+          box.lo_x = std::min(box.lo_x, p[0]);
+          box.lo_y = std::min(box.lo_y, p[1]);
+          box.hi_x = std::max(box.hi_x, p[0]);
+          box.hi_y = std::max(box.hi_y, p[1]);
+        }
       }
-    }
+    });
     for (std::size_t node = n_leaves_ - 1; node >= 1; --node) {
       const Box& l = nodes_[2 * node];
       const Box& r = nodes_[2 * node + 1];
@@ -197,6 +226,7 @@ class Static_kd_tree {
     float x, y;
     std::uint32_t index;
   };
+  static constexpr std::size_t kChunk = std::size_t{1} << 16;  // points per parallel_for item
 
   // Positions [begin, end) of a node at `level` (root: 0).
   std::pair<std::size_t, std::size_t> range(std::size_t node, int level) const {
