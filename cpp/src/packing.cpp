@@ -303,7 +303,33 @@ void mis_in_blocks(Kept_sphere_tree& tree, const std::vector<Index>& order, std:
   constexpr std::uint64_t kRerun = kNoHit - 1;         // too many pending conflicts
   constexpr std::uint64_t kDone = kNoHit - 2;          // a kept conflict, no pending one: rejected, blocker written
   block = std::max<std::size_t>(block, 1);
-  std::vector<std::uint64_t> hit(std::min(block, m - n_forced));
+  if (n_forced == m) return;
+  // Blocks of at most `block` spheres whose radii lie within a factor
+  // kRadiusSpread: the pending radius prunes a frozen query like the kept
+  // spheres' radii prune the sequential one. (One radius for the whole block
+  // lets a few large spheres, from the end of a class or a coarse region,
+  // widen every query of the block: 16x the sequential time measured on a
+  // strongly graded refinement.) Any partition gives the same decisions.
+  constexpr double kRadiusSpread = 2.0;
+  std::vector<std::size_t> starts{n_forced};
+  {
+    double lo = tree.radius(tree.visit(n_forced)), hi = lo;
+    for (std::size_t k = n_forced + 1; k < m; ++k) {
+      const double r = tree.radius(tree.visit(k));
+      const double new_lo = std::min(lo, r), new_hi = std::max(hi, r);
+      if (k - starts.back() >= block || new_hi > kRadiusSpread * new_lo) {
+        starts.push_back(k);
+        lo = hi = r;
+      } else {
+        lo = new_lo;
+        hi = new_hi;
+      }
+    }
+  }
+  starts.push_back(m);
+  std::size_t longest = 0;
+  for (std::size_t i = 0; i + 1 < starts.size(); ++i) longest = std::max(longest, starts[i + 1] - starts[i]);
+  std::vector<std::uint64_t> hit(longest);
   std::vector<std::vector<std::pair<std::uint32_t, std::uint32_t>>> met((hit.size() + kChunk - 1) / kChunk);
   // Marking spheres pending (and unmarking them) goes in chunks too, in the
   // same parallel_for as the queries: a query may see the marks of the next
@@ -362,13 +388,12 @@ void mis_in_blocks(Kept_sphere_tree& tree, const std::vector<Index>& order, std:
     next_radius = -1;
     for (double r : chunk_radius) next_radius = std::max(next_radius, r);
   };
-  if (n_forced == m) return;
-  run(n_forced, n_forced, n_forced, std::min(m, n_forced + block));  // marks the first block
+  run(n_forced, n_forced, n_forced, starts[1]);  // marks the first block
   std::size_t a0 = n_forced;
-  for (std::size_t a = n_forced; a < m;) {
-    const std::size_t b = std::min(m, a + block);
+  for (std::size_t i = 0; i + 1 < starts.size(); ++i) {
+    const std::size_t a = starts[i], b = starts[i + 1];
     tree.set_pending_radius(next_radius);
-    run(a0, a, b, std::min(m, b + block));
+    run(a0, a, b, i + 2 < starts.size() ? starts[i + 2] : m);
     const std::size_t n_chunks = (b - a + kChunk - 1) / kChunk;
     for (std::size_t c = 0; c < n_chunks; ++c) {
       const auto& list = met[c];
@@ -400,7 +425,6 @@ void mis_in_blocks(Kept_sphere_tree& tree, const std::vector<Index>& order, std:
       }
     }
     a0 = a;
-    a = b;
   }
 }
 
