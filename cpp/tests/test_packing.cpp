@@ -9,8 +9,10 @@
 
 #include "check.hpp"
 #include "evomesh/packing.hpp"
+#include "sphere_systems.hpp"
 
 using namespace evomesh;
+using test::System;
 
 namespace {
 
@@ -18,35 +20,6 @@ namespace {
 bool conflict(const Vec2& a, double ra, const Vec2& b, double rb) {
   const double ex = a[0] - b[0], ey = a[1] - b[1], sum = ra + rb;
   return ex * ex + ey * ey < sum * sum;
-}
-
-struct System {
-  std::vector<Vec2> centers;
-  std::vector<double> radii;
-  std::vector<std::uint8_t> priority;
-};
-
-// Random spheres: uniform or clustered centres, radii spread over two decades,
-// some exactly touching pairs (|c1 - c2| = r1 + r2: no conflict) and equal radii.
-System make_system(std::size_t n, bool clustered, std::mt19937_64& rng) {
-  std::uniform_real_distribution<double> u(0.0, 1.0);
-  std::normal_distribution<double> g(0.0, 1.0);
-  System s;
-  const double scale = 1.0 / std::sqrt(static_cast<double>(n));
-  for (std::size_t i = 0; i < n; ++i) {
-    Vec2 c = clustered && i % 2 == 0 ? Vec2{0.5 + 0.05 * g(rng), 0.5 + 0.05 * g(rng)} : Vec2{u(rng), u(rng)};
-    double r = scale * std::pow(10.0, 2 * u(rng) - 1.5);
-    if (i % 11 == 3) r = scale * 0.25;  // ties in radius
-    if (i % 13 == 7 && i > 0) {          // touching the previous sphere, on a grid of 1/8 units
-      c = {s.centers[i - 1][0] + 0.125, s.centers[i - 1][1]};
-      s.radii[i - 1] = 0.0625;
-      r = 0.0625;
-    }
-    s.centers.push_back(c);
-    s.radii.push_back(r);
-    s.priority.push_back(static_cast<std::uint8_t>(u(rng) * 5));
-  }
-  return s;
 }
 
 // The reference: visit in order, keep unless a kept sphere conflicts.
@@ -74,16 +47,11 @@ std::vector<std::uint8_t> brute_mis(const System& s, const std::vector<Index>& o
 
 void check_case(std::size_t n, bool clustered, std::size_t n_forced, std::uint64_t seed) {
   std::mt19937_64 rng(seed);
-  const System s = make_system(n, clustered, rng);
+  const System s = test::make_system(n, clustered ? test::Layout::clustered : test::Layout::uniform, 1.0, 2.0, rng, 5);
 
   // packing_order: (class, radius, index) ascending.
   const std::vector<Index> order = packing_order(s.priority, s.radii);
-  std::vector<Index> expected(n);
-  std::iota(expected.begin(), expected.end(), 0);
-  std::sort(expected.begin(), expected.end(), [&](Index a, Index b) {
-    return std::make_tuple(s.priority[a], s.radii[a], a) < std::make_tuple(s.priority[b], s.radii[b], b);
-  });
-  CHECK(order == expected) << "packing_order, n = " << n;
+  CHECK(order == test::reference_order(s)) << "packing_order, n = " << n;
 
   std::vector<Index> blocker;
   const std::vector<std::uint8_t> kept = lexical_first_mis(s.centers, s.radii, order, n_forced, &blocker);

@@ -16,45 +16,14 @@
 
 #include "check.hpp"
 #include "evomesh/packing.hpp"
+#include "sphere_systems.hpp"
 
 using namespace evomesh;
+using test::Layout;
+using test::make_system;
+using test::System;
 
 namespace {
-
-struct System {
-  std::vector<Vec2> centers;
-  std::vector<double> radii;
-  std::vector<std::uint8_t> priority;
-};
-
-enum class Layout { uniform, clustered, grid };
-
-// n spheres in the unit square; radii `scale / sqrt(n)` times a factor spread
-// over `decades` decades (log-uniform), some ties, some exactly touching pairs;
-// `grid`: centres on a lattice (many equal distances and coordinates).
-System make_system(std::size_t n, Layout layout, double scale, double decades, std::mt19937_64& rng) {
-  std::uniform_real_distribution<double> u(0.0, 1.0);
-  std::normal_distribution<double> g(0.0, 1.0);
-  System s;
-  const double unit = scale / std::sqrt(static_cast<double>(n));
-  const auto side = static_cast<std::size_t>(std::ceil(std::sqrt(static_cast<double>(n))));
-  for (std::size_t i = 0; i < n; ++i) {
-    Vec2 c{u(rng), u(rng)};
-    if (layout == Layout::clustered && i % 3 != 0) c = {0.3 + 0.03 * g(rng), 0.6 + 0.03 * g(rng)};
-    if (layout == Layout::grid) c = {static_cast<double>(i % side) / side, static_cast<double>(i / side) / side};
-    double r = unit * std::pow(10.0, decades * (u(rng) - 0.5));
-    if (i % 11 == 3) r = unit;  // ties in radius
-    if (i % 13 == 7 && i > 0 && layout != Layout::grid) {  // touching the previous sphere (1/8 units apart)
-      c = {s.centers[i - 1][0] + 0.125, s.centers[i - 1][1]};
-      s.radii[i - 1] = 0.0625;
-      r = 0.0625;
-    }
-    s.centers.push_back(c);
-    s.radii.push_back(r);
-    s.priority.push_back(static_cast<std::uint8_t>(u(rng) * 4));
-  }
-  return s;
-}
 
 detail::Mis_block_counts g_total;
 
@@ -164,12 +133,7 @@ void check_public_path(std::size_t n, std::uint64_t seed) {
   const System s = make_system(n, Layout::clustered, 1.0, 2.0, rng);
   const std::vector<Index> order = packing_order(s.priority, s.radii);
   // packing_order sorts in chunks of 2^16 on several threads: the order of (class, radius, index).
-  std::vector<Index> expected(n);
-  std::iota(expected.begin(), expected.end(), 0);
-  std::sort(expected.begin(), expected.end(), [&](Index a, Index b) {
-    return std::make_tuple(s.priority[a], s.radii[a], a) < std::make_tuple(s.priority[b], s.radii[b], b);
-  });
-  CHECK(order == expected) << "packing_order, n = " << n;
+  CHECK(order == test::reference_order(s)) << "packing_order, n = " << n;
   std::vector<Index> blocker_1, blocker_2;
   const auto kept_1 = lexical_first_mis(s.centers, s.radii, order, 5, &blocker_1, 1);
   const auto kept_2 = lexical_first_mis(s.centers, s.radii, order, 5, &blocker_2, 2);
