@@ -266,8 +266,7 @@ Evolve_result frfc(const Mesh_arrays& input, const std::vector<double>& delta, c
   packing = Packing();
   out_index = std::vector<Index>();
   const Quality_options quality = options.quality_settings();
-  early.work.wait();
-  early.points = std::vector<Vec2>();
+  early.wait();
   detail::release_free_memory();
   const bool early_started = options.quality && !mesh.geometry;
   Old_mesh_start old_mesh(input, options.threads);

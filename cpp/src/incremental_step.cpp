@@ -517,7 +517,7 @@ std::optional<Evolve_result> incremental_frfc(const Mesh_arrays& mesh, const std
   selection.pin(mesh.required);
   const auto pieces = pieces_along_chains(mesh, chains, on_segments, out_index);
   const Quality_options quality = options.quality_settings();
-  early.work.wait();
+  early.wait();
   Old_mesh_start old_mesh(mesh, options.threads);
   triangulate_selection(std::move(selection), pieces, options.quality ? &quality : nullptr, result,
                         options.quality ? &early.triangulation : nullptr, nullptr);

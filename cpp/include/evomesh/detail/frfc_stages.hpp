@@ -38,9 +38,9 @@ struct Packing {
 // (select_output): insert_late adds them on the second thread while the
 // spacing repair runs; finish() inserts the rest (what the repair adds).
 struct Early_start {
-  std::vector<Vec2> points;
+  std::vector<Vec2> points, late_points;
   Early_triangulation triangulation;
-  Background work;
+  Background work, late_work;  // late_work waits for work (joins it), then inserts the late points
   bool started = false;
   bool on_thread = false;
   Early_start(const Packing& packing, const Frfc_options& options, bool curved) {
@@ -58,15 +58,25 @@ struct Early_start {
   // interior candidates in the output order.
   void insert_late(const Packing& packing, std::size_t n_points, std::size_t n_first_range) {
     if (!started) return;
-    work.wait();
-    points.clear();
     for (std::size_t c = n_first_range; c < packing.kept.size(); ++c) {
-      if (packing.kept[c]) points.push_back(packing.centers[c]);
+      if (packing.kept[c]) late_points.push_back(packing.centers[c]);
     }
     for (std::size_t c = 0; c < n_points; ++c) {
-      if (packing.kept[c] && !packing.kept_first[c]) points.push_back(packing.centers[c]);
+      if (packing.kept[c] && !packing.kept_first[c]) late_points.push_back(packing.centers[c]);
     }
-    work.start([this]() { triangulation.insert_more(points); }, on_thread);
+    late_work.start(
+        [this]() {
+          work.wait();  // the first batch (rethrows its error here, then from late_work)
+          triangulation.insert_more(late_points);
+        },
+        on_thread);
+  }
+  // Both batches inserted; their copies of the points freed.
+  void wait() {
+    late_work.wait();
+    work.wait();
+    points = std::vector<Vec2>();
+    late_points = std::vector<Vec2>();
   }
 };
 
