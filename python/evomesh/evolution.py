@@ -376,8 +376,7 @@ def _wrap(result: dict[str, Any], old: Mesh | None = None) -> Mesh:
     nn_grew = None
     if known is not None:
         nn_grew = result["output_nn_grew"]
-        nn = nn.copy()
-        nn[nn_grew] = result["output_nn_grown"]
+        nn[nn_grew] = result["output_nn_grown"]  # (the step's own array: nn within the domain)
     return Mesh._trusted(
         result["points"],
         result["triangles"],
