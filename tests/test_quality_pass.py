@@ -262,3 +262,27 @@ def test_smallest_angle_stats_are_the_first_smallest_over_many_blocks() -> None:
         assert r.stats["min_angle"] == pytest.approx(best, abs=1e-12)
         np.testing.assert_allclose([r.stats["min_angle_x"], r.stats["min_angle_y"]], where, rtol=0, atol=1e-15)
     assert results[0].stats["min_angle_x"] == results[1].stats["min_angle_x"]
+
+
+@given(st.integers(0, 2**16), st.floats(0.4, 2.5))
+def test_quality_figures_match_the_numpy_formulas(seed: int, delta: float) -> None:
+    """quality() sums up in C++ (one parallel pass) what triangle_angles and
+    radius_edge_ratios compute in numpy: same extremes, same mean, same first
+    worst triangle; the histogram may differ only for angles within rounding of
+    a bin edge (numpy's arccos is not the C library's)."""
+    from evomesh.mesh_quality import radius_edge_ratios, triangle_angles
+
+    mesh = evomesh.evolve(evomesh.unit_square_mesh(3000, seed=seed % 7), delta, seed=seed)
+    q = evomesh.quality(mesh)
+    angles = triangle_angles(mesh.points, mesh.triangles)
+    ratio = radius_edge_ratios(mesh.points, mesh.triangles)
+    assert q.min_angle == pytest.approx(angles.min(), abs=1e-11)
+    assert q.max_angle == pytest.approx(angles.max(), abs=1e-11)
+    assert q.max_radius_edge == pytest.approx(ratio.max(), rel=1e-12)
+    assert q.mean_radius_edge == pytest.approx(ratio.mean(), rel=1e-12)
+    per_triangle = angles.min(axis=1)
+    assert per_triangle[q.min_angle_triangle] == pytest.approx(per_triangle.min(), abs=1e-11)
+    hist, _ = np.histogram(angles, bins=q.angle_bins)
+    assert q.angle_histogram.sum() == 3 * mesh.n_triangles
+    near_edge = np.abs(angles - 10 * np.round(angles / 10)) < 1e-9
+    assert np.abs(q.angle_histogram - hist).sum() <= 2 * near_edge.sum()

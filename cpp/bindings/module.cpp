@@ -17,6 +17,7 @@
 #include "evomesh/options.hpp"
 #include "evomesh/packing.hpp"
 #include "evomesh/parallel.hpp"
+#include "evomesh/quality_pass.hpp"
 #include "evomesh/spacing.hpp"
 #include "evomesh/step.hpp"
 #include "evomesh/triangulation.hpp"
@@ -421,6 +422,25 @@ PYBIND11_MODULE(_core, m) {
       "{stage: seconds} for seconds_orient, seconds_segments, seconds_planar, seconds_classify). "
       "reference_planarity: the constrained Delaunay triangulation of every edge (check_planar_mesh_cdt, the "
       "check before issue 13) instead of the boundary-winding check; for tests and benchmarks.");
+
+  m.def(
+      "quality_summary",
+      [](const Float_array& points, const Int_array& triangles) {
+        auto pts = to_points(points);
+        auto tris = to_index_rows<3>(triangles, "triangles");
+        require_indices(tris, pts.size(), "triangles");
+        Quality_summary s;
+        {
+          py::gil_scoped_release release;
+          s = quality_summary(pts, tris);
+        }
+        py::array_t<std::int64_t> hist(18);
+        std::copy(s.histogram.begin(), s.histogram.end(), hist.mutable_data());
+        return py::make_tuple(s.min_angle, s.max_angle, s.max_radius_edge, s.sum_radius_edge, s.worst, hist);
+      },
+      py::arg("points"), py::arg("triangles"),
+      "(min angle, max angle, max radius-edge, sum of radius-edge, first triangle with the min angle, angle "
+      "histogram in 18 bins of 10 degrees): quality()'s figures in one parallel pass.");
 
   m.def(
       "first_inverted_triangle",

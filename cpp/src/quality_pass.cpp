@@ -194,6 +194,68 @@ std::pair<double, Vec2> smallest_angle(const std::vector<Vec2>& points, const st
   return best;
 }
 
+namespace {
+
+Quality_summary summary_of(const std::vector<Vec2>& points, const std::vector<Triangle>& triangles, std::size_t begin,
+                           std::size_t end) {
+  constexpr double kDegrees = 180.0 / kPi;
+  Quality_summary s;
+  for (std::size_t t = begin; t < end; ++t) {
+    const Vec2& a = points[triangles[t][0]];
+    const Vec2& b = points[triangles[t][1]];
+    const Vec2& c = points[triangles[t][2]];
+    const double l0 = std::sqrt((c[0] - b[0]) * (c[0] - b[0]) + (c[1] - b[1]) * (c[1] - b[1]));  // opposite a
+    const double l1 = std::sqrt((a[0] - c[0]) * (a[0] - c[0]) + (a[1] - c[1]) * (a[1] - c[1]));
+    const double l2 = std::sqrt((b[0] - a[0]) * (b[0] - a[0]) + (b[1] - a[1]) * (b[1] - a[1]));
+    auto angle = [&](double x, double y, double z) {
+      return std::acos(std::clamp((y * y + z * z - x * x) / (2 * y * z), -1.0, 1.0)) * kDegrees;
+    };
+    const double angles[3] = {angle(l0, l1, l2), angle(l1, l2, l0), angle(l2, l0, l1)};
+    const double smallest = std::min({angles[0], angles[1], angles[2]});
+    if (s.worst < 0 || smallest < s.min_angle) {
+      s.min_angle = smallest;
+      s.worst = static_cast<Index>(t);
+    }
+    for (double x : angles) {
+      s.max_angle = std::max(s.max_angle, x);
+      // numpy.histogram's bins [10 k, 10 (k + 1)), the last one closed
+      int bin = std::min(17, std::max(0, static_cast<int>(std::floor(x / 10.0))));
+      if (x < 10.0 * bin) --bin;
+      else if (bin < 17 && x >= 10.0 * (bin + 1)) ++bin;
+      ++s.histogram[bin];
+    }
+    const double d1x = b[0] - a[0], d1y = b[1] - a[1], d2x = c[0] - a[0], d2y = c[1] - a[1];
+    const double area = 0.5 * std::abs(d1x * d2y - d1y * d2x);
+    const double ratio = l2 * l0 * l1 / (4 * area) / std::min({l2, l0, l1});
+    s.max_radius_edge = std::max(s.max_radius_edge, ratio);
+    s.sum_radius_edge += ratio;
+  }
+  return s;
+}
+
+}  // namespace
+
+Quality_summary quality_summary(const std::vector<Vec2>& points, const std::vector<Triangle>& triangles) {
+  constexpr std::size_t kBlock = 1 << 15;
+  const std::size_t n_blocks = (triangles.size() + kBlock - 1) / kBlock;
+  std::vector<Quality_summary> part(n_blocks);
+  parallel_for(n_blocks, 0, [&](std::size_t b) {
+    part[b] = summary_of(points, triangles, b * kBlock, std::min(triangles.size(), (b + 1) * kBlock));
+  });
+  Quality_summary all;
+  for (const auto& p : part) {  // in block order: the first smallest angle, sums in a fixed order
+    if (p.worst >= 0 && (all.worst < 0 || p.min_angle < all.min_angle)) {
+      all.min_angle = p.min_angle;
+      all.worst = p.worst;
+    }
+    all.max_angle = std::max(all.max_angle, p.max_angle);
+    all.max_radius_edge = std::max(all.max_radius_edge, p.max_radius_edge);
+    all.sum_radius_edge += p.sum_radius_edge;
+    for (int k = 0; k < 18; ++k) all.histogram[k] += p.histogram[k];
+  }
+  return all;
+}
+
 std::pair<double, Vec2> smallest_angle_in(const std::vector<Vec2>& points, const std::vector<Triangle>& triangles,
                                           std::size_t begin, std::size_t end) {
   double best = 180.0;

@@ -183,6 +183,9 @@ def prepare_mesh(
     Returns (triangles, segments, segment_is_boundary, kind, n_flipped, segment_tags, {stage: seconds}).
     reference_planarity: the pre-issue-13 check (a constrained Delaunay triangulation of every edge)."""
 
+def quality_summary(
+    points: ArrayLike, triangles: ArrayLike
+) -> tuple[float, float, float, float, int, NDArray[np.int64]]: ...
 def first_inverted_triangle(points: ArrayLike, triangles: ArrayLike) -> int: ...
 def first_flat_triangles(
     points: ArrayLike, triangles: ArrayLike, min_relative_height: float, min_height_ulps: float

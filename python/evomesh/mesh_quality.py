@@ -7,6 +7,7 @@ from typing import Callable
 
 import numpy as np
 
+from evomesh import _core
 from evomesh.mesh import Mesh
 from evomesh.spacing_function import _require_mesh
 
@@ -88,23 +89,21 @@ def radius_edge_ratios(points: np.ndarray, triangles: np.ndarray) -> np.ndarray:
 
 
 def quality(mesh: Mesh) -> Quality:
-    """Angles and radius-edge ratios of every triangle, summarised."""
+    """Angles and radius-edge ratios of every triangle, summarised (one parallel
+    pass in C++ with the formulas of triangle_angles and radius_edge_ratios)."""
     _require_mesh(mesh)
-    angles = triangle_angles(mesh.points, mesh.triangles)
-    ratio = radius_edge_ratios(mesh.points, mesh.triangles)
+    min_angle, max_angle, max_ratio, sum_ratio, worst, hist = _core.quality_summary(mesh.points, mesh.triangles)
     bins = np.arange(0, 181, 10, dtype=float)
-    hist, _ = np.histogram(angles, bins=bins)
-    worst = int(np.argmin(angles.min(axis=1)))
     return Quality(
-        min_angle=float(angles.min()),
-        max_angle=float(angles.max()),
-        max_radius_edge=float(ratio.max()),
-        mean_radius_edge=float(ratio.mean()),
+        min_angle=float(min_angle),
+        max_angle=float(max_angle),
+        max_radius_edge=float(max_ratio),
+        mean_radius_edge=float(sum_ratio) / mesh.n_triangles,
         n_points=mesh.n_points,
         n_triangles=mesh.n_triangles,
         angle_histogram=hist,
         angle_bins=bins,
-        min_angle_triangle=worst,
+        min_angle_triangle=int(worst),
         min_angle_location=mesh.points[mesh.triangles[worst]].mean(axis=0),
     )
 

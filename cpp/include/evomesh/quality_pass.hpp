@@ -3,6 +3,8 @@
 // triangulation of the kept points.
 #pragma once
 
+#include <array>
+#include <cstdint>
 #include <memory>
 #include <utility>
 #include <vector>
@@ -64,6 +66,17 @@ class Early_triangulation {
 // Smallest interior angle (degrees) over `triangles` and the centroid of the
 // triangle that has it.
 std::pair<double, Vec2> smallest_angle(const std::vector<Vec2>& points, const std::vector<Triangle>& triangles);
+// Python's quality() figures in one parallel pass (mesh_quality.py's formulas:
+// angles by the law of cosines from the edge lengths, clipped; radius-edge =
+// circumradius / shortest edge): the smallest and largest angle, the first
+// triangle with the smallest angle, the largest and the sum of the radius-edge
+// ratios, and the counts of the angles in 18 bins of 10 degrees.
+struct Quality_summary {
+  double min_angle = 180, max_angle = 0, max_radius_edge = 0, sum_radius_edge = 0;
+  Index worst = -1;
+  std::array<std::int64_t, 18> histogram{};
+};
+Quality_summary quality_summary(const std::vector<Vec2>& points, const std::vector<Triangle>& triangles);
 // The same over triangles [begin, end) (the first smallest of them).
 std::pair<double, Vec2> smallest_angle_in(const std::vector<Vec2>& points, const std::vector<Triangle>& triangles,
                                           std::size_t begin, std::size_t end);
