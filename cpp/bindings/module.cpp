@@ -75,6 +75,15 @@ std::vector<T> to_vector(const py::array_t<T, py::array::c_style | py::array::fo
   return std::vector<T>(a.data(), a.data() + a.shape(0));
 }
 
+// Points and triangles whose indices are checked against them.
+std::pair<std::vector<Vec2>, std::vector<Triangle>> to_points_and_triangles(const Float_array& points,
+                                                                           const Int_array& triangles) {
+  auto pts = to_points(points);
+  auto tris = to_index_rows<3>(triangles, "triangles");
+  require_indices(tris, pts.size(), "triangles");
+  return {std::move(pts), std::move(tris)};
+}
+
 Float_array points_array(const std::vector<Vec2>& pts) {
   Float_array out({static_cast<py::ssize_t>(pts.size()), py::ssize_t{2}});
   if (!pts.empty()) std::memcpy(out.mutable_data(), pts.data(), pts.size() * sizeof(Vec2));
@@ -426,9 +435,7 @@ PYBIND11_MODULE(_core, m) {
   m.def(
       "quality_summary",
       [](const Float_array& points, const Int_array& triangles) {
-        auto pts = to_points(points);
-        auto tris = to_index_rows<3>(triangles, "triangles");
-        require_indices(tris, pts.size(), "triangles");
+        auto [pts, tris] = to_points_and_triangles(points, triangles);
         Quality_summary s;
         {
           py::gil_scoped_release release;
@@ -445,9 +452,7 @@ PYBIND11_MODULE(_core, m) {
   m.def(
       "first_inverted_triangle",
       [](const Float_array& points, const Int_array& triangles) {
-        auto pts = to_points(points);
-        auto tris = to_index_rows<3>(triangles, "triangles");
-        require_indices(tris, pts.size(), "triangles");
+        auto [pts, tris] = to_points_and_triangles(points, triangles);
         py::gil_scoped_release release;
         return first_inverted_triangle(pts, tris);
       },
@@ -457,9 +462,7 @@ PYBIND11_MODULE(_core, m) {
   m.def(
       "first_flat_triangles",
       [](const Float_array& points, const Int_array& triangles, double min_relative_height, double min_height_ulps) {
-        auto pts = to_points(points);
-        auto tris = to_index_rows<3>(triangles, "triangles");
-        require_indices(tris, pts.size(), "triangles");
+        auto [pts, tris] = to_points_and_triangles(points, triangles);
         std::array<Index, 2> first;
         {
           py::gil_scoped_release release;
@@ -499,9 +502,7 @@ PYBIND11_MODULE(_core, m) {
   m.def(
       "nn_within_domain",
       [](const Float_array& points, const Int_array& triangles, std::optional<Float_array> euclidean) {
-        auto pts = to_points(points);
-        auto tris = to_index_rows<3>(triangles, "triangles");
-        require_indices(tris, pts.size(), "triangles");
+        auto [pts, tris] = to_points_and_triangles(points, triangles);
         std::vector<double> nn;
         if (euclidean) {
           nn = to_vector<double>(*euclidean);
@@ -626,9 +627,7 @@ PYBIND11_MODULE(_core, m) {
   m.def(
       "locate_points",
       [](const Float_array& points, const Int_array& triangles, const Float_array& queries) {
-        auto pts = to_points(points);
-        auto tris = to_index_rows<3>(triangles, "triangles");
-        require_indices(tris, pts.size(), "triangles");
+        auto [pts, tris] = to_points_and_triangles(points, triangles);
         auto q = to_points(queries, "queries");
         std::vector<Index> t;
         std::vector<std::array<double, 3>> bary;
