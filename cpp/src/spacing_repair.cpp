@@ -37,7 +37,8 @@ template <class Delaunay>
 void repair_gaps(const Mesh_arrays& mesh, const Triangle_fans& fans, const std::vector<double>& delta,
                  const std::vector<double>& nn, double gap_ratio, double refine_ratio, std::uint64_t seed,
                  const std::vector<std::uint8_t>& demoted, const std::vector<std::uint8_t>& kept_centre,
-                 const detail::Point_tree& tree, int threads, Delaunay& added_dt, std::vector<Vec2>& added, std::size_t& n_added) {
+                 const detail::Point_tree& tree, int threads, Delaunay& added_dt, std::vector<Vec2>& added,
+                 std::size_t& n_added) {
   constexpr double kTwoPi = 6.283185307179586;
   if (!(gap_ratio > 0) && !(refine_ratio > 0)) return;
   using Vertex_handle = typename Delaunay::Vertex_handle;
@@ -76,25 +77,23 @@ void repair_gaps(const Mesh_arrays& mesh, const Triangle_fans& fans, const std::
   // computations of that distance apart): most points of a step, found from
   // their triangle fans without a tree query.
   const std::size_t n = mesh.points.size();
-  std::vector<std::uint8_t> open(n, 1);
+  std::vector<std::uint8_t> open(n, 0);
   constexpr std::size_t kChunk = 4096;
   parallel_for((n + kChunk - 1) / kChunk, threads, [&](std::size_t chunk) {
     for (std::size_t p = chunk * kChunk; p < std::min(n, (chunk + 1) * kChunk); ++p) {
-      if (!kept_centre[p]) continue;
-      const double bound2 = target2(p, true);
-      const Vec2& a = mesh.points[p];
-      for (Index k = fans.xadj[p]; k < fans.xadj[p + 1] && open[p]; ++k) {
-        for (Index q : mesh.triangles[fans.adj[k]]) {
-          if (static_cast<std::size_t>(q) == p || !kept_centre[q]) continue;
-          const double dx = a[0] - mesh.points[q][0], dy = a[1] - mesh.points[q][1];
-          if ((dx * dx + dy * dy) * (1 + 1e-9) <= bound2) open[p] = 0;
+      bool certified = false;
+      if (kept_centre[p]) {
+        const double bound2 = target2(p, true);
+        const Vec2& a = mesh.points[p];
+        for (Index k = fans.xadj[p]; k < fans.xadj[p + 1] && !certified; ++k) {
+          for (Index q : mesh.triangles[fans.adj[k]]) {
+            if (static_cast<std::size_t>(q) == p || !kept_centre[q]) continue;
+            const double dx = a[0] - mesh.points[q][0], dy = a[1] - mesh.points[q][1];
+            certified = certified || (dx * dx + dy * dy) * (1 + 1e-9) <= bound2;
+          }
         }
       }
-    }
-  });
-  parallel_for((n + kChunk - 1) / kChunk, threads, [&](std::size_t chunk) {
-    for (std::size_t p = chunk * kChunk; p < std::min(n, (chunk + 1) * kChunk); ++p) {
-      if (!open[p]) continue;
+      if (certified) continue;
       const auto around = tree.squared_two_nearest(mesh.points[p]);
       open[p] = around[1] > target2(p, around[0] == 0);
     }
