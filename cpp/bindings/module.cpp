@@ -474,6 +474,27 @@ PYBIND11_MODULE(_core, m) {
       "(first thin triangle, first coarse triangle), -1 for none: Mesh()'s flatness limits (mesh.py).");
 
   m.def(
+      "first_pinched_boundary",
+      [](const Float_array& points, const Int_array& boundary, const Byte_array& corner, double min_ulps) {
+        auto pts = to_points(points);
+        auto edges = to_index_rows<2>(boundary, "boundary");
+        require_indices(edges, pts.size(), "boundary");
+        if (corner.ndim() != 1 || static_cast<std::size_t>(corner.shape(0)) != pts.size()) {
+          throw Input_error("corner must have one entry per point");
+        }
+        std::vector<char> is_corner(corner.data(), corner.data() + corner.shape(0));
+        std::array<Index, 2> first;
+        {
+          py::gil_scoped_release release;
+          first = first_pinched_boundary(pts, edges, is_corner, min_ulps);
+        }
+        return py::make_tuple(first[0], first[1]);
+      },
+      py::arg("points"), py::arg("boundary"), py::arg("corner"), py::arg("min_ulps"),
+      "(boundary edge, corner) of the first place where a boundary corner not at the edge's ends lies closer to it "
+      "than min_ulps units of rounding, (-1, -1) for none: Mesh()'s limit on gaps outside the domain (mesh.py).");
+
+  m.def(
       "nn_spacing",
       [](const Float_array& points, std::optional<Int_array> triangles, std::optional<Float_array> euclidean) {
         auto pts = to_points(points);

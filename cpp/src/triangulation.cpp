@@ -13,6 +13,7 @@
 #include "evomesh/detail/domain.hpp"
 #include "evomesh/detail/insert_points.hpp"
 #include "evomesh/detail/spatial_order.hpp"
+#include "evomesh/detail/static_kd_tree.hpp"
 #include "evomesh/kernel.hpp"
 
 namespace evomesh {
@@ -493,6 +494,79 @@ std::array<Index, 2> first_flat_triangles(const std::vector<Vec2>& points, const
     if (first[1] < 0 && height < min_height_ulps * rounding) first[1] = static_cast<Index>(t);
   }
   return first;
+}
+
+std::array<Index, 2> first_pinched_boundary(const std::vector<Vec2>& points, const std::vector<Edge>& boundary,
+                                            const std::vector<char>& corner, double min_ulps) {
+  constexpr double eps = std::numeric_limits<double>::epsilon();
+  std::vector<Index> vertex;  // the boundary corners, each once
+  {
+    std::vector<char> seen(points.size(), 0);
+    for (const auto& e : boundary) {
+      for (Index v : e) {
+        if (!seen[static_cast<std::size_t>(v)] && corner[static_cast<std::size_t>(v)]) vertex.push_back(v);
+        seen[static_cast<std::size_t>(v)] = 1;
+      }
+    }
+  }
+  std::vector<Vec2> local(vertex.size());
+  for (std::size_t k = 0; k < vertex.size(); ++k) local[k] = points[static_cast<std::size_t>(vertex[k])];
+  if (local.empty()) return {-1, -1};
+  std::vector<Vec2> tree_points;
+  const detail::Static_kd_tree<> tree(local, 8, tree_points);
+  const auto& point_at = tree.point_at();
+  const auto reach_of = [](const Vec2& p) { return std::max(std::abs(p[0]), std::abs(p[1])); };
+  for (std::size_t s = 0; s < boundary.size(); ++s) {
+    const Vec2& a = points[static_cast<std::size_t>(boundary[s][0])];
+    const Vec2& b = points[static_cast<std::size_t>(boundary[s][1])];
+    const double dx = b[0] - a[0], dy = b[1] - a[1];
+    const double length = std::hypot(dx, dy);
+    const double reach_ab = std::max(reach_of(a), reach_of(b));
+    Index best = -1;
+    double best_ratio = min_ulps;
+    tree.depth_first(1, [&](std::size_t m, detail::Kd_stack& stack) {
+      const detail::Box& box = tree.node(m);
+      // Generous pruning (twice the tolerance at the box's largest coordinate):
+      // it must never skip a point that the exact test below would report.
+      const double reach = std::max({reach_ab, std::abs(box.lo_x), std::abs(box.hi_x), std::abs(box.lo_y),
+                                     std::abs(box.hi_y)});
+      const double slack = 2 * min_ulps * eps * reach;
+      if (box.lo_x > std::max(a[0], b[0]) + slack || box.hi_x < std::min(a[0], b[0]) - slack ||
+          box.lo_y > std::max(a[1], b[1]) + slack || box.hi_y < std::min(a[1], b[1]) - slack) {
+        return false;
+      }
+      if (length > 0) {  // the box's corners against the edge's line
+        double lo = std::numeric_limits<double>::infinity(), hi = -lo;
+        for (double x : {box.lo_x, box.hi_x}) {
+          for (double y : {box.lo_y, box.hi_y}) {
+            const double side = (dx * (y - a[1]) - dy * (x - a[0])) / length;
+            lo = std::min(lo, side);
+            hi = std::max(hi, side);
+          }
+        }
+        if (lo > slack || hi < -slack) return false;
+      }
+      if (!tree.is_leaf(m)) {
+        stack.push_children(m);
+        return false;
+      }
+      const std::size_t leaf = tree.leaf(m);
+      for (std::size_t k = tree.leaf_begin(leaf); k < tree.leaf_begin(leaf + 1); ++k) {
+        const Index v = vertex[point_at[k]];
+        if (v == boundary[s][0] || v == boundary[s][1]) continue;
+        const Vec2& q = tree_points[k];
+        const double rounding = eps * std::max(reach_ab, reach_of(q));
+        const double ratio = distance_to_segment(q, a, b) / rounding;
+        if (ratio < best_ratio || (ratio == best_ratio && best >= 0 && v < best)) {
+          best_ratio = ratio;
+          best = v;
+        }
+      }
+      return false;
+    });
+    if (best >= 0) return {static_cast<Index>(s), best};
+  }
+  return {-1, -1};
 }
 
 Index first_inverted_triangle(const std::vector<Vec2>& points, const std::vector<Triangle>& triangles) {

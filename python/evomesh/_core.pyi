@@ -191,6 +191,10 @@ def first_flat_triangles(
     points: ArrayLike, triangles: ArrayLike, min_relative_height: float, min_height_ulps: float
 ) -> tuple[int, int]: ...
 
+def first_pinched_boundary(
+    points: ArrayLike, boundary: ArrayLike, corner: ArrayLike, min_ulps: float
+) -> tuple[int, int]: ...
+
 def nn_spacing(
     points: ArrayLike, triangles: ArrayLike | None = None, euclidean: ArrayLike | None = None
 ) -> NDArray[np.float64]: ...

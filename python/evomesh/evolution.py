@@ -11,7 +11,7 @@ import numpy as np
 
 from evomesh import _core
 from evomesh.geometry import as_geometry
-from evomesh.mesh import Lineage, Mesh, check_mesh_limits
+from evomesh.mesh import Lineage, Mesh, check_boundary_not_pinched, check_mesh_limits
 from evomesh.spacing_function import _require_mesh, as_delta, delta_from_size
 
 __all__ = ["evolve", "delaunay_refine", "make_options", "FRFC_DEFAULTS", "DRFC_DEFAULTS", "FrfcOptions", "DrfcOptions",
@@ -347,6 +347,8 @@ def _wrap(result: dict[str, Any], old: Mesh | None = None) -> Mesh:
         known = None
     try:
         nn = check_mesh_limits(result["points"], result["triangles"], known)
+        check_boundary_not_pinched(result["points"], result["segments"], result["segment_is_boundary"],
+                                   result["kind"])
     except ValueError as error:
         raise ValueError(
             f"the step's output is not a valid mesh in float64: {error}. The requested spacing is beyond what "

@@ -162,6 +162,34 @@ def _check_not_flat(points: np.ndarray, triangles: np.ndarray) -> None:
         )
 
 
+def check_boundary_not_pinched(points: np.ndarray, segments: np.ndarray, is_boundary: np.ndarray,
+                               kind: np.ndarray) -> None:
+    """Raise ValueError where the domain nearly touches itself across its outside:
+    a boundary corner closer to a boundary edge (other than the edge's own ends)
+    than _MIN_HEIGHT_ULPS units of rounding of their coordinates, the limit every
+    triangle meets. No triangle witnesses such a gap, and a step's segment
+    splits would land on or across the point. Corners suffice (two straight
+    chains come closest at an end of one), and a step keeps them and the chains'
+    lines, so its output passes when its input does. O(n log n) on the boundary
+    (_core.first_pinched_boundary)."""
+    boundary = segments[np.asarray(is_boundary, dtype=bool)]
+    corner = (np.asarray(kind) == PointKind.CORNER).astype(np.uint8)
+    edge, point = _core.first_pinched_boundary(points, boundary, corner, _MIN_HEIGHT_ULPS)
+    if edge < 0:
+        return
+    a, b = (int(v) for v in boundary[edge])
+    p, q, r = points[point], points[a], points[b]
+    along = np.clip(np.dot(p - q, r - q) / np.dot(r - q, r - q), 0.0, 1.0)
+    gap = float(np.hypot(*(p - q - along * (r - q))))
+    rounding = np.finfo(float).eps * float(np.abs(np.stack([p, q, r])).max())
+    raise ValueError(
+        f"the domain nearly touches itself: boundary corner {point} is {gap:.3g} from boundary edge ({a}, {b}), "
+        f"{gap / rounding:.3g} units of rounding of their coordinates (at least {_MIN_HEIGHT_ULPS} are needed, as "
+        "for the height of a triangle); move the corner away from the edge, or join them (make the corner a "
+        "vertex of the edge)"
+    )
+
+
 def check_mesh_limits(points: np.ndarray, triangles: np.ndarray, nn: np.ndarray | None = None) -> np.ndarray:
     """Raise ValueError unless points and counter-clockwise triangles satisfy the
     numeric limits of :class:`Mesh`: coordinates within 1e75, no two points closer
@@ -229,9 +257,13 @@ class Mesh:
     ValueError
         For any malformed mesh: wrong shapes, fewer than 3 points or no
         triangle, NaN, infinite or out-of-range coordinates, indices out of
-        range, zero-area (collinear) or nearly flat (height below 1e-10 of the
-        longest edge), repeated, overlapping or inverted triangles, duplicate or orphan points, an edge shared by more than two
-        triangles, a segment that is not a mesh edge, bad ``kind`` or ``origin``.
+        range, zero-area (collinear) or nearly flat triangles (height below
+        1e-10 of the longest edge, or below 1024 units of rounding of the
+        coordinates), a domain that nearly touches itself (a boundary point
+        within 1024 units of rounding of a boundary edge it is not an end of),
+        repeated, overlapping or inverted triangles, duplicate or orphan
+        points, an edge shared by more than two triangles, a segment that is
+        not a mesh edge, bad ``kind`` or ``origin``.
         The caller's arrays are never modified.
     """
 
@@ -299,6 +331,7 @@ class Mesh:
             # geometry (where the boundary turns, chain ends) stays a corner, so
             # a stale or wrong kind cannot change the domain (issue 9).
             kinds = np.where(computed_kind == PointKind.CORNER, np.uint8(PointKind.CORNER), kinds.astype(np.uint8))
+        check_boundary_not_pinched(pts, segs, boundary, kinds)
         if origin is None:
             org = np.full(n, -1, dtype=np.int64)
         else:

@@ -53,6 +53,24 @@ void check_planar_mesh_cdt(const std::vector<Vec2>& points, const std::vector<Tr
 std::array<Index, 2> first_flat_triangles(const std::vector<Vec2>& points, const std::vector<Triangle>& triangles,
                                           double min_relative_height, double min_height_ulps);
 
+// Where the domain nearly touches itself across its outside: the first boundary
+// edge (index into `boundary`) and the corner (a point with corner[v] != 0 on
+// the boundary) closest to it among those not at its ends that lie closer to it
+// than min_ulps units of rounding of the largest coordinate of the three
+// points; {-1, -1} for none. Mesh()'s flatness limit asks this much of every
+// triangle, but no triangle witnesses a gap outside the domain, and there
+// CGAL's mesher splits an edge at a rounded midpoint that can land on or across
+// the near point (crossing constraints, duplicates). Corners suffice: two
+// straight chains of boundary edges come closest at an end of one of them (or
+// cross), and a step keeps every corner and every chain's line, so a step's
+// output passes when its input does (points a step adds on the sides of a small
+// outer angle come close to the other side, which is no pinch). Boundary
+// corners in a static kd-tree, each edge a query pruned by the distance of a
+// node's box to the edge's line and box: O(n log n) on boundaries of realistic
+// shape.
+std::array<Index, 2> first_pinched_boundary(const std::vector<Vec2>& points, const std::vector<Edge>& boundary,
+                                            const std::vector<char>& corner, double min_ulps);
+
 // The first triangle whose signed area (floating point, as Mesh's check in
 // Python) is not positive, -1 for none.
 Index first_inverted_triangle(const std::vector<Vec2>& points, const std::vector<Triangle>& triangles);

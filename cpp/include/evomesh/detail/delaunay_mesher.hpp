@@ -165,6 +165,13 @@ inline double target_spacing(const Cdt& tr, Vertex_handle v, const Spacing_data&
 // Delaunay_mesh_criteria_2), bad below sin^2(min_angle) (rule 3).
 class Refinement_criteria {
  public:
+  // Heights (twice the area over the longest edge) below this many units of
+  // rounding of the triangle's largest coordinate are not refined for their
+  // angles: 16 times Mesh()'s flatness limit, so the triangles a last split
+  // makes stay above it. (The triangulation's coordinates are the input's
+  // times a power of two: the same units of rounding.)
+  static constexpr double kAngleRuleFloorUlps = 16 * 1024;
+
   using Quality = double;
 
   Refinement_criteria(double min_angle_degrees, const Cdt& tr, const Spacing_data* spacing, bool off_centres)
@@ -214,6 +221,19 @@ class Refinement_criteria {
           q = rounded(-worst);
           return CGAL::Mesh_2::BAD;
         }
+      }
+      // Below the resolution floor the angle rule stops: the triangle is left as
+      // it is. Only a cascade can get there (at a small input angle whose cluster
+      // CGAL does not reduce, concentric shells halving without end: measured on a
+      // 12-point mesh, points 1e-12 from the apex and triangles below Mesh()'s
+      // limit of 1024 units of rounding); rule 4 above and the edges' Gabriel
+      // test are untouched.
+      const double longest = std::max({a, b, c});
+      const double reach = std::max({std::abs(pa.x()), std::abs(pa.y()), std::abs(pb.x()), std::abs(pb.y()),
+                                     std::abs(pc.x()), std::abs(pc.y())});
+      if (twice_area < kAngleRuleFloorUlps * std::numeric_limits<double>::epsilon() * reach * longest) {
+        q = 1;
+        return CGAL::Mesh_2::NOT_BAD;
       }
       // Squared sine of the angle opposite the shortest edge: 2 area / (product of the others).
       double sine;
@@ -311,25 +331,60 @@ class Domain_sides {
 // conflict zone) stays CGAL's: p encroaches whichever side it lies on, so a point
 // that would land behind a constraint splits the constraint instead (Ruppert).
 //
-// Except at a small angle: the edges of a cluster (CGAL's, Mesh_2/Clusters.h:
-// constraint edges at a vertex consecutive under less than 60 degrees, whatever
-// lies between them) are split on common concentric shells until the cluster is
-// reduced, which is what ends the refinement there. That needs the edges of a
-// cluster to encroach each other across the wedges between them, also across a
-// wedge outside the domain (a hole or notch touching the vertex): an edge at the
-// vertex of a cluster keeps CGAL's two-sided test.
+// Except at a small angle of the domain: the edges of a cluster (CGAL's,
+// Mesh_2/Clusters.h: constraint edges at a vertex consecutive under less than 60
+// degrees, whatever lies between them) are split on common concentric shells
+// until the cluster is reduced, which is what ends the refinement at a small
+// angle in the domain. That needs the edges of such a cluster to encroach each
+// other across the wedges between them, also across a wedge outside the domain
+// (a hole touching the vertex): an edge of a cluster with a wedge of the domain
+// keeps CGAL's two-sided test. A cluster whose wedges are all outside the domain
+// (a thin notch, holes meeting at a vertex) has no small angle to end, and its
+// edges see only the domain: across a notch of angle theta, a point at radius r
+// from its apex is r theta from the other side, sees the other side's piece at
+// that radius under a right angle up to rounding, and the shells would go on
+// until the two sides met (measured: a notch of 2e-10 radians, points 3e-7 from
+// the apex rounded to the same point).
 struct Gabriel : CGAL::Mesh_2::Is_locally_conforming_Gabriel<Cdt> {
   using Base = CGAL::Mesh_2::Is_locally_conforming_Gabriel<Cdt>;
   using Base::operator();
   const Domain_sides* sides = nullptr;
   const CGAL::Mesh_2::Clusters<Cdt>* clusters = nullptr;
 
-  // Whether the edge v -> w belongs to a cluster at v.
-  bool in_cluster(Vertex_handle v, Vertex_handle w) const {
+  // Whether the edge v -> w belongs to a cluster at v with a wedge of the domain:
+  // two of its edges consecutive around v with the domain between them (or an
+  // edge with the domain on both sides). The cluster's edges in counter-clockwise
+  // order of direction (a split keeps an edge's direction, so this never looks at
+  // the triangulation, which is mid-insertion when CGAL asks); the wedge from
+  // v -> u to the next edge is on the left of v -> u. The widest gap between
+  // consecutive directions is no wedge of the cluster unless all are below 60
+  // degrees (a cluster all around v).
+  bool in_cluster_with_domain_wedge(Vertex_handle v, Vertex_handle w) const {
     const unsigned n = clusters->number_of_clusters_at_vertex(v);
     for (unsigned k = 0; k < n; ++k) {
       const auto range = clusters->vertices_in_cluster_sequence(v, k);
-      if (std::find(range.first, range.second, w) != range.second) return true;
+      if (std::find(range.first, range.second, w) == range.second) continue;
+      std::vector<std::pair<double, Vertex_handle>> around;
+      for (auto it = range.first; it != range.second; ++it) {
+        const Vertex_handle u = *it;
+        around.emplace_back(std::atan2(u->point().y() - v->point().y(), u->point().x() - v->point().x()), u);
+      }
+      std::sort(around.begin(), around.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
+      const std::size_t m = around.size();
+      std::size_t widest = 0;
+      double widest_gap = -1;
+      for (std::size_t j = 0; j < m; ++j) {
+        const double gap = j + 1 < m ? around[j + 1].first - around[j].first : around[0].first + 2 * kPi - around[j].first;
+        if (gap > widest_gap) {
+          widest_gap = gap;
+          widest = j;
+        }
+      }
+      for (std::size_t j = 0; j < m; ++j) {
+        if (j == widest && widest_gap >= kPi / 3) continue;
+        if (sides->side(v, around[j].second) >= 0) return true;
+      }
+      return false;
     }
     return false;
   }
@@ -337,7 +392,10 @@ struct Gabriel : CGAL::Mesh_2::Is_locally_conforming_Gabriel<Cdt> {
   bool operator()(const Cdt& tr, const Face_handle& fh, const int i) const {
     const Vertex_handle va = fh->vertex(Cdt::cw(i)), vb = fh->vertex(Cdt::ccw(i));
     int side = sides == nullptr ? 0 : sides->side(vb, va);  // fh is on the left of vb -> va
-    if (side != 0 && clusters != nullptr && (in_cluster(va, vb) || in_cluster(vb, va))) side = 0;
+    if (side != 0 && clusters != nullptr &&
+        (in_cluster_with_domain_wedge(va, vb) || in_cluster_with_domain_wedge(vb, va))) {
+      side = 0;
+    }
     const Vertex_handle vi = fh->vertex(i);
     const Vertex_handle mvi = tr.tds().mirror_vertex(fh, i);
     return (side < 0 || tr.is_infinite(vi) || Base::operator()(tr, va, vb, vi->point())) &&
