@@ -5,6 +5,7 @@
 #include <CGAL/exceptions.h>
 
 #include <algorithm>
+#include <chrono>
 #include <ctime>
 #include <fstream>
 #include <cmath>
@@ -222,8 +223,15 @@ void finish_step(const Mesh_arrays& input, Evolve_result& result, detail::Stage_
   // The output's nn (for the output Mesh) on the other thread: the walks below
   // are sequential. Both only read the output's points and triangles.
   Background output_nn;
+  double nn_seconds = 0;
   output_nn.start(
-      [&result]() {
+      [&result, &nn_seconds]() {
+        const auto begin = std::chrono::steady_clock::now();
+        struct Lap {
+          std::chrono::steady_clock::time_point begin;
+          double& out;
+          ~Lap() { out = std::chrono::duration<double>(std::chrono::steady_clock::now() - begin).count(); }
+        } lap{begin, nn_seconds};
         try {
           std::vector<double> nn = nn_spacing(result.mesh.points);
           std::vector<double> within = nn;
@@ -241,10 +249,15 @@ void finish_step(const Mesh_arrays& input, Evolve_result& result, detail::Stage_
         }
       },
       resolve_threads(0) > 1);
+  const auto walks_begin = std::chrono::steady_clock::now();
   result.parents = parent_map(old_mesh, result.mesh, result.origin);
   carry_tags(old_mesh, result.origin, result.parents, result.mesh);
+  const double walk_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - walks_begin).count();
   output_nn.wait();
   timer.lap("parent_map");
+  // Inside the parent_map stage: the walks (and tags) and, beside them, the output's nn.
+  result.stats.emplace_back("parent_map_walk_seconds", walk_seconds);
+  result.stats.emplace_back("parent_map_output_nn_seconds", nn_seconds);
   auto& stats = result.stats;
   double seconds = 0;
   for (const auto& s : stats) {
