@@ -150,3 +150,15 @@ def test_the_limit_is_in_units_of_rounding_not_absolute() -> None:
     kind = evomesh.Mesh(points, triangles).kind
     assert (kind[[1, 6, 8]] == PointKind.CORNER).all()
     check_valid_mesh(evomesh.Mesh(points, triangles))
+
+
+def test_the_core_says_valueerror_when_its_constraint_pieces_cross() -> None:
+    # Below Mesh(): the core given the pinched mesh anyway (as a caller of
+    # _core could) raises a ValueError naming the crossing, not CGAL's bare
+    # "Unauthorized intersections of constraints" RuntimeError.
+    points, triangles, delta, seed = _pinched_case("crossing_pieces")
+    tris, segs, boundary, kind, *_ = _core.prepare_mesh(points, triangles, None, True, None, None)
+    options = evomesh.FrfcOptions()
+    options.seed = seed
+    with pytest.raises(ValueError, match="constraint pieces of the step's mesh cross"):
+        _core.frfc(points, tris, segs, boundary.astype(np.uint8), kind, delta, options)

@@ -6,6 +6,7 @@
 
 #include "evomesh/detail/delaunay_mesher.hpp"
 #include "evomesh/parallel.hpp"
+#include "evomesh/triangulation.hpp"
 
 namespace evomesh {
 
@@ -58,7 +59,11 @@ Refined_mesh quality_pass(Cdt& cdt, const std::vector<Vertex_handle>& handles, c
                           const std::vector<Vec2>& points, const std::vector<Point_kind>& kind,
                           const std::vector<Constraint_piece>& pieces, const Quality_options& options,
                           const std::vector<std::uint8_t>& pinned) {
-  for (const auto& piece : pieces) cdt.insert_constraint(handles[piece.a], handles[piece.b]);
+  try {
+    for (const auto& piece : pieces) cdt.insert_constraint(handles[piece.a], handles[piece.b]);
+  } catch (const Cdt::Intersection_of_constraints_exception&) {
+    throw crossing_pieces_error();
+  }
   Refinement_report report;
   std::vector<std::uint8_t> removed(points.size(), 0);
   std::vector<std::pair<Vertex_handle, Vertex_handle>> crowded;

@@ -582,11 +582,22 @@ Index first_inverted_triangle(const std::vector<Vec2>& points, const std::vector
   return -1;
 }
 
+Input_error crossing_pieces_error() {
+  return Input_error(
+      "two constraint pieces of the step's mesh cross: its boundary or interior segments are closer to "
+      "degenerate than float64 resolves here (a corner within rounding of a segment, or segments meeting at an "
+      "angle of a few units of rounding)");
+}
+
 std::vector<Triangle> constrained_delaunay(const std::vector<Vec2>& points,
                                            const std::vector<Constraint_piece>& pieces) {
   Cdt cdt;
   auto handles = insert_points(cdt, points);
-  for (const auto& piece : pieces) cdt.insert_constraint(handles[piece.a], handles[piece.b]);
+  try {
+    for (const auto& piece : pieces) cdt.insert_constraint(handles[piece.a], handles[piece.b]);
+  } catch (const Cdt::Intersection_of_constraints_exception&) {
+    throw crossing_pieces_error();
+  }
   detail::label_domain(cdt, handles, pieces, "constrained_delaunay");
   std::vector<Triangle> triangles;
   triangles.reserve(cdt.number_of_faces());

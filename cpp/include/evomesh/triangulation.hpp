@@ -17,9 +17,15 @@ struct Constraint_piece {
   std::int64_t tag = 0;  // the segment tag of the chain it lies on
 };
 
+// What a step says when two of its constraint pieces cross (CGAL's
+// Intersection_of_constraints_exception while inserting them): a ValueError in
+// Python, never CGAL's bare RuntimeError.
+Input_error crossing_pieces_error();
+
 // Constrained Delaunay triangulation of `points` with `pieces` as constraints;
 // returns the counter-clockwise triangles inside the domain the pieces bound
 // (regions are flood-filled from the sides of the pieces, so holes stay holes).
+// Throws crossing_pieces_error() when two pieces cross.
 std::vector<Triangle> constrained_delaunay(const std::vector<Vec2>& points,
                                            const std::vector<Constraint_piece>& pieces);
 
