@@ -8,7 +8,8 @@ towards a band of fine spacing, not timed). For each size the script times
   ``topology`` (repeated vertices and triangles, orphans, duplicate points:
   numpy), ``nn`` (nn_M, two points too close), the C++ ``prepare_mesh`` stages
   ``orient``, ``segments`` (edge manifoldness, boundary), ``planar`` and
-  ``classify`` (point kinds), and ``flatness`` (nearly flat triangles);
+  ``classify`` (point kinds), ``flatness`` (nearly flat triangles) and ``pinch``
+  (a boundary corner within 1024 units of rounding of a boundary edge; after path only);
 
 along two paths in the same process, alternating:
 
@@ -50,7 +51,7 @@ from bench_evolve import graded_case  # noqa: E402
 from evomesh import _core  # noqa: E402
 from evomesh import mesh as mesh_module  # noqa: E402
 
-STAGES = ("topology", "nn", "orient", "segments", "planar", "classify", "flatness")
+STAGES = ("topology", "nn", "orient", "segments", "planar", "classify", "flatness", "pinch")
 
 
 def cpu_seconds() -> float:
@@ -85,6 +86,11 @@ def staged(points: np.ndarray, triangles: np.ndarray, segments: np.ndarray, befo
     oriented = result[0]
     lap("flatness", lambda: numpy_flatness(points, oriented) if before else mesh_module._check_not_flat(points,
                                                                                                        oriented))
+    # The near-touching boundary (2026-12-01, after issue 13's goal 3): no such check before.
+    if before:
+        out["pinch"] = 0.0
+    else:
+        lap("pinch", lambda: mesh_module.check_boundary_not_pinched(points, result[1], result[2], result[3]))
     return out
 
 
