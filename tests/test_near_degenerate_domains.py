@@ -10,8 +10,15 @@ profile of test_fuzz.py, 2026-12-01; the meshes are in tests/data/fuzz_*.npz).
   such gaps what it asks of triangle heights: 1024 units of rounding.
 * A DRFC step on a 12-point mesh whose quality pass cascaded towards a small
   angle (a domain wedge of 12.5 degrees between two holes touching at its apex)
-  until triangles were 779 units of rounding high. The angle rule now stops at a
-  floor of 16 * 1024 units of rounding.
+  until triangles were 779 units of rounding high. The edge at that apex outside
+  the small angle's cluster saw the domain only, and CGAL's concentric shells
+  never reduced the cluster; every constraint edge at such an apex now keeps the
+  two-sided encroachment test. As a safety net the angle rule stops below a
+  height of 16 * 1024 units of rounding (C++ test_triangulation).
+* Chains of steps on a domain with a thin notch (an outer angle of 1e-12 rad)
+  met the opposite case: there the two-sided test made the notch's sides
+  encroach each other until they met. A cluster with no wedge of the domain now
+  sees the domain only.
 """
 
 from __future__ import annotations
@@ -95,12 +102,14 @@ def test_drfc_on_a_small_angle_between_two_holes_stays_above_the_flatness_limit(
         new = evomesh.evolve(mesh, case["delta"], method=method, seed=int(case["seed"]))
         check_evolved(mesh, new, rel_area=1e-9, rel_distance=1e-9)
         _rewrapped(new)
-        # The cascade stops at the floor: nothing closer to the apex than
-        # 16 * 1024 / 2 units of rounding (its last split halves a side).
+        # No cascade into the apex (it reached 9e-12 from it, 156 points):
+        # the nearest point is at the spacing of the step, and the smallest
+        # angle is the domain's own 12.54 degrees there.
         apex = mesh.points[6]
         gaps = np.linalg.norm(new.points - apex, axis=1)
-        assert np.sort(gaps)[1] > 8 * 1024 * EPS * np.abs(apex).max()
-        assert evomesh.quality(new).min_angle > 10
+        assert np.sort(gaps)[1] > 1e-4
+        assert evomesh.quality(new).min_angle > 12.5
+        assert new.n_points < 400
 
 
 def _pinches_by_brute_force(points, boundary, corner, min_ulps):
@@ -162,3 +171,19 @@ def test_the_core_says_valueerror_when_its_constraint_pieces_cross() -> None:
     options.seed = seed
     with pytest.raises(ValueError, match="constraint pieces of the step's mesh cross"):
         _core.frfc(points, tris, segs, boundary.astype(np.uint8), kind, delta, options)
+
+
+def test_a_sliver_reaching_a_close_pair_is_sampled_by_f_not_by_its_vertices() -> None:
+    # The long hypothesis profile of test_defects.py: a 33-point random mesh
+    # with two points 8.4e-5 apart and a 0.0075 degree sliver from them across
+    # the domain. delta = 0.5 was refused ("sampling would create about 5e+07
+    # points"); with max_samples raised it drew 9.5e7 samples in 76 s for 610
+    # output points. Grid blocks are now sized by f at their centres: 14k.
+    case = np.load(DATA / "fuzz_sliver_refinement.npz")
+    mesh = evomesh.Mesh(case["points"], case["triangles"], case["segments"], kind=case["kind"])
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", evomesh.QualityWarning)
+        new = evomesh.evolve(mesh, np.full(mesh.n_points, float(case["delta"])))
+    check_evolved(mesh, new)
+    assert new.stats["n_candidates"] < 1e5
+    assert evomesh.quality(new).min_angle > 29

@@ -11,6 +11,7 @@ import copy
 import subprocess
 import sys
 import textwrap
+import warnings
 
 import numpy as np
 import pytest
@@ -18,7 +19,7 @@ import pytest
 import evomesh
 from evomesh import PointKind
 from evomesh.spacing_function import DELTA_MAX, DELTA_MIN
-from invariants import check_evolved, check_valid_mesh
+from invariants import check_evolved, check_valid_mesh, spacing_ratio
 from strategies import grid_mesh
 
 # The unit square as two triangles, and a 3x3 grid (an interior point 4).
@@ -290,11 +291,22 @@ def test_delta_in_range_is_accepted(mesh, delta):
     check_evolved(mesh, evomesh.evolve(mesh, delta))
 
 
-def test_delta_min_is_refused_by_max_samples_with_a_message(mesh):
-    """The documented lower bound is accepted, but one step that small needs far
-    more than max_samples samples: refused with a message, not attempted."""
+def test_delta_min_grades_towards_every_point_in_one_step(mesh):
+    """The documented lower bound everywhere: f = 1e-6 nn_M at the points and
+    1-Lipschitz, so one step grades geometrically towards every point (about
+    log(1e6) rings each). The sampler sizes its cells by f itself inside the
+    triangles and segments far larger than f at their ends; sized by the
+    vertices' bound alone it drew fine cells over all of them (1.1e7 candidates
+    for these 9 points, refused by max_samples before that, 2026-12-01)."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", evomesh.QualityWarning)  # the quality pass reaches its bound
+        new = evomesh.evolve(mesh, DELTA_MIN)
+    check_evolved(mesh, new)
+    ratio = spacing_ratio(mesh, new, np.full(N, DELTA_MIN))
+    assert 0.9 < ratio.min() and ratio.max() < 1.1  # measured 1.000 - 1.033
+    assert new.stats["n_candidates"] < 1e5  # measured 4052
     with pytest.raises(ValueError, match="max_samples"):
-        evomesh.evolve(mesh, DELTA_MIN)
+        evomesh.evolve(mesh, DELTA_MIN, max_samples=1000)
     with pytest.raises(ValueError, match="too much refinement"):
         evomesh.evolve(mesh, 0.05, max_samples=100)
 

@@ -243,10 +243,11 @@ int ring_candidates_of(const Mesh_arrays& mesh, const Triangle_fans& fans, const
 }
 
 Candidates segment_candidates(const Mesh_arrays& mesh, const std::vector<double>& delta, const std::vector<double>& f,
-                              const std::vector<Segment_chain>& chains, const Frfc_options& options) {
+                              const std::vector<Segment_chain>& chains, const Frfc_options& options,
+                              const Spacing_queries* queries) {
   Candidates on_segments;
   on_segments.samples = sample_segments(mesh, f, options.cell_factor, options.samples, options.seed,
-                                        options.adaptive_cells);
+                                        options.adaptive_cells, queries);
   on_segments.round.assign(on_segments.size(), -1);
   on_segments.owner.assign(on_segments.size(), -1);
   if (options.ring_samples) {
@@ -261,7 +262,7 @@ Candidates interior_candidates(const Mesh_arrays& mesh, const Triangle_fans& fan
                                const std::vector<double>& f, const std::vector<std::uint8_t>& demoted,
                                const std::vector<Disc>& cover,
                                const Frfc_options& options, std::size_t& n_drawn,
-                               const std::vector<std::uint8_t>* quiet) {
+                               const std::vector<std::uint8_t>* quiet, const Spacing_queries* queries) {
   std::vector<std::uint8_t> skip;
   if (options.skip_coarse) {
     skip.resize(mesh.triangles.size());
@@ -277,7 +278,7 @@ Candidates interior_candidates(const Mesh_arrays& mesh, const Triangle_fans& fan
   n_drawn = 0;
   Candidates inside;
   inside.samples = sample_triangles(mesh, f, options.cell_factor, options.samples, options.seed, skip, cover,
-                                    options.threads, &n_drawn, options.adaptive_cells);
+                                    options.threads, &n_drawn, options.adaptive_cells, queries);
   inside.round.assign(inside.size(), -1);
   if (options.ring_samples) {
     // Around a demoted point the interpolated sizes are about kInterpolatedScale f(p):

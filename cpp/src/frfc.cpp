@@ -145,9 +145,11 @@ Candidates segment_stage(const Mesh_arrays& mesh, const std::vector<double>& del
                          const std::vector<Segment_chain>& chains, const std::vector<std::uint8_t>& demoted,
                          const Frfc_options& options, Stage_timer& timer) {
   const std::vector<double>& f = spacing.f;
-  check_sample_budget(estimate_sample_count(mesh, f, options.cell_factor, options.max_samples, options.adaptive_cells),
-                      options.max_samples, "sampling");
-  Candidates on_segments = segment_candidates(mesh, delta, f, chains, options);
+  const Spacing_queries queries = spacing_queries(*spacing.function);
+  check_sample_budget(
+      estimate_sample_count(mesh, f, options.cell_factor, options.max_samples, options.adaptive_cells, &queries),
+      options.max_samples, "sampling");
+  Candidates on_segments = segment_candidates(mesh, delta, f, chains, options, &queries);
   timer.lap("sampling");
   candidate_radii(mesh, *spacing.function, f, demoted, options, /*on_segment=*/true, on_segments);
   timer.lap("sample_radii");
@@ -166,7 +168,8 @@ Candidates interior_stage(const Mesh_arrays& mesh, const Triangle_fans& fans, co
     cover = cover_discs(mesh, f, packing.radius, packing.kept, packing.blocker, options.radius_scale,
                         options.radius == Radius_rule::interpolated);
   }
-  Candidates inside = interior_candidates(mesh, fans, delta, f, demoted, cover, options, n_drawn);
+  const Spacing_queries queries = spacing_queries(*spacing.function);
+  Candidates inside = interior_candidates(mesh, fans, delta, f, demoted, cover, options, n_drawn, nullptr, &queries);
   cover = std::vector<Disc>();
   detail::release_free_memory();  // the sampling threads' blocks
   timer.lap("sampling");

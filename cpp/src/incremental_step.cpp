@@ -459,6 +459,14 @@ std::optional<Evolve_result> incremental_frfc(const Mesh_arrays& mesh, const std
   const auto demoted = demoted_points(mesh.triangles, weights.nn, f, forced, options.demote_ratio);
   check_sample_budget(estimate_sample_count(mesh, f, options.cell_factor, options.max_samples, options.adaptive_cells),
                       options.max_samples, "sampling");
+  // A segment far longer than f at its ends has its grid sized by f inside it
+  // (sampling.hpp, Spacing_queries), from the Apollonius graph of all sites:
+  // the full step.
+  if (options.adaptive_cells && options.samples == Sample_mode::random_grid) {
+    for (const auto& e : mesh.segments) {
+      if (asks_spacing(mesh, f, e, options.cell_factor)) return std::nullopt;
+    }
+  }
   timer.lap("incremental_budget");
   Candidates on_segments = segment_candidates(mesh, delta, f, chains, options);
   timer.lap("sampling");
@@ -478,6 +486,12 @@ std::optional<Evolve_result> incremental_frfc(const Mesh_arrays& mesh, const std
   const std::vector<std::uint8_t> quiet = quiet_triangles(mesh, grid, weight, packing.radius, packing.kept, demoted,
                                                           options.radius_scale, magnitude, options.threads);
   timer.lap("incremental_quiet");
+  // The same for a strongly graded triangle.
+  if (options.adaptive_cells && options.samples == Sample_mode::random_grid) {
+    for (std::size_t t = 0; t < mesh.triangles.size(); ++t) {
+      if (!quiet[t] && asks_spacing(mesh, f, mesh.triangles[t], options.cell_factor)) return std::nullopt;
+    }
+  }
   std::size_t n_drawn = 0;
   Candidates inside = interior_candidates(mesh, fans, delta, f, demoted, cover, options, n_drawn, &quiet);
   timer.lap("sampling");

@@ -114,12 +114,21 @@ double farthest_distance(const Vec2& v, double x0, double y0, double x1, double 
   return std::hypot(dx, dy);
 }
 
+// Its four quarters, appended to `out`.
+void split_block(const Dyadic_cell& block, std::vector<Dyadic_cell>& out) {
+  const std::int64_t half = block.size / 2;
+  out.push_back({block.ix + half, block.iy + half, half});
+  out.push_back({block.ix, block.iy + half, half});
+  out.push_back({block.ix + half, block.iy, half});
+  out.push_back({block.ix, block.iy, half});
+}
+
 // The cells of the adaptive grid over the box [xmin, xmax] x [ymin, ymax] (nx by
 // ny fine cells of side s) for the triangle `corners` with vertex values `fv`;
 // stops (returns false) once more than `limit` cells were found.
 bool adaptive_cells(const std::array<Vec2, 3>& corners, const std::array<double, 3>& fv, double xmin, double ymin,
                     double xmax, double ymax, double s, double cell_factor, std::int64_t nx, std::int64_t ny,
-                    double limit, bool adaptive, std::vector<Dyadic_cell>& cells) {
+                    double limit, bool adaptive, const Spacing_queries* queries, std::vector<Dyadic_cell>& cells) {
   const double f_min = std::min({fv[0], fv[1], fv[2]});
   std::int64_t top = 1;
   while (adaptive && top < std::max(nx, ny)) top *= 2;
@@ -130,39 +139,95 @@ bool adaptive_cells(const std::array<Vec2, 3>& corners, const std::array<double,
     }
     return true;
   }
-  std::vector<Dyadic_cell> stack{{0, 0, top}};
-  while (!stack.empty()) {
-    const Dyadic_cell block = stack.back();
-    stack.pop_back();
-    if (block.ix >= nx || block.iy >= ny) continue;
-    const double x0 = xmin + static_cast<double>(block.ix) * s;
-    const double y0 = ymin + static_cast<double>(block.iy) * s;
-    const double x1 = std::min(xmax, xmin + static_cast<double>(block.ix + block.size) * s);
-    const double y1 = std::min(ymax, ymin + static_cast<double>(block.iy + block.size) * s);
-    if (block.size > 1) {
-      // strictly right of a side of the triangle at all four box corners: outside
-      bool outside = false;
-      for (int k = 0; k < 3 && !outside; ++k) {
-        const Vec2& a = corners[k];
-        const Vec2& b = corners[(k + 1) % 3];
-        outside = orientation(a, b, {x0, y0}) < 0 && orientation(a, b, {x1, y0}) < 0 &&
-                  orientation(a, b, {x1, y1}) < 0 && orientation(a, b, {x0, y1}) < 0;
-      }
-      if (outside) continue;
-      double lower = f_min;
-      for (int k = 0; k < 3; ++k) lower = std::max(lower, fv[k] - farthest_distance(corners[k], x0, y0, x1, y1));
-      if (static_cast<double>(block.size) * s > cell_factor * lower * kInvTwoSqrtTwo) {
-        const std::int64_t half = block.size / 2;
-        // pushed in reverse so that blocks come off the stack in row-major order within a parent
-        stack.push_back({block.ix + half, block.iy + half, half});
-        stack.push_back({block.ix, block.iy + half, half});
-        stack.push_back({block.ix + half, block.iy, half});
-        stack.push_back({block.ix, block.iy, half});
-        continue;
+  // A block is kept as one cell when its side is at most c lower / (2 sqrt 2),
+  // lower a lower bound of f over it; else it is split in four. The bound from
+  // the vertices (1-Lipschitz) and, for a triangle that asks, f at the block's
+  // centre less half its diagonal (f exact there, asked level by level in one
+  // batch per level). The cells are sorted at the end, so the order of the
+  // visit does not matter.
+  struct Box {
+    double x0, y0, x1, y1;
+  };
+  const auto box_of = [&](const Dyadic_cell& block) {
+    return Box{xmin + static_cast<double>(block.ix) * s, ymin + static_cast<double>(block.iy) * s,
+               std::min(xmax, xmin + static_cast<double>(block.ix + block.size) * s),
+               std::min(ymax, ymin + static_cast<double>(block.iy + block.size) * s)};
+  };
+  const auto passes = [&](const Dyadic_cell& block, double lower) {
+    return !(static_cast<double>(block.size) * s > cell_factor * lower * kInvTwoSqrtTwo);
+  };
+  // -1: outside the triangle (strictly right of a side at all four corners), else
+  // the vertices' lower bound of f over the block.
+  const auto vertex_bound = [&](const Box& b) {
+    for (int k = 0; k < 3; ++k) {
+      const Vec2& p = corners[k];
+      const Vec2& q = corners[(k + 1) % 3];
+      if (orientation(p, q, {b.x0, b.y0}) < 0 && orientation(p, q, {b.x1, b.y0}) < 0 &&
+          orientation(p, q, {b.x1, b.y1}) < 0 && orientation(p, q, {b.x0, b.y1}) < 0) {
+        return -1.0;
       }
     }
-    cells.push_back(block);
-    if (static_cast<double>(cells.size()) > limit) return false;
+    double lower = f_min;
+    for (int k = 0; k < 3; ++k) lower = std::max(lower, fv[k] - farthest_distance(corners[k], b.x0, b.y0, b.x1, b.y1));
+    return lower;
+  };
+  const bool ask = queries != nullptr && static_cast<double>(nx) * static_cast<double>(ny) > kQueryCells;
+  if (!ask) {  // depth first
+    std::vector<Dyadic_cell> stack{{0, 0, top}};
+    while (!stack.empty()) {
+      const Dyadic_cell block = stack.back();
+      stack.pop_back();
+      if (block.ix >= nx || block.iy >= ny) continue;
+      if (block.size > 1) {
+        const double lower = vertex_bound(box_of(block));
+        if (lower < 0) continue;
+        if (!passes(block, lower)) {
+          split_block(block, stack);
+          continue;
+        }
+      }
+      cells.push_back(block);
+      if (static_cast<double>(cells.size()) > limit) return false;
+    }
+  } else {  // level by level
+    std::vector<Dyadic_cell> level{{0, 0, top}}, next, asked;
+    std::vector<double> asked_lower, f_at;
+    std::vector<Vec2> centres;
+    while (!level.empty()) {
+      next.clear();
+      asked.clear();
+      asked_lower.clear();
+      centres.clear();
+      for (const Dyadic_cell& block : level) {
+        if (block.ix >= nx || block.iy >= ny) continue;
+        if (block.size > 1) {
+          const Box b = box_of(block);
+          const double lower = vertex_bound(b);
+          if (lower < 0) continue;
+          if (!passes(block, lower)) {
+            asked.push_back(block);
+            asked_lower.push_back(lower);
+            centres.push_back({0.5 * (b.x0 + b.x1), 0.5 * (b.y0 + b.y1)});
+            continue;
+          }
+        }
+        cells.push_back(block);
+        if (static_cast<double>(cells.size()) > limit) return false;
+      }
+      if (!asked.empty()) {
+        (*queries)(centres, f_at);
+        for (std::size_t k = 0; k < asked.size(); ++k) {
+          const Box b = box_of(asked[k]);
+          if (!passes(asked[k], std::max(asked_lower[k], f_at[k] - 0.5 * std::hypot(b.x1 - b.x0, b.y1 - b.y0)))) {
+            split_block(asked[k], next);
+            continue;
+          }
+          cells.push_back(asked[k]);
+          if (static_cast<double>(cells.size()) > limit) return false;
+        }
+      }
+      level.swap(next);
+    }
   }
   std::sort(cells.begin(), cells.end(), [](const Dyadic_cell& p, const Dyadic_cell& q) {
     return p.iy != q.iy ? p.iy < q.iy : p.ix < q.ix;
@@ -170,10 +235,13 @@ bool adaptive_cells(const std::array<Vec2, 3>& corners, const std::array<double,
   return true;
 }
 
-// The same for the 1-D cells of a segment of the given length (`cells` fine
-// cells), with f(a) and f(b) at its ends: the blocks as [first, size) pairs.
-void adaptive_segment_cells(double length, double fa, double fb, double cell_factor, std::int64_t n_cells,
-                            bool adaptive, std::vector<std::array<std::int64_t, 2>>& out) {
+// The same for the 1-D cells of the segment a -> b of the given length (`cells`
+// fine cells), with f(a) and f(b) at its ends: the blocks as [first, size) pairs,
+// in order along the segment. A segment of more than kQueryCells fine cells asks
+// `queries` (if any) for f at the centres of the blocks the ends' bound splits.
+void adaptive_segment_cells(const Vec2& a, const Vec2& b, double length, double fa, double fb, double cell_factor,
+                            std::int64_t n_cells, bool adaptive, const Spacing_queries* queries,
+                            std::vector<std::array<std::int64_t, 2>>& out) {
   const double fine = length / static_cast<double>(n_cells);
   if (!adaptive) {
     for (std::int64_t j = 0; j < n_cells; ++j) out.push_back({j, 1});
@@ -181,21 +249,55 @@ void adaptive_segment_cells(double length, double fa, double fb, double cell_fac
   }
   std::int64_t top = 1;
   while (top < n_cells) top *= 2;
-  std::vector<std::array<std::int64_t, 2>> stack{{0, top}};
-  while (!stack.empty()) {
-    const auto [first, size] = stack.back();
-    stack.pop_back();
-    if (first >= n_cells) continue;
-    const double t0 = static_cast<double>(first) * fine;
-    const double t1 = std::min(length, static_cast<double>(first + size) * fine);
-    const double lower = std::max({std::min(fa, fb), fa - t1, fb - (length - t0)});
-    if (size > 1 && static_cast<double>(size) * fine > cell_factor * lower * kInvTwoSqrtTwo) {
-      stack.push_back({first + size / 2, size / 2});
-      stack.push_back({first, size / 2});
-      continue;
+  const bool ask = queries != nullptr && static_cast<double>(n_cells) > kQueryCells;
+  using Block = std::array<std::int64_t, 2>;
+  std::vector<Block> level{{0, top}}, next, asked;
+  std::vector<double> asked_lower, f_at;
+  std::vector<Vec2> centres;
+  const std::size_t first_out = out.size();
+  while (!level.empty()) {
+    next.clear();
+    asked.clear();
+    asked_lower.clear();
+    centres.clear();
+    for (const auto& [first, size] : level) {
+      if (first >= n_cells) continue;
+      const double t0 = static_cast<double>(first) * fine;
+      const double t1 = std::min(length, static_cast<double>(first + size) * fine);
+      const double lower = std::max({std::min(fa, fb), fa - t1, fb - (length - t0)});
+      if (size > 1 && static_cast<double>(size) * fine > cell_factor * lower * kInvTwoSqrtTwo) {
+        if (ask) {
+          asked.push_back({first, size});
+          asked_lower.push_back(lower);
+          const double t = 0.5 * (t0 + t1) / length;
+          centres.push_back({a[0] + t * (b[0] - a[0]), a[1] + t * (b[1] - a[1])});
+        } else {
+          next.push_back({first, size / 2});
+          next.push_back({first + size / 2, size / 2});
+        }
+        continue;
+      }
+      out.push_back({first, std::min(size, n_cells - first)});
     }
-    out.push_back({first, std::min(size, n_cells - first)});
+    if (!asked.empty()) {
+      (*queries)(centres, f_at);
+      for (std::size_t k = 0; k < asked.size(); ++k) {
+        const auto [first, size] = asked[k];
+        const double t0 = static_cast<double>(first) * fine;
+        const double t1 = std::min(length, static_cast<double>(first + size) * fine);
+        const double lower = std::max(asked_lower[k], f_at[k] - 0.5 * (t1 - t0));
+        if (static_cast<double>(size) * fine > cell_factor * lower * kInvTwoSqrtTwo) {
+          next.push_back({first, size / 2});
+          next.push_back({first + size / 2, size / 2});
+          continue;
+        }
+        out.push_back({first, std::min(size, n_cells - first)});
+      }
+    }
+    level.swap(next);
   }
+  std::sort(out.begin() + static_cast<std::ptrdiff_t>(first_out), out.end(),
+            [](const Block& p, const Block& q) { return p[0] < q[0]; });
 }
 
 }  // namespace
@@ -220,11 +322,27 @@ bool in_cover(const std::vector<Disc>& cover, const Triangle& t, const Vec2& x) 
   return false;
 }
 
+bool asks_spacing(const Mesh_arrays& mesh, const std::vector<double>& vertex_f, const Edge& e, double cell_factor) {
+  const double s = cell_factor * std::min(vertex_f[e[0]], vertex_f[e[1]]) * kInvTwoSqrtTwo;
+  const Vec2& a = mesh.points[e[0]];
+  const Vec2& b = mesh.points[e[1]];
+  return !(std::ceil(std::hypot(b[0] - a[0], b[1] - a[1]) / s) <= kQueryCells);
+}
+
+bool asks_spacing(const Mesh_arrays& mesh, const std::vector<double>& vertex_f, const Triangle& t, double cell_factor) {
+  const double s = cell_factor * vertex_f[smallest_f_vertex(t, vertex_f)] * kInvTwoSqrtTwo;
+  const Vec2 &a = mesh.points[t[0]], &b = mesh.points[t[1]], &c = mesh.points[t[2]];
+  const double fx = std::ceil((std::max({a[0], b[0], c[0]}) - std::min({a[0], b[0], c[0]})) / s);
+  const double fy = std::ceil((std::max({a[1], b[1], c[1]}) - std::min({a[1], b[1], c[1]})) / s);
+  return !(std::max(fx, 1.0) * std::max(fy, 1.0) <= kQueryCells);
+}
+
 double estimate_sample_count(const Mesh_arrays& mesh, const std::vector<double>& vertex_f, double cell_factor,
-                             double limit, bool adaptive) {
+                             double limit, bool adaptive, const Spacing_queries* queries) {
   // The fine grid's count bounds the adaptive grid's; only triangles whose fine
-  // grid is large are counted cell by cell (and only up to the limit).
-  constexpr double kCountCells = 4096;
+  // grid is large are counted cell by cell (and only up to the limit), with the
+  // cells sample_triangles uses (the same queries).
+  constexpr double kCountCells = kQueryCells;
   constexpr double kMaxCellsPerSide = 0x1.0p50;  // dyadic indices stay exact in int64 and double
   double total = 0;
   std::vector<Dyadic_cell> cells;
@@ -243,7 +361,7 @@ double estimate_sample_count(const Mesh_arrays& mesh, const std::vector<double>&
       const bool complete = adaptive_cells({a, b, c}, {vertex_f[t[0]], vertex_f[t[1]], vertex_f[t[2]]}, xmin, ymin, xmax,
                                            ymax, s, cell_factor, std::max<std::int64_t>(static_cast<std::int64_t>(fx), 1),
                                            std::max<std::int64_t>(static_cast<std::int64_t>(fy), 1), limit - total,
-                                           adaptive, cells);
+                                           adaptive, queries, cells);
       total += static_cast<double>(cells.size());
       if (!complete) return total;
     }
@@ -261,8 +379,8 @@ double estimate_sample_count(const Mesh_arrays& mesh, const std::vector<double>&
       total += fine + 1;
     } else {
       blocks.clear();
-      adaptive_segment_cells(length, vertex_f[e[0]], vertex_f[e[1]], cell_factor, static_cast<std::int64_t>(fine),
-                             adaptive, blocks);
+      adaptive_segment_cells(a, b, length, vertex_f[e[0]], vertex_f[e[1]], cell_factor,
+                             static_cast<std::int64_t>(fine), adaptive, queries, blocks);
       total += static_cast<double>(blocks.size()) + 1;
     }
     if (total > limit) return total;
@@ -276,7 +394,7 @@ namespace {
 void sample_one_triangle(const Mesh_arrays& mesh, std::size_t ti, const std::vector<double>& vertex_f,
                          double cell_factor, Sample_mode mode, std::uint64_t seed,
                          const std::unordered_set<std::uint64_t>& segment_edges, const std::vector<Disc>& cover,
-                         bool adaptive, Sample_set& out, std::size_t& n_drawn) {
+                         bool adaptive, const Spacing_queries* queries, Sample_set& out, std::size_t& n_drawn) {
   const auto& P = mesh.points;
   const std::size_t n = P.size();
   const Triangle& t = mesh.triangles[ti];
@@ -316,7 +434,7 @@ void sample_one_triangle(const Mesh_arrays& mesh, std::size_t ti, const std::vec
   const auto ny = std::max<std::int64_t>(static_cast<std::int64_t>(std::ceil((ymax - ymin) / s)), 1);
   std::vector<Dyadic_cell> cells;
   adaptive_cells({a, b, c}, {vertex_f[t[0]], vertex_f[t[1]], vertex_f[t[2]]}, xmin, ymin, xmax, ymax, s, cell_factor,
-                 nx, ny, std::numeric_limits<double>::infinity(), adaptive, cells);
+                 nx, ny, std::numeric_limits<double>::infinity(), adaptive, queries, cells);
   Polygon poly, clipped;
   std::array<double, 8> cumulative{};
   for (const Dyadic_cell& cell : cells) {
@@ -356,7 +474,7 @@ void sample_one_triangle(const Mesh_arrays& mesh, std::size_t ti, const std::vec
 Sample_set sample_triangles(const Mesh_arrays& mesh, const std::vector<double>& vertex_f,
                             double cell_factor, Sample_mode mode, std::uint64_t seed,
                             const std::vector<std::uint8_t>& skip, const std::vector<Disc>& cover, int threads,
-                            std::size_t* n_drawn, bool adaptive) {
+                            std::size_t* n_drawn, bool adaptive, const Spacing_queries* queries) {
   std::unordered_set<std::uint64_t> segment_edges;
   if (mode == Sample_mode::midpoints || mode == Sample_mode::barycentre_midpoints) {
     segment_edges.reserve(mesh.segments.size() * 2);
@@ -372,8 +490,8 @@ Sample_set sample_triangles(const Mesh_arrays& mesh, const std::vector<double>& 
   parallel_for(n_blocks, threads, [&](std::size_t k) {
     for (std::size_t ti = k * kBlock; ti < std::min(n_triangles, (k + 1) * kBlock); ++ti) {
       if (!skip.empty() && skip[ti]) continue;
-      sample_one_triangle(mesh, ti, vertex_f, cell_factor, mode, seed, segment_edges, cover, adaptive, blocks[k],
-                          drawn[k]);
+      sample_one_triangle(mesh, ti, vertex_f, cell_factor, mode, seed, segment_edges, cover, adaptive, queries,
+                          blocks[k], drawn[k]);
     }
   });
   Sample_set out;
@@ -394,7 +512,8 @@ Sample_set sample_triangles(const Mesh_arrays& mesh, const std::vector<double>& 
 }
 
 Sample_set sample_segments(const Mesh_arrays& mesh, const std::vector<double>& vertex_f,
-                           double cell_factor, Sample_mode mode, std::uint64_t seed, bool adaptive) {
+                           double cell_factor, Sample_mode mode, std::uint64_t seed, bool adaptive,
+                           const Spacing_queries* queries) {
   Sample_set out;
   std::vector<std::array<std::int64_t, 2>> blocks;
   for (std::size_t k = 0; k < mesh.segments.size(); ++k) {
@@ -413,7 +532,7 @@ Sample_set sample_segments(const Mesh_arrays& mesh, const std::vector<double>& v
     // Stream ids for segments follow the triangles' so the two never share one.
     Random_stream rng(seed, (std::uint64_t{1} << 62) + k);
     blocks.clear();
-    adaptive_segment_cells(length, vertex_f[e[0]], vertex_f[e[1]], cell_factor, cells, adaptive, blocks);
+    adaptive_segment_cells(a, b, length, vertex_f[e[0]], vertex_f[e[1]], cell_factor, cells, adaptive, queries, blocks);
     for (const auto& [first, size] : blocks) {
       const double t = (static_cast<double>(first) + static_cast<double>(size) * rng.uniform()) / static_cast<double>(cells);
       if (!(t > 0 && t < 1)) continue;

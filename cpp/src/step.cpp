@@ -146,6 +146,13 @@ void check_sample_budget(double estimate, double max_samples, const char* what) 
   }
 }
 
+Spacing_queries spacing_queries(const Spacing_function& function) {
+  return [&function](const std::vector<Vec2>& at, std::vector<double>& f) {
+    f.resize(at.size());
+    function.evaluate(at.data(), at.size(), f.data(), nullptr, 1, /*certified=*/true);
+  };
+}
+
 void triangulate_selection(Selection selected, const std::vector<Constraint_piece>& pieces,
                            const Quality_options* quality, Evolve_result& result, Early_triangulation* early,
                            const Boundary_geometry* geometry) {

@@ -1,5 +1,6 @@
 // The domain of constrained_delaunay (a square with a square hole), and the
 // corner decisions of classify_points / runs_straight_through.
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <limits>
@@ -7,6 +8,7 @@
 #include <vector>
 
 #include "check.hpp"
+#include "evomesh/quality_pass.hpp"
 #include "evomesh/triangulation.hpp"
 
 using namespace evomesh;
@@ -265,8 +267,47 @@ void check_planarity_cases() {
   }
 }
 
+// The quality pass's angle rule stops below a height of 16 * 1024 units of
+// rounding (delaunay_mesher.hpp, kAngleRuleFloorUlps): two points of the unit
+// square `gap` apart make triangles with a tiny angle there. Above the floor
+// (gap 1e-9) the pass refines them to min_angle; below it (gap 1e-12, heights of
+// at most 4500 units of rounding) it leaves them, where refining would only
+// cascade into the rounding of the coordinates (or to the bound on inserted
+// points: what this test catches without the floor).
+void check_angle_rule_floor(double gap, bool refined) {
+  std::vector<Vec2> points;
+  std::vector<Constraint_piece> pieces;
+  add_loop(points, pieces, {{0, 0}, {1, 0}, {1, 1}, {0, 1}}, 1);
+  points.push_back({0.5, 0.5});
+  points.push_back({0.5 + gap, 0.5 + 0.3 * gap});
+  std::vector<Point_kind> kind(points.size(), Point_kind::original);
+  for (std::size_t i = 0; i < 4; ++i) kind[i] = Point_kind::corner;
+  Quality_options options;
+  options.min_angle = 30;
+  const Refined_mesh out = quality_triangulate(points, kind, pieces, options);
+  CHECK(!out.report.capped) << "gap " << gap << ": the pass ran to its bound (" << out.report.n_inserted << " points)";
+  double smallest = 180;
+  const auto& p = out.mesh.points;
+  for (const auto& t : out.mesh.triangles) {
+    for (int k = 0; k < 3; ++k) {
+      const Vec2 &a = p[t[k]], &b = p[t[(k + 1) % 3]], &c = p[t[(k + 2) % 3]];
+      const double u0 = b[0] - a[0], u1 = b[1] - a[1], v0 = c[0] - a[0], v1 = c[1] - a[1];
+      smallest = std::min(smallest, std::atan2(std::abs(u0 * v1 - u1 * v0), u0 * v0 + u1 * v1) * 180 / 3.141592653589793);
+    }
+  }
+  std::printf("angle rule floor, gap %g: %zu points inserted, smallest angle %.3g\n", gap, out.report.n_inserted, smallest);
+  if (refined) {
+    CHECK(smallest >= 29.9) << "gap " << gap << ": smallest angle " << smallest;
+  } else {
+    CHECK(smallest < 1) << "gap " << gap << ": refined below the floor (smallest angle " << smallest << ")";
+    CHECK(out.report.n_inserted < 200) << "gap " << gap << ": " << out.report.n_inserted << " points inserted";
+  }
+}
+
 int main() {
   return evomesh_test::run([] {
+    check_angle_rule_floor(1e-9, true);
+    check_angle_rule_floor(1e-12, false);
     check_planarity_cases();
     check_square_with_hole(1, 0, 1);
     check_square_with_hole(1, 40, 2);

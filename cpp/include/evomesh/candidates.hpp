@@ -63,19 +63,25 @@ int ring_candidates_of(const Mesh_arrays& mesh, const Triangle_fans& fans, const
 // Candidates on segments: grid samples, then (options.ring_samples) one ring
 // candidate each way from every R-point, merged in so that each segment's list
 // stays sorted along it, then snapped to straight chains. Radii not yet set.
+// `queries` (optional): f for the grids of segments far longer than f at their
+// ends (sample_segments).
 Candidates segment_candidates(const Mesh_arrays& mesh, const std::vector<double>& delta, const std::vector<double>& f,
-                              const std::vector<Segment_chain>& chains, const Frfc_options& options);
+                              const std::vector<Segment_chain>& chains, const Frfc_options& options,
+                              const Spacing_queries* queries = nullptr);
 
 // Candidates inside triangles: grid samples and (options.ring_samples) the ring
 // candidates of every R-point, except those in a cover disc of their triangle
 // (cover empty: none dropped). `n_drawn` receives the number of grid samples drawn.
 // `quiet` (optional, one flag per triangle): triangles whose grid samples all lie
 // in a cover disc (incremental_step.cpp); they are not sampled, the result is the same.
+// `queries` (optional): f for the adaptive grids of strongly graded triangles
+// (sample_triangles).
 Candidates interior_candidates(const Mesh_arrays& mesh, const Triangle_fans& fans, const std::vector<double>& delta,
                                const std::vector<double>& f, const std::vector<std::uint8_t>& demoted,
                                const std::vector<Disc>& cover,
                                const Frfc_options& options, std::size_t& n_drawn,
-                               const std::vector<std::uint8_t>* quiet = nullptr);
+                               const std::vector<std::uint8_t>* quiet = nullptr,
+                               const Spacing_queries* queries = nullptr);
 
 // Sphere radii of the input points: radius_scale f(p) / 2 (times boundary_scale on segments).
 std::vector<double> input_point_radii(const Mesh_arrays& mesh, const std::vector<double>& f,

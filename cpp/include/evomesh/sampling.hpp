@@ -2,6 +2,7 @@
 #pragma once
 
 #include <cstdint>
+#include <functional>
 #include <limits>
 #include <vector>
 
@@ -21,6 +22,20 @@ struct Sample_set {
   std::vector<Index> parent;  // triangle index (interior samples) or segment index (segment samples)
 };
 
+// f at a batch of points (exactly, e.g. Spacing_function::evaluate): lets the
+// adaptive grid of a strongly graded triangle size its blocks by f itself, not
+// only by the bound from the triangle's vertices. Called from the sampling
+// threads: it must be safe to call concurrently.
+using Spacing_queries = std::function<void(const std::vector<Vec2>& at, std::vector<double>& f)>;
+
+// Whether the adaptive grid of triangle t asks `Spacing_queries` (its fine grid
+// has more than kQueryCells cells: a triangle far larger than f at its smallest
+// vertex, where the vertices' bound alone leaves fine cells over all of it).
+constexpr double kQueryCells = 4096;
+bool asks_spacing(const Mesh_arrays& mesh, const std::vector<double>& vertex_f, const Triangle& t, double cell_factor);
+// The same for the 1-D grid of a segment (sample_segments).
+bool asks_spacing(const Mesh_arrays& mesh, const std::vector<double>& vertex_f, const Edge& e, double cell_factor);
+
 // Interior samples. Cell side = cell_factor * f(q) / (2 sqrt 2), q the vertex of the
 // triangle with the smallest f, or larger where f's Lipschitz bound from the
 // vertices allows (sampling.cpp: adaptive cells; `adaptive` false: the paper's
@@ -31,17 +46,20 @@ struct Sample_set {
 // drawn but not returned (cover empty: all are returned); `n_drawn` receives
 // the number drawn.
 // Triangles are sampled in parallel in fixed blocks: the result never depends
-// on `threads` (0: hardware concurrency).
+// on `threads` (0: hardware concurrency). `queries` (optional): f for the
+// adaptive grid of the triangles asks_spacing() names.
 Sample_set sample_triangles(const Mesh_arrays& mesh, const std::vector<double>& vertex_f,
                             double cell_factor, Sample_mode mode, std::uint64_t seed,
                             const std::vector<std::uint8_t>& skip, const std::vector<Disc>& cover = {},
-                            int threads = 0, std::size_t* n_drawn = nullptr, bool adaptive = true);
+                            int threads = 0, std::size_t* n_drawn = nullptr, bool adaptive = true,
+                            const Spacing_queries* queries = nullptr);
 
 // Samples on the segments, strictly between their endpoints, sorted along each
 // segment from a to b: one random point per 1-D cell of side cell_factor * min f / (2 sqrt 2),
 // or, in every deterministic mode (barycentre and/or midpoints), the midpoint.
 Sample_set sample_segments(const Mesh_arrays& mesh, const std::vector<double>& vertex_f,
-                           double cell_factor, Sample_mode mode, std::uint64_t seed, bool adaptive = true);
+                           double cell_factor, Sample_mode mode, std::uint64_t seed, bool adaptive = true,
+                           const Spacing_queries* queries = nullptr);
 
 // Whether x lies strictly inside the cover disc of a vertex of t (cover empty: no).
 bool in_cover(const std::vector<Disc>& cover, const Triangle& t, const Vec2& x);
@@ -50,8 +68,10 @@ bool in_cover(const std::vector<Disc>& cover, const Triangle& t, const Vec2& x);
 // produce, so callers can refuse inputs that would exhaust memory: O(n) plus the
 // cells of the triangles whose grid adapts, and it stops as soon as the count
 // passes `limit` (infinite when a triangle would need more than 2^50 cells a side).
+// With the same `queries` as sample_triangles, the same cells.
 double estimate_sample_count(const Mesh_arrays& mesh, const std::vector<double>& vertex_f, double cell_factor,
-                             double limit = std::numeric_limits<double>::infinity(), bool adaptive = true);
+                             double limit = std::numeric_limits<double>::infinity(), bool adaptive = true,
+                             const Spacing_queries* queries = nullptr);
 
 // Counter-based random numbers: the same (seed, stream) always gives the same sequence.
 struct Random_stream {

@@ -17,6 +17,7 @@
 #include "evomesh/parent_map.hpp"
 #include "evomesh/quality_pass.hpp"
 #include "evomesh/segment_chains.hpp"
+#include "evomesh/sampling.hpp"
 #include "evomesh/spacing.hpp"
 #include "evomesh/triangulation.hpp"
 #include "evomesh/types.hpp"
@@ -119,6 +120,10 @@ enum class F_at_points { lemma_3_1, evaluate_all };
 // (local_feature_size.hpp).
 Step_spacing step_spacing(const Mesh_arrays& mesh, const std::vector<double>& delta, F_at_points how, int threads,
                           detail::Stage_timer& timer, const std::vector<Segment_chain>* within_domain = nullptr);
+
+// Spacing_queries (sampling.hpp) answered by `function` (certified: CGAL's
+// exact nearest site), one thread per call (the sampling threads call it).
+Spacing_queries spacing_queries(const Spacing_function& function);
 
 // Throws Input_error when `estimate` (the points `what` would create) is above max_samples.
 void check_sample_budget(double estimate, double max_samples, const char* what);

@@ -337,8 +337,11 @@ class Domain_sides {
 // until the cluster is reduced, which is what ends the refinement at a small
 // angle in the domain. That needs the edges of such a cluster to encroach each
 // other across the wedges between them, also across a wedge outside the domain
-// (a hole touching the vertex): an edge of a cluster with a wedge of the domain
-// keeps CGAL's two-sided test. A cluster whose wedges are all outside the domain
+// (a hole touching the vertex): every constraint edge at the apex of a cluster
+// with a wedge of the domain keeps CGAL's two-sided test (also one outside the
+// cluster: with it one-sided, a 12.5 degree wedge between two holes meeting at
+// its apex was refined into the apex at midpoints, 120 points down to 1e-11,
+// never reduced). A cluster whose wedges are all outside the domain
 // (a thin notch, holes meeting at a vertex) has no small angle to end, and its
 // edges see only the domain: across a notch of angle theta, a point at radius r
 // from its apex is r theta from the other side, sees the other side's piece at
@@ -351,19 +354,18 @@ struct Gabriel : CGAL::Mesh_2::Is_locally_conforming_Gabriel<Cdt> {
   const Domain_sides* sides = nullptr;
   const CGAL::Mesh_2::Clusters<Cdt>* clusters = nullptr;
 
-  // Whether the edge v -> w belongs to a cluster at v with a wedge of the domain:
-  // two of its edges consecutive around v with the domain between them (or an
+  // Whether v is the apex of a cluster with a wedge of the domain: two of the
+  // cluster's edges consecutive around v with the domain between them (or an
   // edge with the domain on both sides). The cluster's edges in counter-clockwise
   // order of direction (a split keeps an edge's direction, so this never looks at
   // the triangulation, which is mid-insertion when CGAL asks); the wedge from
   // v -> u to the next edge is on the left of v -> u. The widest gap between
   // consecutive directions is no wedge of the cluster unless all are below 60
   // degrees (a cluster all around v).
-  bool in_cluster_with_domain_wedge(Vertex_handle v, Vertex_handle w) const {
+  bool apex_of_domain_cluster(Vertex_handle v) const {
     const unsigned n = clusters->number_of_clusters_at_vertex(v);
     for (unsigned k = 0; k < n; ++k) {
       const auto range = clusters->vertices_in_cluster_sequence(v, k);
-      if (std::find(range.first, range.second, w) == range.second) continue;
       std::vector<std::pair<double, Vertex_handle>> around;
       for (auto it = range.first; it != range.second; ++it) {
         const Vertex_handle u = *it;
@@ -384,7 +386,6 @@ struct Gabriel : CGAL::Mesh_2::Is_locally_conforming_Gabriel<Cdt> {
         if (j == widest && widest_gap >= kPi / 3) continue;
         if (sides->side(v, around[j].second) >= 0) return true;
       }
-      return false;
     }
     return false;
   }
@@ -393,7 +394,7 @@ struct Gabriel : CGAL::Mesh_2::Is_locally_conforming_Gabriel<Cdt> {
     const Vertex_handle va = fh->vertex(Cdt::cw(i)), vb = fh->vertex(Cdt::ccw(i));
     int side = sides == nullptr ? 0 : sides->side(vb, va);  // fh is on the left of vb -> va
     if (side != 0 && clusters != nullptr &&
-        (in_cluster_with_domain_wedge(va, vb) || in_cluster_with_domain_wedge(vb, va))) {
+        (apex_of_domain_cluster(va) || apex_of_domain_cluster(vb))) {
       side = 0;
     }
     const Vertex_handle vi = fh->vertex(i);
