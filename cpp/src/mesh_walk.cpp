@@ -98,8 +98,7 @@ Index Mesh_walk::locate_from(Index v, const Vec2& x, int max_steps) const {
     }
   }
   for (int step = 0; t >= 0 && step < max_steps; ++step) {
-    const int side = orientation(P[a], P[b], x);
-    if (std::getenv("EVOMESH_DEBUG_WALK")) std::fprintf(stderr, " t %d a %d b %d side %d seg %d\n", t, a, b, side, (int)is_segment(a, b));  // > 0: x on t's side of (a, b)
+    const int side = orientation(P[a], P[b], x);  // > 0: x on t's side of (a, b)
     if (side > 0) return t;
     if (side == 0 || is_segment(a, b)) return -1;
     const Index next = across(t, a, b);
