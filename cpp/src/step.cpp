@@ -234,11 +234,6 @@ void finish_step(const Mesh_arrays& input, Evolve_result& result, detail::Stage_
   output_nn.start(
       [&result, &nn_seconds]() {
         const auto begin = std::chrono::steady_clock::now();
-        struct Lap {
-          std::chrono::steady_clock::time_point begin;
-          double& out;
-          ~Lap() { out = std::chrono::duration<double>(std::chrono::steady_clock::now() - begin).count(); }
-        } lap{begin, nn_seconds};
         try {
           std::vector<double> nn = nn_spacing(result.mesh.points);
           std::vector<double> within = nn;
@@ -254,6 +249,7 @@ void finish_step(const Mesh_arrays& input, Evolve_result& result, detail::Stage_
           result.output_nn_grew.clear();
           result.output_nn_grown.clear();
         }
+        nn_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - begin).count();
       },
       resolve_threads(0) > 1);
   const auto walks_begin = std::chrono::steady_clock::now();

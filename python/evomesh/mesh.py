@@ -259,7 +259,7 @@ class Mesh:
         triangle, NaN, infinite or out-of-range coordinates, indices out of
         range, zero-area (collinear) or nearly flat triangles (height below
         1e-10 of the longest edge, or below 1024 units of rounding of the
-        coordinates), a domain that nearly touches itself (a boundary point
+        coordinates), a domain that nearly touches itself (a boundary corner
         within 1024 units of rounding of a boundary edge it is not an end of),
         repeated, overlapping or inverted triangles, duplicate or orphan
         points, an edge shared by more than two triangles, a segment that is
