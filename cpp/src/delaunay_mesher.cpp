@@ -1,6 +1,7 @@
 #include "evomesh/detail/delaunay_mesher.hpp"
 
 #include "evomesh/detail/domain.hpp"
+#include "evomesh/parallel.hpp"
 
 namespace evomesh::detail {
 
@@ -76,30 +77,58 @@ Refined_mesh extract(Cdt& cdt, const std::vector<Vec2>& input_points, const std:
     result.f[o] = inserted[k]->info().f * scaling.from_unit;
   }
   result.source.resize(n_out, -1);
-  out.triangles.reserve(cdt.number_of_faces());
-  for (auto f = cdt.finite_faces_begin(); f != cdt.finite_faces_end(); ++f) {
-    if (f->is_in_domain()) {
-      out.triangles.push_back({f->vertex(0)->info().out, f->vertex(1)->info().out, f->vertex(2)->info().out});
-    }
-  }
+  // Triangles and constraint edges from the finite faces, in face order: the
+  // faces gathered once, then read in parallel chunks joined in order (the
+  // same arrays as one sweep).
+  std::vector<Face_handle> faces;
+  faces.reserve(cdt.number_of_faces());
+  for (auto f = cdt.finite_faces_begin(); f != cdt.finite_faces_end(); ++f) faces.push_back(f);
+  constexpr std::size_t kChunk = std::size_t{1} << 15;
+  const std::size_t n_chunks = (faces.size() + kChunk - 1) / kChunk;
+  std::vector<std::vector<Triangle>> chunk_triangles(n_chunks);
   // Constraint edges: boundary ones oriented with the domain on their left.
-  std::vector<std::pair<Edge, std::uint8_t>> segments;
-  // (A sweep over the faces, each constraint edge from one side: the one with
-  // the smaller address when both are finite; sorted below.)
-  for (auto fit = cdt.finite_faces_begin(); fit != cdt.finite_faces_end(); ++fit) {
-    for (int i = 0; i < 3; ++i) {
-      const Face_handle f = fit;
-      if (!f->is_constrained(i)) continue;
-      const Face_handle g = f->neighbor(i);
-      if (!cdt.is_infinite(g) && &*g < &*f) continue;
-      const bool f_in = !cdt.is_infinite(f) && f->is_in_domain();
-      const bool g_in = !cdt.is_infinite(g) && g->is_in_domain();
-      const Index a = f->vertex(Cdt::ccw(i))->info().out, b = f->vertex(Cdt::cw(i))->info().out;
-      if (f_in && g_in) segments.push_back({{std::min(a, b), std::max(a, b)}, 0});
-      else if (f_in) segments.push_back({{a, b}, 1});
-      else if (g_in) segments.push_back({{b, a}, 1});
-      else throw std::runtime_error("refinement: a constraint lies outside the domain");
+  // (Each constraint edge from one side: the one with the smaller address when
+  // both are finite; sorted below.)
+  std::vector<std::vector<std::pair<Edge, std::uint8_t>>> chunk_segments(n_chunks);
+  std::vector<std::uint8_t> outside(n_chunks, 0);
+  parallel_for(n_chunks, 0, [&](std::size_t c) {
+    auto& tris = chunk_triangles[c];
+    auto& segs = chunk_segments[c];
+    for (std::size_t k = c * kChunk; k < std::min(faces.size(), (c + 1) * kChunk); ++k) {
+      const Face_handle f = faces[k];
+      if (f->is_in_domain()) {
+        tris.push_back({f->vertex(0)->info().out, f->vertex(1)->info().out, f->vertex(2)->info().out});
+      }
+      for (int i = 0; i < 3; ++i) {
+        if (!f->is_constrained(i)) continue;
+        const Face_handle g = f->neighbor(i);
+        if (!cdt.is_infinite(g) && &*g < &*f) continue;
+        const bool f_in = f->is_in_domain();
+        const bool g_in = !cdt.is_infinite(g) && g->is_in_domain();
+        const Index a = f->vertex(Cdt::ccw(i))->info().out, b = f->vertex(Cdt::cw(i))->info().out;
+        if (f_in && g_in) segs.push_back({{std::min(a, b), std::max(a, b)}, 0});
+        else if (f_in) segs.push_back({{a, b}, 1});
+        else if (g_in) segs.push_back({{b, a}, 1});
+        else outside[c] = 1;
+      }
     }
+  });
+  faces = std::vector<Face_handle>();
+  for (std::uint8_t o : outside) {
+    if (o) throw std::runtime_error("refinement: a constraint lies outside the domain");
+  }
+  std::size_t n_triangles = 0, n_segments = 0;
+  for (std::size_t c = 0; c < n_chunks; ++c) {
+    n_triangles += chunk_triangles[c].size();
+    n_segments += chunk_segments[c].size();
+  }
+  out.triangles.reserve(n_triangles);
+  std::vector<std::pair<Edge, std::uint8_t>> segments;
+  segments.reserve(n_segments);
+  for (std::size_t c = 0; c < n_chunks; ++c) {
+    out.triangles.insert(out.triangles.end(), chunk_triangles[c].begin(), chunk_triangles[c].end());
+    segments.insert(segments.end(), chunk_segments[c].begin(), chunk_segments[c].end());
+    chunk_triangles[c] = std::vector<Triangle>();
   }
   std::sort(segments.begin(), segments.end());
   for (const auto& s : segments) {

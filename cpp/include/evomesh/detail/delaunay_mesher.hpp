@@ -27,6 +27,7 @@
 #include <vector>
 
 #include "evomesh/detail/insert_points.hpp"
+#include "evomesh/parallel.hpp"
 #include "evomesh/kernel.hpp"
 #include "evomesh/refined_mesh.hpp"
 #include "evomesh/triangulation.hpp"
@@ -180,6 +181,9 @@ class Refinement_criteria {
         off_centres_(off_centres),
         tr_(&tr),
         spacing_(spacing) {}
+
+  // Whether rule 4 (sizes from the spacing function) is on.
+  bool has_spacing() const { return spacing_ != nullptr; }
 
   // Cotangent of half the angle under which an off-centre sees the short edge;
   // infinite (always the circumcentre) without off-centres. That angle is a little
@@ -453,7 +457,8 @@ using Faces_base_cgal = CGAL::Mesh_2::Refine_faces_base<Cdt, Refinement_criteria
 struct Faces_base : Faces_base_cgal {
   Faces_base(Cdt& tr, Refinement_criteria& criteria, Edges_level& edges)
       : Faces_base_cgal(tr, criteria, edges),
-        half_angle_cotangent_(criteria.off_centre_half_angle_cotangent()) {}
+        half_angle_cotangent_(criteria.off_centre_half_angle_cotangent()),
+        parallel_scan_(!criteria.has_spacing()) {}
 
   Point_2 refinement_point_impl(const Cdt::Face_handle& f) const {
     const Point_2 c = this->triangulation_ref_impl().circumcenter(f);
@@ -479,6 +484,36 @@ struct Faces_base : Faces_base_cgal {
     return Point_2(mx + dx / to_centre * height, my + dy / to_centre * height);
   }
 
+  // CGAL's scan (every face of the domain; the bad ones queued), with the
+  // badness of the faces computed in parallel blocks first. The queue orders
+  // faces by quality and then by their points (CGAL's Face_compare), never by
+  // when they were queued: the same queue as CGAL's scan. Only without rule 4,
+  // whose target_spacing caches f in the vertices (not thread-safe).
+  void scan_triangulation_impl() {
+    if (!parallel_scan_) {
+      Faces_base_cgal::scan_triangulation_impl();
+      return;
+    }
+    this->bad_faces.clear();
+    Cdt& tr = this->triangulation_ref_impl();
+    std::vector<Cdt::Face_handle> faces;
+    faces.reserve(tr.number_of_faces());
+    for (auto f = tr.finite_faces_begin(); f != tr.finite_faces_end(); ++f) {
+      if (f->is_in_domain()) faces.push_back(f);
+    }
+    std::vector<Refinement_criteria::Quality> quality(faces.size());
+    std::vector<std::uint8_t> bad(faces.size());
+    constexpr std::size_t kChunk = std::size_t{1} << 14;
+    parallel_for((faces.size() + kChunk - 1) / kChunk, 0, [&](std::size_t c) {
+      for (std::size_t k = c * kChunk; k < std::min(faces.size(), (c + 1) * kChunk); ++k) {
+        bad[k] = this->is_bad(faces[k], quality[k]) != CGAL::Mesh_2::NOT_BAD;
+      }
+    });
+    for (std::size_t k = 0; k < faces.size(); ++k) {
+      if (bad[k]) this->bad_faces.insert(faces[k], quality[k]);
+    }
+  }
+
   bool no_longer_element_to_refine_impl() {
     while (!this->bad_faces.empty()) {
       Refinement_criteria::Quality q;
@@ -490,6 +525,7 @@ struct Faces_base : Faces_base_cgal {
 
  private:
   double half_angle_cotangent_;
+  bool parallel_scan_;
 };
 using Faces_level = CGAL::Mesh_2::Refine_faces<Cdt, Refinement_criteria, Edges_level, Faces_base>;
 using Visitor = CGAL::Mesh_2::Refine_edges_visitor_from_faces<Faces_level>;
