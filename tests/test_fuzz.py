@@ -122,6 +122,10 @@ def _evolve_checked(mesh: evomesh.Mesh, delta: np.ndarray, **kwargs) -> evomesh.
         new = None
     else:
         check_evolved(mesh, new, **rounding_tolerances(mesh))
+        # Every output is a valid input: Mesh() accepts it as the user would pass
+        # it back (the step's output check and Mesh()'s limits agree).
+        evomesh.Mesh(new.points, new.triangles, new.segments, segment_tags=new.segment_tags,
+                     triangle_tags=new.triangle_tags, required=new.required, kind=new.kind)
     assert np.array_equal(mesh.points, before[0]) and np.array_equal(mesh.triangles, before[1])
     assert np.array_equal(delta, before[2])
     return new
