@@ -78,26 +78,33 @@ Refined_mesh extract(Cdt& cdt, const std::vector<Vec2>& input_points, const std:
   }
   result.source.resize(n_out, -1);
   // Triangles and constraint edges from the finite faces, in face order: the
-  // faces gathered once, then read in parallel chunks joined in order (the
-  // same arrays as one sweep).
+  // faces gathered once, counted and then read in parallel chunks, each writing
+  // its own range of the triangles (allocated here, not by the threads).
   std::vector<Face_handle> faces;
   faces.reserve(cdt.number_of_faces());
   for (auto f = cdt.finite_faces_begin(); f != cdt.finite_faces_end(); ++f) faces.push_back(f);
   constexpr std::size_t kChunk = std::size_t{1} << 15;
   const std::size_t n_chunks = (faces.size() + kChunk - 1) / kChunk;
-  std::vector<std::vector<Triangle>> chunk_triangles(n_chunks);
+  std::vector<std::size_t> first_triangle(n_chunks + 1, 0);
+  parallel_for(n_chunks, 0, [&](std::size_t c) {
+    std::size_t count = 0;
+    for (std::size_t k = c * kChunk; k < std::min(faces.size(), (c + 1) * kChunk); ++k) count += faces[k]->is_in_domain();
+    first_triangle[c + 1] = count;
+  });
+  for (std::size_t c = 0; c < n_chunks; ++c) first_triangle[c + 1] += first_triangle[c];
+  out.triangles.resize(first_triangle[n_chunks]);
   // Constraint edges: boundary ones oriented with the domain on their left.
   // (Each constraint edge from one side: the one with the smaller address when
   // both are finite; sorted below.)
   std::vector<std::vector<std::pair<Edge, std::uint8_t>>> chunk_segments(n_chunks);
   std::vector<std::uint8_t> outside(n_chunks, 0);
   parallel_for(n_chunks, 0, [&](std::size_t c) {
-    auto& tris = chunk_triangles[c];
+    std::size_t t = first_triangle[c];
     auto& segs = chunk_segments[c];
     for (std::size_t k = c * kChunk; k < std::min(faces.size(), (c + 1) * kChunk); ++k) {
       const Face_handle f = faces[k];
       if (f->is_in_domain()) {
-        tris.push_back({f->vertex(0)->info().out, f->vertex(1)->info().out, f->vertex(2)->info().out});
+        out.triangles[t++] = {f->vertex(0)->info().out, f->vertex(1)->info().out, f->vertex(2)->info().out};
       }
       for (int i = 0; i < 3; ++i) {
         if (!f->is_constrained(i)) continue;
@@ -117,18 +124,10 @@ Refined_mesh extract(Cdt& cdt, const std::vector<Vec2>& input_points, const std:
   for (std::uint8_t o : outside) {
     if (o) throw std::runtime_error("refinement: a constraint lies outside the domain");
   }
-  std::size_t n_triangles = 0, n_segments = 0;
-  for (std::size_t c = 0; c < n_chunks; ++c) {
-    n_triangles += chunk_triangles[c].size();
-    n_segments += chunk_segments[c].size();
-  }
-  out.triangles.reserve(n_triangles);
   std::vector<std::pair<Edge, std::uint8_t>> segments;
-  segments.reserve(n_segments);
-  for (std::size_t c = 0; c < n_chunks; ++c) {
-    out.triangles.insert(out.triangles.end(), chunk_triangles[c].begin(), chunk_triangles[c].end());
-    segments.insert(segments.end(), chunk_segments[c].begin(), chunk_segments[c].end());
-    chunk_triangles[c] = std::vector<Triangle>();
+  for (auto& segs : chunk_segments) {
+    segments.insert(segments.end(), segs.begin(), segs.end());
+    segs = {};
   }
   std::sort(segments.begin(), segments.end());
   for (const auto& s : segments) {
