@@ -446,6 +446,27 @@ struct Edges_base : Edges_base_with_clusters {
 
   // Call once the in_domain marks are set, before scanning.
   void record_domain_sides() { sides_.record(this->tr); }
+
+  // CGAL's scan (every constraint edge in edge order; the encroached ones
+  // queued), with the Gabriel tests computed in parallel blocks first (they
+  // only read the triangulation, the sides and the clusters): the same queue.
+  void scan_triangulation_impl() {
+    this->clear();
+    std::vector<Cdt::Edge> edges;
+    for (auto e = this->tr.finite_edges_begin(); e != this->tr.finite_edges_end(); ++e) {
+      if (e->first->is_constrained(e->second)) edges.push_back(*e);
+    }
+    std::vector<std::uint8_t> conform(edges.size());
+    constexpr std::size_t kChunk = std::size_t{1} << 12;
+    parallel_for((edges.size() + kChunk - 1) / kChunk, 0, [&](std::size_t c) {
+      for (std::size_t k = c * kChunk; k < std::min(edges.size(), (c + 1) * kChunk); ++k) {
+        conform[k] = this->is_locally_conform(this->tr, edges[k].first, edges[k].second);
+      }
+    });
+    for (std::size_t k = 0; k < edges.size(); ++k) {
+      if (!conform[k]) this->add_constrained_edge_to_be_conformed(edges[k]);
+    }
+  }
   void queue_split(Cdt::Vertex_handle a, Cdt::Vertex_handle b) { this->add_constrained_edge_to_be_conformed(a, b); }
 
   // The sub-segments take their parent's side before CGAL's after_insertion_impl
