@@ -46,3 +46,17 @@ def test_thread_environment_variables_do_not_change_results():
         out = subprocess.run([sys.executable, "-c", script], env=env, capture_output=True, text=True, timeout=120)
         assert out.returncode == 0, out.stderr
         assert out.stdout.split()[-1] == reference, variables
+
+
+def test_sampling_that_asks_f_gives_the_same_bits_on_any_number_of_threads():
+    # A sliver from a close pair: its adaptive grid asks the Apollonius graph for
+    # f at block centres (Spacing_queries) from the sampling threads.
+    case = np.load(Path(__file__).parent / "data" / "fuzz_sliver_refinement.npz")
+    mesh = evomesh.Mesh(case["points"], case["triangles"], case["segments"], kind=case["kind"])
+    digests = set()
+    for threads in (1, 2, 3):
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", evomesh.QualityWarning)
+            new = evomesh.evolve(mesh, np.full(mesh.n_points, 0.1), seed=3, threads=threads)
+        digests.add(hashlib.sha256(new.points.tobytes() + new.triangles.tobytes()).hexdigest())
+    assert len(digests) == 1
