@@ -13,9 +13,12 @@ from evomesh.mesh import _MAX_COORDINATE, Mesh, _as_array
 __all__ = ["nn_spacing", "spacing", "SpacingFunction", "as_delta", "delta_from_size", "DELTA_MIN", "DELTA_MAX"]
 
 #: Accepted range of the per-point factor delta: the paper's l <= delta <= L
-#: (Definition 2.6). Below DELTA_MIN one step would need more than ~1e12 samples
-#: per triangle; above DELTA_MAX a point's new spacing is 1e6 times its old one,
-#: which already coarsens any mesh down to its corners.
+#: (Definition 2.6). At DELTA_MIN one step grades the spacing by six orders of
+#: magnitude towards a point (the sampler's grid follows f, so that takes a few
+#: rings per octave, not a grid of f(p)-sized cells over the triangle; further
+#: down, the quality pass's bound on inserted points and float64 run out); above
+#: DELTA_MAX a point's new spacing is 1e6 times its old one, which already
+#: coarsens any mesh down to its corners.
 DELTA_MIN = 1e-6
 DELTA_MAX = 1e6
 
