@@ -322,19 +322,63 @@ bool in_cover(const std::vector<Disc>& cover, const Triangle& t, const Vec2& x) 
   return false;
 }
 
-bool asks_spacing(const Mesh_arrays& mesh, const std::vector<double>& vertex_f, const Edge& e, double cell_factor) {
-  const double s = cell_factor * std::min(vertex_f[e[0]], vertex_f[e[1]]) * kInvTwoSqrtTwo;
+namespace {
+
+// The fine grid of a triangle: cells of side s = c f(q) / (2 sqrt 2), q its
+// vertex of smallest f, over its bounding box (fx by fy cells, as doubles).
+struct Triangle_grid {
+  double s, xmin, ymin, xmax, ymax, fx, fy;
+  double cells() const { return std::max(fx, 1.0) * std::max(fy, 1.0); }
+};
+
+Triangle_grid triangle_grid(const Mesh_arrays& mesh, const std::vector<double>& vertex_f, const Triangle& t,
+                            double cell_factor) {
+  const Vec2 &a = mesh.points[t[0]], &b = mesh.points[t[1]], &c = mesh.points[t[2]];
+  Triangle_grid g;
+  g.s = cell_factor * vertex_f[smallest_f_vertex(t, vertex_f)] * kInvTwoSqrtTwo;
+  g.xmin = std::min({a[0], b[0], c[0]});
+  g.xmax = std::max({a[0], b[0], c[0]});
+  g.ymin = std::min({a[1], b[1], c[1]});
+  g.ymax = std::max({a[1], b[1], c[1]});
+  g.fx = std::ceil((g.xmax - g.xmin) / g.s);
+  g.fy = std::ceil((g.ymax - g.ymin) / g.s);
+  return g;
+}
+
+// The cells of triangle t's adaptive grid (adaptive_cells over its fine grid g).
+bool triangle_cells(const Mesh_arrays& mesh, const std::vector<double>& vertex_f, const Triangle& t,
+                    const Triangle_grid& g, double cell_factor, double limit, bool adaptive,
+                    const Spacing_queries* queries, std::vector<Dyadic_cell>& cells) {
+  return adaptive_cells({mesh.points[t[0]], mesh.points[t[1]], mesh.points[t[2]]},
+                        {vertex_f[t[0]], vertex_f[t[1]], vertex_f[t[2]]}, g.xmin, g.ymin, g.xmax, g.ymax, g.s,
+                        cell_factor, std::max<std::int64_t>(static_cast<std::int64_t>(g.fx), 1),
+                        std::max<std::int64_t>(static_cast<std::int64_t>(g.fy), 1), limit, adaptive, queries, cells);
+}
+
+// The 1-D fine grid of a segment: cells of side s = c min f / (2 sqrt 2) over its length.
+struct Segment_grid {
+  double s, length, cells;
+};
+
+Segment_grid segment_grid(const Mesh_arrays& mesh, const std::vector<double>& vertex_f, const Edge& e,
+                          double cell_factor) {
   const Vec2& a = mesh.points[e[0]];
   const Vec2& b = mesh.points[e[1]];
-  return !(std::ceil(std::hypot(b[0] - a[0], b[1] - a[1]) / s) <= kQueryCells);
+  Segment_grid g;
+  g.s = cell_factor * std::min(vertex_f[e[0]], vertex_f[e[1]]) * kInvTwoSqrtTwo;
+  g.length = std::hypot(b[0] - a[0], b[1] - a[1]);
+  g.cells = std::ceil(g.length / g.s);
+  return g;
+}
+
+}  // namespace
+
+bool asks_spacing(const Mesh_arrays& mesh, const std::vector<double>& vertex_f, const Edge& e, double cell_factor) {
+  return !(segment_grid(mesh, vertex_f, e, cell_factor).cells <= kQueryCells);
 }
 
 bool asks_spacing(const Mesh_arrays& mesh, const std::vector<double>& vertex_f, const Triangle& t, double cell_factor) {
-  const double s = cell_factor * vertex_f[smallest_f_vertex(t, vertex_f)] * kInvTwoSqrtTwo;
-  const Vec2 &a = mesh.points[t[0]], &b = mesh.points[t[1]], &c = mesh.points[t[2]];
-  const double fx = std::ceil((std::max({a[0], b[0], c[0]}) - std::min({a[0], b[0], c[0]})) / s);
-  const double fy = std::ceil((std::max({a[1], b[1], c[1]}) - std::min({a[1], b[1], c[1]})) / s);
-  return !(std::max(fx, 1.0) * std::max(fy, 1.0) <= kQueryCells);
+  return !(triangle_grid(mesh, vertex_f, t, cell_factor).cells() <= kQueryCells);
 }
 
 double estimate_sample_count(const Mesh_arrays& mesh, const std::vector<double>& vertex_f, double cell_factor,
@@ -347,21 +391,14 @@ double estimate_sample_count(const Mesh_arrays& mesh, const std::vector<double>&
   double total = 0;
   std::vector<Dyadic_cell> cells;
   for (const auto& t : mesh.triangles) {
-    const double s = cell_factor * vertex_f[smallest_f_vertex(t, vertex_f)] * kInvTwoSqrtTwo;
-    const Vec2 &a = mesh.points[t[0]], &b = mesh.points[t[1]], &c = mesh.points[t[2]];
-    const double xmin = std::min({a[0], b[0], c[0]}), xmax = std::max({a[0], b[0], c[0]});
-    const double ymin = std::min({a[1], b[1], c[1]}), ymax = std::max({a[1], b[1], c[1]});
-    const double fx = std::ceil((xmax - xmin) / s), fy = std::ceil((ymax - ymin) / s);
-    if (!(fx <= kMaxCellsPerSide && fy <= kMaxCellsPerSide)) return std::numeric_limits<double>::infinity();
-    const double fine = std::max(fx, 1.0) * std::max(fy, 1.0);
+    const Triangle_grid g = triangle_grid(mesh, vertex_f, t, cell_factor);
+    if (!(g.fx <= kMaxCellsPerSide && g.fy <= kMaxCellsPerSide)) return std::numeric_limits<double>::infinity();
+    const double fine = g.cells();
     if (!adaptive || fine <= kCountCells) {
       total += fine;
     } else {
       cells.clear();
-      const bool complete = adaptive_cells({a, b, c}, {vertex_f[t[0]], vertex_f[t[1]], vertex_f[t[2]]}, xmin, ymin, xmax,
-                                           ymax, s, cell_factor, std::max<std::int64_t>(static_cast<std::int64_t>(fx), 1),
-                                           std::max<std::int64_t>(static_cast<std::int64_t>(fy), 1), limit - total,
-                                           adaptive, queries, cells);
+      const bool complete = triangle_cells(mesh, vertex_f, t, g, cell_factor, limit - total, adaptive, queries, cells);
       total += static_cast<double>(cells.size());
       if (!complete) return total;
     }
@@ -369,18 +406,15 @@ double estimate_sample_count(const Mesh_arrays& mesh, const std::vector<double>&
   }
   std::vector<std::array<std::int64_t, 2>> blocks;
   for (const auto& e : mesh.segments) {
-    const double s = cell_factor * std::min(vertex_f[e[0]], vertex_f[e[1]]) * kInvTwoSqrtTwo;
-    const Vec2& a = mesh.points[e[0]];
-    const Vec2& b = mesh.points[e[1]];
-    const double length = std::hypot(b[0] - a[0], b[1] - a[1]);
-    const double fine = std::ceil(length / s);
+    const Segment_grid g = segment_grid(mesh, vertex_f, e, cell_factor);
+    const double fine = g.cells;
     if (!(fine <= kMaxCellsPerSide)) return std::numeric_limits<double>::infinity();
     if (!adaptive || fine <= kCountCells) {
       total += fine + 1;
     } else {
       blocks.clear();
-      adaptive_segment_cells(a, b, length, vertex_f[e[0]], vertex_f[e[1]], cell_factor,
-                             static_cast<std::int64_t>(fine), adaptive, queries, blocks);
+      adaptive_segment_cells(mesh.points[e[0]], mesh.points[e[1]], g.length, vertex_f[e[0]], vertex_f[e[1]],
+                             cell_factor, static_cast<std::int64_t>(fine), adaptive, queries, blocks);
       total += static_cast<double>(blocks.size()) + 1;
     }
     if (total > limit) return total;
@@ -425,16 +459,10 @@ void sample_one_triangle(const Mesh_arrays& mesh, std::size_t ti, const std::vec
     return;
   }
   Random_stream rng(seed, ti);
-  const double s = cell_factor * vertex_f[smallest_f_vertex(t, vertex_f)] * kInvTwoSqrtTwo;
-  const double xmin = std::min({a[0], b[0], c[0]});
-  const double xmax = std::max({a[0], b[0], c[0]});
-  const double ymin = std::min({a[1], b[1], c[1]});
-  const double ymax = std::max({a[1], b[1], c[1]});
-  const auto nx = std::max<std::int64_t>(static_cast<std::int64_t>(std::ceil((xmax - xmin) / s)), 1);
-  const auto ny = std::max<std::int64_t>(static_cast<std::int64_t>(std::ceil((ymax - ymin) / s)), 1);
+  const Triangle_grid g = triangle_grid(mesh, vertex_f, t, cell_factor);
+  const double s = g.s, xmin = g.xmin, xmax = g.xmax, ymin = g.ymin, ymax = g.ymax;
   std::vector<Dyadic_cell> cells;
-  adaptive_cells({a, b, c}, {vertex_f[t[0]], vertex_f[t[1]], vertex_f[t[2]]}, xmin, ymin, xmax, ymax, s, cell_factor,
-                 nx, ny, std::numeric_limits<double>::infinity(), adaptive, queries, cells);
+  triangle_cells(mesh, vertex_f, t, g, cell_factor, std::numeric_limits<double>::infinity(), adaptive, queries, cells);
   Polygon poly, clipped;
   std::array<double, 8> cumulative{};
   for (const Dyadic_cell& cell : cells) {
@@ -520,19 +548,18 @@ Sample_set sample_segments(const Mesh_arrays& mesh, const std::vector<double>& v
     const Edge& e = mesh.segments[k];
     const Vec2& a = mesh.points[e[0]];
     const Vec2& b = mesh.points[e[1]];
-    const double length = std::hypot(b[0] - a[0], b[1] - a[1]);
     if (mode != Sample_mode::random_grid) {
       out.points.push_back({0.5 * (a[0] + b[0]), 0.5 * (a[1] + b[1])});
       out.parent.push_back(static_cast<Index>(k));
       continue;
     }
-    const double s = cell_factor * std::min(vertex_f[e[0]], vertex_f[e[1]]) * kInvTwoSqrtTwo;
-    const auto cells = static_cast<std::int64_t>(std::ceil(length / s));
+    const Segment_grid g = segment_grid(mesh, vertex_f, e, cell_factor);
+    const auto cells = static_cast<std::int64_t>(g.cells);
     if (cells < 2) continue;
     // Stream ids for segments follow the triangles' so the two never share one.
     Random_stream rng(seed, (std::uint64_t{1} << 62) + k);
     blocks.clear();
-    adaptive_segment_cells(a, b, length, vertex_f[e[0]], vertex_f[e[1]], cell_factor, cells, adaptive, queries, blocks);
+    adaptive_segment_cells(a, b, g.length, vertex_f[e[0]], vertex_f[e[1]], cell_factor, cells, adaptive, queries, blocks);
     for (const auto& [first, size] : blocks) {
       const double t = (static_cast<double>(first) + static_cast<double>(size) * rng.uniform()) / static_cast<double>(cells);
       if (!(t > 0 && t < 1)) continue;
