@@ -31,9 +31,12 @@ Packing first_packing_pass(const Mesh_arrays& mesh, const std::vector<double>& f
                            const std::vector<std::uint8_t>& forced, std::size_t n_forced,
                            const std::vector<std::uint8_t>& demoted, const Frfc_options& options) {
   Packing packing;
+  // (exact capacities: growing by insert would double them, 24 bytes a point for nothing)
+  packing.centers.reserve(mesh.points.size() + on_segments.size());
   packing.centers = mesh.points;
   packing.centers.insert(packing.centers.end(), on_segments.samples.points.begin(), on_segments.samples.points.end());
   packing.radius = input_point_radii(mesh, f, options);
+  packing.radius.reserve(mesh.points.size() + on_segments.size());
   packing.radius.insert(packing.radius.end(), on_segments.radius.begin(), on_segments.radius.end());
   std::vector<std::uint8_t> classes(mesh.points.size());
   for (std::size_t i = 0; i < classes.size(); ++i) {
@@ -234,7 +237,6 @@ Evolve_result frfc(const Mesh_arrays& input, const std::vector<double>& delta, c
   const auto demoted = demoted_points(mesh.triangles, spacing.nn, spacing.f, forced, options.demote_ratio);
   const Candidates on_segments = segment_stage(mesh, delta, spacing, chains, demoted, options, timer);
   Packing packing = first_packing_pass(mesh, spacing.f, on_segments, forced, n_forced, demoted, options);
-  Early_start early(packing, options, mesh.geometry != nullptr);
   timer.lap("lfmis");
   std::optional<Triangle_fans> fans(mesh);
   std::size_t n_drawn = 0;
@@ -244,6 +246,11 @@ Evolve_result frfc(const Mesh_arrays& input, const std::vector<double>& delta, c
   const std::size_t n_hidden = spacing.function->n_hidden();
   const std::size_t n_filtered = spacing.function->n_filtered();
   spacing.function.reset();  // the Apollonius graph: the radii of the candidates were its last use
+  detail::release_free_memory();
+  // The quality pass's triangulation of the first pass's points starts here, on
+  // the second thread beside the second pass, not beside the sampling: there it
+  // would be alive with the Apollonius graph and set the step's peak memory.
+  Early_start early(packing, options, mesh.geometry != nullptr);
   second_packing_pass(inside, packing);
   detail::release_free_memory();
   early.insert_late(packing, mesh.points.size(), mesh.points.size() + on_segments.size());

@@ -29,8 +29,10 @@ struct Candidates {
 };
 
 // Triangles around each point (compressed lists).
+// (4-byte offsets and triangle numbers: 28 bytes a point instead of 56; a mesh
+// with 3 m >= 2^32 is refused by the constructor)
 struct Triangle_fans {
-  std::vector<Index> xadj, adj;
+  std::vector<std::uint32_t> xadj, adj;
   explicit Triangle_fans(const Mesh_arrays& mesh);
 };
 

@@ -29,9 +29,11 @@ struct Packing {
 };
 
 // The points the first packing pass keeps are final: the quality pass's
-// triangulation of them starts at once, on a second thread, beside the
-// interior sampling and packing (members destroyed in reverse: the thread is
-// joined before the points it reads go).
+// triangulation of them can start on a second thread while the interior
+// candidates are packed (members destroyed in reverse: the thread is joined
+// before the points it reads go). The full step starts it once the Apollonius
+// graph is freed (beside the second pass; alive with the graph during sampling
+// it set the step's peak memory), the incremental step at once.
 //
 // After the second pass, the points it keeps (the interior candidates and the
 // deferred input points) are final too and come next in the output order
