@@ -35,7 +35,7 @@ constexpr double kInterpolatedFloor = 1.3;
 void add_interior_ring_samples(const Mesh_arrays& mesh, const Triangle_fans& fans, const std::vector<double>& delta,
                                const std::vector<double>& f, double reach, double demoted_reach,
                                const std::vector<std::uint8_t>& demoted, std::uint64_t seed,
-                               const std::vector<Disc>& cover, int threads, Sample_set& inside,
+                               const Cover_discs& cover, int threads, Sample_set& inside,
                                std::vector<std::int8_t>& inside_round) {
   const std::size_t n = mesh.points.size();
   constexpr std::size_t kBlock = 4096;
@@ -265,7 +265,7 @@ Candidates segment_candidates(const Mesh_arrays& mesh, const std::vector<double>
 
 Candidates interior_candidates(const Mesh_arrays& mesh, const Triangle_fans& fans, const std::vector<double>& delta,
                                const std::vector<double>& f, const std::vector<std::uint8_t>& demoted,
-                               const std::vector<Disc>& cover,
+                               const Cover_discs& cover,
                                const Frfc_options& options, std::size_t& n_drawn,
                                const std::vector<std::uint8_t>* quiet, const Spacing_queries* queries) {
   std::vector<std::uint8_t> skip;
@@ -376,11 +376,15 @@ void candidate_radii(const Mesh_arrays& mesh, const Spacing_function& spacing, c
 // also at least s m_v / 2, m_v the smallest f at a vertex of a triangle around
 // v (l is a mean of f at x's triangle's vertices): v's disc is then cut to
 // r_c + s m_v / 2.
-std::vector<Disc> cover_discs(const Mesh_arrays& mesh, const std::vector<double>& f,
-                              const std::vector<double>& radius, const std::vector<std::uint8_t>& kept,
-                              const std::vector<Index>& blocker, double radius_scale, bool interpolated) {
+Cover_discs cover_discs(const Mesh_arrays& mesh, const std::vector<double>& f,
+                        const std::vector<double>& radius, const std::vector<std::uint8_t>& kept,
+                        const std::vector<Index>& blocker, double radius_scale, bool interpolated) {
   const std::size_t n = mesh.points.size();
-  std::vector<Disc> cover(n, Disc{{0.0, 0.0}, 0.0});
+  if (n >= (std::uint64_t{1} << 32)) throw Input_error("meshes of 2^32 points or more are not supported");
+  Cover_discs cover;
+  cover.points = &mesh.points;
+  cover.centre.assign(n, 0);
+  cover.reach.assign(n, 0.0);
   const double s = radius_scale;
   std::vector<double> floor;
   if (interpolated) {
@@ -395,7 +399,8 @@ std::vector<Disc> cover_discs(const Mesh_arrays& mesh, const std::vector<double>
     if (c < 0 || static_cast<std::size_t>(c) >= n) continue;
     double reach = (radius[c] + 0.5 * s * f[c]) / (1 + 0.5 * s);
     if (interpolated) reach = std::min(reach, radius[c] + 0.5 * s * kInterpolatedScale * floor[v]);
-    cover[v] = {mesh.points[c], reach * (1 - 1e-9)};
+    cover.centre[v] = static_cast<std::uint32_t>(c);
+    cover.reach[v] = reach * (1 - 1e-9);
   }
   return cover;
 }

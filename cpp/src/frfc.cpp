@@ -166,14 +166,14 @@ Candidates interior_stage(const Mesh_arrays& mesh, const Triangle_fans& fans, co
                           const Step_spacing& spacing, const Packing& packing, const std::vector<std::uint8_t>& demoted,
                           const Frfc_options& options, Stage_timer& timer, std::size_t& n_drawn) {
   const std::vector<double>& f = spacing.f;
-  std::vector<Disc> cover;
+  Cover_discs cover;
   if (options.filter_samples) {
     cover = cover_discs(mesh, f, packing.radius, packing.kept, packing.blocker, options.radius_scale,
                         options.radius == Radius_rule::interpolated);
   }
   const Spacing_queries queries = spacing_queries(*spacing.function);
   Candidates inside = interior_candidates(mesh, fans, delta, f, demoted, cover, options, n_drawn, nullptr, &queries);
-  cover = std::vector<Disc>();
+  cover = Cover_discs();
   detail::release_free_memory();  // the sampling threads' blocks
   timer.lap("sampling");
   candidate_radii(mesh, *spacing.function, f, demoted, options, /*on_segment=*/false, inside);

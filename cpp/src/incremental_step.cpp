@@ -481,8 +481,8 @@ std::optional<Evolve_result> incremental_frfc(const Mesh_arrays& mesh, const std
 
   const Triangle_fans fans(mesh);
   timer.lap("incremental_fans");
-  const std::vector<Disc> cover = cover_discs(mesh, f, packing.radius, packing.kept, packing.blocker,
-                                              options.radius_scale, options.radius == Radius_rule::interpolated);
+  const Cover_discs cover = cover_discs(mesh, f, packing.radius, packing.kept, packing.blocker,
+                                       options.radius_scale, options.radius == Radius_rule::interpolated);
   const std::vector<std::uint8_t> quiet = quiet_triangles(mesh, grid, weight, packing.radius, packing.kept, demoted,
                                                           options.radius_scale, magnitude, options.threads);
   timer.lap("incremental_quiet");

@@ -312,12 +312,13 @@ std::uint64_t Random_stream::next() { return splitmix64(state); }
 
 double Random_stream::uniform() { return static_cast<double>(next() >> 11) * 0x1.0p-53; }
 
-bool in_cover(const std::vector<Disc>& cover, const Triangle& t, const Vec2& x) {
+bool in_cover(const Cover_discs& cover, const Triangle& t, const Vec2& x) {
   if (cover.empty()) return false;
   for (Index v : t) {
-    const Disc& d = cover[v];
-    const double dx = x[0] - d.center[0], dy = x[1] - d.center[1];
-    if (dx * dx + dy * dy < d.radius * d.radius) return true;
+    const Vec2& c = (*cover.points)[cover.centre[v]];
+    const double r = cover.reach[v];
+    const double dx = x[0] - c[0], dy = x[1] - c[1];
+    if (dx * dx + dy * dy < r * r) return true;
   }
   return false;
 }
@@ -427,7 +428,7 @@ namespace {
 // The samples of one triangle, appended to `out` unless a vertex covers them.
 void sample_one_triangle(const Mesh_arrays& mesh, std::size_t ti, const std::vector<double>& vertex_f,
                          double cell_factor, Sample_mode mode, std::uint64_t seed,
-                         const std::unordered_set<std::uint64_t>& segment_edges, const std::vector<Disc>& cover,
+                         const std::unordered_set<std::uint64_t>& segment_edges, const Cover_discs& cover,
                          bool adaptive, const Spacing_queries* queries, Sample_set& out, std::size_t& n_drawn) {
   const auto& P = mesh.points;
   const std::size_t n = P.size();
@@ -501,7 +502,7 @@ void sample_one_triangle(const Mesh_arrays& mesh, std::size_t ti, const std::vec
 
 Sample_set sample_triangles(const Mesh_arrays& mesh, const std::vector<double>& vertex_f,
                             double cell_factor, Sample_mode mode, std::uint64_t seed,
-                            const std::vector<std::uint8_t>& skip, const std::vector<Disc>& cover, int threads,
+                            const std::vector<std::uint8_t>& skip, const Cover_discs& cover, int threads,
                             std::size_t* n_drawn, bool adaptive, const Spacing_queries* queries) {
   std::unordered_set<std::uint64_t> segment_edges;
   if (mode == Sample_mode::midpoints || mode == Sample_mode::barycentre_midpoints) {

@@ -80,7 +80,7 @@ Candidates segment_candidates(const Mesh_arrays& mesh, const std::vector<double>
 // (sample_triangles).
 Candidates interior_candidates(const Mesh_arrays& mesh, const Triangle_fans& fans, const std::vector<double>& delta,
                                const std::vector<double>& f, const std::vector<std::uint8_t>& demoted,
-                               const std::vector<Disc>& cover,
+                               const Cover_discs& cover,
                                const Frfc_options& options, std::size_t& n_drawn,
                                const std::vector<std::uint8_t>* quiet = nullptr,
                                const Spacing_queries* queries = nullptr);
@@ -99,7 +99,7 @@ void candidate_radii(const Mesh_arrays& mesh, const Spacing_function& spacing, c
 // The sample filter, part 1: one cover disc per input point (see candidates.cpp).
 // kept/blocker: the first packing pass over the input points (indices < n) and
 // segment candidates; radius: the radii of its spheres.
-std::vector<Disc> cover_discs(const Mesh_arrays& mesh, const std::vector<double>& f,
+Cover_discs cover_discs(const Mesh_arrays& mesh, const std::vector<double>& f,
                               const std::vector<double>& radius, const std::vector<std::uint8_t>& kept,
                               const std::vector<Index>& blocker, double radius_scale, bool interpolated);
 

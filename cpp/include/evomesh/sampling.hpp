@@ -12,9 +12,14 @@
 namespace evomesh {
 
 
-struct Disc {
-  Vec2 center;
-  double radius;  // 0: empty
+// The sample filter's discs, one per input point v (candidates.cpp,
+// cover_discs): centre (*points)[centre[v]], radius reach[v] (0: no disc).
+// Empty (no reach): no filter. (12 bytes a point; the centres are input points)
+struct Cover_discs {
+  const std::vector<Vec2>* points = nullptr;
+  std::vector<std::uint32_t> centre;
+  std::vector<double> reach;
+  bool empty() const { return reach.empty(); }
 };
 
 struct Sample_set {
@@ -42,7 +47,7 @@ bool asks_spacing(const Mesh_arrays& mesh, const std::vector<double>& vertex_f, 
 // uniform cells). Every interior sample is strictly inside its triangle
 // (checked with exact orientation predicates). Triangles with skip[t] != 0 get none.
 // Edges that are segments are never sampled here (see sample_segments).
-// A sample strictly inside the disc cover[v] of a vertex v of its triangle is
+// A sample strictly inside the cover disc of a vertex v of its triangle is
 // drawn but not returned (cover empty: all are returned); `n_drawn` receives
 // the number drawn.
 // Triangles are sampled in parallel in fixed blocks: the result never depends
@@ -50,7 +55,7 @@ bool asks_spacing(const Mesh_arrays& mesh, const std::vector<double>& vertex_f, 
 // adaptive grid of the triangles asks_spacing() names.
 Sample_set sample_triangles(const Mesh_arrays& mesh, const std::vector<double>& vertex_f,
                             double cell_factor, Sample_mode mode, std::uint64_t seed,
-                            const std::vector<std::uint8_t>& skip, const std::vector<Disc>& cover = {},
+                            const std::vector<std::uint8_t>& skip, const Cover_discs& cover = {},
                             int threads = 0, std::size_t* n_drawn = nullptr, bool adaptive = true,
                             const Spacing_queries* queries = nullptr);
 
@@ -62,7 +67,7 @@ Sample_set sample_segments(const Mesh_arrays& mesh, const std::vector<double>& v
                            const Spacing_queries* queries = nullptr);
 
 // Whether x lies strictly inside the cover disc of a vertex of t (cover empty: no).
-bool in_cover(const std::vector<Disc>& cover, const Triangle& t, const Vec2& x);
+bool in_cover(const Cover_discs& cover, const Triangle& t, const Vec2& x);
 
 // Upper bound on the number of samples sample_triangles/sample_segments would
 // produce, so callers can refuse inputs that would exhaust memory: O(n) plus the
