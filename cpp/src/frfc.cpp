@@ -247,13 +247,18 @@ Evolve_result frfc(const Mesh_arrays& input, const std::vector<double>& delta, c
   const std::size_t n_filtered = spacing.function->n_filtered();
   spacing.function.reset();  // the Apollonius graph: the radii of the candidates were its last use
   detail::release_free_memory();
-  // The quality pass's triangulation of the first pass's points starts here, on
-  // the second thread beside the second pass, not beside the sampling: there it
-  // would be alive with the Apollonius graph and set the step's peak memory.
-  Early_start early(packing, options, mesh.geometry != nullptr);
+  // The quality pass's triangulation of the first pass's points starts on the
+  // second thread once the Apollonius graph is gone (beside the sampling, it
+  // set the step's peak memory), beside the second pass when that is small,
+  // else after it: its tree of every candidate (about 36 bytes each) is the
+  // peak of a step with several candidates per input point.
+  const bool small_second_pass = inside.size() + packing.deferred.size() <= mesh.points.size();
+  std::optional<Early_start> early;
+  if (small_second_pass) early.emplace(packing, options, mesh.geometry != nullptr);
   second_packing_pass(inside, packing);
   detail::release_free_memory();
-  early.insert_late(packing, mesh.points.size(), mesh.points.size() + on_segments.size());
+  if (!early) early.emplace(packing, options, mesh.geometry != nullptr);
+  early->insert_late(packing, mesh.points.size(), mesh.points.size() + on_segments.size());
   timer.lap("lfmis");
   std::size_t n_repairs = 0;
   const auto repair_points = spacing_repair_stage(mesh, *fans, delta, spacing, on_segments, demoted, options, packing,
@@ -276,12 +281,12 @@ Evolve_result frfc(const Mesh_arrays& input, const std::vector<double>& delta, c
   packing = Packing();
   out_index = std::vector<Index>();
   const Quality_options quality = options.quality_settings();
-  early.wait();
+  early->wait();
   detail::release_free_memory();
   const bool early_started = options.quality && !mesh.geometry;
   Old_mesh_start old_mesh(input, options.threads);
   triangulate_selection(std::move(selection), pieces, options.quality ? &quality : nullptr, result,
-                        early_started ? &early.triangulation : nullptr, mesh.geometry.get());
+                        early_started ? &early->triangulation : nullptr, mesh.geometry.get());
   detail::release_free_memory();
   timer.lap(options.quality ? "quality" : "cdt");
   finish_step(input, result, timer, &old_mesh);
