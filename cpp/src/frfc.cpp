@@ -103,7 +103,9 @@ void second_packing_pass(Candidates& inside, Packing& packing) {
 // Output points: kept input points in input order and kept segment candidates
 // (the first points of the early triangulation), kept interior candidates, then
 // the points of the spacing repair (on segments, then inside). `out_index`
-// receives the output index of every candidate (-1: not kept).
+// receives the output index of every input point and segment candidate (-1:
+// not kept), what the constraint pieces need; not of the interior candidates
+// (8 bytes each: several per input point on a refining front).
 Selection select_output(const Mesh_arrays& mesh, const std::vector<std::uint8_t>& forced, const Packing& packing,
                         std::size_t n_seg, const std::vector<Vec2>& repair_points, std::vector<Index>& out_index) {
   const std::size_t n = mesh.points.size();
@@ -120,9 +122,9 @@ Selection select_output(const Mesh_arrays& mesh, const std::vector<std::uint8_t>
     if (packing.kept[c] && !packing.kept_first[c]) out_order.push_back(c);
   }
   Selection out;
-  out_index.assign(total, -1);
+  out_index.assign(n + n_seg, -1);
   for (std::size_t c : out_order) {
-    out_index[c] = static_cast<Index>(out.mesh.points.size());
+    if (c < n + n_seg) out_index[c] = static_cast<Index>(out.mesh.points.size());
     if (c < n) out.add(packing.centers[c], kept_point_kind(mesh.kind[c], forced[c] == kForcedCorner), static_cast<Index>(c));
     else out.add(packing.centers[c], c < n + n_seg ? Point_kind::boundary : Point_kind::sampled, -1);
   }
@@ -264,7 +266,6 @@ Evolve_result frfc(const Mesh_arrays& input, const std::vector<double>& delta, c
   const auto repair_points = spacing_repair_stage(mesh, *fans, delta, spacing, on_segments, demoted, options, packing,
                                                     n_repairs);
   timer.lap("spacing_repair");
-  fans.reset();
 
   // Step 6: the kept points (on curves, moved onto them), the constraint pieces
   // between them, their triangulation.
@@ -284,7 +285,8 @@ Evolve_result frfc(const Mesh_arrays& input, const std::vector<double>& delta, c
   early->wait();
   detail::release_free_memory();
   const bool early_started = options.quality && !mesh.geometry;
-  Old_mesh_start old_mesh(input, options.threads);
+  Old_mesh_start old_mesh(input, options.threads, std::move(fans));  // (the fans of `mesh`: the input's triangles)
+  fans.reset();
   triangulate_selection(std::move(selection), pieces, options.quality ? &quality : nullptr, result,
                         early_started ? &early->triangulation : nullptr, mesh.geometry.get());
   detail::release_free_memory();

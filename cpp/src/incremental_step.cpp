@@ -479,7 +479,7 @@ std::optional<Evolve_result> incremental_frfc(const Mesh_arrays& mesh, const std
   Early_start early(packing, options, false);
   timer.lap("lfmis");
 
-  const Triangle_fans fans(mesh);
+  Triangle_fans fans(mesh);
   timer.lap("incremental_fans");
   const Cover_discs cover = cover_discs(mesh, f, packing.radius, packing.kept, packing.blocker,
                                        options.radius_scale, options.radius == Radius_rule::interpolated);
@@ -532,7 +532,7 @@ std::optional<Evolve_result> incremental_frfc(const Mesh_arrays& mesh, const std
   const auto pieces = pieces_along_chains(mesh, chains, on_segments, out_index);
   const Quality_options quality = options.quality_settings();
   early.wait();
-  Old_mesh_start old_mesh(mesh, options.threads);
+  Old_mesh_start old_mesh(mesh, options.threads, std::move(fans));
   triangulate_selection(std::move(selection), pieces, options.quality ? &quality : nullptr, result,
                         options.quality ? &early.triangulation : nullptr, nullptr);
   timer.lap(options.quality ? "quality" : "cdt");

@@ -45,39 +45,33 @@ std::vector<Index> locate_with_hints(const Old_mesh_walker& walker, const std::v
 }  // namespace
 
 Old_mesh_walker::Old_mesh_walker(const Mesh_arrays& old_mesh, double outside)
+    : Old_mesh_walker(old_mesh, Triangle_fans(old_mesh), outside) {}
+
+Old_mesh_walker::Old_mesh_walker(const Mesh_arrays& old_mesh, Triangle_fans fans, double outside)
     : outside_(outside),
       mesh_(old_mesh),
       P_(old_mesh.points),
       T_(old_mesh.triangles),
-      triangle_at_(old_mesh.points.size(), -1),
-      fan_begin_(old_mesh.points.size() + 1, 0),
+      fans_(std::move(fans)),
       limit_(64 + 4 * static_cast<std::size_t>(std::sqrt(static_cast<double>(old_mesh.triangles.size())))) {
-  for (std::size_t t = 0; t < T_.size(); ++t) {
-    for (Index v : T_[t]) {
-      triangle_at_[v] = static_cast<Index>(t);
-      ++fan_begin_[v + 1];
-    }
-  }
-  std::partial_sum(fan_begin_.begin(), fan_begin_.end(), fan_begin_.begin());
-  fan_.resize(3 * T_.size());
-  std::vector<Index> fill(fan_begin_.begin(), fan_begin_.end() - 1);
-  for (std::size_t t = 0; t < T_.size(); ++t) {
-    for (Index v : T_[t]) fan_[fill[v]++] = static_cast<Index>(t);
+  if (fans_.xadj.size() != P_.size() + 1 || fans_.adj.size() != 3 * T_.size()) {
+    throw std::logic_error("Old_mesh_walker: the fans are not the old mesh's");
   }
   // The neighbour across edge k (a -> b): the other triangle around a that has
   // b (a mesh is an oriented manifold: at most one), in parallel blocks.
+  // (triangle numbers fit in 4 bytes: Triangle_fans refuses 3 m >= 2^32)
   neighbour_.assign(T_.size(), {-1, -1, -1});
   constexpr std::size_t kBlock = 1 << 14;
   parallel_for((T_.size() + kBlock - 1) / kBlock, 0, [&](std::size_t block) {
     for (std::size_t t = block * kBlock; t < std::min(T_.size(), (block + 1) * kBlock); ++t) {
       for (int k = 0; k < 3; ++k) {
         const Index a = T_[t][k], b = T_[t][(k + 1) % 3];
-        for (Index f = fan_begin_[a]; f < fan_begin_[a + 1]; ++f) {
-          const Index u = fan_[f];
+        for (Index f = fans_.xadj[a]; f < fans_.xadj[a + 1]; ++f) {
+          const Index u = fans_.adj[f];
           if (static_cast<std::size_t>(u) == t) continue;
           const Triangle& other = T_[u];
           if (other[0] == b || other[1] == b || other[2] == b) {
-            neighbour_[t][k] = u;
+            neighbour_[t][k] = static_cast<std::int32_t>(u);
             break;
           }
         }
@@ -132,8 +126,8 @@ Index Old_mesh_walker::search(Index t, const Vec2& q) const {
     // across edges, and around vertices: where a domain touches itself at a
     // vertex, the triangles on either side share no edge
     for (Index v : T_[u]) {
-      for (Index a = fan_begin_[v]; a < fan_begin_[v + 1]; ++a) {
-        const Index w = fan_[a];
+      for (Index a = fans_.xadj[v]; a < fans_.xadj[v + 1]; ++a) {
+        const Index w = fans_.adj[a];
         if (seen.insert(w).second) open.push({distance_to_triangle(P_, T_[w], q), w});
       }
     }

@@ -12,6 +12,7 @@
 #include "evomesh/sampling.hpp"
 #include "evomesh/segment_chains.hpp"
 #include "evomesh/spacing.hpp"
+#include "evomesh/triangle_fans.hpp"
 #include "evomesh/types.hpp"
 
 namespace evomesh {
@@ -26,14 +27,6 @@ struct Candidates {
   std::size_t size() const { return samples.points.size(); }
   // Packing classes (new_point_class).
   std::vector<std::uint8_t> classes(bool on_segment) const;
-};
-
-// Triangles around each point (compressed lists).
-// (4-byte offsets and triangle numbers: 28 bytes a point instead of 56; a mesh
-// with 3 m >= 2^32 is refused by the constructor)
-struct Triangle_fans {
-  std::vector<std::uint32_t> xadj, adj;
-  explicit Triangle_fans(const Mesh_arrays& mesh);
 };
 
 // Ring candidates. Around every R-point p (delta < 1) f is a cone of slope 1

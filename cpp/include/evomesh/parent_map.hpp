@@ -7,6 +7,7 @@
 #include <cstddef>
 #include <vector>
 
+#include "evomesh/triangle_fans.hpp"
 #include "evomesh/types.hpp"
 
 namespace evomesh {
@@ -34,13 +35,17 @@ class Old_mesh_walker {
   // located in the nearest boundary triangle (with a negative coordinate). 0: by
   // rounding only.
   explicit Old_mesh_walker(const Mesh_arrays& old_mesh, double outside = 0);
+  // With the fans of old_mesh already built (a step's, which it no longer needs).
+  Old_mesh_walker(const Mesh_arrays& old_mesh, Triangle_fans fans, double outside = 0);
 
   const Mesh_arrays& mesh() const { return mesh_; }
   // The `outside` of the constructor, when known only after construction.
   void set_outside(double outside) { outside_ = outside; }
 
-  // One old triangle at old point v (-1 for a point of no triangle).
-  Index triangle_at(Index v) const { return triangle_at_[v]; }
+  // One old triangle at old point v (the last around it; -1 for a point of no triangle).
+  Index triangle_at(Index v) const {
+    return fans_.xadj[v] == fans_.xadj[v + 1] ? -1 : static_cast<Index>(fans_.adj[fans_.xadj[v + 1] - 1]);
+  }
 
   // Visibility walk from triangle t towards q: cross an edge that has q strictly
   // on its outer side (the first in a rotating order, so that walks do not
@@ -61,10 +66,9 @@ class Old_mesh_walker {
   const Mesh_arrays& mesh_;
   const std::vector<Vec2>& P_;
   const std::vector<Triangle>& T_;
-  std::vector<std::array<Index, 3>> neighbour_;  // across edge k (t[k] -> t[k+1]), -1 on the boundary
-  std::vector<Index> triangle_at_;
-  std::vector<Index> fan_begin_, fan_;  // the triangles around each old point (compressed lists)
-  std::size_t limit_;                   // of a walk's steps
+  Triangle_fans fans_;                                   // the triangles around each old point
+  std::vector<std::array<std::int32_t, 3>> neighbour_;  // across edge k (t[k] -> t[k+1]), -1 on the boundary
+  std::size_t limit_;                                    // of a walk's steps
 };
 
 // The parent map of `new_mesh` in the old mesh; origin[i] is the old index of new

@@ -7,6 +7,7 @@
 #include <chrono>
 #include <initializer_list>
 #include <memory>
+#include <optional>
 #include <string>
 #include <utility>
 #include <vector>
@@ -172,12 +173,21 @@ void triangulate_selection(Selection selected, const std::vector<Constraint_piec
 
 // The old mesh's walker for finish_step, built on the other thread while the
 // step triangulates (it reads only the input mesh; the quality pass is CGAL's
-// sequential mesher): started before triangulate_selection.
+// sequential mesher): started before triangulate_selection. `fans`, the input's
+// if the step has them: the walker takes them over instead of building its own.
 struct Old_mesh_start {
   std::unique_ptr<Old_mesh_walker> walker;
+  std::optional<Triangle_fans> fans;  // (before `work`: joined before they go)
   Background work;
-  Old_mesh_start(const Mesh_arrays& input, int threads) {
-    work.start([this, &input]() { walker = std::make_unique<Old_mesh_walker>(input); }, resolve_threads(threads) > 1);
+  Old_mesh_start(const Mesh_arrays& input, int threads, std::optional<Triangle_fans> input_fans = std::nullopt)
+      : fans(std::move(input_fans)) {
+    work.start(
+        [this, &input]() {
+          walker = fans ? std::make_unique<Old_mesh_walker>(input, std::move(*fans))
+                        : std::make_unique<Old_mesh_walker>(input);
+          fans.reset();
+        },
+        resolve_threads(threads) > 1);
   }
 };
 

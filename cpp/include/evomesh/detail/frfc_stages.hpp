@@ -96,7 +96,8 @@ void defer_demoted_points(const std::vector<std::uint8_t>& classes, std::size_t 
 // The second pass: deferred input points and interior candidates.
 void second_packing_pass(Candidates& inside, Packing& packing);
 
-// The output points in output order; `out_index` receives the output index of every candidate.
+// The output points in output order; `out_index` receives the output index of
+// every input point and segment candidate.
 Selection select_output(const Mesh_arrays& mesh, const std::vector<std::uint8_t>& forced, const Packing& packing,
                         std::size_t n_seg, const std::vector<Vec2>& repair_points, std::vector<Index>& out_index);
 

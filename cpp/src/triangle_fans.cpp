@@ -1,0 +1,22 @@
+#include "evomesh/triangle_fans.hpp"
+
+namespace evomesh {
+
+Triangle_fans::Triangle_fans(const Mesh_arrays& mesh) {
+  if (3 * mesh.triangles.size() >= (std::uint64_t{1} << 32)) {
+    throw Input_error("meshes of more than 1.4e9 triangles are not supported");
+  }
+  const std::size_t n = mesh.points.size();
+  xadj.assign(n + 1, 0);
+  adj.resize(3 * mesh.triangles.size());
+  for (const auto& t : mesh.triangles) {
+    for (Index v : t) ++xadj[v + 1];
+  }
+  for (std::size_t v = 0; v < n; ++v) xadj[v + 1] += xadj[v];
+  std::vector<std::uint32_t> fill(xadj.begin(), xadj.end() - 1);
+  for (std::size_t t = 0; t < mesh.triangles.size(); ++t) {
+    for (Index v : mesh.triangles[t]) adj[fill[v]++] = static_cast<std::uint32_t>(t);
+  }
+}
+
+}  // namespace evomesh
