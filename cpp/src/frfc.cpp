@@ -33,7 +33,7 @@ Packing first_packing_pass(const Mesh_arrays& mesh, const std::vector<double>& f
   Packing packing;
   // (exact capacities: growing by insert would double them, 24 bytes a point for nothing)
   packing.centers.reserve(mesh.points.size() + on_segments.size());
-  packing.centers = mesh.points;
+  packing.centers.insert(packing.centers.end(), mesh.points.begin(), mesh.points.end());
   packing.centers.insert(packing.centers.end(), on_segments.samples.points.begin(), on_segments.samples.points.end());
   packing.radius = input_point_radii(mesh, f, options);
   packing.radius.reserve(mesh.points.size() + on_segments.size());
@@ -266,6 +266,7 @@ Evolve_result frfc(const Mesh_arrays& input, const std::vector<double>& delta, c
   const auto repair_points = spacing_repair_stage(mesh, *fans, delta, spacing, on_segments, demoted, options, packing,
                                                     n_repairs);
   timer.lap("spacing_repair");
+  fans.reset();  // (not kept for the walker: alive with the packing here, they would add to the peak)
 
   // Step 6: the kept points (on curves, moved onto them), the constraint pieces
   // between them, their triangulation.
@@ -285,8 +286,7 @@ Evolve_result frfc(const Mesh_arrays& input, const std::vector<double>& delta, c
   early->wait();
   detail::release_free_memory();
   const bool early_started = options.quality && !mesh.geometry;
-  Old_mesh_start old_mesh(input, options.threads, std::move(fans));  // (the fans of `mesh`: the input's triangles)
-  fans.reset();
+  Old_mesh_start old_mesh(input, options.threads);
   triangulate_selection(std::move(selection), pieces, options.quality ? &quality : nullptr, result,
                         early_started ? &early->triangulation : nullptr, mesh.geometry.get());
   detail::release_free_memory();

@@ -4,7 +4,7 @@ namespace evomesh {
 
 Triangle_fans::Triangle_fans(const Mesh_arrays& mesh) {
   if (3 * mesh.triangles.size() >= (std::uint64_t{1} << 32)) {
-    throw Input_error("meshes of more than 1.4e9 triangles are not supported");
+    throw Input_error("meshes of 1.43e9 triangles or more (3 x triangles >= 2^32) are not supported");
   }
   const std::size_t n = mesh.points.size();
   xadj.assign(n + 1, 0);

@@ -1,7 +1,8 @@
 // Mesh_walk::locate_from (the gap repair's point location, mesh_walk.hpp)
 // against brute force with exact predicates, on a lattice (lines through
 // vertices and points on edges happen there) and a jittered one, with a wall of
-// interior segments; and Point_tree::squared_two_nearest against brute force.
+// interior segments; Point_tree::squared_two_nearest against brute force; and
+// the old mesh's walker (parent map) built with its own fans or a step's.
 #include <algorithm>
 #include <cstdio>
 #include <array>
@@ -15,6 +16,7 @@
 #include "evomesh/detail/point_tree.hpp"
 #include "evomesh/kernel.hpp"
 #include "evomesh/mesh_walk.hpp"
+#include "evomesh/parent_map.hpp"
 
 using namespace evomesh;
 
@@ -129,6 +131,38 @@ int main() {
       CHECK(wrong == 0) << "jitter " << jitter << ": " << wrong << " answers differ from brute force";
       CHECK(located > 500 && refused > 200) << "jitter " << jitter << ": located " << located << ", refused "
                                             << refused;
+    }
+    // Old_mesh_walker::triangle_at: the last (largest) triangle around a point,
+    // -1 for a point of no triangle, whether the walker builds its fans or takes
+    // a step's; and a walk from there finds the triangle brute force finds.
+    for (double jitter : {0.0, 0.25}) {
+      Mesh_arrays m = grid(17, jitter, 5);
+      m.points.push_back({2.0, 2.0});  // in no triangle
+      std::vector<Index> last(m.points.size(), -1);
+      for (std::size_t t = 0; t < m.triangles.size(); ++t) {
+        for (Index v : m.triangles[t]) last[v] = static_cast<Index>(t);
+      }
+      const Old_mesh_walker own(m);
+      const Old_mesh_walker taken(m, Triangle_fans(m));
+      int wrong = 0, walked_wrong = 0;
+      for (std::size_t v = 0; v < m.points.size(); ++v) {
+        const Index i = static_cast<Index>(v);
+        wrong += own.triangle_at(i) != last[v] || taken.triangle_at(i) != last[v];
+      }
+      CHECK(wrong == 0) << "jitter " << jitter << ": " << wrong << " points with another triangle_at";
+      std::mt19937 rng(13);
+      std::uniform_real_distribution<double> u(0.01, 0.99);
+      for (int q = 0; q < 500; ++q) {
+        const Vec2 x{u(rng), u(rng)};
+        std::size_t steps = 0;
+        const Index got = taken.walk(taken.triangle_at(0), x, static_cast<std::size_t>(q), steps);
+        const Triangle& t = m.triangles[got < 0 ? 0 : got];
+        const bool inside = got >= 0 && orientation(m.points[t[0]], m.points[t[1]], x) >= 0 &&
+                            orientation(m.points[t[1]], m.points[t[2]], x) >= 0 &&
+                            orientation(m.points[t[2]], m.points[t[0]], x) >= 0;
+        walked_wrong += !inside;
+      }
+      CHECK(walked_wrong == 0) << "jitter " << jitter << ": " << walked_wrong << " walks ended outside their point";
     }
     // squared_two_nearest against brute force
     std::mt19937 rng(3);

@@ -179,6 +179,8 @@ struct Old_mesh_start {
   std::unique_ptr<Old_mesh_walker> walker;
   std::optional<Triangle_fans> fans;  // (before `work`: joined before they go)
   Background work;
+  Old_mesh_start(const Old_mesh_start&) = delete;  // the background work holds `this`
+  Old_mesh_start& operator=(const Old_mesh_start&) = delete;
   Old_mesh_start(const Mesh_arrays& input, int threads, std::optional<Triangle_fans> input_fans = std::nullopt)
       : fans(std::move(input_fans)) {
     work.start(

@@ -32,8 +32,9 @@ struct Packing {
 // triangulation of them can start on a second thread while the interior
 // candidates are packed (members destroyed in reverse: the thread is joined
 // before the points it reads go). The full step starts it once the Apollonius
-// graph is freed (beside the second pass; alive with the graph during sampling
-// it set the step's peak memory), the incremental step at once.
+// graph is freed (alive with the graph during sampling it set the step's peak
+// memory): beside the second pass, or after it when that pass packs more
+// candidates than there are input points (frfc.cpp); the incremental step at once.
 //
 // After the second pass, the points it keeps (the interior candidates and the
 // deferred input points) are final too and come next in the output order
@@ -45,6 +46,8 @@ struct Early_start {
   Background work, late_work;  // late_work waits for work (joins it), then inserts the late points
   bool started = false;
   bool on_thread = false;
+  Early_start(const Early_start&) = delete;  // the background work holds `this`
+  Early_start& operator=(const Early_start&) = delete;
   Early_start(const Packing& packing, const Frfc_options& options, bool curved) {
     // (with curved boundaries, kept segment candidates move before the triangulation)
     if (!options.quality || curved) return;
