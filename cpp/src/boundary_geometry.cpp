@@ -74,7 +74,7 @@ Mesh_arrays with_curve_kinds(const Mesh_arrays& input) {
   return mesh;
 }
 
-double project_segment_candidates(const Mesh_arrays& mesh, const std::vector<Index>& segment_of_candidate,
+double project_segment_candidates(const Mesh_arrays& mesh, const std::vector<std::uint32_t>& segment_of_candidate,
                                   std::size_t first, const std::vector<std::uint8_t>& kept,
                                   const std::vector<double>& radius, std::vector<Vec2>& centers) {
   const Boundary_geometry& geometry = *mesh.geometry;

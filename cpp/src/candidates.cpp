@@ -52,7 +52,7 @@ void add_interior_ring_samples(const Mesh_arrays& mesh, const Triangle_fans& fan
         const Ring_candidate& r = ring[k];
         if (in_cover(cover, mesh.triangles[r.triangle], r.x)) continue;
         blocks[b].points.push_back(r.x);
-        blocks[b].parent.push_back(r.triangle);
+        blocks[b].parent.push_back(static_cast<std::uint32_t>(r.triangle));
         rounds[b].push_back(static_cast<std::int8_t>(r.round));
       }
     }
@@ -136,7 +136,7 @@ void add_segment_ring_samples(const Mesh_arrays& mesh, const std::vector<double>
     // drop exact duplicates (a ring sample can coincide with a grid sample only by accident)
     if (!on_segments.points.empty() && on_segments.points.back() == x) continue;
     on_segments.points.push_back(x);
-    on_segments.parent.push_back(all[i].first);
+    on_segments.parent.push_back(static_cast<std::uint32_t>(all[i].first));
     segment_round.push_back(rounds[i]);
     segment_owner.push_back(owners[i]);
   }

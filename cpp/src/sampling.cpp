@@ -440,7 +440,7 @@ void sample_one_triangle(const Mesh_arrays& mesh, std::size_t ti, const std::vec
     ++n_drawn;
     if (in_cover(cover, t, x)) return;
     out.points.push_back(x);
-    out.parent.push_back(static_cast<Index>(ti));
+    out.parent.push_back(static_cast<std::uint32_t>(ti));
   };
   if (mode != Sample_mode::random_grid) {
     if (mode == Sample_mode::barycentre || mode == Sample_mode::barycentre_midpoints) {
@@ -504,6 +504,7 @@ Sample_set sample_triangles(const Mesh_arrays& mesh, const std::vector<double>& 
                             double cell_factor, Sample_mode mode, std::uint64_t seed,
                             const std::vector<std::uint8_t>& skip, const Cover_discs& cover, int threads,
                             std::size_t* n_drawn, bool adaptive, const Spacing_queries* queries) {
+  if (mesh.triangles.size() >= (std::uint64_t{1} << 32)) throw Input_error("meshes of 2^32 triangles or more are not supported");
   std::unordered_set<std::uint64_t> segment_edges;
   if (mode == Sample_mode::midpoints || mode == Sample_mode::barycentre_midpoints) {
     segment_edges.reserve(mesh.segments.size() * 2);
@@ -543,6 +544,7 @@ Sample_set sample_triangles(const Mesh_arrays& mesh, const std::vector<double>& 
 Sample_set sample_segments(const Mesh_arrays& mesh, const std::vector<double>& vertex_f,
                            double cell_factor, Sample_mode mode, std::uint64_t seed, bool adaptive,
                            const Spacing_queries* queries) {
+  if (mesh.segments.size() >= (std::uint64_t{1} << 32)) throw Input_error("meshes of 2^32 segments or more are not supported");
   Sample_set out;
   std::vector<std::array<std::int64_t, 2>> blocks;
   for (std::size_t k = 0; k < mesh.segments.size(); ++k) {
@@ -551,7 +553,7 @@ Sample_set sample_segments(const Mesh_arrays& mesh, const std::vector<double>& v
     const Vec2& b = mesh.points[e[1]];
     if (mode != Sample_mode::random_grid) {
       out.points.push_back({0.5 * (a[0] + b[0]), 0.5 * (a[1] + b[1])});
-      out.parent.push_back(static_cast<Index>(k));
+      out.parent.push_back(static_cast<std::uint32_t>(k));
       continue;
     }
     const Segment_grid g = segment_grid(mesh, vertex_f, e, cell_factor);
@@ -567,7 +569,7 @@ Sample_set sample_segments(const Mesh_arrays& mesh, const std::vector<double>& v
       const Vec2 x{a[0] + t * (b[0] - a[0]), a[1] + t * (b[1] - a[1])};
       if ((x[0] == a[0] && x[1] == a[1]) || (x[0] == b[0] && x[1] == b[1])) continue;
       out.points.push_back(x);
-      out.parent.push_back(static_cast<Index>(k));
+      out.parent.push_back(static_cast<std::uint32_t>(k));
     }
   }
   return out;

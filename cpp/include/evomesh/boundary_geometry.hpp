@@ -48,7 +48,7 @@ Mesh_arrays with_curve_kinds(const Mesh_arrays& mesh);
 // onto their curves. Candidate k is centers[first + k], on segment
 // segment_of_candidate[k]; each may move by at most its sphere's radius (else
 // Input_error). Returns the largest move.
-double project_segment_candidates(const Mesh_arrays& mesh, const std::vector<Index>& segment_of_candidate,
+double project_segment_candidates(const Mesh_arrays& mesh, const std::vector<std::uint32_t>& segment_of_candidate,
                                   std::size_t first, const std::vector<std::uint8_t>& kept,
                                   const std::vector<double>& radius, std::vector<Vec2>& centers);
 

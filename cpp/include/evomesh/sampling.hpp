@@ -24,7 +24,9 @@ struct Cover_discs {
 
 struct Sample_set {
   std::vector<Vec2> points;
-  std::vector<Index> parent;  // triangle index (interior samples) or segment index (segment samples)
+  // triangle index (interior samples) or segment index (segment samples); 4
+  // bytes (the samplers refuse a mesh of 2^32 triangles or segments)
+  std::vector<std::uint32_t> parent;
 };
 
 // f at a batch of points (exactly, e.g. Spacing_function::evaluate): lets the
