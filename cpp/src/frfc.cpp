@@ -100,6 +100,28 @@ void second_packing_pass(Candidates& inside, Packing& packing) {
   packing.kept = extend_packing(packing.centers, packing.radius, packing.first_order, packing.kept, std::move(order));
 }
 
+// After both passes the interior candidates nobody kept are read no more (the
+// spacing repair and the selection read the kept centres and the segment
+// candidates): they leave the packing's arrays, the kept ones keep their order
+// (n_first_range: input points and segment candidates, which stay in place).
+// On a refining front that is ~5 of every 6 candidates, 25 bytes each.
+void drop_rejected_candidates(std::size_t n_first_range, Packing& packing) {
+  std::size_t k = n_first_range;
+  for (std::size_t c = n_first_range; c < packing.centers.size(); ++c) {
+    if (!packing.kept[c]) continue;
+    packing.centers[k] = packing.centers[c];
+    packing.radius[k] = packing.radius[c];
+    packing.kept[k] = 1;
+    ++k;
+  }
+  packing.centers.resize(k);
+  packing.centers.shrink_to_fit();
+  packing.radius.resize(k);
+  packing.radius.shrink_to_fit();
+  packing.kept.resize(k);
+  packing.kept.shrink_to_fit();
+}
+
 // Output points: kept input points in input order and kept segment candidates
 // (the first points of the early triangulation), kept interior candidates, then
 // the points of the spacing repair (on segments, then inside). `out_index`
@@ -261,6 +283,9 @@ Evolve_result frfc(const Mesh_arrays& input, const std::vector<double>& delta, c
   detail::release_free_memory();
   if (!early) early.emplace(packing, options, mesh.geometry != nullptr);
   early->insert_late(packing, mesh.points.size(), mesh.points.size() + on_segments.size());
+  const std::size_t n_candidates = packing.centers.size();
+  drop_rejected_candidates(mesh.points.size() + on_segments.size(), packing);
+  detail::release_free_memory();
   timer.lap("lfmis");
   std::size_t n_repairs = 0;
   const auto repair_points = spacing_repair_stage(mesh, *fans, delta, spacing, on_segments, demoted, options, packing,
@@ -278,7 +303,6 @@ Evolve_result frfc(const Mesh_arrays& input, const std::vector<double>& delta, c
   Selection selection = select_output(mesh, forced, packing, on_segments.size(), repair_points, out_index);
   selection.pin(mesh.required);
   const auto pieces = pieces_along_chains(mesh, chains, on_segments, out_index);
-  const std::size_t n_candidates = packing.centers.size();
   const std::size_t n_demoted = packing.n_demoted;
   packing = Packing();
   out_index = std::vector<Index>();
