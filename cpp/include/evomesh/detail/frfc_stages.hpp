@@ -16,7 +16,8 @@
 namespace evomesh::frfc_stages {
 
 // The spheres of the packing in candidate order: input points [0, n), segment
-// candidates [n, n + n_seg), then interior candidates.
+// candidates [n, n + n_seg), then interior candidates (after both passes, the
+// kept ones only: frfc.cpp, drop_rejected_candidates).
 struct Packing {
   std::vector<Vec2> centers;
   std::vector<double> radius;            // of the first pass's spheres
