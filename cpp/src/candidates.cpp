@@ -363,7 +363,7 @@ Cover_discs cover_discs(const Mesh_arrays& mesh, const std::vector<double>& f,
                         const std::vector<double>& radius, const std::vector<std::uint8_t>& kept,
                         const std::vector<Index>& blocker, double radius_scale, bool interpolated) {
   const std::size_t n = mesh.points.size();
-  if (n >= (std::uint64_t{1} << 32)) throw Input_error("meshes of 2^32 points or more are not supported");
+  check_fits_4_bytes(n, "points");
   Cover_discs cover;
   cover.points = &mesh.points;
   cover.centre.assign(n, 0);

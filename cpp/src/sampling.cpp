@@ -504,7 +504,7 @@ Sample_set sample_triangles(const Mesh_arrays& mesh, const std::vector<double>& 
                             double cell_factor, Sample_mode mode, std::uint64_t seed,
                             const std::vector<std::uint8_t>& skip, const Cover_discs& cover, int threads,
                             std::size_t* n_drawn, bool adaptive, const Spacing_queries* queries) {
-  if (mesh.triangles.size() >= (std::uint64_t{1} << 32)) throw Input_error("meshes of 2^32 triangles or more are not supported");
+  check_fits_4_bytes(mesh.triangles.size(), "triangles");
   std::unordered_set<std::uint64_t> segment_edges;
   if (mode == Sample_mode::midpoints || mode == Sample_mode::barycentre_midpoints) {
     segment_edges.reserve(mesh.segments.size() * 2);
@@ -544,7 +544,7 @@ Sample_set sample_triangles(const Mesh_arrays& mesh, const std::vector<double>& 
 Sample_set sample_segments(const Mesh_arrays& mesh, const std::vector<double>& vertex_f,
                            double cell_factor, Sample_mode mode, std::uint64_t seed, bool adaptive,
                            const Spacing_queries* queries) {
-  if (mesh.segments.size() >= (std::uint64_t{1} << 32)) throw Input_error("meshes of 2^32 segments or more are not supported");
+  check_fits_4_bytes(mesh.segments.size(), "segments");
   Sample_set out;
   std::vector<std::array<std::int64_t, 2>> blocks;
   for (std::size_t k = 0; k < mesh.segments.size(); ++k) {

@@ -3,9 +3,7 @@
 namespace evomesh {
 
 Triangle_fans::Triangle_fans(const Mesh_arrays& mesh) {
-  if (3 * mesh.triangles.size() >= (std::uint64_t{1} << 32)) {
-    throw Input_error("meshes of 1.43e9 triangles or more (3 x triangles >= 2^32) are not supported");
-  }
+  check_fits_4_bytes(3 * std::uint64_t{mesh.triangles.size()}, "3 x triangles (1.43e9 triangles)");
   const std::size_t n = mesh.points.size();
   xadj.assign(n + 1, 0);
   adj.resize(3 * mesh.triangles.size());

@@ -41,6 +41,14 @@ struct Input_error : std::invalid_argument {
   using std::invalid_argument::invalid_argument;
 };
 
+// Throws Input_error unless `count` fits the 4-byte indices that memory-bound
+// arrays use (count < 2^32; `what`: "3 x triangles", "points", ...).
+inline void check_fits_4_bytes(std::uint64_t count, const char* what) {
+  if (count >= (std::uint64_t{1} << 32)) {
+    throw Input_error(std::string("meshes with 2^32 or more ") + what + " are not supported");
+  }
+}
+
 // A triangle mesh as plain arrays. Triangles are counter-clockwise.
 // Segments are constraint edges; `segment_is_boundary[k]` tells whether
 // segment k is a boundary edge (domain on its left, a -> b) or an interior
