@@ -31,11 +31,13 @@ namespace evomesh::detail {
 
 // Set when a comparison of Flagged_interval values could not be decided (the
 // predicate's interval answer is then not trusted). Per thread: graphs are
-// built and queried on several threads.
-inline thread_local bool interval_undecided = false;
+// built and queried on several threads. Every predicate reads and resets it:
+// the initial-exec model makes that a plain load, not a call (__tls_get_addr)
+// as the default model of a shared library would.
+__attribute__((tls_model("initial-exec"))) inline thread_local bool interval_undecided = false;
 // Predicates this thread evaluated exactly because the interval answer was not
 // certain (for tests and diagnostics).
-inline thread_local std::size_t exact_evaluations = 0;
+__attribute__((tls_model("initial-exec"))) inline thread_local std::size_t exact_evaluations = 0;
 
 // Interval arithmetic (CGAL::Interval_nt<false>: needs rounding towards +inf,
 // which the filtered predicate sets) whose comparisons never throw.
@@ -116,6 +118,18 @@ class Algebraic_structure_traits<evomesh::detail::Flagged_interval>
  public:
   typedef Tag_false Is_exact;
   typedef Tag_true Is_numerical_sensitive;
+  // As for Interval_nt: the square of an interval (tighter and cheaper than a
+  // product), as CGAL's formulas (CGAL::square) get it there.
+  struct Square : CGAL::cpp98::unary_function<evomesh::detail::Flagged_interval, evomesh::detail::Flagged_interval> {
+    evomesh::detail::Flagged_interval operator()(const evomesh::detail::Flagged_interval& x) const {
+      return evomesh::detail::Flagged_interval(CGAL::square(x.interval()));
+    }
+  };
+  struct Is_zero : CGAL::cpp98::unary_function<evomesh::detail::Flagged_interval, bool> {
+    bool operator()(const evomesh::detail::Flagged_interval& x) const {
+      return evomesh::detail::Flagged_interval::decide(CGAL::is_zero(x.interval()));
+    }
+  };
 };
 
 template <>
