@@ -43,6 +43,18 @@ using Ag_kernel = CGAL::Simple_cartesian<double>;
 // (detail/apollonius_filter.hpp): the same decisions again, and on those inputs
 // no throw for every site.
 using Ag_traits = detail::Apollonius_traits_without_throws<Ag_kernel, CGAL::Simple_cartesian<CGAL::Mpzf>>;
+// Every predicate of the traits goes through the filter that checks the flag
+// (should a CGAL release name its converter differently, this stops the build).
+static_assert(Ag_traits::Compare_x_2::checks_undecided_comparisons &&
+              Ag_traits::Compare_y_2::checks_undecided_comparisons &&
+              Ag_traits::Compare_weight_2::checks_undecided_comparisons &&
+              Ag_traits::Orientation_2::checks_undecided_comparisons &&
+              Ag_traits::Is_hidden_2::checks_undecided_comparisons &&
+              Ag_traits::Oriented_side_of_bisector_2::checks_undecided_comparisons &&
+              Ag_traits::Vertex_conflict_2::checks_undecided_comparisons &&
+              Ag_traits::Finite_edge_interior_conflict_2::checks_undecided_comparisons &&
+              Ag_traits::Infinite_edge_interior_conflict_2::checks_undecided_comparisons &&
+              Ag_traits::Is_degenerate_edge_2::checks_undecided_comparisons);
 
 // Vertex base carrying its site and the index of that site. CGAL's
 // Apollonius_graph_vertex_base_2 also holds a list of the sites it hides, a

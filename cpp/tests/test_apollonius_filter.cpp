@@ -11,7 +11,9 @@
 
 #include <algorithm>
 #include <array>
+#include <cmath>
 #include <cstdio>
+#include <limits>
 #include <random>
 #include <set>
 #include <utility>
@@ -19,6 +21,7 @@
 
 #include "check.hpp"
 #include "evomesh/detail/apollonius_filter.hpp"
+#include "evomesh/spacing.hpp"
 
 namespace {
 
@@ -127,11 +130,48 @@ void flagged_interval() {
   CHECK(CGAL::sign(Flagged_interval(0.0)) == CGAL::ZERO && !interval_undecided) << "exact zero";
 }
 
+// evomesh's Spacing_function (four graphs built on threads, queries on threads)
+// on a lattice with equal weights and a band of larger ones, where most
+// insertions need the exact path: certified f against brute force (the
+// minimum of w_c + |x - c| over all sites; ties between lattice sites are equal
+// up to rounding).
+void spacing_function_on_lattice() {
+  const int k = 150;
+  const double h = 1.0 / (k - 1);
+  std::vector<evomesh::Vec2> sites;
+  std::vector<double> weights;
+  for (int j = 0; j < k; ++j) {
+    for (int i = 0; i < k; ++i) {
+      sites.push_back({i * h, j * h});
+      weights.push_back((i > 60 && i < 90 ? 3.0 : 1.0) * h);
+    }
+  }
+  const evomesh::Spacing_function f(sites, weights);
+  CHECK(f.n_parts() > 1) << f.n_parts();
+  std::vector<evomesh::Vec2> queries;
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<double> u(0, 1);
+  for (int q = 0; q < 1500; ++q) queries.push_back({u(rng), u(rng)});
+  for (int q = 0; q < 500; ++q) queries.push_back(sites[static_cast<std::size_t>(q) * 41 % sites.size()]);
+  std::vector<double> value(queries.size());
+  f.evaluate(queries.data(), queries.size(), value.data(), nullptr, /*threads=*/2, /*certified=*/true);
+  int wrong = 0;
+  for (std::size_t q = 0; q < queries.size(); ++q) {
+    double best = std::numeric_limits<double>::infinity();
+    for (std::size_t c = 0; c < sites.size(); ++c) {
+      best = std::min(best, weights[c] + std::hypot(queries[q][0] - sites[c][0], queries[q][1] - sites[c][1]));
+    }
+    wrong += !(std::abs(value[q] - best) <= 1e-12 * best);
+  }
+  CHECK(wrong == 0) << wrong << " of " << queries.size() << " queries off the brute-force minimum";
+}
+
 }  // namespace
 
 int main() {
   return evomesh_test::run([] {
     flagged_interval();
+    spacing_function_on_lattice();
     lattice("lattice, equal weights", 24, [](int, int) { return 1.0; });
     lattice("lattice, zero weights", 24, [](int, int) { return 0.0; });
     lattice("lattice, two weights in bands", 24, [](int i, int) { return i < 12 ? 1.0 : 2.0; });

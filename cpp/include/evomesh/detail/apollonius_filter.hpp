@@ -31,13 +31,13 @@ namespace evomesh::detail {
 
 // Set when a comparison of Flagged_interval values could not be decided (the
 // predicate's interval answer is then not trusted). Per thread: graphs are
-// built and queried on several threads. Every predicate reads and resets it:
-// the initial-exec model makes that a plain load, not a call (__tls_get_addr)
-// as the default model of a shared library would.
-__attribute__((tls_model("initial-exec"))) inline thread_local bool interval_undecided = false;
+// built and queried on several threads. (The default TLS model: the
+// initial-exec one would save a __tls_get_addr call per predicate, 2-4 % of
+// the graph on random sites, but can make a dlopen'ed module fail to load.)
+inline thread_local bool interval_undecided = false;
 // Predicates this thread evaluated exactly because the interval answer was not
 // certain (for tests and diagnostics).
-__attribute__((tls_model("initial-exec"))) inline thread_local std::size_t exact_evaluations = 0;
+inline thread_local std::size_t exact_evaluations = 0;
 
 // Interval arithmetic (CGAL::Interval_nt<false>: needs rounding towards +inf,
 // which the filtered predicate sets) whose comparisons never throw.
@@ -211,6 +211,9 @@ class Filtered_predicate<
   typedef C2E To_exact_converter;
   typedef C2A To_approximate_converter;
   typedef typename EP::result_type result_type;
+  // What spacing.cpp checks at compile time: this specialisation, not CGAL's
+  // primary template (which would trust an undecided interval answer here).
+  static constexpr bool checks_undecided_comparisons = true;
 
   Filtered_predicate() {}
 
@@ -218,10 +221,11 @@ class Filtered_predicate<
   result_type operator()(const Args&... args) const {
     {
       Protect_FPU_rounding<Protection> p;
-      evomesh::detail::interval_undecided = false;
+      bool& undecided = evomesh::detail::interval_undecided;  // one TLS lookup per predicate
+      undecided = false;
       try {
         const result_type res = ap(c2a(args)...);
-        if (!evomesh::detail::interval_undecided) return res;
+        if (!undecided) return res;
       } catch (...) {
       }
     }
