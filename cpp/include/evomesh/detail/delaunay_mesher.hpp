@@ -450,11 +450,18 @@ struct Edges_base : Edges_base_with_clusters {
   // CGAL's scan (every constraint edge in edge order; the encroached ones
   // queued), with the Gabriel tests computed in parallel blocks first (they
   // only read the triangulation, the sides and the clusters): the same queue.
+  // The constraint edges in CGAL's edge order, from a sweep over the faces:
+  // its edge iterator visits the faces in container order and reports edge i
+  // of face f when f < f->neighbor(i) (Triangulation_ds_edge_iterator_2), and
+  // the finite-edge filter never drops a constraint edge (its ends are finite).
+  // Visiting every edge through that iterator took 0.1 s on a 1e6-point mesh.
   void scan_triangulation_impl() {
     this->clear();
     std::vector<Cdt::Edge> edges;
-    for (auto e = this->tr.finite_edges_begin(); e != this->tr.finite_edges_end(); ++e) {
-      if (e->first->is_constrained(e->second)) edges.push_back(*e);
+    for (auto f = this->tr.all_faces_begin(); f != this->tr.all_faces_end(); ++f) {
+      for (int i = 0; i < 3; ++i) {
+        if (f->is_constrained(i) && Cdt::Face_handle(f) < f->neighbor(i)) edges.emplace_back(f, i);
+      }
     }
     std::vector<std::uint8_t> conform(edges.size());
     constexpr std::size_t kChunk = std::size_t{1} << 12;
