@@ -5,8 +5,8 @@
 // out of the predicate and evaluate it again exactly. On inputs with exact
 // degeneracies (lattices, equal weights on cocircular sites: meshes that start
 // from a structured grid) that happens about once per inserted site, and a throw
-// and its unwinding cost more than the exact evaluation: about a quarter of the
-// graph's construction on the front benchmark (971,843 throws in one 1e6 step).
+// and its unwinding cost more than the exact evaluation: a fifth of the graph's
+// construction on the front benchmark (971,843 throws in one 1e6 step).
 //
 // Here the same interval evaluation runs on `Flagged_interval`, whose comparisons
 // return a plain bool: an undecided one sets a per-thread flag and answers false.
