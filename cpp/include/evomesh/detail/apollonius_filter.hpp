@@ -174,6 +174,10 @@ class Real_embeddable_traits<evomesh::detail::Flagged_interval>
 namespace evomesh::detail {
 
 using Flagged_kernel = CGAL::Simple_cartesian<Flagged_interval>;
+// Kernel (doubles) -> Flagged_kernel: the converter type by which the
+// Filtered_predicate specialisation below recognises these traits.
+template <class Kernel>
+using To_flagged_kernel = CGAL::Cartesian_converter<Kernel, Flagged_kernel, To_flagged_interval>;
 
 // The Apollonius graph traits of spacing.cpp: `Kernel` (doubles) filtered by
 // Flagged_kernel, exact with `Exact_kernel`.
@@ -181,7 +185,7 @@ template <class Kernel, class Exact_kernel>
 using Apollonius_traits_without_throws = CGAL::Apollonius_graph_filtered_traits_2<
     Kernel, CGAL::Integral_domain_without_division_tag, Exact_kernel, CGAL::Integral_domain_without_division_tag,
     Flagged_kernel, CGAL::Integral_domain_without_division_tag, CGAL::Cartesian_converter<Kernel, Exact_kernel>,
-    CGAL::Cartesian_converter<Kernel, Flagged_kernel, To_flagged_interval>>;
+    To_flagged_kernel<Kernel>>;
 
 }  // namespace evomesh::detail
 
@@ -195,11 +199,10 @@ namespace CGAL {
 template <class EP, class AP, class C2E, class K1, class K2, bool Protection>
 class Filtered_predicate<
     EP, AP, C2E,
-    ApolloniusGraph_2::Apollonius_graph_cartesian_converter<
-        K1, K2, Cartesian_converter<typename K1::Base, evomesh::detail::Flagged_kernel, evomesh::detail::To_flagged_interval>>,
+    ApolloniusGraph_2::Apollonius_graph_cartesian_converter<K1, K2, evomesh::detail::To_flagged_kernel<typename K1::Base>>,
     Protection> {
-  using C2A = ApolloniusGraph_2::Apollonius_graph_cartesian_converter<
-      K1, K2, Cartesian_converter<typename K1::Base, evomesh::detail::Flagged_kernel, evomesh::detail::To_flagged_interval>>;
+  using C2A =
+      ApolloniusGraph_2::Apollonius_graph_cartesian_converter<K1, K2, evomesh::detail::To_flagged_kernel<typename K1::Base>>;
   C2E c2e;
   C2A c2a;
   EP ep;
