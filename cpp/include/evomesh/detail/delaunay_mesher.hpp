@@ -17,6 +17,7 @@
 #include <CGAL/Triangulation_vertex_base_with_info_2.h>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdint>
 #include <functional>
@@ -51,7 +52,23 @@ using Vb = CGAL::Triangulation_vertex_base_with_info_2<Vertex_info, Kernel>;
 using Fb_info = CGAL::Triangulation_face_base_with_info_2<std::int8_t, Kernel>;  // flood-fill label
 using Fb_constrained = CGAL::Constrained_triangulation_face_base_2<Kernel, Fb_info>;
 using Fb_cdt = CGAL::Constrained_Delaunay_triangulation_face_base_2<Kernel, Fb_constrained>;
-using Fb = CGAL::Delaunay_mesh_face_base_2<Kernel, Fb_cdt>;
+using Fb_mesh = CGAL::Delaunay_mesh_face_base_2<Kernel, Fb_cdt>;
+
+// A face base with the number of the face's entry in the mesher's queue of bad
+// faces (Bad_face_queue), 0 when it has none. A face the triangulation creates
+// (or reuses) starts with 0.
+template <class Gt, class Base>
+class Queued_face_base_2 : public Base {
+ public:
+  template <class Tds2>
+  struct Rebind_TDS {
+    using Base2 = typename Base::template Rebind_TDS<Tds2>::Other;
+    using Other = Queued_face_base_2<Gt, Base2>;
+  };
+  using Base::Base;
+  std::uint64_t queue_entry = 0;
+};
+using Fb = Queued_face_base_2<Kernel, Fb_mesh>;
 using Tds = CGAL::Triangulation_data_structure_2<Vb, Fb>;
 // As in constrained_delaunay: constraints may pass through points, never cross.
 using Cdt = CGAL::Constrained_Delaunay_triangulation_2<
@@ -267,8 +284,9 @@ class Refinement_criteria {
    private:
     // The queue order must not depend on rounding: the same mesh scaled by 1e-100
     // has qualities equal up to a few ulps, and near-ties would then be refined in
-    // another order. Rounded to float, they tie exactly and CGAL breaks ties by the
-    // points' lexicographic order, which scaling keeps.
+    // another order. Rounded to float, they tie exactly, and the queue
+    // (Bad_face_queue) breaks ties by the points' lexicographic order, which
+    // scaling keeps.
     static double rounded(double q) { return static_cast<double>(static_cast<float>(q)); }
 
     double bound_;
@@ -490,10 +508,103 @@ using Edges_level = CGAL::Mesh_2::Refine_edges_with_clusters<Cdt, Gabriel, Edges
 
 using Faces_base_cgal = CGAL::Mesh_2::Refine_faces_base<Cdt, Refinement_criteria, Edges_level>;
 
-// Rule 4 is about vertices: a triangle queued as bad can become good when a point
-// is inserted next to one of its vertices without destroying it. Such stale
-// entries are dropped before the mesher looks at the queue.
-//
+// The faces the mesher will split, worst first: by quality, then by their
+// points (CGAL's Face_compare: the three vertices' points in order,
+// lexicographically), a total order. CGAL's own queue (a Double_map: two
+// balanced trees, one of them keyed by the points) cost about a microsecond per
+// insertion or removal, with the points of both faces read at every comparison,
+// and broke ties of quality by where its hinted insertion landed. This is a
+// binary heap whose entries carry their key and leave lazily: an entry is
+// current while its face's queue_entry holds its number. A face leaves the queue
+// by setting that to 0; a face the triangulation creates or reuses starts at 0;
+// clear() makes every number issued so far stale. Every operation is O(log n)
+// on a contiguous array; entries left behind are compacted away when they
+// outnumber the current ones.
+class Bad_face_queue {
+ public:
+  using Quality = Refinement_criteria::Quality;
+
+  // The face's entry, if current (the face is queued).
+  bool contains(const Face_handle& f) const { return f->queue_entry >= first_current_; }
+
+  // Queues f with quality q unless it is queued already (as CGAL's map, which
+  // keeps one entry per face).
+  void push(const Face_handle& f, Quality q) {
+    if (contains(f)) return;
+    f->queue_entry = next_;
+    heap_.push_back({q, next_++, f, {f->vertex(0), f->vertex(1), f->vertex(2)}});
+    std::push_heap(heap_.begin(), heap_.end(), Later());
+    ++n_current_;
+  }
+  void erase(const Face_handle& f) {
+    if (!contains(f)) return;
+    f->queue_entry = 0;
+    --n_current_;
+    if (heap_.size() > 2 * n_current_ + 4096) compact();
+  }
+  bool empty() {
+    settle();
+    return heap_.empty();
+  }
+  // The worst face and its quality (the queue must not be empty).
+  Face_handle front_face() {
+    settle();
+    return heap_.front().face;
+  }
+  Quality front_quality() {
+    settle();
+    return heap_.front().quality;
+  }
+  void pop_front() {
+    settle();
+    erase(heap_.front().face);
+    settle();
+  }
+  void clear() {
+    heap_.clear();
+    first_current_ = next_;
+    n_current_ = 0;
+  }
+
+ private:
+  struct Entry {
+    Quality quality;
+    std::uint64_t number;
+    Face_handle face;
+    std::array<Vertex_handle, 3> vertices;  // the key's points (vertices outlive the mesher's run)
+  };
+  // Heap order: the entry that comes later in the queue is "less".
+  struct Later {
+    bool operator()(const Entry& a, const Entry& b) const {
+      if (a.quality != b.quality) return b.quality < a.quality;
+      for (int k = 0; k < 3; ++k) {
+        const Point_2& p = a.vertices[k]->point();
+        const Point_2& q = b.vertices[k]->point();
+        if (q < p) return true;
+        if (p < q) return false;
+      }
+      return false;
+    }
+  };
+  bool current(const Entry& e) const { return e.number >= first_current_ && e.face->queue_entry == e.number; }
+  void settle() {
+    while (!heap_.empty() && !current(heap_.front())) {
+      std::pop_heap(heap_.begin(), heap_.end(), Later());
+      heap_.pop_back();
+    }
+  }
+  void compact() {
+    heap_.erase(std::remove_if(heap_.begin(), heap_.end(), [this](const Entry& e) { return !current(e); }),
+                heap_.end());
+    std::make_heap(heap_.begin(), heap_.end(), Later());
+  }
+
+  std::vector<Entry> heap_;
+  std::uint64_t next_ = 1;           // the next entry's number
+  std::uint64_t first_current_ = 1;  // entries numbered below were cleared
+  std::size_t n_current_ = 0;
+};
+
 // In the quality pass badly shaped triangles are split at their off-centre (Ungor,
 // "Off-centers", 2004) rather than their circumcentre: the point on the bisector of
 // the shortest edge pq, towards the circumcentre, from which pq is seen under the
@@ -529,17 +640,15 @@ struct Faces_base : Faces_base_cgal {
     return Point_2(mx + dx / to_centre * height, my + dy / to_centre * height);
   }
 
-  // CGAL's scan (every face of the domain; the bad ones queued), with the
-  // badness of the faces computed in parallel blocks first. The queue orders
-  // faces by quality and then by their points (CGAL's Face_compare), never by
-  // when they were queued: the same queue as CGAL's scan. Only without rule 4,
-  // whose target_spacing caches f in the vertices (not thread-safe).
+  // The face level's queue (CGAL's Refine_faces_base, with Bad_face_queue for
+  // its Double_map): every function of it that reads or changes the queue.
+
+  // CGAL's scan (every face of the domain in container order; the bad ones
+  // queued), with the badness of the faces computed in parallel blocks first
+  // when rule 4 is off (its target_spacing caches f in the vertices: not
+  // thread-safe).
   void scan_triangulation_impl() {
-    if (!parallel_scan_) {
-      Faces_base_cgal::scan_triangulation_impl();
-      return;
-    }
-    this->bad_faces.clear();
+    queue_.clear();
     Cdt& tr = this->triangulation_ref_impl();
     std::vector<Cdt::Face_handle> faces;
     faces.reserve(tr.number_of_faces());
@@ -549,28 +658,67 @@ struct Faces_base : Faces_base_cgal {
     std::vector<Refinement_criteria::Quality> quality(faces.size());
     std::vector<std::uint8_t> bad(faces.size());
     constexpr std::size_t kChunk = std::size_t{1} << 14;
-    parallel_for((faces.size() + kChunk - 1) / kChunk, 0, [&](std::size_t c) {
+    parallel_for((faces.size() + kChunk - 1) / kChunk, parallel_scan_ ? 0 : 1, [&](std::size_t c) {
       for (std::size_t k = c * kChunk; k < std::min(faces.size(), (c + 1) * kChunk); ++k) {
         bad[k] = this->is_bad(faces[k], quality[k]) != CGAL::Mesh_2::NOT_BAD;
       }
     });
     for (std::size_t k = 0; k < faces.size(); ++k) {
-      if (bad[k]) this->bad_faces.insert(faces[k], quality[k]);
+      if (bad[k]) queue_.push(faces[k], quality[k]);
     }
   }
 
+  // Rule 4 is about vertices: a triangle queued as bad can become good when a
+  // point is inserted next to one of its vertices without destroying it. Such
+  // stale entries are dropped before the mesher looks at the queue.
   bool no_longer_element_to_refine_impl() {
-    while (!this->bad_faces.empty()) {
+    while (!queue_.empty()) {
       Refinement_criteria::Quality q;
-      if (this->is_bad(this->bad_faces.front()->second, q) != CGAL::Mesh_2::NOT_BAD) break;
-      this->bad_faces.pop_front();
+      if (this->is_bad(queue_.front_face(), q) != CGAL::Mesh_2::NOT_BAD) break;
+      queue_.pop_front();
     }
-    return this->bad_faces.empty();
+    return queue_.empty();
   }
+  Cdt::Face_handle get_next_element_impl() {
+    this->current_badness = this->is_bad(queue_.front_quality());
+    return queue_.front_face();
+  }
+  void pop_next_element_impl() { queue_.pop_front(); }
+
+  // The faces in conflict with a new point leave the queue (and the domain
+  // until after_insertion marks the new ones); called by both levels.
+  void before_insertion_impl(const Cdt::Face_handle&, const Point_2&,
+                             CGAL::Triangulation_mesher_level_traits_2<Cdt>::Zone& zone) {
+    for (const Cdt::Face_handle& f : zone.faces) {
+      queue_.erase(f);
+      f->set_in_domain(false);
+    }
+  }
+  void after_insertion_impl(const detail::Vertex_handle& v) {
+    auto f = this->triangulation_ref_impl().incident_faces(v), done = f;
+    do {
+      f->set_in_domain(true);
+    } while (++f != done);
+    compute_new_bad_faces(v);
+  }
+  // The bad faces around a new point join the queue (also called by the edge
+  // level's visitor).
+  void compute_new_bad_faces(const detail::Vertex_handle& v) {
+    Cdt& tr = this->triangulation_ref_impl();
+    auto f = tr.incident_faces(v), done = f;
+    do {
+      if (!tr.is_infinite(f) && f->is_in_domain()) {
+        Refinement_criteria::Quality q;
+        if (this->is_bad(f, q) != CGAL::Mesh_2::NOT_BAD) queue_.push(f, q);
+      }
+    } while (++f != done);
+  }
+  void remove_bad_face(const Cdt::Face_handle& f) { queue_.erase(f); }
 
  private:
   double half_angle_cotangent_;
   bool parallel_scan_;
+  Bad_face_queue queue_;
 };
 using Faces_level = CGAL::Mesh_2::Refine_faces<Cdt, Refinement_criteria, Edges_level, Faces_base>;
 using Visitor = CGAL::Mesh_2::Refine_edges_visitor_from_faces<Faces_level>;
