@@ -28,8 +28,9 @@ std::size_t run_mesher(Mesher& mesher, std::size_t budget, Refinement_report& re
   return inserted;
 }
 
-Refined_mesh extract(Cdt& cdt, const std::vector<Vec2>& input_points, const std::vector<Point_kind>& input_kind,
-                     const std::vector<std::uint8_t>& removed, const Scaling& scaling) {
+Refined_mesh extract(Cdt& cdt, const std::vector<Vertex_handle>& handles, const std::vector<Vec2>& input_points,
+                     const std::vector<Point_kind>& input_kind, const std::vector<std::uint8_t>& removed,
+                     const Scaling& scaling) {
   Refined_mesh result;
   Mesh_arrays& out = result.mesh;
   const std::size_t n = input_kind.size();
@@ -41,10 +42,7 @@ Refined_mesh extract(Cdt& cdt, const std::vector<Vec2>& input_points, const std:
   }
   std::vector<Vertex_handle> inserted;
   for (auto v = cdt.finite_vertices_begin(); v != cdt.finite_vertices_end(); ++v) {
-    if (v->info().index >= 0) {
-      v->info().out = input_to_out[v->info().index];
-      continue;
-    }
+    if (v->info().index >= 0) continue;
     inserted.push_back(v);
     // Ruppert: a point the mesher inserts lies in the domain (a refinement point
     // behind a constraint splits the constraint instead); counted, never expected.
@@ -58,24 +56,35 @@ Refined_mesh extract(Cdt& cdt, const std::vector<Vec2>& input_points, const std:
   std::sort(inserted.begin(), inserted.end(), [](Vertex_handle u, Vertex_handle w) {
     return u->point().x() < w->point().x() || (u->point().x() == w->point().x() && u->point().y() < w->point().y());
   });
-  const std::size_t n_out = result.source.size() + inserted.size();
+  const std::size_t n_kept = result.source.size();
+  const std::size_t n_out = n_kept + inserted.size();
   out.points.resize(n_out);
   out.kind.resize(n_out);
   result.f.resize(n_out);
-  for (auto v = cdt.finite_vertices_begin(); v != cdt.finite_vertices_end(); ++v) {
-    if (v->info().index < 0) continue;
-    const Index o = v->info().out;
-    out.points[o] = input_points[v->info().index];
-    out.kind[o] = input_kind[v->info().index];
-    result.f[o] = v->info().f * scaling.from_unit;
-  }
-  for (std::size_t k = 0; k < inserted.size(); ++k) {
-    const Index o = static_cast<Index>(result.source.size() + k);
-    inserted[k]->info().out = o;
-    out.points[o] = {inserted[k]->point().x() * scaling.from_unit, inserted[k]->point().y() * scaling.from_unit};
-    out.kind[o] = Point_kind::sampled;
-    result.f[o] = inserted[k]->info().f * scaling.from_unit;
-  }
+  // In input order (the arrays read and written in order; each vertex once), in
+  // parallel blocks; then the inserted points.
+  constexpr std::size_t kBlock = std::size_t{1} << 15;
+  parallel_for((n + kBlock - 1) / kBlock, 0, [&](std::size_t b) {
+    for (std::size_t i = b * kBlock; i < std::min(n, (b + 1) * kBlock); ++i) {
+      const Index o = input_to_out[i];
+      if (o < 0) continue;
+      auto& info = handles[i]->info();
+      info.out = o;
+      out.points[o] = input_points[i];
+      out.kind[o] = input_kind[i];
+      result.f[o] = info.f * scaling.from_unit;
+    }
+  });
+  parallel_for((inserted.size() + kBlock - 1) / kBlock, 0, [&](std::size_t b) {
+    for (std::size_t k = b * kBlock; k < std::min(inserted.size(), (b + 1) * kBlock); ++k) {
+      const Index o = static_cast<Index>(n_kept + k);
+      auto& info = inserted[k]->info();
+      info.out = o;
+      out.points[o] = {inserted[k]->point().x() * scaling.from_unit, inserted[k]->point().y() * scaling.from_unit};
+      out.kind[o] = Point_kind::sampled;
+      result.f[o] = info.f * scaling.from_unit;
+    }
+  });
   result.source.resize(n_out, -1);
   // Triangles and constraint edges from the finite faces, in face order: the
   // faces gathered once, counted and then read in parallel chunks, each writing

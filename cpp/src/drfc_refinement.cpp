@@ -73,7 +73,7 @@ Refined_mesh spacing_refine(const Mesh_arrays& mesh, const Spacing_function& spa
     mesher.rescan_faces();
   }
   std::vector<std::uint8_t> removed(n, 0);
-  Refined_mesh result = extract(cdt, mesh.points, mesh.kind, removed, scaling);
+  Refined_mesh result = extract(cdt, handles, mesh.points, mesh.kind, removed, scaling);
   result.report.n_inserted = report.n_inserted;
   result.report.rounds = report.rounds;
   result.report.capped = report.capped;

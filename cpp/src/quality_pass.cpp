@@ -77,7 +77,7 @@ Refined_mesh quality_pass(Cdt& cdt, const std::vector<Vertex_handle>& handles, c
   const double budget = options.max_inserted_fraction * static_cast<double>(points.size()) + options.max_inserted_extra;
   run_mesher(mesher, static_cast<std::size_t>(std::max(0.0, budget)), report);
   report.rounds = 1;
-  Refined_mesh result = extract(cdt, points, kind, removed, scaling);
+  Refined_mesh result = extract(cdt, handles, points, kind, removed, scaling);
   result.f.clear();
   result.report.n_inserted = report.n_inserted;
   result.report.n_removed = report.n_removed;
@@ -124,7 +124,7 @@ Early_triangulation::~Early_triangulation() = default;
 void Early_triangulation::insert_first(const std::vector<Vec2>& first) {
   Impl& impl = *impl_;
   impl.scaling = unit_scaling(first);
-  insert_points(impl.cdt, first, impl.scaling.to_unit);
+  insert_points_only(impl.cdt, first, impl.scaling.to_unit);  // (on the step's second thread: no handles)
   impl.n_first = first.size();
   impl.started = true;
 }
@@ -168,16 +168,15 @@ Refined_mesh Early_triangulation::finish(const std::vector<Vec2>& points, const 
   }
   cdt.insert(input.begin(), input.end());
   if (cdt.number_of_vertices() != points.size()) throw Input_error("points contain duplicates");
-  std::vector<Vertex_handle> handles(points.size());
-  for (auto v = cdt.finite_vertices_begin(); v != cdt.finite_vertices_end(); ++v) {
-    const Index i = v->info().index;
-    // the batches inserted early are the first points of the final list
-    if (v->point().x() * impl.scaling.from_unit != points[i][0] ||
-        v->point().y() * impl.scaling.from_unit != points[i][1]) {
-      throw std::logic_error("Early_triangulation: a point inserted early is not the final point at its index");
-    }
-    handles[i] = v;
-  }
+  // The batches inserted early are the first points of the final list.
+  const double from_unit = impl.scaling.from_unit;
+  const auto handles = vertex_handles(
+      cdt, points.size(),
+      [&](const Vertex_handle& v) {
+        const Vec2& p = points[v->info().index];
+        return v->point().x() * from_unit == p[0] && v->point().y() * from_unit == p[1];
+      },
+      "Early_triangulation: a point inserted early is not the final point at its index");
   Refined_mesh refined = quality_pass(cdt, handles, impl.scaling, points, kind, pieces, options, pinned);
   impl_ = std::make_unique<Impl>();  // the triangulation's memory goes before the step's next stage
   return refined;

@@ -767,8 +767,11 @@ void mark_domain(Cdt& cdt, const std::vector<Vertex_handle>& handles, const std:
 // Runs the mesher until it is done or `budget` points were inserted; returns the number inserted.
 std::size_t run_mesher(Mesher& mesher, std::size_t budget, Refinement_report& report);
 
-// Input points keep their exact input coordinates; f is returned in input units.
-Refined_mesh extract(Cdt& cdt, const std::vector<Vec2>& input_points, const std::vector<Point_kind>& input_kind,
-                     const std::vector<std::uint8_t>& removed, const Scaling& scaling);
+// The refined mesh: the input points not removed, in input order (handles: the
+// vertex of each), then the points the mesher inserted, sorted. Input points keep
+// their exact input coordinates; f is returned in input units.
+Refined_mesh extract(Cdt& cdt, const std::vector<Vertex_handle>& handles, const std::vector<Vec2>& input_points,
+                     const std::vector<Point_kind>& input_kind, const std::vector<std::uint8_t>& removed,
+                     const Scaling& scaling);
 
 }  // namespace evomesh::detail

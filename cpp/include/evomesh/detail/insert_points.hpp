@@ -3,10 +3,14 @@
 // (delaunay_mesher.hpp). Internal: included by cpp/src only.
 #pragma once
 
+#include <algorithm>
 #include <cstddef>
+#include <cstdint>
+#include <stdexcept>
 #include <utility>
 #include <vector>
 
+#include "evomesh/parallel.hpp"
 #include "evomesh/types.hpp"
 
 namespace evomesh::detail {
@@ -16,13 +20,44 @@ namespace evomesh::detail {
 // argument-dependent lookup).
 inline Index& vertex_index(Index& info) { return info; }
 
+// The vertex of every point index (vertex_index of each finite vertex's info):
+// the vertices gathered in container order, then placed in parallel blocks (the
+// writes land all over `handles`: on a large triangulation that is the cost).
+// `check(v)`, also in parallel, returns false for a vertex that is not where
+// the caller expects; then std::logic_error(what) is thrown.
+template <class Tr, class Check>
+std::vector<typename Tr::Vertex_handle> vertex_handles(Tr& tr, std::size_t n_points, Check check, const char* what) {
+  using Vertex_handle = typename Tr::Vertex_handle;
+  std::vector<Vertex_handle> vertices;
+  vertices.reserve(tr.number_of_vertices());
+  for (auto v = tr.finite_vertices_begin(); v != tr.finite_vertices_end(); ++v) vertices.push_back(v);
+  std::vector<Vertex_handle> handles(n_points);
+  constexpr std::size_t kBlock = std::size_t{1} << 15;
+  const std::size_t n_blocks = (vertices.size() + kBlock - 1) / kBlock;
+  std::vector<std::uint8_t> wrong(n_blocks, 0);
+  parallel_for(n_blocks, 0, [&](std::size_t b) {
+    for (std::size_t k = b * kBlock; k < std::min(vertices.size(), (b + 1) * kBlock); ++k) {
+      const Vertex_handle v = vertices[k];
+      const Index i = vertex_index(v->info());
+      if (i < 0 || static_cast<std::size_t>(i) >= n_points || !check(v)) {
+        wrong[b] = 1;
+        continue;
+      }
+      handles[i] = v;
+    }
+  });
+  for (std::uint8_t w : wrong) {
+    if (w) throw std::logic_error(what);
+  }
+  return handles;
+}
+
 // Inserts `points`, scaled by `scale` (a power of two, so exactly), with CGAL's
 // range insertion (its spatial sort, each point located from the last); each
 // vertex's info holds the index of its point (vertex_index), the rest of the
-// info is value-initialised. Returns the vertex of every point; throws
-// Input_error when points coincide.
+// info is value-initialised. Throws Input_error when points coincide.
 template <class Tr>
-std::vector<typename Tr::Vertex_handle> insert_points(Tr& tr, const std::vector<Vec2>& points, double scale = 1) {
+void insert_points_only(Tr& tr, const std::vector<Vec2>& points, double scale = 1) {
   using Info = typename Tr::Vertex::Info;
   std::vector<std::pair<typename Tr::Point, Info>> input;
   input.reserve(points.size());
@@ -33,9 +68,14 @@ std::vector<typename Tr::Vertex_handle> insert_points(Tr& tr, const std::vector<
   }
   tr.insert(input.begin(), input.end());
   if (tr.number_of_vertices() != points.size()) throw Input_error("points contain duplicates");
-  std::vector<typename Tr::Vertex_handle> handles(points.size());
-  for (auto v = tr.finite_vertices_begin(); v != tr.finite_vertices_end(); ++v) handles[vertex_index(v->info())] = v;
-  return handles;
+}
+
+// insert_points_only, and the vertex of every point.
+template <class Tr>
+std::vector<typename Tr::Vertex_handle> insert_points(Tr& tr, const std::vector<Vec2>& points, double scale = 1) {
+  insert_points_only(tr, points, scale);
+  return vertex_handles(
+      tr, points.size(), [](const typename Tr::Vertex_handle&) { return true; }, "insert_points: a vertex without its point");
 }
 
 }  // namespace evomesh::detail
