@@ -264,17 +264,40 @@ std::pair<double, Vec2> smallest_angle_in(const std::vector<Vec2>& points, const
                                           std::size_t begin, std::size_t end) {
   double best = 180.0;
   Vec2 where{0, 0};
+  // The angle at a corner is atan2(|cross|, dot) of its two edges, and atan2 is
+  // most of the cost. A triangle whose every corner has |cross| > tan(beyond)
+  // dot (or dot <= 0) has every angle above `beyond`, a little more than the
+  // best so far: it cannot hold a smaller one, and its angles are not computed.
+  // The others are computed as always, so the answer is the same.
+  constexpr double kMarginDegrees = 1e-6;  // far above the rounding of atan2 and tan
+  double beyond_tan = -1;                  // < 0: no bound yet (best + margin >= 90)
+  auto set_bound = [&]() {
+    const double beyond = best + kMarginDegrees;
+    beyond_tan = beyond < 89.0 ? std::tan(beyond * kPi / 180.0) : -1;
+  };
   for (std::size_t i = begin; i < end; ++i) {
     const Triangle& t = triangles[i];
+    double cross[3], dot[3];
+    bool may_hold_smaller = beyond_tan < 0;
     for (int k = 0; k < 3; ++k) {
       const Vec2& p = points[t[k]];
       const Vec2& q = points[t[(k + 1) % 3]];
       const Vec2& r = points[t[(k + 2) % 3]];
       const double ux = q[0] - p[0], uy = q[1] - p[1], vx = r[0] - p[0], vy = r[1] - p[1];
-      const double angle = std::atan2(std::abs(ux * vy - uy * vx), ux * vx + uy * vy) * 180.0 / kPi;
+      cross[k] = std::abs(ux * vy - uy * vx);
+      dot[k] = ux * vx + uy * vy;
+      may_hold_smaller = may_hold_smaller || (dot[k] > 0 && !(cross[k] > beyond_tan * dot[k]));
+    }
+    if (!may_hold_smaller) continue;
+    for (int k = 0; k < 3; ++k) {
+      const double angle = std::atan2(cross[k], dot[k]) * 180.0 / kPi;
       if (angle < best) {
         best = angle;
+        const Vec2& p = points[t[k]];
+        const Vec2& q = points[t[(k + 1) % 3]];
+        const Vec2& r = points[t[(k + 2) % 3]];
         where = {(p[0] + q[0] + r[0]) / 3.0, (p[1] + q[1] + r[1]) / 3.0};
+        set_bound();
       }
     }
   }
