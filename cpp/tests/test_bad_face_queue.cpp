@@ -3,7 +3,8 @@
 // then the three vertices' points in order, lexicographically): random pushes
 // (with many equal qualities), removals, pops and clears on the faces of a real
 // triangulation, enough removals to make it compact, and faces the
-// triangulation destroys and reuses while entries of them are still queued.
+// triangulation destroys and reuses while entries of them are still queued; and
+// the face base keeps CGAL's time stamps distinct.
 #include <array>
 #include <cstdio>
 #include <map>
@@ -156,6 +157,28 @@ void destroyed_and_reused_faces() {
   CHECK(queue.empty());
 }
 
+// The queue's face base keeps CGAL's time stamps: every face of a triangulation
+// (created by any of the container's constructors, also after removals and
+// reuse) has its own, so handles compare as CGAL expects (by time stamp).
+void faces_have_distinct_time_stamps() {
+  Cdt cdt;
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<double> coordinate(0.0, 1.0);
+  std::vector<evomesh::detail::Vertex_handle> vertices;
+  for (int i = 0; i < 2000; ++i) vertices.push_back(cdt.insert(Point_2(coordinate(rng), coordinate(rng))));
+  cdt.insert_constraint(Point_2(0.1, 0.1), Point_2(0.9, 0.8));
+  for (int i = 0; i < 500; i += 3) cdt.remove(vertices[i]);
+  std::set<std::size_t> stamps;
+  std::size_t n_faces = 0;
+  for (auto f = cdt.all_faces_begin(); f != cdt.all_faces_end(); ++f) {
+    ++n_faces;
+    stamps.insert(f->time_stamp());
+    CHECK(f->queue_entry == 0);
+  }
+  CHECK(stamps.size() == n_faces) << stamps.size() << " distinct time stamps for " << n_faces << " faces";
+  CHECK(stamps.count(std::size_t(-1)) == 0);
+}
+
 }  // namespace
 
 int main() {
@@ -164,5 +187,6 @@ int main() {
     // many faces, most of them removed: the heap compacts several times
     random_operations(11, 20000, 200000, false);
     destroyed_and_reused_faces();
+    faces_have_distinct_time_stamps();
   });
 }

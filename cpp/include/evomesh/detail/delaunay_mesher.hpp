@@ -56,7 +56,14 @@ using Fb_mesh = CGAL::Delaunay_mesh_face_base_2<Kernel, Fb_cdt>;
 
 // A face base with the number of the face's entry in the mesher's queue of bad
 // faces (Bad_face_queue), 0 when it has none. A face the triangulation creates
-// (or reuses) starts with 0.
+// starts with 0.
+//
+// The default constructor must be user-provided: CGAL's container creates faces
+// by value-initialisation (`T()`), which zero-fills a class whose default
+// constructor is not, and Delaunay_mesh_face_base_2's time stamp must keep the
+// "unset" value the container wrote there (its constructors leave it alone):
+// zeroed, every such face had time stamp 0, and CGAL's handle comparisons
+// (ordered by time stamp) failed their assertion.
 template <class Gt, class Base>
 class Queued_face_base_2 : public Base {
  public:
@@ -65,6 +72,7 @@ class Queued_face_base_2 : public Base {
     using Base2 = typename Base::template Rebind_TDS<Tds2>::Other;
     using Other = Queued_face_base_2<Gt, Base2>;
   };
+  Queued_face_base_2() : Base() {}  // NOLINT(modernize-use-equals-default): see above
   using Base::Base;
   std::uint64_t queue_entry = 0;
 };
