@@ -47,6 +47,19 @@ struct Reference {
   }
 };
 
+// Pops everything: the faces come out in the reference's order, then the queue is empty.
+void drain_in_order(Bad_face_queue& queue, Reference& reference) {
+  while (!reference.order.empty()) {
+    const Face_handle front = reference.order.begin()->second;
+    CHECK(!queue.empty());
+    if (queue.empty()) return;
+    CHECK(queue.front_face() == front);
+    queue.pop_front();
+    reference.erase(front);
+  }
+  CHECK(queue.empty());
+}
+
 std::vector<Face_handle> finite_faces(Cdt& cdt) {
   std::vector<Face_handle> faces;
   for (auto f = cdt.finite_faces_begin(); f != cdt.finite_faces_end(); ++f) faces.push_back(f);
@@ -96,16 +109,7 @@ void random_operations(unsigned seed, int n_points, int n_operations, bool with_
       CHECK(queue.front_quality() == std::get<0>(reference.order.begin()->first)) << "step " << step;
     }
   }
-  // drained in the reference's order
-  while (!reference.order.empty()) {
-    const Face_handle front = reference.order.begin()->second;
-    CHECK(!queue.empty());
-    if (queue.empty()) return;
-    CHECK(queue.front_face() == front);
-    queue.pop_front();
-    reference.erase(front);
-  }
-  CHECK(queue.empty());
+  drain_in_order(queue, reference);
 }
 
 // Entries of faces that the triangulation destroys (after leaving the queue, as
@@ -146,15 +150,7 @@ void destroyed_and_reused_faces() {
       reference.erase(front);
     }
   }
-  while (!reference.order.empty()) {
-    const Face_handle front = reference.order.begin()->second;
-    CHECK(!queue.empty());
-    if (queue.empty()) return;
-    CHECK(queue.front_face() == front);
-    queue.pop_front();
-    reference.erase(front);
-  }
-  CHECK(queue.empty());
+  drain_in_order(queue, reference);
 }
 
 // The queue's face base keeps CGAL's time stamps: every face of a triangulation
