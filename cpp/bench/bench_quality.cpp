@@ -21,7 +21,7 @@ using namespace evomesh;
 int main(int argc, char** argv) {
   const double n_target = argc > 1 ? std::stod(argv[1]) : 1e6;
   const double jitter = argc > 2 ? std::stod(argv[2]) : 0.3;  // < 0: uniform random
-  const int repeats = argc > 3 ? std::stoi(argv[3]) : 3;
+  const int repeats = std::max(1, argc > 3 ? std::stoi(argv[3]) : 3);
   std::mt19937_64 rng(5);
   std::uniform_real_distribution<double> u(0, 1);
   std::vector<Vec2> pts;

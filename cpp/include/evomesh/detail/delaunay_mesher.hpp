@@ -565,8 +565,7 @@ class Bad_face_queue {
   }
   void pop_front() {
     settle();
-    erase(heap_.front().face);
-    settle();
+    erase(heap_.front().face);  // (its entry leaves at the next settle)
   }
   void clear() {
     heap_.clear();
@@ -721,6 +720,7 @@ struct Faces_base : Faces_base_cgal {
       }
     } while (++f != done);
   }
+  // (CGAL's public counterpart would work on its own, unused map.)
   void remove_bad_face(const Cdt::Face_handle& f) { queue_.erase(f); }
 
  private:
