@@ -1,6 +1,7 @@
 #include "evomesh/detail/delaunay_mesher.hpp"
 
 #include "evomesh/detail/domain.hpp"
+#include "evomesh/detail/parallel_sweep.hpp"
 #include "evomesh/parallel.hpp"
 
 namespace evomesh::detail {
@@ -40,12 +41,14 @@ Refined_mesh extract(Cdt& cdt, const std::vector<Vertex_handle>& handles, const 
     input_to_out[i] = static_cast<Index>(result.source.size());
     result.source.push_back(static_cast<Index>(i));
   }
-  std::vector<Vertex_handle> inserted;
-  for (auto v = cdt.finite_vertices_begin(); v != cdt.finite_vertices_end(); ++v) {
-    if (v->info().index >= 0) continue;
-    inserted.push_back(v);
-    // Ruppert: a point the mesher inserts lies in the domain (a refinement point
-    // behind a constraint splits the constraint instead); counted, never expected.
+  // The points the mesher inserted (no point index; sorted below, so the
+  // sweep's order does not matter).
+  std::vector<Vertex_handle> inserted = parallel_gather(cdt.tds().vertices(), [&](Vertex_handle v) {
+    return !cdt.is_infinite(v) && v->info().index < 0;
+  });
+  // Ruppert: a point the mesher inserts lies in the domain (a refinement point
+  // behind a constraint splits the constraint instead); counted, never expected.
+  for (const Vertex_handle& v : inserted) {
     bool in_domain = false;
     auto f = cdt.incident_faces(v), done = f;
     do {
@@ -86,20 +89,18 @@ Refined_mesh extract(Cdt& cdt, const std::vector<Vertex_handle>& handles, const 
     }
   });
   result.source.resize(n_out, -1);
-  // Triangles and constraint edges from the finite faces, in face order: the
-  // faces gathered once, counted and then read in parallel chunks, each writing
-  // its own range of the triangles (allocated here, not by the threads).
-  std::vector<Face_handle> faces;
-  faces.reserve(cdt.number_of_faces());
-  for (auto f = cdt.finite_faces_begin(); f != cdt.finite_faces_end(); ++f) faces.push_back(f);
-  constexpr std::size_t kChunk = std::size_t{1} << 15;
-  const std::size_t n_chunks = (faces.size() + kChunk - 1) / kChunk;
+  // Triangles and constraint edges from the finite faces, in face order: two
+  // parallel sweeps over the face container (parallel_sweep.hpp), the first
+  // counting each chunk's triangles, the second writing them to the chunk's own
+  // range (allocated here, not by the threads). (Below dimension 2 the face
+  // container holds edges, and there are no faces.)
+  auto& faces = cdt.tds().faces();
+  const std::size_t n_chunks = cdt.dimension() == 2 ? sweep_chunks(faces) : 0;
+  auto is_triangle = [&](const Face_handle& f) { return !cdt.is_infinite(f) && f->is_in_domain(); };
   std::vector<std::size_t> first_triangle(n_chunks + 1, 0);
-  parallel_for(n_chunks, 0, [&](std::size_t c) {
-    std::size_t count = 0;
-    for (std::size_t k = c * kChunk; k < std::min(faces.size(), (c + 1) * kChunk); ++k) count += faces[k]->is_in_domain();
-    first_triangle[c + 1] = count;
-  });
+  if (n_chunks > 0) {
+    parallel_sweep(faces, [&](std::size_t c, Face_handle f) { first_triangle[c + 1] += is_triangle(f); });
+  }
   for (std::size_t c = 0; c < n_chunks; ++c) first_triangle[c + 1] += first_triangle[c];
   out.triangles.resize(first_triangle[n_chunks]);
   // Constraint edges: boundary ones oriented with the domain on their left.
@@ -107,14 +108,15 @@ Refined_mesh extract(Cdt& cdt, const std::vector<Vertex_handle>& handles, const 
   // both are finite; sorted below.)
   std::vector<std::vector<std::pair<Edge, std::uint8_t>>> chunk_segments(n_chunks);
   std::vector<std::uint8_t> outside(n_chunks, 0);
-  parallel_for(n_chunks, 0, [&](std::size_t c) {
-    std::size_t t = first_triangle[c];
-    auto& segs = chunk_segments[c];
-    for (std::size_t k = c * kChunk; k < std::min(faces.size(), (c + 1) * kChunk); ++k) {
-      const Face_handle f = faces[k];
+  std::vector<std::size_t> next_triangle(first_triangle.begin(), first_triangle.begin() + n_chunks);
+  if (n_chunks > 0) {
+    parallel_sweep(faces, [&](std::size_t c, Face_handle f) {
+      if (cdt.is_infinite(f)) return;
       if (f->is_in_domain()) {
-        out.triangles[t++] = {f->vertex(0)->info().out, f->vertex(1)->info().out, f->vertex(2)->info().out};
+        out.triangles[next_triangle[c]++] = {f->vertex(0)->info().out, f->vertex(1)->info().out,
+                                             f->vertex(2)->info().out};
       }
+      auto& segs = chunk_segments[c];
       for (int i = 0; i < 3; ++i) {
         if (!f->is_constrained(i)) continue;
         const Face_handle g = f->neighbor(i);
@@ -127,9 +129,8 @@ Refined_mesh extract(Cdt& cdt, const std::vector<Vertex_handle>& handles, const 
         else if (g_in) segs.push_back({{b, a}, 1});
         else outside[c] = 1;
       }
-    }
-  });
-  faces = std::vector<Face_handle>();
+    });
+  }
   for (std::uint8_t o : outside) {
     if (o) throw std::runtime_error("refinement: a constraint lies outside the domain");
   }

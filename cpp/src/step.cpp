@@ -16,6 +16,9 @@
 #if defined(__GLIBC__)
 #include <malloc.h>
 #endif
+#if defined(__unix__)
+#include <sys/resource.h>
+#endif
 
 namespace evomesh {
 
@@ -41,6 +44,9 @@ double Stage_timer::process_cpu_seconds() {
 void Stage_timer::record_memory(const std::string& name) {
   const double cpu = process_cpu_seconds();
   add("cpu_seconds_" + name, cpu - last_cpu_, false);
+  const Kernel_usage usage = kernel_usage();
+  add("page_faults_" + name, usage.page_faults - last_usage_.page_faults, false);
+  add("system_seconds_" + name, usage.system_seconds - last_usage_.system_seconds, false);
   double peak_kib = -1;
   {
     std::ifstream status("/proc/self/status");
@@ -57,6 +63,19 @@ void Stage_timer::record_memory(const std::string& name) {
 #endif
   last_ = std::chrono::steady_clock::now();  // the reading is not the stage's time
   last_cpu_ = process_cpu_seconds();
+  last_usage_ = kernel_usage();
+}
+
+Stage_timer::Kernel_usage Stage_timer::kernel_usage() {
+  Kernel_usage usage;
+#if defined(__unix__)
+  rusage r{};
+  if (getrusage(RUSAGE_SELF, &r) == 0) {
+    usage.page_faults = static_cast<double>(r.ru_minflt + r.ru_majflt);
+    usage.system_seconds = static_cast<double>(r.ru_stime.tv_sec) + 1e-6 * static_cast<double>(r.ru_stime.tv_usec);
+  }
+#endif
+  return usage;
 }
 
 }  // namespace detail

@@ -5,6 +5,8 @@
 #include <cstdio>
 #include <limits>
 #include <random>
+#include <stdexcept>
+#include <string>
 #include <vector>
 
 #include "check.hpp"
@@ -96,6 +98,75 @@ void check_square_with_hole(int per_side, int n_interior, std::uint64_t seed) {
   }
   std::printf("square with hole: %zu points (%zu in the hole), %zu triangles, area %.17g\n", points.size(), in_hole,
               triangles.size(), area);
+}
+
+// The message of the std::runtime_error that constrained_delaunay throws ("" when none).
+std::string domain_error(const std::vector<Vec2>& points, const std::vector<Constraint_piece>& pieces) {
+  try {
+    constrained_delaunay(points, pieces);
+  } catch (const std::runtime_error& e) {
+    return e.what();
+  }
+  return "";
+}
+
+// label_domain's two fills (domain.hpp): only the regions with an outside seed
+// when every piece is an edge, every region otherwise; and its errors.
+void check_domain_labels() {
+  std::vector<Vec2> points;
+  std::vector<Constraint_piece> pieces;
+  add_loop(points, pieces, {{0, 0}, {4, 0}, {4, 4}, {0, 4}}, 8);
+  add_loop(points, pieces, {{1, 1}, {1, 3}, {3, 3}, {3, 1}}, 4);
+  points.push_back({2, 2});  // in the hole
+  points.push_back({0.5, 3.5});
+  auto area_of = [&](const std::vector<Vec2>& p, const std::vector<Triangle>& triangles) {
+    double area = 0;
+    for (const auto& t : triangles) area += signed_area(p, t);
+    return area;
+  };
+  CHECK(area_of(points, constrained_delaunay(points, pieces)) == 12.0);
+  // A point on the first piece splits it: that piece is no edge, every region is filled.
+  {
+    auto split = points;
+    split.push_back({0.25, 0});
+    CHECK(area_of(split, constrained_delaunay(split, pieces)) == 12.0);
+  }
+  // An open boundary: the outside leaks in through the missing piece.
+  {
+    auto open = pieces;
+    open.erase(open.begin() + 3);
+    const std::string message = domain_error(points, open);
+    CHECK(message.find("domain boundary is not closed") != std::string::npos) << message;
+  }
+  // An open boundary while a point splits a piece (the fill of every region).
+  {
+    auto split = points;
+    split.push_back({0.25, 0});
+    auto open = pieces;
+    open.erase(open.begin() + 3);
+    const std::string message = domain_error(split, open);
+    CHECK(message.find("domain boundary is not closed") != std::string::npos) << message;
+  }
+  // Points on every piece of the hole: no piece bounds it whole, so nothing
+  // seeds it (the fill of every region says so; taking it for inside would
+  // fill the hole).
+  {
+    std::vector<Vec2> p;
+    std::vector<Constraint_piece> loops;
+    add_loop(p, loops, {{0, 0}, {4, 0}, {4, 4}, {0, 4}}, 1);
+    add_loop(p, loops, {{1, 1}, {1, 3}, {3, 3}, {3, 1}}, 1);
+    for (Vec2 x : std::vector<Vec2>{{1, 2}, {2, 3}, {3, 2}, {2, 1}, {2, 2}}) p.push_back(x);
+    const std::string message = domain_error(p, loops);
+    CHECK(message.find("a region has no seed") != std::string::npos) << "'" << message << "'";
+  }
+  // The hole's loop turned around: its inside is seeded inside from one piece
+  // and outside from the next.
+  {
+    auto turned = pieces;
+    std::swap(turned[32].a, turned[32].b);
+    const std::string message = domain_error(points, turned);
+    CHECK(message.find("constrained_delaunay:") != std::string::npos) << "no error: " << message;
+  }
 }
 
 // A 3 x 3 grid of the square [0, 2]^2 (points row by row), CCW triangles.
@@ -312,6 +383,7 @@ int main() {
     check_square_with_hole(1, 0, 1);
     check_square_with_hole(1, 40, 2);
     check_square_with_hole(5, 300, 3);
+    check_domain_labels();
     check_classification();
   });
 }

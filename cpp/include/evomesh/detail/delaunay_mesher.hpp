@@ -28,6 +28,7 @@
 #include <vector>
 
 #include "evomesh/detail/insert_points.hpp"
+#include "evomesh/detail/parallel_sweep.hpp"
 #include "evomesh/parallel.hpp"
 #include "evomesh/kernel.hpp"
 #include "evomesh/refined_mesh.hpp"
@@ -91,19 +92,24 @@ using Face_handle = Cdt::Face_handle;
 // quarter of the quality pass's set-up on a 1e6-point mesh. Only the vertices
 // of constraint edges can have clusters, and the clusters of a vertex are built
 // from its own edges alone (the map is keyed by the vertex), so visiting those
-// vertices, found by one sweep over the faces, builds the same map.
+// vertices, found by one sweep over the faces (in parallel: parallel_sweep.hpp),
+// builds the same map.
 template <>
 template <>
 inline void CGAL::Mesh_2::Clusters<evomesh::detail::Cdt>::create_clusters<CGAL::Tag_false>(CGAL::Tag_false) {
   cluster_map.clear();
-  std::vector<Vertex_handle> ends;
-  for (auto f = tr.finite_faces_begin(); f != tr.finite_faces_end(); ++f) {
+  if (tr.dimension() < 2) return;  // (no constraint edges in a face)
+  auto& faces = tr.tds().faces();
+  std::vector<std::vector<Vertex_handle>> in_chunk(evomesh::detail::sweep_chunks(faces));
+  evomesh::detail::parallel_sweep(faces, [&](std::size_t c, evomesh::detail::Face_handle f) {
+    if (tr.is_infinite(f)) return;
     for (int i = 0; i < 3; ++i) {
       if (!f->is_constrained(i)) continue;
-      ends.push_back(f->vertex(evomesh::detail::Cdt::ccw(i)));
-      ends.push_back(f->vertex(evomesh::detail::Cdt::cw(i)));
+      in_chunk[c].push_back(f->vertex(evomesh::detail::Cdt::ccw(i)));
+      in_chunk[c].push_back(f->vertex(evomesh::detail::Cdt::cw(i)));
     }
-  }
+  });
+  std::vector<Vertex_handle> ends = evomesh::detail::joined(in_chunk);
   std::sort(ends.begin(), ends.end());
   ends.erase(std::unique(ends.begin(), ends.end()), ends.end());
   for (const Vertex_handle& v : ends) create_clusters_of_vertex(v);
@@ -321,12 +327,16 @@ class Refinement_criteria {
 class Domain_sides {
  public:
   // Domain on the left of every boundary constraint edge, as the marks say now.
-  // Every constraint edge is seen from its finite faces (a face iteration is
-  // much cheaper than CGAL's edge iterator); from either side it gives the
-  // same key.
-  void record(const Cdt& tr) {
+  // Every constraint edge is seen from its finite faces (a face sweep, in
+  // parallel, is much cheaper than CGAL's edge iterator); from either side it
+  // gives the same key.
+  void record(Cdt& tr) {
     left_.clear();
-    for (auto f = tr.finite_faces_begin(); f != tr.finite_faces_end(); ++f) {
+    if (tr.dimension() < 2) return;
+    auto& faces = tr.tds().faces();
+    std::vector<std::vector<Key>> in_chunk(sweep_chunks(faces));
+    parallel_sweep(faces, [&](std::size_t c, Face_handle f) {
+      if (tr.is_infinite(f)) return;
       for (int i = 0; i < 3; ++i) {
         if (!f->is_constrained(i)) continue;
         const Face_handle g = f->neighbor(i);
@@ -334,10 +344,11 @@ class Domain_sides {
         const bool g_in = !tr.is_infinite(g) && g->is_in_domain();
         // f lies on the left of vertex(ccw(i)) -> vertex(cw(i)).
         const Vertex_handle a = f->vertex(Cdt::ccw(i)), b = f->vertex(Cdt::cw(i));
-        if (f_in && !g_in) left_.insert(key(a, b));
-        else if (g_in && !f_in) left_.insert(key(b, a));
+        if (f_in && !g_in) in_chunk[c].push_back(key(a, b));
+        else if (g_in && !f_in) in_chunk[c].push_back(key(b, a));
       }
-    }
+    });
+    for (const auto& keys : in_chunk) left_.insert(keys.begin(), keys.end());
   }
   // +1: the domain is on the left of a -> b only; -1: on its right only; 0: both
   // sides (an interior constraint) or not a boundary edge.
@@ -476,19 +487,22 @@ struct Edges_base : Edges_base_with_clusters {
   // CGAL's scan (every constraint edge in edge order; the encroached ones
   // queued), with the Gabriel tests computed in parallel blocks first (they
   // only read the triangulation, the sides and the clusters): the same queue.
-  // The constraint edges in CGAL's edge order, from a sweep over the faces:
+  // The constraint edges in CGAL's edge order, from a (parallel) sweep over the faces:
   // its edge iterator visits the faces in container order and reports edge i
   // of face f when f < f->neighbor(i) (Triangulation_ds_edge_iterator_2), and
   // the finite-edge filter never drops a constraint edge (its ends are finite).
   // Visiting every edge through that iterator took 0.1 s on a 1e6-point mesh.
   void scan_triangulation_impl() {
     this->clear();
-    std::vector<Cdt::Edge> edges;
-    for (auto f = this->tr.all_faces_begin(); f != this->tr.all_faces_end(); ++f) {
+    if (this->tr.dimension() < 2) return;
+    auto& faces = this->tr.tds().faces();
+    std::vector<std::vector<Cdt::Edge>> in_chunk(sweep_chunks(faces));
+    parallel_sweep(faces, [&](std::size_t c, Cdt::Face_handle f) {
       for (int i = 0; i < 3; ++i) {
-        if (f->is_constrained(i) && Cdt::Face_handle(f) < f->neighbor(i)) edges.emplace_back(f, i);
+        if (f->is_constrained(i) && f < f->neighbor(i)) in_chunk[c].emplace_back(f, i);
       }
-    }
+    });
+    const std::vector<Cdt::Edge> edges = joined(in_chunk);
     std::vector<std::uint8_t> conform(edges.size());
     constexpr std::size_t kChunk = std::size_t{1} << 12;
     parallel_for((edges.size() + kChunk - 1) / kChunk, 0, [&](std::size_t c) {
@@ -651,27 +665,25 @@ struct Faces_base : Faces_base_cgal {
   // its Double_map): every function of it that reads or changes the queue.
 
   // CGAL's scan (every face of the domain in container order; the bad ones
-  // queued), with the badness of the faces computed in parallel blocks first
-  // when rule 4 is off (its target_spacing caches f in the vertices: not
-  // thread-safe).
+  // queued), with the badness of the faces computed in a parallel sweep
+  // (parallel_sweep.hpp) when rule 4 is off (its target_spacing caches f in the
+  // vertices: not thread-safe), the bad ones then queued in container order.
   void scan_triangulation_impl() {
     queue_.clear();
     Cdt& tr = this->triangulation_ref_impl();
-    std::vector<Cdt::Face_handle> faces;
-    faces.reserve(tr.number_of_faces());
-    for (auto f = tr.finite_faces_begin(); f != tr.finite_faces_end(); ++f) {
-      if (f->is_in_domain()) faces.push_back(f);
-    }
-    std::vector<Refinement_criteria::Quality> quality(faces.size());
-    std::vector<std::uint8_t> bad(faces.size());
-    constexpr std::size_t kChunk = std::size_t{1} << 14;
-    parallel_for((faces.size() + kChunk - 1) / kChunk, parallel_scan_ ? 0 : 1, [&](std::size_t c) {
-      for (std::size_t k = c * kChunk; k < std::min(faces.size(), (c + 1) * kChunk); ++k) {
-        bad[k] = this->is_bad(faces[k], quality[k]) != CGAL::Mesh_2::NOT_BAD;
-      }
-    });
-    for (std::size_t k = 0; k < faces.size(); ++k) {
-      if (bad[k]) queue_.push(faces[k], quality[k]);
+    if (tr.dimension() < 2) return;
+    auto& faces = tr.tds().faces();
+    std::vector<std::vector<std::pair<Cdt::Face_handle, Refinement_criteria::Quality>>> bad(sweep_chunks(faces));
+    parallel_sweep(
+        faces,
+        [&](std::size_t c, Cdt::Face_handle f) {
+          if (tr.is_infinite(f) || !f->is_in_domain()) return;
+          Refinement_criteria::Quality q;
+          if (this->is_bad(f, q) != CGAL::Mesh_2::NOT_BAD) bad[c].emplace_back(f, q);
+        },
+        parallel_scan_ ? 0 : 1);
+    for (const auto& in_chunk : bad) {
+      for (const auto& [f, q] : in_chunk) queue_.push(f, q);
     }
   }
 

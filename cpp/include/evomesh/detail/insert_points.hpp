@@ -10,6 +10,7 @@
 #include <utility>
 #include <vector>
 
+#include "evomesh/detail/parallel_sweep.hpp"
 #include "evomesh/parallel.hpp"
 #include "evomesh/types.hpp"
 
@@ -20,31 +21,25 @@ namespace evomesh::detail {
 // argument-dependent lookup).
 inline Index& vertex_index(Index& info) { return info; }
 
-// The vertex of every point index (vertex_index of each finite vertex's info):
-// the vertices gathered in container order, then placed in parallel blocks (the
-// writes land all over `handles`: on a large triangulation that is the cost).
+// The vertex of every point index (vertex_index of each finite vertex's info),
+// placed by a parallel sweep over the vertices (parallel_sweep.hpp; the writes
+// land all over `handles`: on a large triangulation that is the cost).
 // `check(v)`, also in parallel, returns false for a vertex that is not where
 // the caller expects; then std::logic_error(what) is thrown.
 template <class Tr, class Check>
 std::vector<typename Tr::Vertex_handle> vertex_handles(Tr& tr, std::size_t n_points, Check check, const char* what) {
   using Vertex_handle = typename Tr::Vertex_handle;
-  std::vector<Vertex_handle> vertices;
-  vertices.reserve(tr.number_of_vertices());
-  for (auto v = tr.finite_vertices_begin(); v != tr.finite_vertices_end(); ++v) vertices.push_back(v);
   std::vector<Vertex_handle> handles(n_points);
-  constexpr std::size_t kBlock = std::size_t{1} << 15;
-  const std::size_t n_blocks = (vertices.size() + kBlock - 1) / kBlock;
-  std::vector<std::uint8_t> wrong(n_blocks, 0);
-  parallel_for(n_blocks, 0, [&](std::size_t b) {
-    for (std::size_t k = b * kBlock; k < std::min(vertices.size(), (b + 1) * kBlock); ++k) {
-      const Vertex_handle v = vertices[k];
-      const Index i = vertex_index(v->info());
-      if (i < 0 || static_cast<std::size_t>(i) >= n_points || !check(v)) {
-        wrong[b] = 1;
-        continue;
-      }
-      handles[i] = v;
+  auto& vertices = tr.tds().vertices();
+  std::vector<std::uint8_t> wrong(sweep_chunks(vertices), 0);
+  parallel_sweep(vertices, [&](std::size_t c, Vertex_handle v) {
+    if (tr.is_infinite(v)) return;
+    const Index i = vertex_index(v->info());
+    if (i < 0 || static_cast<std::size_t>(i) >= n_points || !check(v)) {
+      wrong[c] = 1;
+      return;
     }
+    handles[i] = v;
   });
   for (std::uint8_t w : wrong) {
     if (w) throw std::logic_error(what);
