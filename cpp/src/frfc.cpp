@@ -290,6 +290,7 @@ Evolve_result frfc(const Mesh_arrays& input, const std::vector<double>& delta, c
   std::size_t n_repairs = 0;
   const auto repair_points = spacing_repair_stage(mesh, *fans, delta, spacing, on_segments, demoted, options, packing,
                                                     n_repairs);
+  early->insert_rest(packing, mesh.points.size(), mesh.points.size() + on_segments.size(), repair_points);
   timer.lap("spacing_repair");
   fans.reset();  // (not kept for the walker: alive with the packing here, they would add to the peak)
 

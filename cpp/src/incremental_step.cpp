@@ -523,6 +523,7 @@ std::optional<Evolve_result> incremental_frfc(const Mesh_arrays& mesh, const std
     const Spacing_repair_input input{mesh, fans, delta, weights.nn, f, packing.centers, on_segments.owner, demoted};
     repair_points = repair_spacing(input, options, packing.kept, n_repairs);
   }
+  early.insert_rest(packing, n, n + on_segments.size(), repair_points);
   timer.lap("spacing_repair");
 
   // Step 6 as in frfc.cpp: the same selection, so the same triangulation.

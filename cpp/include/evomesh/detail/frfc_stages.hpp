@@ -40,11 +40,15 @@ struct Packing {
 // After the second pass, the points it keeps (the interior candidates and the
 // deferred input points) are final too and come next in the output order
 // (select_output): insert_late adds them on the second thread while the
-// spacing repair runs; finish() inserts the rest (what the repair adds).
+// spacing repair runs. What the repair adds comes last (the segment candidates
+// it keeps, then its own points): insert_rest adds those while the output is
+// selected; finish() inserts whatever is still missing.
 struct Early_start {
-  std::vector<Vec2> points, late_points;
+  std::vector<Vec2> points, late_points, rest_points;
   Early_triangulation triangulation;
-  Background work, late_work;  // late_work waits for work (joins it), then inserts the late points
+  // late_work waits for work (joins it), then inserts the late points;
+  // rest_work waits for late_work, then inserts the rest.
+  Background work, late_work, rest_work;
   bool started = false;
   bool on_thread = false;
   Early_start(const Early_start&) = delete;  // the background work holds `this`
@@ -77,12 +81,33 @@ struct Early_start {
         },
         on_thread);
   }
-  // Both batches inserted; their copies of the points freed.
+  // After the spacing repair: the segment candidates it kept ([n_points,
+  // n_first_range), kept and not kept_first; those before n_points that are
+  // kept later went with the late points: select_output lists the former after
+  // the latter) and its points, the tail of the output order. (Were the order
+  // not the final one, finish() would find a point at the wrong index and throw.)
+  void insert_rest(const Packing& packing, std::size_t n_points, std::size_t n_first_range,
+                   const std::vector<Vec2>& repair_points) {
+    if (!started) return;
+    for (std::size_t c = n_points; c < n_first_range; ++c) {
+      if (packing.kept[c] && !packing.kept_first[c]) rest_points.push_back(packing.centers[c]);
+    }
+    rest_points.insert(rest_points.end(), repair_points.begin(), repair_points.end());
+    rest_work.start(
+        [this]() {
+          late_work.wait();
+          triangulation.insert_more(rest_points);
+        },
+        on_thread);
+  }
+  // Every batch inserted; their copies of the points freed.
   void wait() {
+    rest_work.wait();
     late_work.wait();
     work.wait();
     points = std::vector<Vec2>();
     late_points = std::vector<Vec2>();
+    rest_points = std::vector<Vec2>();
   }
 };
 
