@@ -308,10 +308,13 @@ Evolve_result frfc(const Mesh_arrays& input, const std::vector<double>& delta, c
   packing = Packing();
   out_index = std::vector<Index>();
   const Quality_options quality = options.quality_settings();
+  // The old mesh's walker (parent map) is built on another thread while the
+  // early triangulation takes the repair's points: both before the quality
+  // pass, which runs on this thread.
+  Old_mesh_start old_mesh(input, options.threads);
   early->wait();
   detail::release_free_memory();
   const bool early_started = options.quality && !mesh.geometry;
-  Old_mesh_start old_mesh(input, options.threads);
   triangulate_selection(std::move(selection), pieces, options.quality ? &quality : nullptr, result,
                         early_started ? &early->triangulation : nullptr, mesh.geometry.get());
   detail::release_free_memory();

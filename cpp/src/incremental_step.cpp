@@ -532,8 +532,8 @@ std::optional<Evolve_result> incremental_frfc(const Mesh_arrays& mesh, const std
   selection.pin(mesh.required);
   const auto pieces = pieces_along_chains(mesh, chains, on_segments, out_index);
   const Quality_options quality = options.quality_settings();
+  Old_mesh_start old_mesh(mesh, options.threads, std::move(fans));  // beside the early triangulation (frfc.cpp)
   early.wait();
-  Old_mesh_start old_mesh(mesh, options.threads, std::move(fans));
   triangulate_selection(std::move(selection), pieces, options.quality ? &quality : nullptr, result,
                         options.quality ? &early.triangulation : nullptr, nullptr);
   timer.lap(options.quality ? "quality" : "cdt");

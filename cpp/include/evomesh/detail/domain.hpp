@@ -21,6 +21,8 @@ enum Domain_label : int { domain_unknown = 0, domain_inside = 1, domain_outside 
 // constraints are flood-filled from those seeds. A piece split by a point lying
 // on it is skipped (its sub-edges still bound the same regions). Throws
 // std::runtime_error naming `who` when the pieces do not bound a consistent domain.
+// The triangulation's constraints are the pieces (each inserted with
+// insert_constraint, nothing else constrained): the fill below relies on it.
 // `each_face(f)` is called on every face once its label is final, on several
 // faces at once (a parallel sweep).
 template <class Cdt, class Handles, class Each_face>
