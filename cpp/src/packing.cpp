@@ -45,7 +45,7 @@ class Kept_sphere_tree {
   // `order`: the visiting order (distinct sphere indices; the tree holds every sphere).
   Kept_sphere_tree(const std::vector<Vec2>& centers, const std::vector<double>& radii, const std::vector<Index>& order,
                    int threads)
-      : tree_(centers, kLeafSize) {
+      : tree_(centers, kLeafSize, Tree::Boxes_later{}) {
     const std::size_t n = centers.size();
     const auto& sphere_at = tree_.point_at();
     // Gathers and a scatter over all spheres, in chunks on `threads` threads.
@@ -60,6 +60,8 @@ class Kept_sphere_tree {
       const std::size_t i = sphere_at[k];
       slots_[k] = {centers[i][0], centers[i][1], radii[i]};
     });
+    // The nodes' boxes from the slots, in order (the same boxes).
+    tree_.set_boxes([this](std::size_t k) { return Vec2{slots_[k].x, slots_[k].y}; });
     {
       std::vector<std::uint32_t> position_of(n);
       chunks(n, [&](std::size_t k) { position_of[sphere_at[k]] = static_cast<std::uint32_t>(k); });
@@ -234,7 +236,8 @@ class Kept_sphere_tree {
     return kNone;
   }
 
-  detail::Static_kd_tree<Node> tree_;
+  using Tree = detail::Static_kd_tree<Node>;
+  Tree tree_;
   std::vector<Slot> slots_;                  // in tree order
   std::vector<std::uint32_t> visit_;         // position of each sphere of the visiting order
   std::vector<Leaf_masks> leaf_masks_;

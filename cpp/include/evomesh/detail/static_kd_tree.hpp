@@ -76,10 +76,27 @@ class Static_kd_tree {
       : Static_kd_tree(points, leaf_size, &tree_points) {}
   // The same tree without the copy of the points (the user gathers its own
   // leaf records through point_at()).
-  Static_kd_tree(const std::vector<Vec2>& points, std::size_t leaf_size) : Static_kd_tree(points, leaf_size, nullptr) {}
+  Static_kd_tree(const std::vector<Vec2>& points, std::size_t leaf_size)
+      : Static_kd_tree(points, leaf_size, nullptr, true) {}
+  // The same tree without its nodes' boxes, for a user who gathers its own
+  // records into tree order anyway (through point_at()): set_boxes then reads
+  // the points from those, in order, instead of one more pass of reads all
+  // over `points` (on 6.9e7 spheres each such pass took seconds).
+  struct Boxes_later {};
+  Static_kd_tree(const std::vector<Vec2>& points, std::size_t leaf_size, Boxes_later)
+      : Static_kd_tree(points, leaf_size, nullptr, false) {}
+  // The boxes of a tree built with Boxes_later: tree_point(position) is the
+  // point at that position (points[point_at()[position]]).
+  template <class Tree_point>
+  void set_boxes(Tree_point tree_point) {
+    compute_boxes(tree_point);
+  }
 
  private:
   Static_kd_tree(const std::vector<Vec2>& points, std::size_t leaf_size, std::vector<Vec2>* tree_points)
+      : Static_kd_tree(points, leaf_size, tree_points, true) {}
+  Static_kd_tree(const std::vector<Vec2>& points, std::size_t leaf_size, std::vector<Vec2>* tree_points,
+                 bool boxes)
       : n_(points.size()) {
     if (n_ >= std::numeric_limits<std::uint32_t>::max()) {
       throw Input_error("too many points for a kd-tree (at most 2^32 - 2)");
@@ -142,6 +159,15 @@ class Static_kd_tree {
         for (std::size_t k = begin; k < end; ++k) (*tree_points)[k] = points[point_at_[k]];
       });
     }
+    if (boxes) {
+      compute_boxes([&](std::size_t k) -> const Vec2& { return tree_points ? (*tree_points)[k] : points[point_at_[k]]; });
+    }
+  }
+
+  // Every node's box: the leaves' from their points (tree_point(position)), in
+  // parallel, then the inner nodes' from their children.
+  template <class Tree_point>
+  void compute_boxes(Tree_point tree_point) {
     nodes_.resize(2 * n_leaves_);
     constexpr std::size_t kLeafChunk = 1024;
     parallel_for((n_leaves_ + kLeafChunk - 1) / kLeafChunk, 0, [&](std::size_t c) {
@@ -150,7 +176,7 @@ class Static_kd_tree {
         box.lo_x = box.lo_y = std::numeric_limits<double>::infinity();
         box.hi_x = box.hi_y = -std::numeric_limits<double>::infinity();
         for (std::size_t k = leaf_begin(leaf); k < leaf_begin(leaf + 1); ++k) {
-          const Vec2& p = tree_points ? (*tree_points)[k] : points[point_at_[k]];
+          const Vec2 p = tree_point(k);
           box.lo_x = std::min(box.lo_x, p[0]);
           box.lo_y = std::min(box.lo_y, p[1]);
           box.hi_x = std::max(box.hi_x, p[0]);
