@@ -29,21 +29,23 @@ constexpr double kMargin = 1.02;
 constexpr double kInterpolatedScale = 1.2;
 constexpr double kInterpolatedFloor = 1.3;
 
-// Interior ring candidates of every R-point, in point order, appended to
-// `inside` (with their rounds), except those in a cover disc of their triangle.
-// Points are handled in parallel in fixed blocks joined in order.
+// Interior ring candidates of every R-point, in point order, except those in a
+// cover disc of their triangle: appended to `blocks` (one per fixed block of
+// points, joined later in order) with their rounds.
 void add_interior_ring_samples(const Mesh_arrays& mesh, const Triangle_fans& fans, const std::vector<double>& delta,
                                const std::vector<double>& f, double reach, double demoted_reach,
                                const std::vector<std::uint8_t>& demoted, std::uint64_t seed,
-                               const Cover_discs& cover, int threads, Sample_set& inside,
-                               std::vector<std::int8_t>& inside_round) {
+                               const Cover_discs& cover, int threads, std::vector<Sample_set>& blocks,
+                               std::vector<std::int8_t>& ring_round) {
   const std::size_t n = mesh.points.size();
   constexpr std::size_t kBlock = 4096;
   const std::size_t n_blocks = (n + kBlock - 1) / kBlock;
-  std::vector<Sample_set> blocks(n_blocks);
+  const std::size_t first = blocks.size();
+  blocks.resize(first + n_blocks);
   std::vector<std::vector<std::int8_t>> rounds(n_blocks);
   parallel_for(n_blocks, threads, [&](std::size_t b) {
     std::array<Ring_candidate, kRingDirections> ring;
+    Sample_set& out = blocks[first + b];
     for (std::size_t p = b * kBlock; p < std::min(n, (b + 1) * kBlock); ++p) {
       if (!(delta[p] < 1)) continue;
       const double d = !demoted.empty() && demoted[p] ? demoted_reach : reach;
@@ -51,17 +53,16 @@ void add_interior_ring_samples(const Mesh_arrays& mesh, const Triangle_fans& fan
       for (int k = 0; k < count; ++k) {
         const Ring_candidate& r = ring[k];
         if (in_cover(cover, mesh.triangles[r.triangle], r.x)) continue;
-        blocks[b].points.push_back(r.x);
-        blocks[b].parent.push_back(static_cast<std::uint32_t>(r.triangle));
+        out.points.push_back(r.x);
+        out.parent.push_back(static_cast<std::uint32_t>(r.triangle));
         rounds[b].push_back(static_cast<std::int8_t>(r.round));
       }
     }
   });
-  for (std::size_t b = 0; b < n_blocks; ++b) {
-    inside.points.insert(inside.points.end(), blocks[b].points.begin(), blocks[b].points.end());
-    inside.parent.insert(inside.parent.end(), blocks[b].parent.begin(), blocks[b].parent.end());
-    inside_round.insert(inside_round.end(), rounds[b].begin(), rounds[b].end());
-  }
+  std::size_t total = 0;
+  for (const auto& r : rounds) total += r.size();
+  ring_round.reserve(total);
+  for (const auto& r : rounds) ring_round.insert(ring_round.end(), r.begin(), r.end());
 }
 
 // Segment ring candidates: one each way from an R-point, on the segment, merged
@@ -264,10 +265,13 @@ Candidates interior_candidates(const Mesh_arrays& mesh, const Triangle_fans& fan
     else for (std::size_t t = 0; t < skip.size(); ++t) skip[t] = skip[t] || (*quiet)[t];
   }
   n_drawn = 0;
-  Candidates inside;
-  inside.samples = sample_triangles(mesh, f, options.cell_factor, options.samples, options.seed, skip, cover,
-                                    options.threads, &n_drawn, options.adaptive_cells, queries);
-  inside.round.assign(inside.size(), -1);
+  // Grid samples, then ring candidates, in blocks joined once (join_samples).
+  std::vector<Sample_set> blocks = sample_triangle_blocks(mesh, f, options.cell_factor, options.samples, options.seed,
+                                                          skip, cover, options.threads, &n_drawn,
+                                                          options.adaptive_cells, queries);
+  std::size_t n_grid = 0;
+  for (const Sample_set& block : blocks) n_grid += block.points.size();
+  std::vector<std::int8_t> ring_round;
   if (options.ring_samples) {
     // Around a demoted point the interpolated sizes are about kInterpolatedScale f(p):
     // the closest sphere that misses p's is then kMargin s (1 + kInterpolatedScale) f(p) / 2
@@ -278,9 +282,13 @@ Candidates interior_candidates(const Mesh_arrays& mesh, const Triangle_fans& fan
                                      ? 0.5 * (near + ring_reach(options.radius_scale))
                                      : ring_reach(options.radius_scale);
     add_interior_ring_samples(mesh, fans, delta, f, ring_reach(options.radius_scale), demoted_reach, demoted,
-                              options.seed, cover,
-                              options.threads, inside.samples, inside.round);
+                              options.seed, cover, options.threads, blocks, ring_round);
   }
+  Candidates inside;
+  inside.samples = join_samples(blocks);
+  inside.round.reserve(n_grid + ring_round.size());
+  inside.round.assign(n_grid, -1);
+  inside.round.insert(inside.round.end(), ring_round.begin(), ring_round.end());
   return inside;
 }
 

@@ -8,6 +8,7 @@
 
 #include "evomesh/kernel.hpp"
 #include "evomesh/parallel.hpp"
+#include "evomesh/step.hpp"
 
 namespace evomesh {
 
@@ -500,10 +501,11 @@ void sample_one_triangle(const Mesh_arrays& mesh, std::size_t ti, const std::vec
 
 }  // namespace
 
-Sample_set sample_triangles(const Mesh_arrays& mesh, const std::vector<double>& vertex_f,
-                            double cell_factor, Sample_mode mode, std::uint64_t seed,
-                            const std::vector<std::uint8_t>& skip, const Cover_discs& cover, int threads,
-                            std::size_t* n_drawn, bool adaptive, const Spacing_queries* queries) {
+std::vector<Sample_set> sample_triangle_blocks(const Mesh_arrays& mesh, const std::vector<double>& vertex_f,
+                                               double cell_factor, Sample_mode mode, std::uint64_t seed,
+                                               const std::vector<std::uint8_t>& skip, const Cover_discs& cover,
+                                               int threads, std::size_t* n_drawn, bool adaptive,
+                                               const Spacing_queries* queries) {
   check_fits_4_bytes(mesh.triangles.size(), "triangles");
   std::unordered_set<std::uint64_t> segment_edges;
   if (mode == Sample_mode::midpoints || mode == Sample_mode::barycentre_midpoints) {
@@ -524,20 +526,43 @@ Sample_set sample_triangles(const Mesh_arrays& mesh, const std::vector<double>& 
                           blocks[k], drawn[k]);
     }
   });
-  Sample_set out;
-  std::size_t total = 0, total_drawn = 0;
-  for (std::size_t k = 0; k < n_blocks; ++k) {
-    total += blocks[k].points.size();
-    total_drawn += drawn[k];
+  if (n_drawn) {
+    *n_drawn = 0;
+    for (std::size_t d : drawn) *n_drawn += d;
   }
-  out.points.reserve(total);
+  return blocks;
+}
+
+Sample_set sample_triangles(const Mesh_arrays& mesh, const std::vector<double>& vertex_f,
+                            double cell_factor, Sample_mode mode, std::uint64_t seed,
+                            const std::vector<std::uint8_t>& skip, const Cover_discs& cover, int threads,
+                            std::size_t* n_drawn, bool adaptive, const Spacing_queries* queries) {
+  auto blocks = sample_triangle_blocks(mesh, vertex_f, cell_factor, mode, seed, skip, cover, threads, n_drawn,
+                                       adaptive, queries);
+  return join_samples(blocks);
+}
+
+Sample_set join_samples(std::vector<Sample_set>& blocks) {
+  std::size_t total = 0;
+  for (const Sample_set& block : blocks) total += block.points.size();
+  Sample_set out;
+  out.points.reserve(total);  // (pages are touched as the copies go, not before)
   out.parent.reserve(total);
-  for (auto& block : blocks) {
+  // Freed blocks go back to the system every kRelease bytes (a trim walks the
+  // free lists of every arena: a few per step, not one per block).
+  constexpr std::size_t kRelease = std::size_t{32} << 20;
+  std::size_t freed = 0;
+  for (Sample_set& block : blocks) {
     out.points.insert(out.points.end(), block.points.begin(), block.points.end());
     out.parent.insert(out.parent.end(), block.parent.begin(), block.parent.end());
+    freed += block.points.capacity() * sizeof(Vec2) + block.parent.capacity() * sizeof(std::uint32_t);
     block = Sample_set();
+    if (freed >= kRelease) {
+      detail::release_free_memory();
+      freed = 0;
+    }
   }
-  if (n_drawn) *n_drawn = total_drawn;
+  blocks = std::vector<Sample_set>();
   return out;
 }
 

@@ -60,6 +60,21 @@ Sample_set sample_triangles(const Mesh_arrays& mesh, const std::vector<double>& 
                             const std::vector<std::uint8_t>& skip, const Cover_discs& cover = {},
                             int threads = 0, std::size_t* n_drawn = nullptr, bool adaptive = true,
                             const Spacing_queries* queries = nullptr);
+// The same samples before they are joined: one set per fixed block of
+// triangles, in order (join_samples of them is sample_triangles' result), for a
+// caller that adds blocks of its own before the one join.
+std::vector<Sample_set> sample_triangle_blocks(const Mesh_arrays& mesh, const std::vector<double>& vertex_f,
+                                               double cell_factor, Sample_mode mode, std::uint64_t seed,
+                                               const std::vector<std::uint8_t>& skip, const Cover_discs& cover,
+                                               int threads, std::size_t* n_drawn, bool adaptive,
+                                               const Spacing_queries* queries);
+
+// The blocks joined in order into one set of exact size; `blocks` is emptied.
+// Each block is freed once copied and what the freed blocks held goes back to
+// the system as the join goes (detail::release_free_memory), so the join holds
+// little more than its output. (Appending blocks to a growing set held the old
+// and the new copy of it at once: that was the refining front's peak at 1e6.)
+Sample_set join_samples(std::vector<Sample_set>& blocks);
 
 // Samples on the segments, strictly between their endpoints, sorted along each
 // segment from a to b: one random point per 1-D cell of side cell_factor * min f / (2 sqrt 2),
