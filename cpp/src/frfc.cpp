@@ -90,9 +90,7 @@ void second_packing_pass(Candidates& inside, Packing& packing) {
   packing.centers.insert(packing.centers.end(), inside.samples.points.begin(), inside.samples.points.end());
   inside = Candidates();
   // Positions in (deferred, interior candidates) -> candidate indices.
-  std::vector<Index> order = packing_order(classes, radii);
-  classes = std::vector<std::uint8_t>();
-  radii = std::vector<double>();
+  std::vector<Index> order = packing_order(std::move(classes), std::move(radii));
   for (Index& k : order) {
     k = static_cast<std::size_t>(k) < n_deferred ? packing.deferred[k]
                                                  : static_cast<Index>(n_first + (static_cast<std::size_t>(k) - n_deferred));

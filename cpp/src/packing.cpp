@@ -5,6 +5,7 @@
 #include <cstring>
 #include <limits>
 #include <numeric>
+#include <utility>
 
 #include "evomesh/detail/bits.hpp"
 #include "evomesh/detail/static_kd_tree.hpp"
@@ -42,8 +43,9 @@ namespace {
 // pending sphere that conflicts.
 class Kept_sphere_tree {
  public:
-  // `order`: the visiting order (distinct sphere indices; the tree holds every sphere).
-  Kept_sphere_tree(const std::vector<Vec2>& centers, const std::vector<double>& radii, const std::vector<Index>& order,
+  // `order`: the visiting order (distinct sphere indices; the tree holds every
+  // sphere), consumed: the tree keeps the position of each instead.
+  Kept_sphere_tree(const std::vector<Vec2>& centers, const std::vector<double>& radii, std::vector<Index>&& order,
                    int threads)
       : tree_(centers, kLeafSize, Tree::Boxes_later{}) {
     const std::size_t n = centers.size();
@@ -55,6 +57,15 @@ class Kept_sphere_tree {
         for (std::size_t k = c * kChunk; k < std::min(size, (c + 1) * kChunk); ++k) body(k);
       });
     };
+    // (memory: the visiting positions first, so that the order, 8 bytes a
+    // sphere, is gone before the slots, 24, are filled)
+    {
+      std::vector<std::uint32_t> position_of(n);
+      chunks(n, [&](std::size_t k) { position_of[sphere_at[k]] = static_cast<std::uint32_t>(k); });
+      visit_.resize(order.size());
+      chunks(order.size(), [&](std::size_t k) { visit_[k] = position_of[order[k]]; });
+    }
+    order = std::vector<Index>();
     slots_.resize(n);
     chunks(n, [&](std::size_t k) {
       const std::size_t i = sphere_at[k];
@@ -62,17 +73,12 @@ class Kept_sphere_tree {
     });
     // The nodes' boxes from the slots, in order (the same boxes).
     tree_.set_boxes([this](std::size_t k) { return Vec2{slots_[k].x, slots_[k].y}; });
-    {
-      std::vector<std::uint32_t> position_of(n);
-      chunks(n, [&](std::size_t k) { position_of[sphere_at[k]] = static_cast<std::uint32_t>(k); });
-      visit_.resize(order.size());
-      chunks(order.size(), [&](std::size_t k) { visit_[k] = position_of[order[k]]; });
-    }
     leaf_masks_.assign(tree_.n_leaves(), Leaf_masks{});
   }
 
   // Position of the k-th sphere of the visiting order.
   std::size_t visit(std::size_t k) const { return visit_[k]; }
+  std::size_t n_visits() const { return visit_.size(); }
 
   // Fetches what a query at `position` reads first, ahead of time.
   void prefetch(std::size_t position) const {
@@ -252,20 +258,21 @@ constexpr std::size_t kNone = Kept_sphere_tree::kNone;
 
 // The visiting loop: each sphere is kept unless a kept one conflicts (the
 // first `n_forced` always).
-void mis_sequential(Kept_sphere_tree& tree, const std::vector<Index>& order, std::size_t n_forced,
-                    std::vector<std::uint8_t>& kept, std::vector<Index>* blocker) {
+void mis_sequential(Kept_sphere_tree& tree, std::size_t n_forced, std::vector<std::uint8_t>& kept,
+                    std::vector<Index>* blocker) {
   // The loop prefetches a few spheres ahead: which sphere comes next never
   // depends on the decisions.
   constexpr std::size_t kAhead = 8;
-  const std::size_t m = order.size();
+  const std::size_t m = tree.n_visits();
   for (std::size_t k = 0; k < m; ++k) {
     if (k + kAhead < m) tree.prefetch(tree.visit(k + kAhead));
-    const std::size_t hit = k < n_forced ? kNone : tree.conflicting_kept(tree.visit(k));
+    const std::size_t position = tree.visit(k);
+    const std::size_t hit = k < n_forced ? kNone : tree.conflicting_kept(position);
     if (hit == kNone) {
-      kept[order[k]] = 1;
-      tree.keep(tree.visit(k));
+      kept[tree.sphere_at(position)] = 1;
+      tree.keep(position);
     } else if (blocker) {
-      (*blocker)[order[k]] = static_cast<Index>(tree.sphere_at(hit));
+      (*blocker)[tree.sphere_at(position)] = static_cast<Index>(tree.sphere_at(hit));
     }
   }
 }
@@ -290,12 +297,11 @@ void mis_sequential(Kept_sphere_tree& tree, const std::vector<Index>& order, std
 // sequential query instead, on the tree that then holds S_a + K_k. So every
 // decision and every blocker equals the sequential one, for any block size
 // and thread count.
-void mis_in_blocks(Kept_sphere_tree& tree, const std::vector<Index>& order, std::size_t n_forced,
-                   std::vector<std::uint8_t>& kept, std::vector<Index>* blocker, int threads, std::size_t block,
-                   detail::Mis_block_counts* counts) {
-  const std::size_t m = order.size();
+void mis_in_blocks(Kept_sphere_tree& tree, std::size_t n_forced, std::vector<std::uint8_t>& kept,
+                   std::vector<Index>* blocker, int threads, std::size_t block, detail::Mis_block_counts* counts) {
+  const std::size_t m = tree.n_visits();
   for (std::size_t k = 0; k < n_forced; ++k) {
-    kept[order[k]] = 1;
+    kept[tree.sphere_at(tree.visit(k))] = 1;
     tree.keep(tree.visit(k));
   }
   // A block's queries go in chunks, a parallel_for item each; a chunk lists
@@ -380,7 +386,7 @@ void mis_in_blocks(Kept_sphere_tree& tree, const std::vector<Index>& order, std:
           hit[offset] = kRerun;
         } else if (h != kNone && found.size == 0) {
           // Final: no sphere of the block can come first (each k writes its own entry).
-          if (blocker) (*blocker)[order[k]] = static_cast<Index>(tree.sphere_at(h));
+          if (blocker) (*blocker)[tree.sphere_at(tree.visit(k))] = static_cast<Index>(tree.sphere_at(h));
           hit[offset] = kDone;
         } else {
           hit[offset] = h == kNone ? kNoHit : h;
@@ -420,10 +426,10 @@ void mis_in_blocks(Kept_sphere_tree& tree, const std::vector<Index>& order, std:
           if (first == kNone && h != kNoHit) first = static_cast<std::size_t>(h);
         }
         if (first == kNone) {
-          kept[order[k]] = 1;
+          kept[tree.sphere_at(position)] = 1;
           tree.keep(position);
         } else if (blocker) {
-          (*blocker)[order[k]] = static_cast<Index>(tree.sphere_at(first));
+          (*blocker)[tree.sphere_at(position)] = static_cast<Index>(tree.sphere_at(first));
         }
       }
     }
@@ -445,7 +451,7 @@ constexpr std::size_t kMinParallel = 32768;
 // `block` > 0: mis_in_blocks with that block size whatever the size and the
 // thread count (tests).
 std::vector<std::uint8_t> mis_in_order(const std::vector<Vec2>& centers, const std::vector<double>& radii,
-                                       const std::vector<Index>& order, std::size_t n_forced,
+                                       std::vector<Index> order, std::size_t n_forced,
                                        std::vector<Index>* blocker, bool permutation, int threads,
                                        std::size_t block = 0, detail::Mis_block_counts* counts = nullptr) {
   const std::size_t n = centers.size();
@@ -466,14 +472,14 @@ std::vector<std::uint8_t> mis_in_order(const std::vector<Vec2>& centers, const s
     if (!std::isfinite(radii[i]) || !(radii[i] > 0)) throw Input_error("sphere radii must be finite and > 0");
   }
   std::fill(kept.begin(), kept.end(), 0);
-  Kept_sphere_tree tree(centers, radii, order, threads);
+  const std::size_t m = order.size();
+  Kept_sphere_tree tree(centers, radii, std::move(order), threads);
   if (blocker) blocker->assign(n, -1);
-  const bool parallel = resolve_threads(threads) > 1 && !detail::in_parallel_region() &&
-                        order.size() - n_forced >= kMinParallel;
+  const bool parallel = resolve_threads(threads) > 1 && !detail::in_parallel_region() && m - n_forced >= kMinParallel;
   if (block > 0 || parallel) {
-    mis_in_blocks(tree, order, n_forced, kept, blocker, threads, block > 0 ? block : kBlock, counts);
+    mis_in_blocks(tree, n_forced, kept, blocker, threads, block > 0 ? block : kBlock, counts);
   } else {
-    mis_sequential(tree, order, n_forced, kept, blocker);
+    mis_sequential(tree, n_forced, kept, blocker);
   }
   return kept;
 }
@@ -501,37 +507,48 @@ std::vector<std::uint8_t> lexical_first_mis_in_blocks(const std::vector<Vec2>& c
 
 }  // namespace detail
 
-std::vector<Index> packing_order(const std::vector<std::uint8_t>& priority_class,
-                                 const std::vector<double>& radii) {
+namespace {
+
+// packing_order's sort keys: the radius's bits and (class, index).
+struct Order_item {
+  std::uint64_t radius_bits;
+  std::uint64_t class_and_index;  // class in the top byte
+};
+constexpr std::size_t kOrderChunk = std::size_t{1} << 16;
+
+template <class Body>
+void for_order_chunks(std::size_t n, Body body) {
+  const std::size_t n_chunks = std::max<std::size_t>(1, (n + kOrderChunk - 1) / kOrderChunk);
+  parallel_for(n_chunks, 0, [&](std::size_t c) { body(c, c * kOrderChunk, std::min(n, (c + 1) * kOrderChunk)); });
+}
+
+std::vector<Order_item> order_items(const std::vector<std::uint8_t>& priority_class, const std::vector<double>& radii) {
   if (priority_class.size() != radii.size()) throw Input_error("classes and radii must have the same length");
-  // (class, radius, index) is a strict total order. A stable least-significant-
-  // digit radix sort on (class, radius) of the indices in increasing order gives
-  // it: the bits of a positive double order like the double, so the radius is
-  // sorted in six 11-bit passes (passes whose digit is the same everywhere are
-  // skipped), then the class in one 8-bit pass. Each pass counts and moves the
-  // items in chunks on parallel_for's default threads, each chunk's items of a
-  // digit after those of the chunks before: the same stable order.
-  const std::size_t n = radii.size();
-  struct Item {
-    std::uint64_t radius_bits;
-    std::uint64_t class_and_index;  // class in the top byte
-  };
-  constexpr std::size_t kChunk = std::size_t{1} << 16;
-  const std::size_t n_chunks = std::max<std::size_t>(1, (n + kChunk - 1) / kChunk);
-  auto for_chunks = [&](auto body) {
-    parallel_for(n_chunks, 0, [&](std::size_t c) { body(c, c * kChunk, std::min(n, (c + 1) * kChunk)); });
-  };
-  std::vector<Item> items(n), next(n);
-  for_chunks([&](std::size_t, std::size_t begin, std::size_t end) {
+  std::vector<Order_item> items(radii.size());
+  for_order_chunks(radii.size(), [&](std::size_t, std::size_t begin, std::size_t end) {
     for (std::size_t i = begin; i < end; ++i) {
       if (!(radii[i] > 0)) throw Input_error("sphere radii must be > 0");
       std::memcpy(&items[i].radius_bits, &radii[i], sizeof(double));
       items[i].class_and_index = (std::uint64_t{priority_class[i]} << 56) | i;
     }
   });
+  return items;
+}
+
+// (class, radius, index) is a strict total order. A stable least-significant-
+// digit radix sort on (class, radius) of the indices in increasing order gives
+// it: the bits of a positive double order like the double, so the radius is
+// sorted in six 11-bit passes (passes whose digit is the same everywhere are
+// skipped), then the class in one 8-bit pass. Each pass counts and moves the
+// items in chunks on parallel_for's default threads, each chunk's items of a
+// digit after those of the chunks before: the same stable order.
+std::vector<Index> sorted_order(std::vector<Order_item> items) {
+  const std::size_t n = items.size();
+  const std::size_t n_chunks = std::max<std::size_t>(1, (n + kOrderChunk - 1) / kOrderChunk);
+  std::vector<Order_item> next(n);
   std::vector<std::size_t> count(n_chunks << 11);  // chunk c, digit d: count[c * n_buckets + d]
   auto pass = [&](auto digit_of, std::size_t n_buckets) {
-    for_chunks([&](std::size_t c, std::size_t begin, std::size_t end) {
+    for_order_chunks(n, [&](std::size_t c, std::size_t begin, std::size_t end) {
       std::size_t* chunk_count = &count[c * n_buckets];
       std::fill(chunk_count, chunk_count + n_buckets, 0);
       for (std::size_t i = begin; i < end; ++i) ++chunk_count[digit_of(items[i])];
@@ -547,23 +564,38 @@ std::vector<Index> packing_order(const std::vector<std::uint8_t>& priority_class
         sum += k;
       }
     }
-    for_chunks([&](std::size_t c, std::size_t begin, std::size_t end) {
+    for_order_chunks(n, [&](std::size_t c, std::size_t begin, std::size_t end) {
       std::size_t* chunk_count = &count[c * n_buckets];
       for (std::size_t i = begin; i < end; ++i) next[chunk_count[digit_of(items[i])]++] = items[i];
     });
     items.swap(next);
   };
   for (int shift = 0; shift < 64; shift += 11) {
-    pass([shift](const Item& item) { return static_cast<std::size_t>((item.radius_bits >> shift) & 0x7ff); },
+    pass([shift](const Order_item& item) { return static_cast<std::size_t>((item.radius_bits >> shift) & 0x7ff); },
          std::size_t{1} << 11);
   }
-  pass([](const Item& item) { return static_cast<std::size_t>(item.class_and_index >> 56); }, 256);
+  pass([](const Order_item& item) { return static_cast<std::size_t>(item.class_and_index >> 56); }, 256);
+  next = std::vector<Order_item>();  // (before the order is made: 16 bytes a sphere)
   std::vector<Index> order(n);
   constexpr std::uint64_t kIndexMask = (std::uint64_t{1} << 56) - 1;
-  for_chunks([&](std::size_t, std::size_t begin, std::size_t end) {
+  for_order_chunks(n, [&](std::size_t, std::size_t begin, std::size_t end) {
     for (std::size_t k = begin; k < end; ++k) order[k] = static_cast<Index>(items[k].class_and_index & kIndexMask);
   });
   return order;
+}
+
+}  // namespace
+
+std::vector<Index> packing_order(const std::vector<std::uint8_t>& priority_class,
+                                 const std::vector<double>& radii) {
+  return sorted_order(order_items(priority_class, radii));
+}
+
+std::vector<Index> packing_order(std::vector<std::uint8_t>&& priority_class, std::vector<double>&& radii) {
+  std::vector<Order_item> items = order_items(priority_class, radii);
+  priority_class = std::vector<std::uint8_t>();
+  radii = std::vector<double>();
+  return sorted_order(std::move(items));
 }
 
 Packing_class old_point_class(Point_kind kind, bool forced, bool demoted) {
@@ -609,7 +641,7 @@ std::vector<std::uint8_t> extend_packing(const std::vector<Vec2>& centers, const
   order.reserve(n_first + more_order.size());
   order.insert(order.end(), more_order.begin(), more_order.end());
   more_order = std::vector<Index>();
-  return mis_in_order(centers, radii, order, n_first, nullptr, /*permutation=*/false, threads);
+  return mis_in_order(centers, radii, std::move(order), n_first, nullptr, /*permutation=*/false, threads);
 }
 
 }  // namespace evomesh

@@ -80,6 +80,12 @@ void check_orders(const char* name, const std::vector<Vec2>& points) {
     auto grid = indices(detail::spatial_order(points, Spatial_order::hilbert_grid, threads));
     const auto grid_one = indices(detail::spatial_order(points, Spatial_order::hilbert_grid, 1));
     CHECK(grid == grid_one) << name << ": the grid order depends on the threads";
+    // Equal points share a key: they come by index (the order is by key, then index).
+    bool ties_by_index = true;
+    for (std::size_t k = 1; k < n; ++k) {
+      if (points[grid[k]] == points[grid[k - 1]]) ties_by_index = ties_by_index && grid[k - 1] < grid[k];
+    }
+    CHECK(ties_by_index) << name << ": equal points of the grid order are not by index";
     std::sort(grid.begin(), grid.end());
     bool permutation = true;
     for (std::size_t k = 0; k < n; ++k) permutation = permutation && grid[k] == k;

@@ -52,6 +52,8 @@ std::vector<std::uint8_t> lexical_first_mis_in_blocks(const std::vector<Vec2>& c
 // (a radix sort on parallel_for's default threads).
 std::vector<Index> packing_order(const std::vector<std::uint8_t>& priority_class,
                                  const std::vector<double>& radii);
+// The same, freeing the classes and radii once read (the peak of a large sort).
+std::vector<Index> packing_order(std::vector<std::uint8_t>&& priority_class, std::vector<double>&& radii);
 
 // Priority classes of the packing (Section 6's order), shared by FRFC and DRFC:
 // corners, boundary points (existing, then ring candidates by round, then other
