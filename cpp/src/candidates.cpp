@@ -307,7 +307,7 @@ void candidate_radii(const Mesh_arrays& mesh, const Spacing_function& spacing, c
                      Candidates& candidates) {
   const Sample_set& samples = candidates.samples;
   const std::size_t m = samples.points.size();
-  candidates.radius.resize(m);
+  detail::parallel_resize(candidates.radius, m);
   double* out = candidates.radius.data();
   if (options.radius != Radius_rule::cheap) {
     spacing.evaluate(samples.points.data(), m, out, nullptr, options.threads, /*certified=*/false);

@@ -61,9 +61,9 @@ Refined_mesh extract(Cdt& cdt, const std::vector<Vertex_handle>& handles, const 
   });
   const std::size_t n_kept = result.source.size();
   const std::size_t n_out = n_kept + inserted.size();
-  out.points.resize(n_out);
-  out.kind.resize(n_out);
-  result.f.resize(n_out);
+  parallel_resize(out.points, n_out);
+  parallel_resize(out.kind, n_out);
+  parallel_resize(result.f, n_out);
   // In input order (the arrays read and written in order; each vertex once), in
   // parallel blocks; then the inserted points.
   constexpr std::size_t kBlock = std::size_t{1} << 15;
@@ -88,7 +88,7 @@ Refined_mesh extract(Cdt& cdt, const std::vector<Vertex_handle>& handles, const 
       result.f[o] = info.f * scaling.from_unit;
     }
   });
-  result.source.resize(n_out, -1);
+  parallel_resize(result.source, n_out, Index{-1});
   // Triangles and constraint edges from the finite faces, in face order: two
   // parallel sweeps over the face container (parallel_sweep.hpp), the first
   // counting each chunk's triangles, the second writing them to the chunk's own
@@ -102,7 +102,7 @@ Refined_mesh extract(Cdt& cdt, const std::vector<Vertex_handle>& handles, const 
     parallel_sweep(faces, [&](std::size_t c, Face_handle f) { first_triangle[c + 1] += is_triangle(f); });
   }
   for (std::size_t c = 0; c < n_chunks; ++c) first_triangle[c + 1] += first_triangle[c];
-  out.triangles.resize(first_triangle[n_chunks]);
+  parallel_resize(out.triangles, first_triangle[n_chunks]);
   // Constraint edges: boundary ones oriented with the domain on their left.
   // (Each constraint edge from one side: the one with the smaller address when
   // both are finite; sorted below.)

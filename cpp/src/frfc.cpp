@@ -80,14 +80,21 @@ void second_packing_pass(Candidates& inside, Packing& packing) {
     const auto inside_classes = inside.classes(/*on_segment=*/false);
     classes.insert(classes.end(), inside_classes.begin(), inside_classes.end());
   }
+  // (the arrays grow with their fresh pages touched on both threads: detail::parallel_resize)
+  const std::size_t n_inside = inside.size();
   std::vector<double> radii;
-  radii.reserve(n_deferred + inside.size());
-  packing.radius.reserve(n_first + inside.size());
-  packing.centers.reserve(n_first + inside.size());
-  for (Index c : packing.deferred) radii.push_back(packing.radius[c]);
-  radii.insert(radii.end(), inside.radius.begin(), inside.radius.end());
-  packing.radius.insert(packing.radius.end(), inside.radius.begin(), inside.radius.end());
-  packing.centers.insert(packing.centers.end(), inside.samples.points.begin(), inside.samples.points.end());
+  detail::parallel_resize(radii, n_deferred + n_inside);
+  for (std::size_t k = 0; k < n_deferred; ++k) radii[k] = packing.radius[packing.deferred[k]];
+  detail::parallel_resize(packing.radius, n_first + n_inside);
+  detail::parallel_resize(packing.centers, n_first + n_inside);
+  constexpr std::size_t kChunk = std::size_t{1} << 16;
+  parallel_for((n_inside + kChunk - 1) / kChunk, 0, [&](std::size_t c) {
+    for (std::size_t j = c * kChunk; j < std::min(n_inside, (c + 1) * kChunk); ++j) {
+      radii[n_deferred + j] = inside.radius[j];
+      packing.radius[n_first + j] = inside.radius[j];
+      packing.centers[n_first + j] = inside.samples.points[j];
+    }
+  });
   inside = Candidates();
   // Positions in (deferred, interior candidates) -> candidate indices.
   std::vector<Index> order = packing_order(std::move(classes), std::move(radii));

@@ -60,13 +60,14 @@ class Kept_sphere_tree {
     // (memory: the visiting positions first, so that the order, 8 bytes a
     // sphere, is gone before the slots, 24, are filled)
     {
-      std::vector<std::uint32_t> position_of(n);
+      std::vector<std::uint32_t> position_of;
+      detail::parallel_resize(position_of, n);
       chunks(n, [&](std::size_t k) { position_of[sphere_at[k]] = static_cast<std::uint32_t>(k); });
-      visit_.resize(order.size());
+      detail::parallel_resize(visit_, order.size());
       chunks(order.size(), [&](std::size_t k) { visit_[k] = position_of[order[k]]; });
     }
     order = std::vector<Index>();
-    slots_.resize(n);
+    detail::parallel_resize(slots_, n);
     chunks(n, [&](std::size_t k) {
       const std::size_t i = sphere_at[k];
       slots_[k] = {centers[i][0], centers[i][1], radii[i]};
@@ -474,7 +475,10 @@ std::vector<std::uint8_t> mis_in_order(const std::vector<Vec2>& centers, const s
   std::fill(kept.begin(), kept.end(), 0);
   const std::size_t m = order.size();
   Kept_sphere_tree tree(centers, radii, std::move(order), threads);
-  if (blocker) blocker->assign(n, -1);
+  if (blocker) {
+    blocker->clear();
+    detail::parallel_resize(*blocker, n, Index{-1});
+  }
   const bool parallel = resolve_threads(threads) > 1 && !detail::in_parallel_region() && m - n_forced >= kMinParallel;
   if (block > 0 || parallel) {
     mis_in_blocks(tree, n_forced, kept, blocker, threads, block > 0 ? block : kBlock, counts);
@@ -524,7 +528,8 @@ void for_order_chunks(std::size_t n, Body body) {
 
 std::vector<Order_item> order_items(const std::vector<std::uint8_t>& priority_class, const std::vector<double>& radii) {
   if (priority_class.size() != radii.size()) throw Input_error("classes and radii must have the same length");
-  std::vector<Order_item> items(radii.size());
+  std::vector<Order_item> items;
+  detail::parallel_resize(items, radii.size());
   for_order_chunks(radii.size(), [&](std::size_t, std::size_t begin, std::size_t end) {
     for (std::size_t i = begin; i < end; ++i) {
       if (!(radii[i] > 0)) throw Input_error("sphere radii must be > 0");
@@ -545,7 +550,8 @@ std::vector<Order_item> order_items(const std::vector<std::uint8_t>& priority_cl
 std::vector<Index> sorted_order(std::vector<Order_item> items) {
   const std::size_t n = items.size();
   const std::size_t n_chunks = std::max<std::size_t>(1, (n + kOrderChunk - 1) / kOrderChunk);
-  std::vector<Order_item> next(n);
+  std::vector<Order_item> next;
+  detail::parallel_resize(next, n);
   std::vector<std::size_t> count(n_chunks << 11);  // chunk c, digit d: count[c * n_buckets + d]
   auto pass = [&](auto digit_of, std::size_t n_buckets) {
     for_order_chunks(n, [&](std::size_t c, std::size_t begin, std::size_t end) {
@@ -576,7 +582,8 @@ std::vector<Index> sorted_order(std::vector<Order_item> items) {
   }
   pass([](const Order_item& item) { return static_cast<std::size_t>(item.class_and_index >> 56); }, 256);
   next = std::vector<Order_item>();  // (before the order is made: 16 bytes a sphere)
-  std::vector<Index> order(n);
+  std::vector<Index> order;
+  detail::parallel_resize(order, n);
   constexpr std::uint64_t kIndexMask = (std::uint64_t{1} << 56) - 1;
   for_order_chunks(n, [&](std::size_t, std::size_t begin, std::size_t end) {
     for (std::size_t k = begin; k < end; ++k) order[k] = static_cast<Index>(items[k].class_and_index & kIndexMask);
@@ -633,13 +640,20 @@ Packing_class new_point_class(bool on_segment, int round) {
 std::vector<std::uint8_t> extend_packing(const std::vector<Vec2>& centers, const std::vector<double>& radii,
                                          const std::vector<Index>& first_order, const std::vector<std::uint8_t>& kept,
                                          std::vector<Index> more_order, int threads) {
+  std::size_t n_first = 0;
+  for (Index c : first_order) n_first += kept[c] != 0;
   std::vector<Index> order;
+  detail::parallel_resize(order, n_first + more_order.size());
+  std::size_t k = 0;
   for (Index c : first_order) {
-    if (kept[c]) order.push_back(c);
+    if (kept[c]) order[k++] = c;
   }
-  const std::size_t n_first = order.size();
-  order.reserve(n_first + more_order.size());
-  order.insert(order.end(), more_order.begin(), more_order.end());
+  constexpr std::size_t kChunk = std::size_t{1} << 16;
+  parallel_for((more_order.size() + kChunk - 1) / kChunk, threads, [&](std::size_t c) {
+    for (std::size_t j = c * kChunk; j < std::min(more_order.size(), (c + 1) * kChunk); ++j) {
+      order[n_first + j] = more_order[j];
+    }
+  });
   more_order = std::vector<Index>();
   return mis_in_order(centers, radii, std::move(order), n_first, nullptr, /*permutation=*/false, threads);
 }

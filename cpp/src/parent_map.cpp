@@ -142,8 +142,8 @@ Parent_map parent_map(const Old_mesh_walker& walker, const Mesh_arrays& new_mesh
   const std::size_t n_new = new_mesh.points.size();
   if (origin.size() != n_new) throw std::logic_error("parent_map: one origin per new point");
   Parent_map map;
-  map.triangle.assign(n_new, -1);
-  map.barycentric.assign(n_new, {0.0, 0.0, 0.0});
+  detail::parallel_resize(map.triangle, n_new, Index{-1});
+  detail::parallel_resize(map.barycentric, n_new);
   if (T.empty()) return map;
   // New points around each new point (compressed lists).
   std::vector<Index> xadj(n_new + 1, 0), adj;

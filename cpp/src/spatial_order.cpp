@@ -128,7 +128,9 @@ std::vector<std::uint32_t> hilbert_grid_permutation(const Vec2* points, std::siz
   }
   const double extent = std::max(hi_x - lo_x, hi_y - lo_y);
   const double scale = extent > 0 ? 65535.0 / extent : 0.0;
-  std::vector<std::uint32_t> key(n), order(n);
+  std::vector<std::uint32_t> key, order;
+  parallel_resize(key, n);
+  parallel_resize(order, n);
   constexpr std::size_t kBlock = 1 << 16;
   parallel_for((n + kBlock - 1) / kBlock, threads, [&](std::size_t b) {
     for (std::size_t i = b * kBlock; i < std::min(n, (b + 1) * kBlock); ++i) {

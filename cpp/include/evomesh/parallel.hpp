@@ -6,7 +6,10 @@
 #include <cstddef>
 #include <exception>
 #include <string>
+#include <cstring>
 #include <thread>
+#include <type_traits>
+#include <vector>
 #include <utility>
 
 namespace evomesh {
@@ -82,6 +85,37 @@ void parallel_for(std::size_t n, int threads, Body body) {
   detail::run_parallel(
       n, t, [](void* context, std::size_t i) { (*static_cast<Body*>(context))(i); }, &body);
 }
+
+namespace detail {
+
+// v.resize(n, value) (elements value-initialised when no value is given), with
+// the pages of fresh storage first touched on parallel_for's default threads.
+// A plain resize touches them all on the calling thread, and the first touch
+// (the page fault, not the zeroing) is what fresh memory costs: 1.7 us a 4 KiB
+// page on one thread and 1.0 on two in a warm process on the 2-core VM
+// measured, up to 14 us (a 513 MB resize took 1.8 s) late in a 1e7 step.
+// The storage is allocated by reserve and zeroed as raw bytes before resize
+// constructs the elements in it (for trivially copyable T).
+template <class T>
+void parallel_resize(std::vector<T>& v, std::size_t n, const T& value = T()) {
+  static_assert(std::is_trivially_copyable_v<T>, "parallel_resize: trivially copyable elements only");
+  constexpr std::size_t kChunkBytes = std::size_t{1} << 21;
+  if (n > v.capacity() && (n - v.size()) * sizeof(T) >= 2 * kChunkBytes) {
+    std::vector<T> fresh;
+    fresh.reserve(n);
+    unsigned char* raw = reinterpret_cast<unsigned char*>(fresh.data());
+    const std::size_t bytes = n * sizeof(T);
+    parallel_for((bytes + kChunkBytes - 1) / kChunkBytes, 0, [&](std::size_t c) {
+      const std::size_t begin = c * kChunkBytes;
+      std::memset(raw + begin, 0, std::min(bytes, begin + kChunkBytes) - begin);
+    });
+    fresh.insert(fresh.end(), v.begin(), v.end());
+    v.swap(fresh);
+  }
+  v.resize(n, value);
+}
+
+}  // namespace detail
 
 // Work started on another thread and waited for later; the destructor waits
 // too, so an exception on the main path never leaves a running thread behind.

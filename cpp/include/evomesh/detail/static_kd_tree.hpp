@@ -103,7 +103,7 @@ class Static_kd_tree {
     }
     while ((n_ >> depth_) > leaf_size) ++depth_;
     n_leaves_ = std::size_t{1} << depth_;
-    point_at_.resize(n_);
+    parallel_resize(point_at_, n_);
     // The loops over points run in chunks on parallel_for's default threads
     // (min and max are exact: the same box whatever the chunks).
     const std::size_t n_chunks = (n_ + kChunk - 1) / kChunk;
@@ -131,7 +131,8 @@ class Static_kd_tree {
       }
       const double extent = std::max(hi_x - lo_x, hi_y - lo_y);
       const double scale = extent > 0 ? 1.0 / extent : 1.0;
-      std::vector<Build_item> items(n_);
+      std::vector<Build_item> items;
+      parallel_resize(items, n_);
       parallel_for(n_chunks, 0, [&](std::size_t c) {
         const auto [begin, end] = chunk_range(c);
         for (std::size_t i = begin; i < end; ++i) {
@@ -153,7 +154,7 @@ class Static_kd_tree {
       });
     }
     if (tree_points) {
-      tree_points->resize(n_);
+      parallel_resize(*tree_points, n_);
       parallel_for(n_chunks, 0, [&](std::size_t c) {
         const auto [begin, end] = chunk_range(c);
         for (std::size_t k = begin; k < end; ++k) (*tree_points)[k] = points[point_at_[k]];
