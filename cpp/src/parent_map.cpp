@@ -151,7 +151,7 @@ Parent_map parent_map(const Old_mesh_walker& walker, const Mesh_arrays& new_mesh
     for (Index v : t) xadj[v + 1] += 2;
   }
   std::partial_sum(xadj.begin(), xadj.end(), xadj.begin());
-  adj.resize(static_cast<std::size_t>(xadj.back()));
+  detail::parallel_resize(adj, static_cast<std::size_t>(xadj.back()));
   {
     std::vector<Index> fill(xadj.begin(), xadj.end() - 1);
     for (const auto& t : new_mesh.triangles) {

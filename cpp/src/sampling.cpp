@@ -546,21 +546,30 @@ Sample_set join_samples(std::vector<Sample_set>& blocks) {
   std::size_t total = 0;
   for (const Sample_set& block : blocks) total += block.points.size();
   Sample_set out;
-  out.points.reserve(total);  // (pages are touched as the copies go, not before)
+  out.points.reserve(total);  // (pages are touched group by group, not before)
   out.parent.reserve(total);
-  // Freed blocks go back to the system every kRelease bytes (a trim walks the
+  // Groups of blocks holding kRelease bytes or more: each group's range of the
+  // output is touched and filled on parallel_for's threads, then its blocks
+  // are freed and what they held goes back to the system (a trim walks the
   // free lists of every arena: a few per step, not one per block).
   constexpr std::size_t kRelease = std::size_t{32} << 20;
-  std::size_t freed = 0;
-  for (Sample_set& block : blocks) {
-    out.points.insert(out.points.end(), block.points.begin(), block.points.end());
-    out.parent.insert(out.parent.end(), block.parent.begin(), block.parent.end());
-    freed += block.points.capacity() * sizeof(Vec2) + block.parent.capacity() * sizeof(std::uint32_t);
-    block = Sample_set();
-    if (freed >= kRelease) {
-      detail::release_free_memory();
-      freed = 0;
-    }
+  constexpr std::size_t kBytesPerSample = sizeof(Vec2) + sizeof(std::uint32_t);
+  for (std::size_t first = 0; first < blocks.size();) {
+    std::size_t last = first, bytes = 0;
+    while (last < blocks.size() && bytes < kRelease) bytes += blocks[last++].points.size() * kBytesPerSample;
+    const std::size_t at = out.points.size();
+    std::vector<std::size_t> offset(last - first + 1, at);
+    for (std::size_t k = first; k < last; ++k) offset[k - first + 1] = offset[k - first] + blocks[k].points.size();
+    detail::parallel_resize(out.points, offset.back());
+    detail::parallel_resize(out.parent, offset.back());
+    parallel_for(last - first, 0, [&](std::size_t k) {
+      Sample_set& block = blocks[first + k];
+      std::copy(block.points.begin(), block.points.end(), out.points.begin() + static_cast<std::ptrdiff_t>(offset[k]));
+      std::copy(block.parent.begin(), block.parent.end(), out.parent.begin() + static_cast<std::ptrdiff_t>(offset[k]));
+      block = Sample_set();
+    });
+    if (bytes >= kRelease) detail::release_free_memory();
+    first = last;
   }
   blocks = std::vector<Sample_set>();
   return out;

@@ -154,18 +154,24 @@ std::vector<Vec2> repair_spacing(const Spacing_repair_input& input, const Frfc_o
   using Delaunay = CGAL::Delaunay_triangulation_2<Kernel>;
   const std::size_t n = mesh.points.size();
   n_added = 0;
+  // (fresh arrays sized first, their pages touched on both threads: detail::parallel_resize)
+  std::size_t n_kept = 0;
+  for (std::size_t c = 0; c < centers.size(); ++c) n_kept += kept[c] != 0;
   std::vector<Vec2> kept_points;
-  std::vector<Index> position_of(n, -1);
-  for (std::size_t c = 0; c < centers.size(); ++c) {
+  detail::parallel_resize(kept_points, n_kept);
+  std::vector<Index> position_of;
+  detail::parallel_resize(position_of, n, Index{-1});
+  for (std::size_t c = 0, k = 0; c < centers.size(); ++c) {
     if (!kept[c]) continue;
-    if (c < n) position_of[c] = static_cast<Index>(kept_points.size());
-    kept_points.push_back(centers[c]);
+    if (c < n) position_of[c] = static_cast<Index>(k);
+    kept_points[k++] = centers[c];
   }
   if (kept_points.size() < 2) return {};
   const detail::Point_tree tree(kept_points);
   // nn2 of the kept R-points (delta < 1): the second nearest kept centre, the
   // nearest being the point itself (kept centres are distinct).
-  std::vector<double> nn2(n, 0.0);
+  std::vector<double> nn2;
+  detail::parallel_resize(nn2, n);
   if (repair_ratio > 0) {
     constexpr std::size_t kChunk = 4096;
     parallel_for((n + kChunk - 1) / kChunk, threads, [&](std::size_t chunk) {
@@ -185,10 +191,15 @@ std::vector<Vec2> repair_spacing(const Spacing_repair_input& input, const Frfc_o
     }
   }
   std::vector<Vec2> added;
-  std::vector<std::vector<Index>> on_segments(n);  // segment ring candidates (centre indices) of needy points
+  // The segment ring candidates of needy points: (owner, centre index), by
+  // owner then centre (a list per input point would be n empty vectors).
+  std::vector<std::pair<Index, Index>> on_segments;
   for (std::size_t j = 0; j < segment_owner.size(); ++j) {
-    if (segment_owner[j] >= 0 && is_needy[segment_owner[j]]) on_segments[segment_owner[j]].push_back(static_cast<Index>(n + j));
+    if (segment_owner[j] >= 0 && is_needy[segment_owner[j]]) {
+      on_segments.emplace_back(segment_owner[j], static_cast<Index>(n + j));
+    }
   }
+  std::sort(on_segments.begin(), on_segments.end());
   Delaunay added_dt;  // every point added here (segment or interior)
   Delaunay::Vertex_handle hint;
   auto nearest2 = [&](const Vec2& x) {
@@ -214,7 +225,9 @@ std::vector<Vec2> repair_spacing(const Spacing_repair_input& input, const Frfc_o
     Vec2 best_point{0.0, 0.0};
     bool found = false;
     double best_d2 = 0;
-    for (Index c : on_segments[p]) {
+    for (auto it = std::lower_bound(on_segments.begin(), on_segments.end(), std::pair<Index, Index>{p, -1});
+         it != on_segments.end() && it->first == p; ++it) {
+      const Index c = it->second;
       const double e2 = nearest2(centers[c]);
       if (e2 > best_d2) {
         best_d2 = e2;

@@ -1,12 +1,14 @@
 #include "evomesh/triangle_fans.hpp"
 
+#include "evomesh/parallel.hpp"
+
 namespace evomesh {
 
 Triangle_fans::Triangle_fans(const Mesh_arrays& mesh) {
   check_fits_4_bytes(3 * std::uint64_t{mesh.triangles.size()}, "3 x triangles (1.43e9 triangles)");
   const std::size_t n = mesh.points.size();
   xadj.assign(n + 1, 0);
-  adj.resize(3 * mesh.triangles.size());
+  detail::parallel_resize(adj, 3 * mesh.triangles.size());
   for (const auto& t : mesh.triangles) {
     for (Index v : t) ++xadj[v + 1];
   }

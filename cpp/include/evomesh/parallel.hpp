@@ -89,28 +89,31 @@ void parallel_for(std::size_t n, int threads, Body body) {
 namespace detail {
 
 // v.resize(n, value) (elements value-initialised when no value is given), with
-// the pages of fresh storage first touched on parallel_for's default threads.
-// A plain resize touches them all on the calling thread, and the first touch
-// (the page fault, not the zeroing) is what fresh memory costs: 1.7 us a 4 KiB
-// page on one thread and 1.0 on two in a warm process on the 2-core VM
-// measured, up to 14 us (a 513 MB resize took 1.8 s) late in a 1e7 step.
-// The storage is allocated by reserve and zeroed as raw bytes before resize
-// constructs the elements in it (for trivially copyable T).
+// the pages of the new elements' storage first touched on parallel_for's
+// default threads. A plain resize touches them all on the calling thread, and
+// the first touch (the page fault, not the zeroing) is what fresh memory
+// costs: 1.7 us a 4 KiB page on one thread and 1.0 on two in a warm process on
+// the 2-core VM measured, up to 14 us (a 513 MB resize took 1.8 s) late in a
+// 1e7 step. The storage (fresh, or capacity reserved before) is zeroed as raw
+// bytes before resize constructs the elements in it (trivially copyable T).
 template <class T>
 void parallel_resize(std::vector<T>& v, std::size_t n, const T& value = T()) {
   static_assert(std::is_trivially_copyable_v<T>, "parallel_resize: trivially copyable elements only");
   constexpr std::size_t kChunkBytes = std::size_t{1} << 21;
-  if (n > v.capacity() && (n - v.size()) * sizeof(T) >= 2 * kChunkBytes) {
+  if (n > v.size() && (n - v.size()) * sizeof(T) >= 2 * kChunkBytes) {
+    const std::size_t from = n > v.capacity() ? 0 : v.size();  // bytes to touch: [from, n) elements
     std::vector<T> fresh;
-    fresh.reserve(n);
-    unsigned char* raw = reinterpret_cast<unsigned char*>(fresh.data());
-    const std::size_t bytes = n * sizeof(T);
-    parallel_for((bytes + kChunkBytes - 1) / kChunkBytes, 0, [&](std::size_t c) {
-      const std::size_t begin = c * kChunkBytes;
-      std::memset(raw + begin, 0, std::min(bytes, begin + kChunkBytes) - begin);
+    if (n > v.capacity()) fresh.reserve(n);
+    unsigned char* raw = reinterpret_cast<unsigned char*>(n > v.capacity() ? fresh.data() : v.data());
+    const std::size_t begin_byte = from * sizeof(T), end_byte = n * sizeof(T);
+    parallel_for((end_byte - begin_byte + kChunkBytes - 1) / kChunkBytes, 0, [&](std::size_t c) {
+      const std::size_t begin = begin_byte + c * kChunkBytes;
+      std::memset(raw + begin, 0, std::min(end_byte, begin + kChunkBytes) - begin);
     });
-    fresh.insert(fresh.end(), v.begin(), v.end());
-    v.swap(fresh);
+    if (n > v.capacity()) {
+      fresh.insert(fresh.end(), v.begin(), v.end());
+      v.swap(fresh);
+    }
   }
   v.resize(n, value);
 }
