@@ -1,6 +1,6 @@
 // parallel_for: the same results on 1..4 threads, from concurrent callers and
-// nested calls; exceptions reach the caller; the pool survives fork(); and the
-// parsing behind default_thread_count().
+// nested calls; exceptions reach the caller; the pool survives fork(); the
+// parsing behind default_thread_count(); and detail::parallel_resize.
 #include <atomic>
 #include <chrono>
 #include <cmath>
@@ -183,6 +183,48 @@ void check_fork() {
 
 }  // namespace
 
+// parallel_resize against resize: from empty, with contents kept, within
+// reserved capacity, with a fill value, small (no parallel touch) and large
+// (touched in parallel), on 1 and 2 threads, also from inside a work item.
+void check_parallel_resize() {
+  struct Item {
+    std::int64_t a;
+    double b;
+    std::uint8_t c;
+  };
+  for (int threads : {1, 2}) {
+    const Thread_limit limit(threads);
+    for (std::size_t n : {std::size_t{0}, std::size_t{1000}, std::size_t{3} << 20}) {
+      for (std::size_t kept : {std::size_t{0}, std::size_t{777}}) {
+        for (bool reserved : {false, true}) {
+          std::vector<std::int64_t> ours(kept), reference(kept);
+          for (std::size_t i = 0; i < kept; ++i) ours[i] = reference[i] = static_cast<std::int64_t>(i * 7 + 1);
+          if (reserved) ours.reserve(n + 5);
+          const std::int64_t* before = ours.data();
+          detail::parallel_resize(ours, std::max(n, kept), std::int64_t{-3});
+          reference.resize(std::max(n, kept), -3);
+          CHECK(ours == reference) << "int64, n " << n << ", kept " << kept << ", reserved " << reserved;
+          if (reserved && n > 0) CHECK(ours.data() == before) << "reserved capacity reused, n " << n;
+        }
+      }
+      std::vector<Item> items;
+      detail::parallel_resize(items, n);
+      bool zero = true;
+      for (const Item& item : items) zero = zero && item.a == 0 && item.b == 0.0 && item.c == 0;
+      CHECK(items.size() == n && zero) << "value-initialised items, n " << n;
+    }
+    // shrinking and equal sizes behave as resize
+    std::vector<double> v(5000, 2.0);
+    detail::parallel_resize(v, 10);
+    CHECK(v.size() == 10 && v[9] == 2.0);
+    // from inside a work item (the touch runs on the calling thread)
+    std::vector<std::vector<std::uint32_t>> nested(2);
+    parallel_for(2, threads, [&](std::size_t i) { detail::parallel_resize(nested[i], std::size_t{1} << 21, 5u); });
+    CHECK(nested[0] == std::vector<std::uint32_t>(std::size_t{1} << 21, 5u) && nested[1] == nested[0])
+        << "parallel_resize inside a work item";
+  }
+}
+
 int main() {
   return evomesh_test::run([] {
     const auto t0 = std::chrono::steady_clock::now();
@@ -193,6 +235,7 @@ int main() {
     check_nested();
     check_exceptions();
     check_fork();
+    check_parallel_resize();
     std::printf("default_thread_count() = %d, %.3f s\n", default_thread_count(),
                 std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
   });
