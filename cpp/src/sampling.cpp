@@ -387,7 +387,7 @@ double estimate_sample_count(const Mesh_arrays& mesh, const std::vector<double>&
                              double limit, bool adaptive, const Spacing_queries* queries) {
   // The fine grid's count bounds the adaptive grid's; only triangles whose fine
   // grid is large are counted cell by cell (and only up to the limit), with the
-  // cells sample_triangles uses (the same queries).
+  // cells sample_triangle_blocks uses (the same queries).
   constexpr double kCountCells = kQueryCells;
   constexpr double kMaxCellsPerSide = 0x1.0p50;  // dyadic indices stay exact in int64 and double
   double total = 0;
@@ -531,15 +531,6 @@ std::vector<Sample_set> sample_triangle_blocks(const Mesh_arrays& mesh, const st
     for (std::size_t d : drawn) *n_drawn += d;
   }
   return blocks;
-}
-
-Sample_set sample_triangles(const Mesh_arrays& mesh, const std::vector<double>& vertex_f,
-                            double cell_factor, Sample_mode mode, std::uint64_t seed,
-                            const std::vector<std::uint8_t>& skip, const Cover_discs& cover, int threads,
-                            std::size_t* n_drawn, bool adaptive, const Spacing_queries* queries) {
-  auto blocks = sample_triangle_blocks(mesh, vertex_f, cell_factor, mode, seed, skip, cover, threads, n_drawn,
-                                       adaptive, queries);
-  return join_samples(blocks);
 }
 
 Sample_set join_samples(std::vector<Sample_set>& blocks) {

@@ -70,7 +70,7 @@ Candidates segment_candidates(const Mesh_arrays& mesh, const std::vector<double>
 // `quiet` (optional, one flag per triangle): triangles whose grid samples all lie
 // in a cover disc (incremental_step.cpp); they are not sampled, the result is the same.
 // `queries` (optional): f for the adaptive grids of strongly graded triangles
-// (sample_triangles).
+// (sample_triangle_blocks).
 Candidates interior_candidates(const Mesh_arrays& mesh, const Triangle_fans& fans, const std::vector<double>& delta,
                                const std::vector<double>& f, const std::vector<std::uint8_t>& demoted,
                                const Cover_discs& cover,

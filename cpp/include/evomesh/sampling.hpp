@@ -52,17 +52,11 @@ bool asks_spacing(const Mesh_arrays& mesh, const std::vector<double>& vertex_f, 
 // A sample strictly inside the cover disc of a vertex v of its triangle is
 // drawn but not returned (cover empty: all are returned); `n_drawn` receives
 // the number drawn.
-// Triangles are sampled in parallel in fixed blocks: the result never depends
-// on `threads` (0: hardware concurrency). `queries` (optional): f for the
-// adaptive grid of the triangles asks_spacing() names.
-Sample_set sample_triangles(const Mesh_arrays& mesh, const std::vector<double>& vertex_f,
-                            double cell_factor, Sample_mode mode, std::uint64_t seed,
-                            const std::vector<std::uint8_t>& skip, const Cover_discs& cover = {},
-                            int threads = 0, std::size_t* n_drawn = nullptr, bool adaptive = true,
-                            const Spacing_queries* queries = nullptr);
-// The same samples before they are joined: one set per fixed block of
-// triangles, in order (join_samples of them is sample_triangles' result), for a
-// caller that adds blocks of its own before the one join.
+// Triangles are sampled in parallel in fixed blocks, one set each, in order
+// (join_samples makes them one set): the result never depends on `threads`
+// (0: hardware concurrency). A caller may add blocks of its own before the one
+// join. `queries` (optional): f for the adaptive grid of the triangles
+// asks_spacing() names.
 std::vector<Sample_set> sample_triangle_blocks(const Mesh_arrays& mesh, const std::vector<double>& vertex_f,
                                                double cell_factor, Sample_mode mode, std::uint64_t seed,
                                                const std::vector<std::uint8_t>& skip, const Cover_discs& cover,
@@ -70,10 +64,11 @@ std::vector<Sample_set> sample_triangle_blocks(const Mesh_arrays& mesh, const st
                                                const Spacing_queries* queries);
 
 // The blocks joined in order into one set of exact size; `blocks` is emptied.
-// Each block is freed once copied and what the freed blocks held goes back to
-// the system as the join goes (detail::release_free_memory), so the join holds
-// little more than its output. (Appending blocks to a growing set held the old
-// and the new copy of it at once: that was the refining front's peak at 1e6.)
+// Groups of blocks (32 MiB or more) are copied in parallel, then freed, and
+// what they held goes back to the system (detail::release_free_memory), so the
+// join holds little more than its output. (Appending blocks to a growing set
+// held the old and the new copy of it at once: that was the refining front's
+// peak at 1e6.)
 Sample_set join_samples(std::vector<Sample_set>& blocks);
 
 // Samples on the segments, strictly between their endpoints, sorted along each
@@ -86,11 +81,11 @@ Sample_set sample_segments(const Mesh_arrays& mesh, const std::vector<double>& v
 // Whether x lies strictly inside the cover disc of a vertex of t (cover empty: no).
 bool in_cover(const Cover_discs& cover, const Triangle& t, const Vec2& x);
 
-// Upper bound on the number of samples sample_triangles/sample_segments would
+// Upper bound on the number of samples sample_triangle_blocks/sample_segments would
 // produce, so callers can refuse inputs that would exhaust memory: O(n) plus the
 // cells of the triangles whose grid adapts, and it stops as soon as the count
 // passes `limit` (infinite when a triangle would need more than 2^50 cells a side).
-// With the same `queries` as sample_triangles, the same cells.
+// With the same `queries` as sample_triangle_blocks, the same cells.
 double estimate_sample_count(const Mesh_arrays& mesh, const std::vector<double>& vertex_f, double cell_factor,
                              double limit = std::numeric_limits<double>::infinity(), bool adaptive = true,
                              const Spacing_queries* queries = nullptr);
