@@ -101,16 +101,18 @@ void parallel_resize(std::vector<T>& v, std::size_t n, const T& value = T()) {
   static_assert(std::is_trivially_copyable_v<T>, "parallel_resize: trivially copyable elements only");
   constexpr std::size_t kChunkBytes = std::size_t{1} << 21;
   if (n > v.size() && (n - v.size()) * sizeof(T) >= 2 * kChunkBytes) {
-    const std::size_t from = n > v.capacity() ? 0 : v.size();  // bytes to touch: [from, n) elements
+    // Fresh storage is touched whole (the elements kept are copied over it),
+    // reserved capacity from the current end.
+    const bool fresh_storage = n > v.capacity();
     std::vector<T> fresh;
-    if (n > v.capacity()) fresh.reserve(n);
-    unsigned char* raw = reinterpret_cast<unsigned char*>(n > v.capacity() ? fresh.data() : v.data());
-    const std::size_t begin_byte = from * sizeof(T), end_byte = n * sizeof(T);
+    if (fresh_storage) fresh.reserve(n);
+    unsigned char* raw = reinterpret_cast<unsigned char*>(fresh_storage ? fresh.data() : v.data());
+    const std::size_t begin_byte = fresh_storage ? 0 : v.size() * sizeof(T), end_byte = n * sizeof(T);
     parallel_for((end_byte - begin_byte + kChunkBytes - 1) / kChunkBytes, 0, [&](std::size_t c) {
       const std::size_t begin = begin_byte + c * kChunkBytes;
       std::memset(raw + begin, 0, std::min(end_byte, begin + kChunkBytes) - begin);
     });
-    if (n > v.capacity()) {
+    if (fresh_storage) {
       fresh.insert(fresh.end(), v.begin(), v.end());
       v.swap(fresh);
     }
