@@ -22,7 +22,10 @@ def _step(threads):
     mesh = grid_mesh(60, 60, jitter=0.2, seed=3)
     delta = np.exp(np.random.default_rng(0).uniform(np.log(0.3), np.log(3), mesh.n_points))
     new = evomesh.evolve(mesh, delta, seed=5, threads=threads)
-    return hashlib.sha256(new.points.tobytes() + new.triangles.tobytes() + new.kind.tobytes()).hexdigest()
+    # the mesh, its parent map (walked in parallel rounds) and its nn (completed in parallel)
+    arrays = (new.points, new.triangles, new.kind, new.lineage.parent_triangle, new.lineage.barycentric,
+              new.nn_spacing, new._nn_grew)
+    return hashlib.sha256(b"".join(np.ascontiguousarray(a).tobytes() for a in arrays)).hexdigest()
 
 
 @pytest.mark.skipif(not hasattr(os, "fork"), reason="needs fork()")

@@ -1,9 +1,9 @@
 #include "evomesh/parent_map.hpp"
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <cstdint>
-#include <deque>
 #include <limits>
 #include <queue>
 #include <unordered_set>
@@ -145,52 +145,120 @@ Parent_map parent_map(const Old_mesh_walker& walker, const Mesh_arrays& new_mesh
   detail::parallel_resize(map.triangle, n_new, Index{-1});
   detail::parallel_resize(map.barycentric, n_new);
   if (T.empty()) return map;
-  // New points around each new point (compressed lists).
-  std::vector<Index> xadj(n_new + 1, 0), adj;
-  for (const auto& t : new_mesh.triangles) {
-    for (Index v : t) xadj[v + 1] += 2;
-  }
-  std::partial_sum(xadj.begin(), xadj.end(), xadj.begin());
-  detail::parallel_resize(adj, static_cast<std::size_t>(xadj.back()));
+  // Rounds of walks, each from the old triangle of a new neighbour placed in
+  // an earlier round: the kept points first (a triangle at their old index),
+  // then the points placed by the walks of round 1, and so on. A point walks
+  // from its placed neighbour of least index (an atomic minimum over the new
+  // triangles at it), so the walks of a round are independent and run in
+  // parallel, and the map is the same for any thread count. O(n) walks of a few
+  // triangles each, as in a breadth-first order, with no sequential pass.
+  constexpr std::uint32_t kNone = ~std::uint32_t{0};
+  constexpr std::size_t kChunk = std::size_t{1} << 14;
+  auto chunks = [](std::size_t size) { return (size + kChunk - 1) / kChunk; };
+  std::vector<Index> start;  // the old triangle a walk from new point u starts at (-1: u not placed)
+  detail::parallel_resize(start, n_new, Index{-1});
+  std::vector<Index> pending;  // new points not placed yet
   {
-    std::vector<Index> fill(xadj.begin(), xadj.end() - 1);
-    for (const auto& t : new_mesh.triangles) {
-      for (int k = 0; k < 3; ++k) {
-        adj[fill[t[k]]++] = t[(k + 1) % 3];
-        adj[fill[t[k]]++] = t[(k + 2) % 3];
+    std::vector<std::vector<Index>> found(chunks(n_new));
+    parallel_for(found.size(), 0, [&](std::size_t c) {
+      for (std::size_t i = c * kChunk; i < std::min(n_new, (c + 1) * kChunk); ++i) {
+        if (origin[i] >= 0) start[i] = walker.triangle_at(origin[i]);
+        else found[c].push_back(static_cast<Index>(i));
       }
-    }
+    });
+    for (const auto& f : found) pending.insert(pending.end(), f.begin(), f.end());
   }
-  std::vector<std::uint8_t> placed(n_new, 0);
-  std::deque<Index> queue;
-  for (std::size_t i = 0; i < n_new; ++i) {
-    if (origin[i] >= 0) {
-      placed[i] = 1;
-      queue.push_back(static_cast<Index>(i));
-    }
+  // The new triangles that have a vertex not placed (those a round reads).
+  std::vector<Index> open_triangles;
+  {
+    const auto& NT = new_mesh.triangles;
+    std::vector<std::vector<Index>> found(chunks(NT.size()));
+    parallel_for(found.size(), 0, [&](std::size_t c) {
+      for (std::size_t t = c * kChunk; t < std::min(NT.size(), (c + 1) * kChunk); ++t) {
+        if (origin[NT[t][0]] < 0 || origin[NT[t][1]] < 0 || origin[NT[t][2]] < 0) found[c].push_back(static_cast<Index>(t));
+      }
+    });
+    for (const auto& f : found) open_triangles.insert(open_triangles.end(), f.begin(), f.end());
   }
+  std::vector<std::atomic<std::uint32_t>> from(n_new);  // least placed neighbour of a pending point
+  parallel_for(chunks(n_new), 0, [&](std::size_t c) {
+    for (std::size_t i = c * kChunk; i < std::min(n_new, (c + 1) * kChunk); ++i) from[i].store(kNone, std::memory_order_relaxed);
+  });
   std::vector<Index> unplaced;
-  while (!queue.empty()) {
-    const Index u = queue.front();
-    queue.pop_front();
-    const Index start = origin[u] >= 0 ? walker.triangle_at(origin[u]) : map.triangle[u];
-    for (Index a = xadj[u]; a < xadj[u + 1]; ++a) {
-      const Index v = adj[a];
-      if (placed[v]) continue;
-      placed[v] = 1;
-      const Index t = start < 0 ? -1 : walker.walk(start, new_mesh.points[v], static_cast<std::size_t>(v), map.n_walk_steps);
-      if (t < 0) {
-        unplaced.push_back(v);
-        continue;
+  while (!pending.empty()) {
+    // Each pending point's least placed neighbour (start >= 0 only for points
+    // placed before this round: this round's walks write start afterwards).
+    parallel_for(chunks(open_triangles.size()), 0, [&](std::size_t c) {
+      for (std::size_t k = c * kChunk; k < std::min(open_triangles.size(), (c + 1) * kChunk); ++k) {
+        const Triangle& tri = new_mesh.triangles[open_triangles[k]];
+        for (int j = 0; j < 3; ++j) {
+          const Index v = tri[j];
+          if (start[v] >= 0) continue;
+          for (int i = 1; i < 3; ++i) {
+            const Index u = tri[(j + i) % 3];
+            if (start[u] < 0) continue;
+            std::uint32_t seen = from[v].load(std::memory_order_relaxed);
+            while (static_cast<std::uint32_t>(u) < seen &&
+                   !from[v].compare_exchange_weak(seen, static_cast<std::uint32_t>(u), std::memory_order_relaxed)) {
+            }
+          }
+        }
       }
-      map.triangle[v] = t;
-      map.barycentric[v] = barycentric_coordinates(P, T[t], new_mesh.points[v]);
-      queue.push_back(v);
+    });
+    // The walks; a point with no placed neighbour waits for the next round, one
+    // whose walk fails is located by the search below.
+    std::vector<std::vector<Index>> waiting(chunks(pending.size())), failed(waiting.size());
+    std::vector<std::size_t> steps(waiting.size(), 0);
+    std::vector<Index> placed_now;  // (start is written after the round)
+    detail::parallel_resize(placed_now, pending.size(), Index{-1});
+    parallel_for(waiting.size(), 0, [&](std::size_t c) {
+      for (std::size_t k = c * kChunk; k < std::min(pending.size(), (c + 1) * kChunk); ++k) {
+        const Index v = pending[k];
+        const std::uint32_t u = from[v].load(std::memory_order_relaxed);
+        if (u == kNone) {
+          waiting[c].push_back(v);
+          continue;
+        }
+        from[v].store(kNone, std::memory_order_relaxed);
+        const Index t = walker.walk(start[u], new_mesh.points[v], static_cast<std::size_t>(v), steps[c]);
+        if (t < 0) {
+          failed[c].push_back(v);
+          continue;
+        }
+        map.triangle[v] = t;
+        map.barycentric[v] = barycentric_coordinates(P, T[t], new_mesh.points[v]);
+        placed_now[k] = t;
+      }
+    });
+    std::vector<std::size_t> n_placed(waiting.size(), 0);
+    parallel_for(waiting.size(), 0, [&](std::size_t c) {
+      for (std::size_t k = c * kChunk; k < std::min(pending.size(), (c + 1) * kChunk); ++k) {
+        if (placed_now[k] < 0) continue;
+        start[pending[k]] = placed_now[k];
+        ++n_placed[c];
+      }
+    });
+    std::size_t placed_in_round = 0;
+    for (std::size_t c = 0; c < waiting.size(); ++c) {
+      placed_in_round += n_placed[c];
+      map.n_walk_steps += steps[c];
+      unplaced.insert(unplaced.end(), failed[c].begin(), failed[c].end());
     }
+    pending.clear();
+    for (const auto& w : waiting) pending.insert(pending.end(), w.begin(), w.end());
+    if (placed_in_round == 0 || pending.empty()) break;  // (then none has a placed neighbour)
+    // The triangles with a vertex still pending, in order.
+    std::vector<std::vector<Index>> still(chunks(open_triangles.size()));
+    parallel_for(still.size(), 0, [&](std::size_t c) {
+      for (std::size_t k = c * kChunk; k < std::min(open_triangles.size(), (c + 1) * kChunk); ++k) {
+        const Triangle& tri = new_mesh.triangles[open_triangles[k]];
+        if (start[tri[0]] < 0 || start[tri[1]] < 0 || start[tri[2]] < 0) still[c].push_back(open_triangles[k]);
+      }
+    });
+    open_triangles.clear();
+    for (const auto& f : still) open_triangles.insert(open_triangles.end(), f.begin(), f.end());
   }
-  for (std::size_t i = 0; i < n_new; ++i) {
-    if (!placed[i]) unplaced.push_back(static_cast<Index>(i));
-  }
+  unplaced.insert(unplaced.end(), pending.begin(), pending.end());
   if (!unplaced.empty()) {
     std::sort(unplaced.begin(), unplaced.end());
     std::vector<Vec2> queries(unplaced.size());

@@ -72,11 +72,15 @@ class Old_mesh_walker {
 };
 
 // The parent map of `new_mesh` in the old mesh; origin[i] is the old index of new
-// point i or -1. Points are located in breadth-first order over the new mesh's
-// edges, from the kept points: each walk starts in the old triangle of a new
-// neighbour already placed, a few triangles away (a visibility walk with exact
-// orientation tests). Points a walk cannot reach (across a hole, or a walk longer
-// than its bound) are located by a search over the whole old mesh. O(n) walks.
+// point i or -1. Points are located in rounds over the new mesh's edges, from
+// the kept points: each walk starts in the old triangle of a new neighbour
+// placed in an earlier round (the one of least index), a few triangles away (a
+// visibility walk with exact orientation tests); the walks of a round run in
+// parallel, and the map does not depend on the thread count. Points a walk
+// cannot reach (across a hole, or a walk longer than its bound) are located by
+// a search over the whole old mesh. O(n) walks. (A point strictly inside an old
+// triangle gets that triangle from any walk; one on an old edge or vertex gets
+// one of the triangles there.)
 Parent_map parent_map(const Old_mesh_walker& old_mesh, const Mesh_arrays& new_mesh, const std::vector<Index>& origin);
 
 // The input's labels on the new mesh, through the parent map (no global search):
