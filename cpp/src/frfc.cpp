@@ -317,14 +317,20 @@ Evolve_result frfc(const Mesh_arrays& input, const std::vector<double>& delta, c
   // early triangulation takes the repair's points: both before the quality
   // pass, which runs on this thread.
   Old_mesh_start old_mesh(input, options.threads);
+  // The selected points' nn on another thread too, most of the output's
+  // (output_nn.hpp); not with curves, whose points move after the selection.
+  std::optional<Selection_nn> selection_nn;
+  if (!mesh.geometry) selection_nn.emplace(selection.mesh.points, options.threads);
   early->wait();
   detail::release_free_memory();
+  if (selection_nn) selection_nn->wait_until_read();
   const bool early_started = options.quality && !mesh.geometry;
+  std::vector<Index> selected_index;
   triangulate_selection(std::move(selection), pieces, options.quality ? &quality : nullptr, result,
-                        early_started ? &early->triangulation : nullptr, mesh.geometry.get());
+                        early_started ? &early->triangulation : nullptr, mesh.geometry.get(), &selected_index);
   detail::release_free_memory();
   timer.lap(options.quality ? "quality" : "cdt");
-  finish_step(input, result, timer, &old_mesh);
+  finish_step(input, result, timer, &old_mesh, selection_nn ? &*selection_nn : nullptr, &selected_index);
   add_step_counts(result, {{"n_input_points", mesh.points.size()},
                            {"n_segment_samples", on_segments.size()},
                            {"n_interior_samples", n_interior},

@@ -1,0 +1,56 @@
+"""The output's nn that a step hands to the next (issue 13): most of it is the
+selected points' nn, found while the quality pass runs, completed where the pass
+added and dropped points (cpp/include/evomesh/output_nn.hpp). It must be the
+same bits as a fresh computation on the output, whichever way it was found."""
+
+import numpy as np
+import pytest
+from hypothesis import given
+
+import evomesh
+from evomesh import _core
+from strategies import grid_mesh, mesh_and_delta
+
+
+def _assert_fresh(new: evomesh.Mesh) -> None:
+    nn, grew = _core.nn_within_domain(new.points, new.triangles)
+    np.testing.assert_array_equal(new.nn_spacing, nn)
+    np.testing.assert_array_equal(new._nn_grew, grew)
+
+
+@given(mesh_and_delta())
+def test_a_steps_nn_is_the_outputs(case):
+    mesh, delta = case
+    for method in ("frfc", "drfc"):
+        _assert_fresh(evomesh.evolve(mesh, delta, method=method, seed=3))
+
+
+@pytest.mark.parametrize("delta", [0.45, 0.8, 1.0, 1.7])
+@pytest.mark.parametrize("jitter", [0.0, 0.2])
+def test_the_step_completes_the_selections_nn(delta: float, jitter: float) -> None:
+    """On lattices (equal distances everywhere) and jittered grids, refined and
+    coarsened, with the quality pass adding points: the full step and the
+    incremental one take the selection's nn and complete it."""
+    mesh = evomesh.unit_square_mesh(3000, jitter=jitter, seed=2)
+    x = mesh.points[:, 0]
+    for d in (np.full(mesh.n_points, delta), np.where(np.abs(x - 0.5) < 0.1, delta, 1.0)):
+        new = evomesh.evolve(mesh, d, seed=1)
+        assert new.stats["output_nn_from_selection"] == 1
+        _assert_fresh(new)
+        again = evomesh.evolve(new, np.where(np.abs(new.points[:, 1] - 0.3) < 0.05, 0.7, 1.0), seed=2)
+        assert again.stats["output_nn_from_selection"] == 1
+        _assert_fresh(again)
+
+
+def test_points_the_quality_pass_drops() -> None:
+    """A case where the pass drops crowding points: their neighbours' nn is
+    searched again among the points kept."""
+    rng = np.random.default_rng(5)
+    for hole in (False, True):
+        mesh = grid_mesh(24, 24, jitter=0.3, hole=hole)
+        for seed in range(3):
+            delta = np.exp(rng.uniform(np.log(0.3), np.log(3.0), mesh.n_points))
+            new = evomesh.evolve(mesh, delta, seed=seed)
+            assert new.stats["quality_points_removed"] > 0
+            assert new.stats["output_nn_from_selection"] == 1
+            _assert_fresh(new)
