@@ -317,13 +317,12 @@ Evolve_result frfc(const Mesh_arrays& input, const std::vector<double>& delta, c
   // early triangulation takes the repair's points: both before the quality
   // pass, which runs on this thread.
   Old_mesh_start old_mesh(input, options.threads);
-  // The selected points' nn on another thread too, most of the output's
-  // (output_nn.hpp); not with curves, whose points move after the selection.
-  std::optional<Selection_nn> selection_nn;
-  if (!mesh.geometry) selection_nn.emplace(selection.mesh.points, options.threads);
   early->wait();
   detail::release_free_memory();
-  if (selection_nn) selection_nn->wait_until_read();
+  // Beside the quality pass, the selected points' nn: most of the output's
+  // (output_nn.hpp; not with curves, whose points move after the selection).
+  std::optional<Selection_nn> selection_nn;
+  if (!mesh.geometry && options.quality) selection_nn.emplace(selection.mesh.points, options.threads);
   const bool early_started = options.quality && !mesh.geometry;
   std::vector<Index> selected_index;
   triangulate_selection(std::move(selection), pieces, options.quality ? &quality : nullptr, result,

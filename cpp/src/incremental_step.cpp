@@ -533,14 +533,14 @@ std::optional<Evolve_result> incremental_frfc(const Mesh_arrays& mesh, const std
   const auto pieces = pieces_along_chains(mesh, chains, on_segments, out_index);
   const Quality_options quality = options.quality_settings();
   Old_mesh_start old_mesh(mesh, options.threads, std::move(fans));  // beside the early triangulation (frfc.cpp)
-  Selection_nn selection_nn(selection.mesh.points, options.threads);   // (as in frfc.cpp)
   early.wait();
-  selection_nn.wait_until_read();
+  std::optional<Selection_nn> selection_nn;  // beside the quality pass (frfc.cpp)
+  if (options.quality) selection_nn.emplace(selection.mesh.points, options.threads);
   std::vector<Index> selected_index;
   triangulate_selection(std::move(selection), pieces, options.quality ? &quality : nullptr, result,
                         options.quality ? &early.triangulation : nullptr, nullptr, &selected_index);
   timer.lap(options.quality ? "quality" : "cdt");
-  finish_step(mesh, result, timer, &old_mesh, &selection_nn, &selected_index);
+  finish_step(mesh, result, timer, &old_mesh, selection_nn ? &*selection_nn : nullptr, &selected_index);
   std::size_t n_quiet = 0;
   for (std::uint8_t q : quiet) n_quiet += q;
   std::vector<std::uint8_t> in_region(n, 0);

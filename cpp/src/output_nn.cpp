@@ -95,17 +95,16 @@ struct Selection_nn::Impl {
   }
 };
 
-Selection_nn::Selection_nn(const std::vector<Vec2>& selected, int threads) : read_future_(read_.get_future()) {
+Selection_nn::Selection_nn(const std::vector<Vec2>& selected, int threads) {
+  try {
+    impl_ = std::make_unique<Impl>(selected);
+  } catch (const std::exception&) {
+    impl_.reset();  // (too many points for the tree: the output's nn from scratch says so)
+    return;
+  }
   work_.start(
-      [this, &selected]() {
-        try {
-          impl_ = std::make_unique<Impl>(selected);
-        } catch (...) {
-          read_.set_value();
-          throw;
-        }
-        read_.set_value();
-        // One thread: the other one is the quality pass's.
+      [this]() {
+        // One thread: the other one is the mesher's.
         const std::size_t n = impl_->points().size();
         std::vector<double> nn2(n);
         for (std::size_t k = 0; k < n; ++k) nn2[k] = impl_->tree.squared_nn_at(k);
@@ -116,8 +115,6 @@ Selection_nn::Selection_nn(const std::vector<Vec2>& selected, int threads) : rea
 
 Selection_nn::~Selection_nn() = default;
 
-void Selection_nn::wait_until_read() { read_future_.wait(); }
-
 bool Selection_nn::output_squared_nn(const std::vector<Vec2>& output, const std::vector<Index>& source,
                                      std::vector<double>& nn2) {
   try {
@@ -125,7 +122,9 @@ bool Selection_nn::output_squared_nn(const std::vector<Vec2>& output, const std:
   } catch (const std::exception&) {
     return false;
   }
-  if (!impl_ || output.size() < 2 || source.size() != output.size()) return false;
+  if (!impl_ || impl_->nn2.size() != impl_->points().size() || output.size() < 2 || source.size() != output.size()) {
+    return false;
+  }
   const Impl& impl = *impl_;
   const auto& P = impl.points();
   const auto& point_at = impl.tree.tree().point_at();

@@ -54,7 +54,6 @@ void check_case(const char* name, const std::vector<Vec2>& selected, std::size_t
   const std::vector<double> expected = nn_spacing(out.points);
   for (int threads : {1, 2, 4}) {
     Selection_nn nn(selected, threads);
-    nn.wait_until_read();
     std::vector<double> nn2;
     const bool ok = nn.output_squared_nn(out.points, out.source, nn2);
     CHECK(ok) << name << " threads " << threads;
@@ -114,7 +113,6 @@ void check_declines() {
     // a duplicate added point
     Output out = make_output(points, 0, {points[10]});
     Selection_nn nn(points, 2);
-    nn.wait_until_read();
     std::vector<double> nn2;
     CHECK(!nn.output_squared_nn(out.points, out.source, nn2)) << "duplicate";
   }
@@ -123,7 +121,6 @@ void check_declines() {
     Output out = make_output(points, 0, {});
     out.points[5][0] += 1e-3;
     Selection_nn nn(points, 2);
-    nn.wait_until_read();
     std::vector<double> nn2;
     CHECK(!nn.output_squared_nn(out.points, out.source, nn2)) << "moved";
   }

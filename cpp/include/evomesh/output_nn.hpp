@@ -22,7 +22,6 @@
 #pragma once
 
 #include <cstddef>
-#include <future>
 #include <memory>
 #include <vector>
 
@@ -33,29 +32,29 @@ namespace evomesh {
 
 class Selection_nn {
  public:
-  // Starts the work on another thread when `threads` allows (else does it now).
-  explicit Selection_nn(const std::vector<Vec2>& selected, int threads);
+  // Builds the kd-tree of `selected` now, on parallel_for's threads (it keeps
+  // its own copy of the points: they may go once this returns), then finds
+  // their squared nn on another thread when `threads` allows (else now). A
+  // step starts it once the early triangulation is done, so that it runs
+  // beside the mesher: beside that triangulation's thread, it took its core
+  // (the step then waited for that thread longer).
+  Selection_nn(const std::vector<Vec2>& selected, int threads);
   ~Selection_nn();
   Selection_nn(const Selection_nn&) = delete;
   Selection_nn& operator=(const Selection_nn&) = delete;
 
-  // Returns once `selected` is read (the tree holds its own copy): the caller
-  // may then let the points go.
-  void wait_until_read();
-
   // The output's squared nn, by output point: `source[i]` is the selected
-  // point output point i is (-1: a point the pass added). False when it cannot
-  // tell (duplicate points, or the work failed): the caller then computes the
-  // output's nn from scratch, which says what is wrong.
+  // point output point i is (-1: a point the pass added). Waits for the
+  // selected points' nn. False when it cannot tell (duplicate points, or the
+  // tree or the queries failed): the caller then computes the output's nn from
+  // scratch, which says what is wrong.
   bool output_squared_nn(const std::vector<Vec2>& output, const std::vector<Index>& source,
                          std::vector<double>& nn2);
 
  private:
   struct Impl;
-  std::unique_ptr<Impl> impl_;
-  std::promise<void> read_;
-  std::future<void> read_future_;
-  Background work_;  // (last: joined before the rest goes)
+  std::unique_ptr<Impl> impl_;  // (null when the tree could not be built)
+  Background work_;             // (last: joined before the rest goes)
 };
 
 }  // namespace evomesh

@@ -209,8 +209,8 @@ struct Old_mesh_start {
 // After triangulate_selection: the parent map of the new mesh in `input` (timed
 // as "parent_map"), beside it the output's nn, and the step's total time; the
 // walker from `start` if given. `selection_nn` (optional; with the
-// `selected_index` of triangulate_selection): the selected points' nn, started
-// before the quality pass, which the output's nn then completes (output_nn.hpp).
+// `selected_index` of triangulate_selection): the selected points' nn, found
+// beside the quality pass, which the output's nn then completes (output_nn.hpp).
 void finish_step(const Mesh_arrays& input, Evolve_result& result, detail::Stage_timer& timer,
                  Old_mesh_start* start = nullptr, Selection_nn* selection_nn = nullptr,
                  const std::vector<Index>* selected_index = nullptr);
