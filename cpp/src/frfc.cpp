@@ -319,17 +319,12 @@ Evolve_result frfc(const Mesh_arrays& input, const std::vector<double>& delta, c
   Old_mesh_start old_mesh(input, options.threads);
   early->wait();
   detail::release_free_memory();
-  // Beside the quality pass, the selected points' nn: most of the output's
-  // (output_nn.hpp; not with curves, whose points move after the selection).
-  std::optional<Selection_nn> selection_nn;
-  if (!mesh.geometry && options.quality) selection_nn.emplace(selection.mesh.points, options.threads);
   const bool early_started = options.quality && !mesh.geometry;
-  std::vector<Index> selected_index;
   triangulate_selection(std::move(selection), pieces, options.quality ? &quality : nullptr, result,
-                        early_started ? &early->triangulation : nullptr, mesh.geometry.get(), &selected_index);
+                        early_started ? &early->triangulation : nullptr, mesh.geometry.get());
   detail::release_free_memory();
   timer.lap(options.quality ? "quality" : "cdt");
-  finish_step(input, result, timer, &old_mesh, selection_nn ? &*selection_nn : nullptr, &selected_index);
+  finish_step(input, result, timer, &old_mesh);
   add_step_counts(result, {{"n_input_points", mesh.points.size()},
                            {"n_segment_samples", on_segments.size()},
                            {"n_interior_samples", n_interior},

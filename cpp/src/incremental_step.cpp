@@ -534,13 +534,10 @@ std::optional<Evolve_result> incremental_frfc(const Mesh_arrays& mesh, const std
   const Quality_options quality = options.quality_settings();
   Old_mesh_start old_mesh(mesh, options.threads, std::move(fans));  // beside the early triangulation (frfc.cpp)
   early.wait();
-  std::optional<Selection_nn> selection_nn;  // beside the quality pass (frfc.cpp)
-  if (options.quality) selection_nn.emplace(selection.mesh.points, options.threads);
-  std::vector<Index> selected_index;
   triangulate_selection(std::move(selection), pieces, options.quality ? &quality : nullptr, result,
-                        options.quality ? &early.triangulation : nullptr, nullptr, &selected_index);
+                        options.quality ? &early.triangulation : nullptr, nullptr);
   timer.lap(options.quality ? "quality" : "cdt");
-  finish_step(mesh, result, timer, &old_mesh, selection_nn ? &*selection_nn : nullptr, &selected_index);
+  finish_step(mesh, result, timer, &old_mesh);
   std::size_t n_quiet = 0;
   for (std::uint8_t q : quiet) n_quiet += q;
   std::vector<std::uint8_t> in_region(n, 0);

@@ -174,7 +174,7 @@ Spacing_queries spacing_queries(const Spacing_function& function) {
 
 void triangulate_selection(Selection selected, const std::vector<Constraint_piece>& pieces,
                            const Quality_options* quality, Evolve_result& result, Early_triangulation* early,
-                           const Boundary_geometry* geometry, std::vector<Index>* selected_index) {
+                           const Boundary_geometry* geometry) {
   auto& stats = result.stats;
   Mesh_arrays& mesh = selected.mesh;
   // CGAL's triangulations assume these (a piece from a point to itself, or out
@@ -200,7 +200,6 @@ void triangulate_selection(Selection selected, const std::vector<Constraint_piec
         result.origin[i] = refined.source[i] < 0 ? -1 : selected.origin[refined.source[i]];
       }
       result.mesh = std::move(refined.mesh);
-      if (selected_index) *selected_index = refined.source;
       if (geometry) selection_index = std::move(refined.source);
       const auto& report = refined.report;
       stats.emplace_back("quality_points_added", static_cast<double>(report.n_inserted));
@@ -222,10 +221,6 @@ void triangulate_selection(Selection selected, const std::vector<Constraint_piec
     }
     result.mesh = std::move(mesh);
     result.origin = std::move(selected.origin);
-    if (selected_index) {
-      selected_index->resize(result.mesh.points.size());
-      for (std::size_t i = 0; i < selected_index->size(); ++i) (*selected_index)[i] = static_cast<Index>(i);
-    }
     if (geometry) {
       selection_index.resize(result.mesh.points.size());
       for (std::size_t i = 0; i < selection_index.size(); ++i) selection_index[i] = static_cast<Index>(i);
@@ -241,8 +236,7 @@ void triangulate_selection(Selection selected, const std::vector<Constraint_piec
   stats.emplace_back("min_angle_y", angle.second[1]);
 }
 
-void finish_step(const Mesh_arrays& input, Evolve_result& result, detail::Stage_timer& timer, Old_mesh_start* start,
-                 Selection_nn* selection_nn, const std::vector<Index>* selected_index) {
+void finish_step(const Mesh_arrays& input, Evolve_result& result, detail::Stage_timer& timer, Old_mesh_start* start) {
   std::unique_ptr<Old_mesh_walker> walker;
   if (start != nullptr) {
     start->work.wait();
@@ -252,24 +246,15 @@ void finish_step(const Mesh_arrays& input, Evolve_result& result, detail::Stage_
     walker = std::make_unique<Old_mesh_walker>(input, result.curve_reach);
   }
   const Old_mesh_walker& old_mesh = *walker;  // for both
-  // The output's nn (for the output Mesh) on the other thread, beside the
-  // walks: completed from the selected points' (output_nn.hpp) when the step
-  // started that, else from scratch. Both only read the output's points and triangles.
+  // The output's nn (for the output Mesh) on another thread, beside the walks
+  // (both on parallel_for's threads). Both only read the output's points and triangles.
   Background output_nn;
   double nn_seconds = 0;
-  bool nn_from_selection = false;
   output_nn.start(
-      [&result, &nn_seconds, &nn_from_selection, selection_nn, selected_index]() {
+      [&result, &nn_seconds]() {
         const auto begin = std::chrono::steady_clock::now();
         try {
-          std::vector<double> nn;
-          if (selection_nn && selected_index &&
-              selection_nn->output_squared_nn(result.mesh.points, *selected_index, nn)) {
-            for (double& d : nn) d = std::sqrt(d);
-            nn_from_selection = true;
-          } else {
-            nn = nn_spacing(result.mesh.points);
-          }
+          std::vector<double> nn = nn_spacing(result.mesh.points);
           std::vector<double> within = nn;
           const auto grew = keep_within_domain(result.mesh.points, result.mesh.triangles, within);
           for (std::size_t i = 0; i < grew.size(); ++i) {
@@ -295,7 +280,6 @@ void finish_step(const Mesh_arrays& input, Evolve_result& result, detail::Stage_
   // Inside the parent_map stage: the walks (and tags) and, beside them, the output's nn.
   result.stats.emplace_back("parent_map_walk_seconds", walk_seconds);
   result.stats.emplace_back("parent_map_output_nn_seconds", nn_seconds);
-  result.stats.emplace_back("output_nn_from_selection", nn_from_selection ? 1.0 : 0.0);
   auto& stats = result.stats;
   double seconds = 0;
   for (const auto& s : stats) {

@@ -15,7 +15,6 @@
 #include "evomesh/boundary_geometry.hpp"
 #include "evomesh/options.hpp"
 #include "evomesh/parallel.hpp"
-#include "evomesh/output_nn.hpp"
 #include "evomesh/parent_map.hpp"
 #include "evomesh/quality_pass.hpp"
 #include "evomesh/segment_chains.hpp"
@@ -176,12 +175,9 @@ inline Point_kind kept_point_kind(Point_kind kind, bool forced_corner, bool from
 // With a `geometry`, new points on curved pieces are then moved onto their
 // curves (fit_to_curves); result.curve_reach says how far outside the input's
 // domain that may put them.
-// `selected_index` (optional) receives, for every output point, its index in
-// `selected` (-1: a point the quality pass added).
 void triangulate_selection(Selection selected, const std::vector<Constraint_piece>& pieces,
                            const Quality_options* quality, Evolve_result& result,
-                           Early_triangulation* early = nullptr, const Boundary_geometry* geometry = nullptr,
-                           std::vector<Index>* selected_index = nullptr);
+                           Early_triangulation* early = nullptr, const Boundary_geometry* geometry = nullptr);
 
 
 // The old mesh's walker for finish_step, built on the other thread while the
@@ -207,13 +203,9 @@ struct Old_mesh_start {
 };
 
 // After triangulate_selection: the parent map of the new mesh in `input` (timed
-// as "parent_map"), beside it the output's nn, and the step's total time; the
-// walker from `start` if given. `selection_nn` (optional; with the
-// `selected_index` of triangulate_selection): the selected points' nn, found
-// beside the quality pass, which the output's nn then completes (output_nn.hpp).
+// as "parent_map") and the step's total time; the walker from `start` if given.
 void finish_step(const Mesh_arrays& input, Evolve_result& result, detail::Stage_timer& timer,
-                 Old_mesh_start* start = nullptr, Selection_nn* selection_nn = nullptr,
-                 const std::vector<Index>* selected_index = nullptr);
+                 Old_mesh_start* start = nullptr);
 
 // Appends the counts (name, value) to result.stats, then the output's point and
 // triangle counts.

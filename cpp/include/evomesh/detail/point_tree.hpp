@@ -53,14 +53,6 @@ class Point_tree {
     return best;
   }
 
-  // The points in tree order, and the tree (for searches of the user's own).
-  const std::vector<Vec2>& tree_points() const { return points_; }
-  const Static_kd_tree<>& tree() const { return tree_; }
-
-  // The squared distance from the point at `position` (tree order) to its
-  // nearest other point.
-  double squared_nn_at(std::size_t position) const { return query(position); }
-
   // Squared nearest-neighbour distances, by point index.
   std::vector<double> squared_nn(int threads) const {
     const std::size_t n = points_.size();
