@@ -49,3 +49,25 @@ def test_points_the_quality_pass_drops() -> None:
             new = evomesh.evolve(mesh, delta, seed=seed)
             assert new.stats["quality_points_removed"] > 0
             _assert_fresh(new)
+
+
+def test_constant_arrays_of_a_plain_mesh_are_free_and_frozen() -> None:
+    """An unlabelled user mesh: tags, required flags and origin are views of one
+    value (no memory a point), read-only for good, and equal to the arrays they
+    stand for, also after a pickle round trip and through a step."""
+    import pickle
+
+    mesh = evomesh.unit_square_mesh(500, seed=4)
+    n, m = mesh.n_points, mesh.n_triangles
+    for array, value, size in ((mesh.triangle_tags, 0, m), (mesh.segment_tags, 0, len(mesh.segments)),
+                               (mesh.required, False, n), (mesh.origin, -1, n)):
+        assert array.shape == (size,) and array.strides == (0,)
+        assert (array == value).all()
+        with pytest.raises(ValueError):
+            array.flags.writeable = True
+    again = pickle.loads(pickle.dumps(mesh))
+    np.testing.assert_array_equal(again.origin, mesh.origin)
+    np.testing.assert_array_equal(again.triangle_tags, mesh.triangle_tags)
+    new = evomesh.evolve(mesh, 0.7, seed=1)
+    assert new.triangle_tags.strides == (0,) and (new.triangle_tags == 0).all()
+    assert ((new.origin >= -1) & (new.origin < n)).all()

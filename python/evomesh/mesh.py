@@ -37,17 +37,31 @@ Names and values come from the C++ core (evomesh::Point_kind).
 
 def _frozen(array: np.ndarray) -> np.ndarray:
     """A read-only array over an immutable ``bytes`` owner: numpy refuses to make
-    it (or any view of it) writeable again, so a Mesh cannot be changed in place."""
+    it (or any view of it) writeable again, so a Mesh cannot be changed in place.
+    (A constant made by _frozen_constant already is one, and stays a view.)"""
+    if isinstance(array, np.ndarray) and array.ndim == 1 and array.strides == (0,) and _owned_by_bytes(array):
+        return array
     array = np.ascontiguousarray(array)
     return np.frombuffer(array.tobytes(), dtype=array.dtype).reshape(array.shape)
 
 
+def _owned_by_bytes(array: np.ndarray) -> bool:
+    base = array
+    while isinstance(base, np.ndarray):
+        base = base.base
+    return isinstance(base, bytes)
+
+
+def _frozen_constant(n: int, value: Any, dtype: Any) -> np.ndarray:
+    """n copies of `value` as a read-only view of one immutable value (stride 0):
+    the labels of an unlabelled mesh and the origin of a user's mesh cost no
+    memory (24 bytes a point in a plain mesh: int64 triangle tags, int64 origin)."""
+    one = np.frombuffer(np.array([value], dtype=dtype).tobytes(), dtype=dtype)
+    return np.broadcast_to(one, (n,))
+
+
 def _frozen_zeros(n: int, dtype: Any) -> np.ndarray:
-    """n zeros as a read-only view of one immutable zero (stride 0): the labels
-    of an unlabelled mesh cost no memory (16 bytes a point for the triangle
-    tags of a plain mesh, in every mesh a step takes and returns)."""
-    zero = np.frombuffer(bytes(np.dtype(dtype).itemsize), dtype=dtype)
-    return np.broadcast_to(zero, (n,))
+    return _frozen_constant(n, 0, dtype)
 
 
 def _as_array(values: Any, name: str) -> np.ndarray:
@@ -341,7 +355,7 @@ class Mesh:
             kinds = np.where(computed_kind == PointKind.CORNER, np.uint8(PointKind.CORNER), kinds.astype(np.uint8))
         check_boundary_not_pinched(pts, segs, boundary, kinds)
         if origin is None:
-            org = np.full(n, -1, dtype=np.int64)
+            org = _frozen_constant(n, -1, np.int64)
         else:
             org = _as_array(origin, "origin")
             if org.dtype == object or org.dtype.kind not in "iu":
