@@ -46,7 +46,7 @@ def _frozen(array: np.ndarray) -> np.ndarray:
 
 
 def _owned_by_bytes(array: np.ndarray) -> bool:
-    base = array
+    base: object = array
     while isinstance(base, np.ndarray):
         base = base.base
     return isinstance(base, bytes)
