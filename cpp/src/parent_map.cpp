@@ -151,7 +151,10 @@ Parent_map parent_map(const Old_mesh_walker& walker, const Mesh_arrays& new_mesh
   // from its placed neighbour of least index (an atomic minimum over the new
   // triangles at it), so the walks of a round are independent and run in
   // parallel, and the map is the same for any thread count. O(n) walks of a few
-  // triangles each, as in a breadth-first order, with no sequential pass.
+  // triangles each, as in a breadth-first order, with no sequential pass. There
+  // are as many rounds as new points lie edges away from the nearest kept one
+  // (a few, more only where a step refines by a large factor); each reads only
+  // the new triangles that still have a pending vertex.
   constexpr std::uint32_t kNone = ~std::uint32_t{0};
   constexpr std::size_t kChunk = std::size_t{1} << 14;
   auto chunks = [](std::size_t size) { return (size + kChunk - 1) / kChunk; };

@@ -60,10 +60,6 @@ def _frozen_constant(n: int, value: Any, dtype: Any) -> np.ndarray:
     return np.broadcast_to(one, (n,))
 
 
-def _frozen_zeros(n: int, dtype: Any) -> np.ndarray:
-    return _frozen_constant(n, 0, dtype)
-
-
 def _as_array(values: Any, name: str) -> np.ndarray:
     """np.asarray with a clear message for ragged nested sequences."""
     try:
@@ -380,11 +376,11 @@ class Mesh:
         set_(self, "stats", MappingProxyType(dict(stats)))
         set_(self, "lineage", lineage)
         n_segments, n_triangles, n_points = len(self.segments), len(self.triangles), len(self.points)
-        set_(self, "segment_tags", _frozen_zeros(n_segments, np.int64) if segment_tags is None
+        set_(self, "segment_tags", _frozen_constant(n_segments, 0, np.int64) if segment_tags is None
              else _frozen(np.asarray(segment_tags, dtype=np.int64)))
-        set_(self, "triangle_tags", _frozen_zeros(n_triangles, np.int64) if triangle_tags is None
+        set_(self, "triangle_tags", _frozen_constant(n_triangles, 0, np.int64) if triangle_tags is None
              else _frozen(np.asarray(triangle_tags, dtype=np.int64)))
-        set_(self, "required", _frozen_zeros(n_points, bool) if required is None
+        set_(self, "required", _frozen_constant(n_points, False, bool) if required is None
              else _frozen(np.asarray(required, dtype=bool)))
         # nn: the Euclidean distances, made distances within the domain, unless
         # nn_grew (the points where that made them larger) says it was done.
