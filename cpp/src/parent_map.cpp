@@ -158,31 +158,32 @@ Parent_map parent_map(const Old_mesh_walker& walker, const Mesh_arrays& new_mesh
   constexpr std::uint32_t kNone = ~std::uint32_t{0};
   constexpr std::size_t kChunk = std::size_t{1} << 14;
   auto chunks = [](std::size_t size) { return (size + kChunk - 1) / kChunk; };
+  // value(k) for k in [0, size) with keep(k), in order (filtered in parallel chunks).
+  auto collect = [&](std::size_t size, auto keep, auto value) {
+    std::vector<std::vector<Index>> found(chunks(size));
+    parallel_for(found.size(), 0, [&](std::size_t c) {
+      for (std::size_t k = c * kChunk; k < std::min(size, (c + 1) * kChunk); ++k) {
+        if (keep(k)) found[c].push_back(value(k));
+      }
+    });
+    std::vector<Index> out;
+    for (const auto& f : found) out.insert(out.end(), f.begin(), f.end());
+    return out;
+  };
+  auto itself = [](std::size_t k) { return static_cast<Index>(k); };
   std::vector<Index> start;  // the old triangle a walk from new point u starts at (-1: u not placed)
   detail::parallel_resize(start, n_new, Index{-1});
-  std::vector<Index> pending;  // new points not placed yet
-  {
-    std::vector<std::vector<Index>> found(chunks(n_new));
-    parallel_for(found.size(), 0, [&](std::size_t c) {
-      for (std::size_t i = c * kChunk; i < std::min(n_new, (c + 1) * kChunk); ++i) {
-        if (origin[i] >= 0) start[i] = walker.triangle_at(origin[i]);
-        else found[c].push_back(static_cast<Index>(i));
-      }
-    });
-    for (const auto& f : found) pending.insert(pending.end(), f.begin(), f.end());
-  }
+  parallel_for(chunks(n_new), 0, [&](std::size_t c) {
+    for (std::size_t i = c * kChunk; i < std::min(n_new, (c + 1) * kChunk); ++i) {
+      if (origin[i] >= 0) start[i] = walker.triangle_at(origin[i]);
+    }
+  });
+  const auto& NT = new_mesh.triangles;
+  std::vector<Index> pending = collect(n_new, [&](std::size_t i) { return origin[i] < 0; }, itself);
   // The new triangles that have a vertex not placed (those a round reads).
-  std::vector<Index> open_triangles;
-  {
-    const auto& NT = new_mesh.triangles;
-    std::vector<std::vector<Index>> found(chunks(NT.size()));
-    parallel_for(found.size(), 0, [&](std::size_t c) {
-      for (std::size_t t = c * kChunk; t < std::min(NT.size(), (c + 1) * kChunk); ++t) {
-        if (origin[NT[t][0]] < 0 || origin[NT[t][1]] < 0 || origin[NT[t][2]] < 0) found[c].push_back(static_cast<Index>(t));
-      }
-    });
-    for (const auto& f : found) open_triangles.insert(open_triangles.end(), f.begin(), f.end());
-  }
+  std::vector<Index> open_triangles = collect(
+      NT.size(), [&](std::size_t t) { return origin[NT[t][0]] < 0 || origin[NT[t][1]] < 0 || origin[NT[t][2]] < 0; },
+      itself);
   std::vector<std::atomic<std::uint32_t>> from(n_new);  // least placed neighbour of a pending point
   parallel_for(chunks(n_new), 0, [&](std::size_t c) {
     for (std::size_t i = c * kChunk; i < std::min(n_new, (c + 1) * kChunk); ++i) from[i].store(kNone, std::memory_order_relaxed);
@@ -193,7 +194,7 @@ Parent_map parent_map(const Old_mesh_walker& walker, const Mesh_arrays& new_mesh
     // placed before this round: this round's walks write start afterwards).
     parallel_for(chunks(open_triangles.size()), 0, [&](std::size_t c) {
       for (std::size_t k = c * kChunk; k < std::min(open_triangles.size(), (c + 1) * kChunk); ++k) {
-        const Triangle& tri = new_mesh.triangles[open_triangles[k]];
+        const Triangle& tri = NT[open_triangles[k]];
         for (int j = 0; j < 3; ++j) {
           const Index v = tri[j];
           if (start[v] >= 0) continue;
@@ -251,15 +252,13 @@ Parent_map parent_map(const Old_mesh_walker& walker, const Mesh_arrays& new_mesh
     for (const auto& w : waiting) pending.insert(pending.end(), w.begin(), w.end());
     if (placed_in_round == 0 || pending.empty()) break;  // (then none has a placed neighbour)
     // The triangles with a vertex still pending, in order.
-    std::vector<std::vector<Index>> still(chunks(open_triangles.size()));
-    parallel_for(still.size(), 0, [&](std::size_t c) {
-      for (std::size_t k = c * kChunk; k < std::min(open_triangles.size(), (c + 1) * kChunk); ++k) {
-        const Triangle& tri = new_mesh.triangles[open_triangles[k]];
-        if (start[tri[0]] < 0 || start[tri[1]] < 0 || start[tri[2]] < 0) still[c].push_back(open_triangles[k]);
-      }
-    });
-    open_triangles.clear();
-    for (const auto& f : still) open_triangles.insert(open_triangles.end(), f.begin(), f.end());
+    open_triangles = collect(
+        open_triangles.size(),
+        [&](std::size_t k) {
+          const Triangle& tri = NT[open_triangles[k]];
+          return start[tri[0]] < 0 || start[tri[1]] < 0 || start[tri[2]] < 0;
+        },
+        [&](std::size_t k) { return open_triangles[k]; });
   }
   unplaced.insert(unplaced.end(), pending.begin(), pending.end());
   if (!unplaced.empty()) {
