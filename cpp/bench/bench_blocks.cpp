@@ -1,4 +1,5 @@
 // Building-block costs per point (wall time): constrained Delaunay, nn_spacing,
+// nn within the domain (keep_within_domain over the Delaunay triangles),
 // the Apollonius graph (Spacing_function: parts built in parallel from 2^19
 // sites on), and f on one thread at the points (certified) and at sample-like
 // points (greedy walk). Points: uniform random in the unit square, or the graded
@@ -14,6 +15,7 @@
 #include <string>
 #include <vector>
 
+#include "evomesh/local_feature_size.hpp"
 #include "evomesh/spacing.hpp"
 #include "evomesh/triangulation.hpp"
 
@@ -79,6 +81,25 @@ int main(int argc, char** argv) {
   t0 = std::chrono::steady_clock::now();
   const auto triangles = constrained_delaunay(points, {});
   std::printf("Delaunay (constrained_delaunay)    %6.2f  (%zu triangles: no constraints, no domain)\n", seconds_since(t0) * us, triangles.size());
+
+  {
+    // The same points inside a square boundary (its triangles, not timed).
+    std::vector<Vec2> boxed = points;
+    double lo = 0, hi = 1;
+    for (const Vec2& p : points) lo = std::min({lo, p[0], p[1]}), hi = std::max({hi, p[0], p[1]});
+    const double pad = 0.1 * (hi - lo);
+    for (const Vec2& c : {Vec2{lo - pad, lo - pad}, Vec2{hi + pad, lo - pad}, Vec2{hi + pad, hi + pad},
+                          Vec2{lo - pad, hi + pad}}) {
+      boxed.push_back(c);
+    }
+    const Index m = static_cast<Index>(boxed.size());
+    const auto domain = constrained_delaunay(
+        boxed, {{m - 4, m - 3, true}, {m - 3, m - 2, true}, {m - 2, m - 1, true}, {m - 1, m - 4, true}});
+    std::vector<double> within = nn_spacing(boxed);
+    t0 = std::chrono::steady_clock::now();
+    keep_within_domain(boxed, domain, within);
+    std::printf("nn within the domain (its edges)   %6.2f\n", seconds_since(t0) * us);
+  }
 
   std::vector<double> weight(n);
   for (std::size_t i = 0; i < n; ++i) weight[i] = delta[i] * nn[i];

@@ -14,33 +14,77 @@ namespace evomesh {
 
 std::vector<std::uint8_t> keep_within_domain(const std::vector<Vec2>& points, const std::vector<Triangle>& triangles,
                                              std::vector<double>& nn) {
-  // Edge lengths in parallel blocks (hypot is most of the cost), their least at
-  // every point in one pass.
-  std::vector<double> shortest(points.size(), std::numeric_limits<double>::infinity());
+  // A point changes where its shortest edge (the least std::hypot of its edges)
+  // exceeds nn * (1 + kRounding). The edge of least squared length decides that
+  // for almost every point with one hypot: the least hypot is at most that edge's,
+  // so "unchanged" is certain when its hypot is within the bound. Only the other
+  // points (about those that change) take the least hypot of all their edges, as
+  // the definition says: the same bits as computing it everywhere.
+  const std::size_t n = points.size();
+  constexpr double kRounding = 4 * std::numeric_limits<double>::epsilon();
+  // Squared edge lengths in parallel blocks (the reads of the points), the
+  // shortest edge of every point in one pass.
+  std::vector<std::array<double, 3>> squared_length(triangles.size());
   constexpr std::size_t kBlock = 1 << 14;
-  std::vector<std::array<double, 3>> length(triangles.size());
   parallel_for((triangles.size() + kBlock - 1) / kBlock, 0, [&](std::size_t block) {
     for (std::size_t t = block * kBlock; t < std::min(triangles.size(), (block + 1) * kBlock); ++t) {
       for (int k = 0; k < 3; ++k) {
         const Index a = triangles[t][k], b = triangles[t][(k + 1) % 3];
-        length[t][k] = std::hypot(points[b][0] - points[a][0], points[b][1] - points[a][1]);
+        const double dx = points[b][0] - points[a][0], dy = points[b][1] - points[a][1];
+        squared_length[t][k] = dx * dx + dy * dy;
       }
     }
   });
-  for (std::size_t t = 0; t < triangles.size(); ++t) {
-    for (int k = 0; k < 3; ++k) {
-      const Index a = triangles[t][k], b = triangles[t][(k + 1) % 3];
-      shortest[a] = std::min(shortest[a], length[t][k]);
-      shortest[b] = std::min(shortest[b], length[t][k]);
+  // Each worker owns a range of points and scans every edge for them (ties keep
+  // the first edge in triangle order, as one pass would).
+  std::vector<double> least(n, std::numeric_limits<double>::infinity());
+  std::vector<Index> other(n, -1);
+  const std::size_t n_owners = std::max<std::size_t>(1, std::min<std::size_t>(static_cast<std::size_t>(resolve_threads(0)), 8));
+  parallel_for(n_owners, 0, [&](std::size_t owner) {
+    const Index lo = static_cast<Index>(n * owner / n_owners), hi = static_cast<Index>(n * (owner + 1) / n_owners);
+    for (std::size_t t = 0; t < triangles.size(); ++t) {
+      for (int k = 0; k < 3; ++k) {
+        const Index a = triangles[t][k], b = triangles[t][(k + 1) % 3];
+        const double squared = squared_length[t][k];
+        if (a >= lo && a < hi && squared < least[a]) least[a] = squared, other[a] = b;
+        if (b >= lo && b < hi && squared < least[b]) least[b] = squared, other[b] = a;
+      }
+    }
+  });
+  squared_length = {};
+  // `least` becomes the least hypot where it is needed exactly, else stays unused.
+  std::vector<std::uint8_t> exact(n, 0);
+  parallel_for((n + kBlock - 1) / kBlock, 0, [&](std::size_t block) {
+    for (std::size_t i = block * kBlock; i < std::min(n, (block + 1) * kBlock); ++i) {
+      if (other[i] < 0) continue;  // no edge: nn stays
+      const Vec2& q = points[other[i]];
+      const double length = std::hypot(q[0] - points[i][0], q[1] - points[i][1]);
+      if (length > nn[i] * (1 + kRounding) || std::isnan(length) || std::isnan(nn[i])) {
+        exact[i] = 1;
+        least[i] = std::numeric_limits<double>::infinity();
+      }
+    }
+  });
+  other = {};
+  bool any = false;
+  for (std::uint8_t e : exact) any = any || e;
+  if (any) {
+    for (const Triangle& t : triangles) {
+      for (int k = 0; k < 3; ++k) {
+        const Index a = t[k], b = t[(k + 1) % 3];
+        if (!exact[a] && !exact[b]) continue;
+        const double length = std::hypot(points[b][0] - points[a][0], points[b][1] - points[a][1]);
+        if (exact[a]) least[a] = std::min(least[a], length);
+        if (exact[b]) least[b] = std::min(least[b], length);
+      }
     }
   }
-  std::vector<std::uint8_t> changed(points.size(), 0);
-  constexpr double kRounding = 4 * std::numeric_limits<double>::epsilon();
-  for (std::size_t i = 0; i < points.size(); ++i) {
+  std::vector<std::uint8_t> changed(n, 0);
+  for (std::size_t i = 0; i < n; ++i) {
     // the nearest point is no edge neighbour: in a constrained Delaunay
     // triangulation it is hidden behind a constraint (a slit, a thin wall)
-    if (std::isfinite(shortest[i]) && shortest[i] > nn[i] * (1 + kRounding)) {
-      nn[i] = shortest[i];
+    if (exact[i] && std::isfinite(least[i]) && least[i] > nn[i] * (1 + kRounding)) {
+      nn[i] = least[i];
       changed[i] = 1;
     }
   }
