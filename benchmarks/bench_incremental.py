@@ -97,6 +97,8 @@ def assert_same(full: evomesh.Mesh, fast: evomesh.Mesh) -> None:
         assert np.array_equal(getattr(full, name), getattr(fast, name)), name
     for name in LINEAGE:
         assert np.array_equal(getattr(full.lineage, name), getattr(fast.lineage, name)), name
+    # the output's nn that the next step reads (the incremental step takes it from the change)
+    assert np.array_equal(full.nn_spacing, fast.nn_spacing), "nn_spacing"
 
 
 def run(n: int, repeats: int, evidence: bool) -> list[dict]:

@@ -71,3 +71,21 @@ def test_constant_arrays_of_a_plain_mesh_are_free_and_frozen() -> None:
     new = evomesh.evolve(mesh, 0.7, seed=1)
     assert new.triangle_tags.strides == (0,) and (new.triangle_tags == 0).all()
     assert ((new.origin >= -1) & (new.origin < n)).all()
+
+
+@pytest.mark.parametrize("jitter", [0.0, 0.2])
+def test_an_incremental_steps_nn_from_the_change(jitter: float) -> None:
+    """A narrow band on a 2e4-point mesh: the incremental step takes the output's
+    nn from the input's where nothing near changed (nn_spacing_after_change);
+    the same bits as a fresh computation, on a lattice (ties) and a jittered grid,
+    refined and coarsened, and again on the stepped mesh."""
+    mesh = evomesh.unit_square_mesh(20000, jitter=jitter, seed=3)
+    for value in (0.6, 1.6):
+        x = mesh.points[:, 0]
+        new = evomesh.evolve(mesh, np.where(np.abs(x - 0.4) < 0.02, value, 1.0), seed=1)
+        assert "incremental_quiet_triangles" in new.stats  # the incremental path
+        _assert_fresh(new)
+        y = new.points[:, 1]
+        again = evomesh.evolve(new, np.where(np.abs(y - 0.7) < 0.015, 1 / value, 1.0), seed=2)
+        assert "incremental_quiet_triangles" in again.stats
+        _assert_fresh(again)

@@ -537,7 +537,13 @@ std::optional<Evolve_result> incremental_frfc(const Mesh_arrays& mesh, const std
   triangulate_selection(std::move(selection), pieces, options.quality ? &quality : nullptr, result,
                         options.quality ? &early.triangulation : nullptr, nullptr);
   timer.lap(options.quality ? "quality" : "cdt");
-  finish_step(mesh, result, timer, &old_mesh);
+  // The output's nn from the input's where nothing near changed: the input's
+  // Euclidean nn is weights.nn except where it grew within the domain.
+  std::vector<double> euclidean_nn = weights.nn;
+  for (std::size_t i = 0; i < weights.evaluate.size(); ++i) {
+    if (weights.evaluate[i]) euclidean_nn[i] = std::numeric_limits<double>::quiet_NaN();
+  }
+  finish_step(mesh, result, timer, &old_mesh, &euclidean_nn);
   std::size_t n_quiet = 0;
   for (std::uint8_t q : quiet) n_quiet += q;
   std::vector<std::uint8_t> in_region(n, 0);

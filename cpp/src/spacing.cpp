@@ -31,6 +31,108 @@ std::vector<double> nn_spacing(const std::vector<Vec2>& points) {
   return nn;
 }
 
+std::vector<double> nn_spacing_after_change(const std::vector<Vec2>& input_points,
+                                            const std::vector<double>& input_nn, const std::vector<Vec2>& points,
+                                            const std::vector<Triangle>& triangles,
+                                            const std::vector<Index>& origin) {
+  const std::size_t n = points.size();
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  if (origin.size() != n || input_nn.size() != input_points.size() || n < 2) return nn_spacing(points);
+  // The changed points: input points the output lost, and the new points.
+  std::vector<std::uint8_t> kept(input_points.size(), 0);
+  std::vector<Vec2> changed;
+  for (std::size_t i = 0; i < n; ++i) {
+    if (origin[i] >= 0) kept[origin[i]] = 1;
+    else changed.push_back(points[i]);
+  }
+  for (std::size_t o = 0; o < input_points.size(); ++o) {
+    if (!kept[o]) changed.push_back(input_points[o]);
+  }
+  if (changed.size() > n / 8) return nn_spacing(points);
+  constexpr std::size_t kChunk = 4096;
+  const std::size_t n_chunks = (n + kChunk - 1) / kChunk;
+  // Kept point p with old nn d = fl(sqrt(m)), m its least squared distance then:
+  // m <= bound = fl(d^2) (1 + 1e-15) (d rounds sqrt(m) to nearest; 1e-15 is
+  // about 9 units of rounding), so no changed point within squared distance
+  // `bound` (computed as the trees compute it) means the old nearest point is
+  // kept and no new point is nearer: nn(p) = d, bit for bit.
+  std::vector<double> nn(n, nan);
+  std::vector<std::uint8_t> open(n, 0);
+  if (changed.empty()) changed.push_back({nan, nan});  // (a tree of one point no query comes near)
+  {
+    const detail::Point_tree changed_tree(changed);
+    parallel_for(n_chunks, 0, [&](std::size_t c) {
+      for (std::size_t i = c * kChunk; i < std::min(n, (c + 1) * kChunk); ++i) {
+        const double d = origin[i] >= 0 ? input_nn[origin[i]] : nan;
+        const double bound = d * d * (1 + 1e-15);
+        if (bound >= 0x1p-960 && bound <= 0x1p960 && !changed_tree.has_point_within(points[i], bound)) nn[i] = d;
+        else open[i] = 1;
+      }
+    });
+  }
+  // Upper bounds on the others' nn: their shortest edge (squared, then with room
+  // for rounding; a point without one makes the whole computation fresh).
+  std::vector<double> reach(n, std::numeric_limits<double>::infinity());
+  for (const Triangle& t : triangles) {
+    for (int k = 0; k < 3; ++k) {
+      const Index a = t[k], b = t[(k + 1) % 3];
+      if (!open[a] && !open[b]) continue;
+      const double dx = points[b][0] - points[a][0], dy = points[b][1] - points[a][1];
+      const double squared = dx * dx + dy * dy;
+      if (open[a]) reach[a] = std::min(reach[a], squared);
+      if (open[b]) reach[b] = std::min(reach[b], squared);
+    }
+  }
+  std::vector<Vec2> open_points;
+  double largest = 0;  // the largest reach, squared
+  for (std::size_t i = 0; i < n; ++i) {
+    if (!open[i]) continue;
+    if (!(reach[i] >= 0x1p-960 && reach[i] <= 0x1p960)) return nn_spacing(points);
+    open_points.push_back(points[i]);
+    largest = std::max(largest, reach[i]);
+  }
+  if (open_points.empty()) return nn;
+  if (open_points.size() > n / 4) return nn_spacing(points);
+  reach = {};
+  // Every output point within the largest reach of an open point (the open
+  // points among them), in a tree: an open point's nearest other point lies
+  // within its reach, so its two nearest points in that tree are itself and its
+  // nearest other point of the output.
+  largest *= 1 + 1e-12;
+  std::vector<std::uint8_t> near(n, 0);
+  {
+    const detail::Point_tree open_tree(open_points);
+    parallel_for(n_chunks, 0, [&](std::size_t c) {
+      for (std::size_t i = c * kChunk; i < std::min(n, (c + 1) * kChunk); ++i) {
+        near[i] = open[i] || open_tree.has_point_within(points[i], largest);
+      }
+    });
+  }
+  std::vector<Vec2> near_points;
+  for (std::size_t i = 0; i < n; ++i) {
+    if (near[i]) near_points.push_back(points[i]);
+  }
+  const detail::Point_tree near_tree(near_points);
+  bool has_zero = false;
+  std::vector<Index> open_index;
+  for (std::size_t i = 0; i < n; ++i) {
+    if (open[i]) open_index.push_back(static_cast<Index>(i));
+  }
+  std::vector<double> exact(open_index.size());
+  parallel_for((open_index.size() + kChunk - 1) / kChunk, 0, [&](std::size_t c) {
+    for (std::size_t k = c * kChunk; k < std::min(open_index.size(), (c + 1) * kChunk); ++k) {
+      exact[k] = near_tree.squared_two_nearest(points[open_index[k]])[1];
+    }
+  });
+  for (std::size_t k = 0; k < open_index.size(); ++k) {
+    has_zero = has_zero || exact[k] == 0;
+    nn[open_index[k]] = std::sqrt(exact[k]);
+  }
+  // A zero is a duplicate or an underflow: nn_spacing says which (and throws).
+  if (has_zero) return nn_spacing(points);
+  return nn;
+}
+
 namespace {
 
 using Ag_kernel = CGAL::Simple_cartesian<double>;

@@ -236,7 +236,8 @@ void triangulate_selection(Selection selected, const std::vector<Constraint_piec
   stats.emplace_back("min_angle_y", angle.second[1]);
 }
 
-void finish_step(const Mesh_arrays& input, Evolve_result& result, detail::Stage_timer& timer, Old_mesh_start* start) {
+void finish_step(const Mesh_arrays& input, Evolve_result& result, detail::Stage_timer& timer, Old_mesh_start* start,
+                 const std::vector<double>* input_nn) {
   std::unique_ptr<Old_mesh_walker> walker;
   if (start != nullptr) {
     start->work.wait();
@@ -251,10 +252,12 @@ void finish_step(const Mesh_arrays& input, Evolve_result& result, detail::Stage_
   Background output_nn;
   double nn_seconds = 0;
   output_nn.start(
-      [&result, &nn_seconds]() {
+      [&result, &nn_seconds, &input, input_nn]() {
         const auto begin = std::chrono::steady_clock::now();
         try {
-          std::vector<double> nn = nn_spacing(result.mesh.points);
+          std::vector<double> nn = input_nn ? nn_spacing_after_change(input.points, *input_nn, result.mesh.points,
+                                                                      result.mesh.triangles, result.origin)
+                                            : nn_spacing(result.mesh.points);
           std::vector<double> within = nn;
           const auto grew = keep_within_domain(result.mesh.points, result.mesh.triangles, within);
           for (std::size_t i = 0; i < grew.size(); ++i) {

@@ -15,6 +15,20 @@ namespace evomesh {
 // Precondition: at least two points, no duplicates (throws Input_error).
 std::vector<double> nn_spacing(const std::vector<Vec2>& points);
 
+// nn_spacing(points) of a step's output, the same bits, from what the step
+// changed: output point i is input point origin[i] (-1: a new point) at the same
+// coordinates, and input_nn[o] is input point o's nn_spacing in the input (NaN:
+// unknown). A kept point keeps its nn when no removed input point and no new
+// point is as near as its old nearest point (then that point is kept and nothing
+// nearer came: the minimum is the same expression over the same points); the
+// others take their nn among the output points near them, with the triangles'
+// edges as upper bounds. Falls back to nn_spacing(points) when the change is
+// large. O(n + k log k) for k changed points (plus a tree query per point).
+std::vector<double> nn_spacing_after_change(const std::vector<Vec2>& input_points,
+                                            const std::vector<double>& input_nn, const std::vector<Vec2>& points,
+                                            const std::vector<Triangle>& triangles,
+                                            const std::vector<Index>& origin);
+
 // f(x) = min_i (weight_i + |x - site_i|), the lower envelope of cones of
 // slope 1 (Eq. 3). Evaluated through CGAL's Apollonius graph (additively
 // weighted Voronoi diagram): the site minimising weight_i + |x - site_i| is

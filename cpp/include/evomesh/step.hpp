@@ -204,8 +204,11 @@ struct Old_mesh_start {
 
 // After triangulate_selection: the parent map of the new mesh in `input` (timed
 // as "parent_map") and the step's total time; the walker from `start` if given.
+// `input_nn`, if given: nn_spacing of the input points (NaN where unknown), for
+// the output's nn from what the step changed (nn_spacing_after_change; kept
+// points must not have moved).
 void finish_step(const Mesh_arrays& input, Evolve_result& result, detail::Stage_timer& timer,
-                 Old_mesh_start* start = nullptr);
+                 Old_mesh_start* start = nullptr, const std::vector<double>* input_nn = nullptr);
 
 // Appends the counts (name, value) to result.stats, then the output's point and
 // triangle counts.

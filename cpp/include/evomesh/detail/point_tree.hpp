@@ -36,6 +36,18 @@ class Point_tree {
     return best;
   }
 
+  // Whether some point of the tree lies within squared distance `bound` of x
+  // (computed as squared_nearest computes it): the search prunes every node
+  // farther than the bound, so far queries stop near the root.
+  bool has_point_within(const Vec2& x, double bound) const {
+    if (points_.empty()) return false;
+    bool found = false;
+    nearer_first(x, [&] { return found ? -1.0 : bound; }, [&](std::size_t leaf) {
+      found = found || leaf_min<false>(leaf, x, 0, std::numeric_limits<double>::infinity()) <= bound;
+    });
+    return found;
+  }
+
   // Squared distances from x to its nearest and second nearest points of the
   // tree (+inf where the tree has fewer).
   std::array<double, 2> squared_two_nearest(const Vec2& x) const {
