@@ -13,6 +13,7 @@
 #include <list>
 #include <map>
 #include <numeric>
+#include <optional>
 
 #include "evomesh/detail/apollonius_filter.hpp"
 #include "evomesh/detail/point_tree.hpp"
@@ -58,20 +59,24 @@ std::vector<double> nn_spacing_after_change(const std::vector<Vec2>& input_point
   // kept and no new point is nearer: nn(p) = d, bit for bit.
   std::vector<double> nn(n, nan);
   std::vector<std::uint8_t> open(n, 0);
-  if (changed.empty()) changed.push_back({nan, nan});  // (a tree of one point no query comes near)
   {
-    const detail::Point_tree changed_tree(changed);
+    const std::optional<detail::Point_tree> changed_tree =
+        changed.empty() ? std::nullopt : std::make_optional<detail::Point_tree>(changed);
     parallel_for(n_chunks, 0, [&](std::size_t c) {
       for (std::size_t i = c * kChunk; i < std::min(n, (c + 1) * kChunk); ++i) {
         const double d = origin[i] >= 0 ? input_nn[origin[i]] : nan;
         const double bound = d * d * (1 + 1e-15);
-        if (bound >= 0x1p-960 && bound <= 0x1p960 && !changed_tree.has_point_within(points[i], bound)) nn[i] = d;
-        else open[i] = 1;
+        if (bound >= 0x1p-960 && bound <= 0x1p960 &&
+            !(changed_tree && changed_tree->has_point_within(points[i], bound))) {
+          nn[i] = d;
+        } else {
+          open[i] = 1;
+        }
       }
     });
   }
-  // Upper bounds on the others' nn: their shortest edge (squared, then with room
-  // for rounding; a point without one makes the whole computation fresh).
+  // Upper bounds on the others' nn: their shortest edge, squared (a point
+  // without one makes the whole computation fresh).
   std::vector<double> reach(n, std::numeric_limits<double>::infinity());
   for (const Triangle& t : triangles) {
     for (int k = 0; k < 3; ++k) {
@@ -83,11 +88,13 @@ std::vector<double> nn_spacing_after_change(const std::vector<Vec2>& input_point
       if (open[b]) reach[b] = std::min(reach[b], squared);
     }
   }
+  std::vector<Index> open_index;
   std::vector<Vec2> open_points;
   double largest = 0;  // the largest reach, squared
   for (std::size_t i = 0; i < n; ++i) {
     if (!open[i]) continue;
     if (!(reach[i] >= 0x1p-960 && reach[i] <= 0x1p960)) return nn_spacing(points);
+    open_index.push_back(static_cast<Index>(i));
     open_points.push_back(points[i]);
     largest = std::max(largest, reach[i]);
   }
@@ -113,17 +120,13 @@ std::vector<double> nn_spacing_after_change(const std::vector<Vec2>& input_point
     if (near[i]) near_points.push_back(points[i]);
   }
   const detail::Point_tree near_tree(near_points);
-  bool has_zero = false;
-  std::vector<Index> open_index;
-  for (std::size_t i = 0; i < n; ++i) {
-    if (open[i]) open_index.push_back(static_cast<Index>(i));
-  }
   std::vector<double> exact(open_index.size());
   parallel_for((open_index.size() + kChunk - 1) / kChunk, 0, [&](std::size_t c) {
     for (std::size_t k = c * kChunk; k < std::min(open_index.size(), (c + 1) * kChunk); ++k) {
       exact[k] = near_tree.squared_two_nearest(points[open_index[k]])[1];
     }
   });
+  bool has_zero = false;
   for (std::size_t k = 0; k < open_index.size(); ++k) {
     has_zero = has_zero || exact[k] == 0;
     nn[open_index[k]] = std::sqrt(exact[k]);
