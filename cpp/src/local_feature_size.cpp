@@ -39,7 +39,7 @@ std::vector<std::uint8_t> keep_within_domain(const std::vector<Vec2>& points, co
   // the first edge in triangle order, as one pass would).
   std::vector<double> least(n, std::numeric_limits<double>::infinity());
   std::vector<Index> other(n, -1);
-  const std::size_t n_owners = std::max<std::size_t>(1, std::min<std::size_t>(static_cast<std::size_t>(resolve_threads(0)), 8));
+  const std::size_t n_owners = std::clamp<std::size_t>(static_cast<std::size_t>(resolve_threads(0)), 1, 8);
   parallel_for(n_owners, 0, [&](std::size_t owner) {
     const Index lo = static_cast<Index>(n * owner / n_owners), hi = static_cast<Index>(n * (owner + 1) / n_owners);
     for (std::size_t t = 0; t < triangles.size(); ++t) {

@@ -104,7 +104,8 @@ std::vector<double> nn_spacing_after_change(const std::vector<Vec2>& input_point
   // Every output point within the largest reach of an open point (the open
   // points among them), in a tree: an open point's nearest other point lies
   // within its reach, so its two nearest points in that tree are itself and its
-  // nearest other point of the output.
+  // nearest other point of the output (the reach and the trees compute the same
+  // squares; the room below only makes the set larger).
   largest *= 1 + 1e-12;
   std::vector<std::uint8_t> near(n, 0);
   {

@@ -65,7 +65,9 @@ std::vector<Vec2> square_points(std::size_t n, bool lattice, double scale, std::
   if (lattice) {
     const int side = static_cast<int>(std::sqrt(static_cast<double>(n)));
     for (int j = 0; j < side; ++j) {
-      for (int i = 0; i < side; ++i) p.push_back({scale * (0.01 + 0.98 * i / (side - 1)), scale * (0.01 + 0.98 * j / (side - 1))});
+      for (int i = 0; i < side; ++i) {
+        p.push_back({scale * (0.01 + 0.98 * i / (side - 1)), scale * (0.01 + 0.98 * j / (side - 1))});
+      }
     }
   } else {
     for (std::size_t i = 0; i < n; ++i) p.push_back({scale * u(rng), scale * u(rng)});
