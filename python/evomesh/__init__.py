@@ -55,7 +55,7 @@ from evomesh._core import default_thread_count  # noqa: E402
 
 # Moving-front workflow.
 from evomesh.experiments.growing_circle import growing_circle  # noqa: E402
-from evomesh.field_transfer import transfer, transfer_cells  # noqa: E402
+from evomesh.field_transfer import DomainChange, domain_change, transfer, transfer_cells  # noqa: E402
 from evomesh.fronts import CircleFront, Front, LevelSetFront, PointFront, SpacingLaw  # noqa: E402
 from evomesh.meshgen import unit_square_mesh  # noqa: E402
 from evomesh.statistics import step_statistics  # noqa: E402
@@ -69,6 +69,8 @@ __all__ += [
     "SpacingLaw",
     "transfer",
     "transfer_cells",
+    "domain_change",
+    "DomainChange",
     "run",
     "Run",
     "Step",

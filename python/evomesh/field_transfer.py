@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from typing import Any, Callable, Literal, Mapping, overload
+from typing import Any, Callable, Literal, Mapping, NamedTuple, overload
 
 import numpy as np
 import scipy.sparse
@@ -14,7 +14,7 @@ from evomesh import _core
 from evomesh.mesh import Mesh
 from evomesh.spacing_function import _require_mesh
 
-__all__ = ["transfer", "transfer_cells", "Interpolation", "Supermesh"]
+__all__ = ["transfer", "transfer_cells", "domain_change", "DomainChange", "Interpolation", "Supermesh"]
 
 # A new point that the core does not locate in the old mesh is accepted on the
 # nearest old boundary edge if it lies within _outside_tolerance of it:
@@ -265,7 +265,16 @@ def transfer(
     scaled P1 mass matrix has condition number at most 4 on any mesh), to
     rounding, with the integral restored exactly at the end.
     Needs ``new = evolve(old, ...)``; chain calls step by step over several
-    steps (each step is conservative, so the chain is).
+    steps (each step is conservative, so the chain is). A non-finite value is
+    refused (the projection is global: it would spread everywhere).
+
+    When the domain changes (curved boundaries, ``geometry=``: the step moves
+    the discrete boundary between the chords and the curve), the strips of the
+    new domain that no old triangle covers take the linear extension of the
+    old field from the nearest old triangle, and the strips the new domain
+    leaves out are dropped. Constants and linear fields are still reproduced
+    to rounding, and the integral changes by exactly the strips' contribution,
+    which :func:`domain_change` reports (``integral_gained - integral_lost``).
 
     Parameters
     ----------
@@ -318,7 +327,12 @@ def transfer_cells(
     The P0 projection ``new[t] = sum_s |t n s| old[s] / |t|`` over the old
     triangles s overlapping t (a local :class:`Supermesh`, found through
     ``new.lineage``): ``sum_t |t| new[t] = sum_s |s| old[s]`` up to rounding,
-    and a constant field is reproduced exactly.
+    and a constant field is reproduced exactly. Where the new domain covers
+    area the old one did not (curved boundaries), that part of a new triangle
+    takes the value of the nearest old triangle (the one it overlaps most, else
+    the one at its points, in its region); the total then changes by
+    :func:`domain_change`'s ``integral_gained - integral_lost``. A NaN reaches
+    only the new triangles that overlap its old triangle.
 
     Over several steps, chain the calls, one per step::
 
@@ -444,21 +458,178 @@ class Supermesh:
         self.identical = raw["identical"]
         self._new_mass: Any = None  # new's P1 mass matrix, made on first use
         self.new_triangle = np.repeat(np.arange(new.n_triangles), np.diff(self.offsets))
-        empty = np.flatnonzero(np.diff(self.offsets) == 0)
-        if len(empty):
-            raise ValueError(f"new triangle {int(empty[0])} overlaps no old triangle: new was not evolved from old")
+        self._find_domain_change(parent)
 
     def project_cells(self, values: Any) -> np.ndarray:
         """P0 projection of per-triangle values (see :func:`transfer_cells`)."""
         array, flat, dtype = _numeric(values, self.old.n_triangles, "triangle")
-        covered = np.add.reduceat(self.area, self.offsets[:-1])
-        # Relative to a reference value per new triangle (its first old
-        # triangle): a constant field gives differences 0, hence exactly itself.
-        reference = flat[self.old_triangle[self.offsets[:-1]]]
-        weights = (self.area / covered[self.new_triangle])[:, None]
-        mixed = np.add.reduceat(weights * (flat[self.old_triangle] - reference[self.new_triangle]), self.offsets[:-1])
+        n_new = self.new.n_triangles
+        # Relative to a reference value per new triangle (the old triangle that
+        # stands in for it outside the old domain, else its first pair): a
+        # constant field gives differences 0, hence exactly itself. The part of
+        # a new triangle that no old one covers (a curved boundary moved the
+        # domain) takes the value of that nearest old triangle.
+        counts = np.diff(self.offsets)
+        nonempty = counts > 0
+        first = np.full(n_new, -1, dtype=np.int64)
+        first[nonempty] = self.old_triangle[self.offsets[:-1][nonempty]]
+        first[self.gap_triangle] = self.gap_old_triangle
+        reference = flat[first]
+        # Divided by the covered area where the old triangles cover t (so the
+        # weights sum to 1 to rounding), by |t| where a gap is left: there the
+        # gap's own term, (old[s*] - reference) |gap| / |t|, is 0 by the choice of reference.
+        denominator = np.bincount(self.new_triangle, self.area, minlength=n_new)
+        denominator[self.gap_triangle] = self._new_area[self.gap_triangle]
+        weights = (self.area / denominator[self.new_triangle])[:, None]
+        mixed = np.zeros((n_new, flat.shape[1]), dtype=flat.dtype)
+        if nonempty.any():
+            terms = weights * (flat[self.old_triangle] - reference[self.new_triangle])
+            mixed[nonempty] = np.add.reduceat(terms, self.offsets[:-1][nonempty])
         out = (reference + mixed).astype(dtype, copy=False)
-        return out.reshape((self.new.n_triangles,) + array.shape[1:])
+        return out.reshape((n_new,) + array.shape[1:])
+
+    def _find_domain_change(self, parent: np.ndarray) -> None:
+        """Where the new domain covers area the old one did not (a step with curved
+        boundaries moves the discrete boundary between the chords and the curve).
+
+        A new triangle t whose pairs leave more than rounding of its area
+        uncovered gets a stand-in old triangle s* (``gap_old_triangle``): of its
+        pairs the one with the largest overlap, else (t lies wholly outside the
+        old domain) the old triangle at one of its points (the star of a kept
+        point, the lineage's parent of a new one), preferring t's region tag.
+        The old field on the uncovered part U of t is the linear extension E of
+        its values on s*. Then ``int_U phi_a^t E`` needs no polygon of U:
+        ``int_t phi_a^t E - sum_i int_(t n s_i) phi_a^t E``, the first from the
+        P1 element mass of t and E at t's points, the second from each pair's
+        mass block and E at s_i's points (E is linear, so it is its own P1
+        interpolant on s_i). Exact for the quadratic integrand, so constants and
+        linear fields are reproduced and the integral grows by exactly int_U E.
+        ``_gap_mass[g]`` maps s*'s three values to t's three right-hand sides.
+        """
+        old, new = self.old, self.new
+        self._new_area = new.triangle_areas
+        n_new = new.n_triangles
+        covered = np.bincount(self.new_triangle, self.area, minlength=n_new)
+        counts = np.diff(self.offsets)
+        # Rounding of the areas: each shoelace term is a few roundings of
+        # (coordinate magnitude) x (edge length); one such error per pair.
+        magnitude = max(float(np.abs(old.points).max()), float(np.abs(new.points).max()))
+        edge = np.abs(new.points[new.triangles] - new.points[np.roll(new.triangles, 1, axis=1)]).max(axis=(1, 2))
+        tolerance = 64.0 * np.finfo(np.float64).eps * magnitude * edge * (1.0 + counts)
+        gap = np.flatnonzero(self._new_area - covered > tolerance)
+        stand_in = np.full(len(gap), -1, dtype=np.int64)
+        with_pairs = counts[gap] > 0
+        if with_pairs.any():
+            # the pair of largest overlap: order pairs by (new triangle, area) and take each group's last
+            rows = gap[with_pairs]
+            members = np.flatnonzero(np.isin(self.new_triangle, rows))
+            order = members[np.lexsort((self.area[members], self.new_triangle[members]))]
+            last = order[np.r_[self.new_triangle[order][1:] != self.new_triangle[order][:-1], True]]
+            stand_in[with_pairs] = self.old_triangle[last]
+        lone = np.flatnonzero(~with_pairs)
+        if len(lone):
+            stand_in[lone] = self._old_triangle_at_points(gap[lone], parent)
+            missing = lone[stand_in[lone] < 0]
+            if len(missing):
+                raise ValueError(
+                    f"new triangle {int(gap[missing[0]])} overlaps no old triangle and none of its points lies in "
+                    "one: new was not evolved from old"
+                )
+        self.gap_triangle = gap
+        self.gap_old_triangle = stand_in
+        self.gap_area = self._new_area[gap] - covered[gap]
+        # old triangles' area left uncovered by new ones (the domain lost there)
+        old_area = old.triangle_areas
+        old_covered = np.bincount(self.old_triangle, self.area, minlength=old.n_triangles)
+        old_edge = np.abs(old.points[old.triangles] - old.points[np.roll(old.triangles, 1, axis=1)]).max(axis=(1, 2))
+        old_counts = np.bincount(self.old_triangle, minlength=old.n_triangles)
+        old_tolerance = 64.0 * np.finfo(np.float64).eps * magnitude * old_edge * (1.0 + old_counts)
+        self.lost_triangle = np.flatnonzero(old_area - old_covered > old_tolerance)
+        self.lost_area = old_area[self.lost_triangle] - old_covered[self.lost_triangle]
+        self._old_area = old_area
+        if not len(gap) or self.mass.size == 0:
+            self._gap_mass = np.zeros((len(gap), 3, 3))
+            return
+        s_points = old.points[old.triangles[stand_in]]  # (g, 3, 2)
+        t_points = new.points[new.triangles[gap]]
+        # int_t phi_a^t E = (M_t e)_a, e = E at t's points = lambda^{s*}(t's points) @ values(s*)
+        element = (self._new_area[gap] / 12.0)[:, None, None] * (np.ones((3, 3)) + np.eye(3))
+        gap_mass = element @ _barycentric(s_points, t_points)
+        pairs = np.flatnonzero(np.isin(self.new_triangle, gap))
+        if len(pairs):
+            slot = np.searchsorted(gap, self.new_triangle[pairs])
+            pair_points = old.points[old.triangles[self.old_triangle[pairs]]]
+            # int_(t n s_i) phi_a^t E = sum_b mass_i[a, b] E(s_i's point b)
+            pair_terms = self.mass[pairs] @ _barycentric(s_points[slot], pair_points)
+            np.subtract.at(gap_mass, slot, pair_terms)
+        self._gap_mass = gap_mass
+
+    def _old_triangle_at_points(self, triangles: np.ndarray, parent: np.ndarray) -> np.ndarray:
+        """An old triangle at one of the points of each given new triangle (-1 if none):
+        the first old triangle around a kept point's origin, or a new point's parent,
+        preferring one with the new triangle's region tag."""
+        old, new = self.old, self.new
+        incident = np.full(old.n_points, -1, dtype=np.int64)
+        flat = old.triangles.ravel()
+        incident[flat[::-1]] = (np.arange(len(flat)) // 3)[::-1]  # first triangle of each point
+        corners = new.triangles[triangles]  # (k, 3)
+        origin = new.origin[corners]
+        candidate = np.where(origin >= 0, incident[np.maximum(origin, 0)], parent[corners])
+        candidate = np.where(candidate < old.n_triangles, candidate, -1)
+        same_region = (candidate >= 0) & (old.triangle_tags[np.maximum(candidate, 0)]
+                                          == new.triangle_tags[triangles][:, None])
+        score = same_region * 2 + (candidate >= 0)
+        return candidate[np.arange(len(triangles)), np.argmax(score, axis=1)]
+
+    def domain_change(self, values: Any = None) -> DomainChange:
+        """What the change of domain between old and new does to a field's integral.
+
+        A step with curved boundaries (``geometry=``) moves the discrete boundary:
+        the new domain covers strips the old one did not (``area_gained``) and
+        leaves out others (``area_lost``). A conservative transfer carries the
+        old field's integral over the common part exactly; on the gained strip
+        the field is the linear extension from the nearest old triangle, on the
+        lost strip it is dropped, so
+
+            integral(new field) = integral(old field) + integral_gained - integral_lost
+
+        up to rounding, for :func:`transfer` (P1, ``method="conservative"``)
+        and :func:`transfer_cells` (P0).
+
+        Parameters
+        ----------
+        values : array_like, shape (n_old_points,) or (n_old_triangles,), optional
+            A scalar field at the old points (P1) or on the old triangles (P0;
+            when both lengths match, points win). Without it only the areas are given.
+
+        Returns
+        -------
+        DomainChange
+        """
+        area_gained = float(self.gap_area.sum())
+        area_lost = float(self.lost_area.sum())
+        if values is None:
+            return DomainChange(area_gained, area_lost, None, None)
+        field = np.asarray(values, dtype=np.float64)
+        if field.shape == (self.old.n_points,):
+            gap_values = field[self.old.triangles[self.gap_old_triangle]]
+            if self.mass.size == 0 and len(self.area):
+                raise ValueError("a P1 field's domain change needs a Supermesh built with mass=True")
+            gained = float(np.einsum("gab,gb->", self._gap_mass, gap_values))
+            lost_tri = self.lost_triangle
+            whole = self._old_area[lost_tri] / 3.0 * field[self.old.triangles[lost_tri]].sum(axis=1)
+            members = np.flatnonzero(np.isin(self.old_triangle, lost_tri))
+            inside = np.einsum("kab,kb->k", self.mass[members], field[self.old.triangles[self.old_triangle[members]]])
+            lost = float(whole.sum() - inside.sum())
+        elif field.shape == (self.old.n_triangles,):
+            gained = float((self.gap_area * field[self.gap_old_triangle]).sum())
+            lost = float((self.lost_area * field[self.lost_triangle]).sum())
+        else:
+            raise ValueError(
+                f"values must be a scalar field on the old points ({self.old.n_points},) or triangles "
+                f"({self.old.n_triangles},), got shape {field.shape}"
+            )
+        return DomainChange(area_gained, area_lost, gained, lost)
 
     def mixed_mass(self) -> scipy.sparse.csr_matrix:
         """``M_mix[i, j] = int phi_i^new phi_j^old``, shape (n_new_points, n_old_points)."""
@@ -481,10 +652,24 @@ class Supermesh:
         # rhs = M_mix @ flat without assembling M_mix (per pair, the 3 x 3 block
         # times the old triangle's values, into the new triangle's rows), then
         # M_new u = rhs; the matrices are real: a complex field is two solves.
+        bad = ~np.isfinite(flat).all(axis=1)
+        if bad.any():
+            k = int(np.argmax(bad))
+            raise ValueError(
+                f"values at old point {k} ({self.old.points[k].tolist()}) are not finite: the conservative transfer "
+                "is a global projection, so one NaN or inf would spread over the whole mesh; the linear transfer "
+                "keeps it to the triangles around that point"
+            )
         parts = []
         for part in columns:
             rhs = _core.mixed_mass_times(self.offsets, self.old_triangle, self.mass, self.old.triangles,
                                          self.new.triangles, self.new.n_points, np.ascontiguousarray(part))
+            if len(self.gap_triangle):  # the new domain's area outside the old one (see _find_domain_change)
+                gap_values = part[self.old.triangles[self.gap_old_triangle]]  # (g, 3, columns)
+                rows = self.new.triangles[self.gap_triangle].ravel()
+                contribution = np.einsum("gab,gbc->gac", self._gap_mass, gap_values).reshape(len(rows), -1)
+                for column in range(contribution.shape[1]):
+                    rhs[:, column] += np.bincount(rows, contribution[:, column], minlength=self.new.n_points)
             parts.append(_solve_mass(self._new_mass, rhs, self._threads))
         out = parts[0] if len(parts) == 1 else parts[0] + 1j * parts[1]
         out = out.astype(dtype, copy=False)
@@ -496,3 +681,39 @@ def _named(interpolation: Callable[[Any], np.ndarray], name: Any, values: Any) -
         return interpolation(values)
     except (TypeError, ValueError) as error:
         raise type(error)(f"field {name!r}: {error}") from None
+
+
+class DomainChange(NamedTuple):
+    """The change of domain between a mesh and the mesh evolved from it (see
+    :meth:`Supermesh.domain_change`): the areas the new domain gains and
+    loses, and a field's integral over them (None without a field)."""
+
+    area_gained: float
+    area_lost: float
+    integral_gained: float | None
+    integral_lost: float | None
+
+
+def domain_change(old: Mesh, new: Mesh, values: Any = None) -> DomainChange:
+    """The area ``new = evolve(old, ...)`` gains and loses against ``old``, and
+    a field's integral over them: see :meth:`Supermesh.domain_change`.
+
+    ``transfer(old, new, u, method="conservative")`` changes the integral of u
+    by exactly ``integral_gained - integral_lost`` (0 when the domain is kept,
+    i.e. without curved boundaries)."""
+    values_given = values is not None
+    points_field = values_given and np.shape(values) == (old.n_points,)
+    return Supermesh(old, new, mass=not values_given or points_field).domain_change(values)
+
+
+def _barycentric(triangle: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """Barycentric coordinates (extrapolated outside) of points in triangles:
+    ``triangle`` (k, 3, 2), ``points`` (k, m, 2) -> (k, m, 3)."""
+    a = triangle[:, 0, :][:, None, :]
+    e1 = (triangle[:, 1, :] - triangle[:, 0, :])[:, None, :]
+    e2 = (triangle[:, 2, :] - triangle[:, 0, :])[:, None, :]
+    q = points - a
+    det = e1[..., 0] * e2[..., 1] - e1[..., 1] * e2[..., 0]
+    l1 = (q[..., 0] * e2[..., 1] - q[..., 1] * e2[..., 0]) / det
+    l2 = (e1[..., 0] * q[..., 1] - e1[..., 1] * q[..., 0]) / det
+    return np.stack([1.0 - l1 - l2, l1, l2], axis=-1)
