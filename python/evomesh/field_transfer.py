@@ -507,16 +507,12 @@ class Supermesh:
         ``_gap_mass[g]`` maps s*'s three values to t's three right-hand sides.
         """
         old, new = self.old, self.new
-        self._new_area = new.triangle_areas
         n_new = new.n_triangles
+        self._new_area, edge = _areas_and_longest_sides(new)
         covered = np.bincount(self.new_triangle, self.area, minlength=n_new)
         counts = np.diff(self.offsets)
-        # Rounding of the areas: each shoelace term is a few roundings of
-        # (coordinate magnitude) x (edge length); one such error per pair.
-        magnitude = max(float(np.abs(old.points).max()), float(np.abs(new.points).max()))
-        edge = np.abs(new.points[new.triangles] - new.points[np.roll(new.triangles, 1, axis=1)]).max(axis=(1, 2))
-        tolerance = 64.0 * np.finfo(np.float64).eps * magnitude * edge * (1.0 + counts)
-        gap = np.flatnonzero(self._new_area - covered > tolerance)
+        self._magnitude = max(float(np.abs(old.points).max()), float(np.abs(new.points).max()))
+        gap = np.flatnonzero(self._new_area - covered > _area_rounding(self._magnitude, edge, counts))
         stand_in = np.full(len(gap), -1, dtype=np.int64)
         with_pairs = counts[gap] > 0
         if with_pairs.any():
@@ -538,15 +534,7 @@ class Supermesh:
         self.gap_triangle = gap
         self.gap_old_triangle = stand_in
         self.gap_area = self._new_area[gap] - covered[gap]
-        # old triangles' area left uncovered by new ones (the domain lost there)
-        old_area = old.triangle_areas
-        old_covered = np.bincount(self.old_triangle, self.area, minlength=old.n_triangles)
-        old_edge = np.abs(old.points[old.triangles] - old.points[np.roll(old.triangles, 1, axis=1)]).max(axis=(1, 2))
-        old_counts = np.bincount(self.old_triangle, minlength=old.n_triangles)
-        old_tolerance = 64.0 * np.finfo(np.float64).eps * magnitude * old_edge * (1.0 + old_counts)
-        self.lost_triangle = np.flatnonzero(old_area - old_covered > old_tolerance)
-        self.lost_area = old_area[self.lost_triangle] - old_covered[self.lost_triangle]
-        self._old_area = old_area
+        self._lost: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None  # made by _lost_part on first use
         if not len(gap) or self.mass.size == 0:
             self._gap_mass = np.zeros((len(gap), 3, 3))
             return
@@ -563,6 +551,18 @@ class Supermesh:
             pair_terms = self.mass[pairs] @ _barycentric(s_points[slot], pair_points)
             np.subtract.at(gap_mass, slot, pair_terms)
         self._gap_mass = gap_mass
+
+    def _lost_part(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Old triangles that new ones leave partly uncovered (the domain lost
+        there), their uncovered areas, and every old triangle's area."""
+        if self._lost is None:
+            old = self.old
+            old_area, edge = _areas_and_longest_sides(old)
+            covered = np.bincount(self.old_triangle, self.area, minlength=old.n_triangles)
+            counts = np.bincount(self.old_triangle, minlength=old.n_triangles)
+            lost = np.flatnonzero(old_area - covered > _area_rounding(self._magnitude, edge, counts))
+            self._lost = (lost, old_area[lost] - covered[lost], old_area)
+        return self._lost
 
     def _old_triangle_at_points(self, triangles: np.ndarray, parent: np.ndarray) -> np.ndarray:
         """An old triangle at one of the points of each given new triangle (-1 if none):
@@ -606,8 +606,9 @@ class Supermesh:
         -------
         DomainChange
         """
+        lost_triangle, lost_area, old_area = self._lost_part()
         area_gained = float(self.gap_area.sum())
-        area_lost = float(self.lost_area.sum())
+        area_lost = float(lost_area.sum())
         if values is None:
             return DomainChange(area_gained, area_lost, None, None)
         field = np.asarray(values, dtype=np.float64)
@@ -616,14 +617,13 @@ class Supermesh:
             if self.mass.size == 0 and len(self.area):
                 raise ValueError("a P1 field's domain change needs a Supermesh built with mass=True")
             gained = float(np.einsum("gab,gb->", self._gap_mass, gap_values))
-            lost_tri = self.lost_triangle
-            whole = self._old_area[lost_tri] / 3.0 * field[self.old.triangles[lost_tri]].sum(axis=1)
-            members = np.flatnonzero(np.isin(self.old_triangle, lost_tri))
+            whole = old_area[lost_triangle] / 3.0 * field[self.old.triangles[lost_triangle]].sum(axis=1)
+            members = np.flatnonzero(np.isin(self.old_triangle, lost_triangle))
             inside = np.einsum("kab,kb->k", self.mass[members], field[self.old.triangles[self.old_triangle[members]]])
             lost = float(whole.sum() - inside.sum())
         elif field.shape == (self.old.n_triangles,):
             gained = float((self.gap_area * field[self.gap_old_triangle]).sum())
-            lost = float((self.lost_area * field[self.lost_triangle]).sum())
+            lost = float((lost_area * field[lost_triangle]).sum())
         else:
             raise ValueError(
                 f"values must be a scalar field on the old points ({self.old.n_points},) or triangles "
@@ -704,6 +704,23 @@ def domain_change(old: Mesh, new: Mesh, values: Any = None) -> DomainChange:
     values_given = values is not None
     points_field = values_given and np.shape(values) == (old.n_points,)
     return Supermesh(old, new, mass=not values_given or points_field).domain_change(values)
+
+
+def _areas_and_longest_sides(mesh: Mesh) -> tuple[np.ndarray, np.ndarray]:
+    """Signed areas and the largest coordinate difference along any side, shape (m,) each."""
+    p = mesh.points[mesh.triangles]
+    d1 = p[:, 1] - p[:, 0]
+    d2 = p[:, 2] - p[:, 0]
+    area = 0.5 * (d1[:, 0] * d2[:, 1] - d1[:, 1] * d2[:, 0])
+    side = np.maximum(np.abs(d1).max(axis=1), np.abs(d2).max(axis=1))  # (the third side is at most their sum)
+    return area, 2.0 * side
+
+
+def _area_rounding(magnitude: float, side: np.ndarray, pairs: np.ndarray) -> np.ndarray:
+    """Rounding of a triangle's area against the sum of its pairs' areas: each
+    shoelace term carries a few roundings of (coordinate magnitude) x (side),
+    one such error per pair (in units of the coordinates' rounding, never absolute)."""
+    return 64.0 * np.finfo(np.float64).eps * magnitude * side * (1.0 + pairs)
 
 
 def _barycentric(triangle: np.ndarray, points: np.ndarray) -> np.ndarray:
