@@ -155,3 +155,165 @@ def test_a_curve_for_a_tag_the_mesh_lacks_is_refused():
     mesh = polygon_mesh([_regular_polygon(12)], 0.2)
     with pytest.raises(ValueError, match="segment tag 7 has a curve, but no segment of the mesh has that tag"):
         evomesh.evolve(mesh, 1.0, geometry={0: evomesh.Circle((0, 0), 1.0), 7: evomesh.Circle((0, 0), 0.5)})
+
+
+# --------------------------------------------------------------------------------------------------
+# write_mesh: checked first, written beside the file and renamed
+
+
+def _leftovers(folder):
+    return sorted(p.name for p in folder.iterdir() if p.name.startswith("."))
+
+
+def test_write_mesh_pads_a_2d_vector_for_gmsh(tmp_path):
+    mesh = evomesh.unit_square_mesh(60)
+    path = evomesh.io.write_mesh(tmp_path / "x.msh", mesh)
+    evomesh.io.write_mesh(path, mesh, {"vel": mesh.points, "F": np.tile(np.eye(2), (mesh.n_points, 1, 1))})
+    back, data = evomesh.io.read_mesh(path)
+    assert np.array_equal(back.points, mesh.points)
+    assert np.array_equal(data["vel"], np.c_[mesh.points, np.zeros(mesh.n_points)])
+    assert np.array_equal(data["F"], np.tile(np.diag([1.0, 1.0, 0.0]).ravel(), (mesh.n_points, 1)))
+    assert _leftovers(tmp_path) == []
+
+
+def test_write_mesh_refusal_leaves_the_old_file(tmp_path):
+    mesh = evomesh.unit_square_mesh(60)
+    path = evomesh.io.write_mesh(tmp_path / "x.msh", mesh, {"u": mesh.points[:, 0]})
+    before = path.read_bytes()
+    with pytest.raises(ValueError, match="'w'.*Gmsh files hold 1, 3 or 9 components"):
+        evomesh.io.write_mesh(path, mesh, {"w": np.zeros((mesh.n_points, 4))})
+    assert path.read_bytes() == before and _leftovers(tmp_path) == []
+
+
+def test_write_mesh_failure_inside_meshio_leaves_the_old_file(tmp_path, monkeypatch):
+    import meshio
+
+    mesh = evomesh.unit_square_mesh(60)
+    path = evomesh.io.write_mesh(tmp_path / "x.vtu", mesh)
+    before = path.read_bytes()
+
+    def half_then_fail(self, filename, file_format=None, **kwargs):
+        with open(filename, "wb") as handle:
+            handle.write(b"<VTKFile")  # a truncated file, as meshio leaves one
+        raise meshio.WriteError("disk says no")
+
+    monkeypatch.setattr(meshio.Mesh, "write", half_then_fail)
+    with pytest.raises(ValueError, match=r"cannot write .*x\.vtu: WriteError: disk says no"):
+        evomesh.io.write_mesh(path, mesh)
+    assert path.read_bytes() == before and _leftovers(tmp_path) == []
+
+
+def test_write_mesh_xdmf_with_its_h5_replaces_both(tmp_path):
+    pytest.importorskip("h5py")
+    mesh = evomesh.unit_square_mesh(60)
+    path = evomesh.io.write_mesh(tmp_path / "x.xdmf", mesh, {"u": mesh.points[:, 0]})
+    evomesh.io.write_mesh(path, mesh, {"u": 2 * mesh.points[:, 0]})
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["x.h5", "x.xdmf"]
+    _, data = evomesh.io.read_mesh(path)
+    assert np.array_equal(data["u"], 2 * mesh.points[:, 0])
+
+
+def test_xdmf_without_h5py_says_how_to_get_it(tmp_path, monkeypatch, capsys):
+    mesh = evomesh.unit_square_mesh(60)
+    source = evomesh.io.write_mesh(tmp_path / "in.vtu", mesh)
+    monkeypatch.setitem(__import__("sys").modules, "h5py", None)  # import h5py now fails
+    with pytest.raises(ImportError, match="pip install h5py"):
+        evomesh.io.write_mesh(tmp_path / "x.xdmf", mesh)
+    assert main(["adapt", str(source), str(tmp_path / "out.xdmf"), "--size-expr", "0.1", "--quiet"]) == 2
+    error = capsys.readouterr().err.strip()
+    assert "pip install h5py" in error and len(error.splitlines()) == 1
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["in.vtu"]
+
+
+# --------------------------------------------------------------------------------------------------
+# Tags: int64 exactly, one tag per segment, Gmsh 4.1 and physical names
+
+
+def _tagged_square(segment_tag: int = 3, triangle_tags=(1, 2)):
+    mesh = evomesh.unit_square_mesh(200)
+    boundary = mesh.segments[mesh.segment_is_boundary]
+    left = mesh.points[mesh.triangles].mean(axis=1)[:, 0] < 0.5
+    return evomesh.Mesh(mesh.points, mesh.triangles, boundary, segment_tags=np.full(len(boundary), segment_tag),
+                        triangle_tags=np.where(left, *triangle_tags))
+
+
+def test_int64_tags_are_kept_exactly_or_refused_for_gmsh(tmp_path):
+    big = 2**33 + 1
+    mesh = _tagged_square(segment_tag=big, triangle_tags=(-(2**40), 5))
+    assert mesh.segment_tags.max() == big
+    back, _ = evomesh.io.read_mesh(evomesh.io.write_mesh(tmp_path / "m.vtu", mesh))
+    assert set(back.segment_tags.tolist()) == {big, 0} and set(back.triangle_tags.tolist()) == {-(2**40), 5}
+    new = evomesh.evolve(mesh, 0.7)
+    assert big in new.segment_tags
+    with pytest.raises(ValueError, match=f"segment tag {big} does not fit in the 32-bit tags of Gmsh"):
+        evomesh.io.write_mesh(tmp_path / "m.msh", mesh)
+    assert not (tmp_path / "m.msh").exists()
+
+
+def test_a_segment_given_twice_needs_one_tag():
+    mesh = evomesh.unit_square_mesh(60)
+    segments = mesh.segments[:3]
+    twice = np.r_[segments, segments[1:2, ::-1]]
+    with pytest.raises(ValueError, match=rf"segment \({min(segments[1])}, {max(segments[1])}\) is given twice with "
+                                         r"different tags: row 1 has tag 7, row 3 has tag 8"):
+        evomesh.Mesh(mesh.points, mesh.triangles, twice, segment_tags=[6, 7, 5, 8])
+    same = evomesh.Mesh(mesh.points, mesh.triangles, twice, segment_tags=[6, 7, 5, 7])
+    assert sorted(set(same.segment_tags.tolist())) == [0, 5, 6, 7]
+
+
+@pytest.mark.parametrize("file_format", ["gmsh", "gmsh22"])
+def test_gmsh_files_from_to_meshio_read_back_with_tags_and_names(tmp_path, file_format):
+    import meshio
+
+    names = {(1, 3): "dirichlet", (2, 1): "left", (2, 2): "right"}
+    mesh = _tagged_square(triangle_tags=(1, 2))
+    mesh = evomesh.Mesh(mesh.points, mesh.triangles, mesh.segments, segment_tags=mesh.segment_tags,
+                        triangle_tags=mesh.triangle_tags, tag_names=names)
+    mesh.to_meshio().write(tmp_path / "m.msh", file_format=file_format)
+    back = evomesh.Mesh.from_meshio(meshio.read(tmp_path / "m.msh"))
+    assert np.array_equal(back.points, mesh.points) and np.array_equal(back.kind, mesh.kind)
+    rows = lambda m: dict(zip(map(tuple, m.triangles.tolist()), m.triangle_tags.tolist()))  # noqa: E731
+    assert rows(back) == rows(mesh)
+    assert dict(back.tag_names) == names
+
+
+def test_physical_names_survive_evolve_pickle_and_adapt(tmp_path):
+    import pickle
+
+    names = {(1, 3): "dirichlet", (2, 1): "fluid", (2, 2): "solid"}
+    base = _tagged_square()
+    mesh = evomesh.Mesh(base.points, base.triangles, base.segments, segment_tags=base.segment_tags,
+                        triangle_tags=base.triangle_tags, tag_names=names)
+    assert dict(evomesh.evolve(mesh, 0.7).tag_names) == names
+    assert dict(pickle.loads(pickle.dumps(mesh)).tag_names) == names
+    source = evomesh.io.write_mesh(tmp_path / "in.msh", mesh)
+    assert main(["adapt", str(source), str(tmp_path / "out.msh"), "--size-expr", "0.08", "--quiet"]) == 0
+    out, _ = evomesh.io.read_mesh(tmp_path / "out.msh")
+    assert dict(out.tag_names) == names
+    assert set(out.segment_tags.tolist()) == {0, 3} and set(out.triangle_tags.tolist()) == {1, 2}  # 0: region borders
+
+
+@pytest.mark.parametrize("names, error, message", [
+    ({(3, 1): "x"}, ValueError, "dim must be 1"),
+    ({1: "x"}, TypeError, "pairs of integers"),
+    ({(1, 1): ""}, TypeError, "non-empty string"),
+    ({(1, 1): 'say "hi"'}, ValueError, "double quotes"),
+    ([("a", 1)], TypeError, "mapping"),
+])
+def test_tag_names_are_checked(names, error, message):
+    mesh = evomesh.unit_square_mesh(60)
+    with pytest.raises(error, match=message):
+        evomesh.Mesh(mesh.points, mesh.triangles, tag_names=names)
+
+
+def test_bad_cell_tags_are_called_cell_data_of_triangles():
+    import meshio
+
+    mesh = evomesh.unit_square_mesh(200)
+    tags = np.ones(mesh.n_triangles)
+    tags[5] = 0.5
+    m = meshio.Mesh(np.c_[mesh.points, np.zeros(mesh.n_points)], [("triangle", mesh.triangles)],
+                    cell_data={"gmsh:physical": [tags]})
+    with pytest.raises(ValueError, match=rf"cell data 'gmsh:physical' must hold integers, but 1 of "
+                                         rf"{mesh.n_triangles} triangles do not \(first: triangle 5"):
+        evomesh.Mesh.from_meshio(m)

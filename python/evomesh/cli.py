@@ -292,11 +292,10 @@ def _check_output(path: str) -> None:
     import os
     from pathlib import Path
 
-    import meshio
+    from evomesh.io import check_writable_format
 
     out = Path(path)
-    if out.suffix.lower() not in meshio.extension_to_filetypes:
-        raise ValueError(f"cannot tell the format of {path} from its suffix {out.suffix!r}")
+    check_writable_format(out)  # the suffix; h5py for .xdmf
     folder = out.parent if str(out.parent) else Path(".")
     if not folder.is_dir():
         raise ValueError(f"output folder {folder} does not exist")
@@ -392,7 +391,8 @@ def _growing_circle(args: argparse.Namespace) -> int:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``evomesh`` command; returns the exit status
-    (0 success, 2 bad arguments or failure, with a one-line message)."""
+    (0 success, 2 bad arguments or failure, with a one-line message; also for
+    a missing optional package, such as h5py for .xdmf files)."""
     parser = build_parser()
     args = parser.parse_args(argv)  # argparse exits with status 2 on malformed options
     try:
@@ -402,7 +402,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             return _adapt(args)
         if args.command == "info":
             return _info(args)
-    except (ValueError, TypeError, OSError) as error:
+    except (ValueError, TypeError, OSError, ImportError) as error:
         lines = str(error).strip().splitlines()
         print(f"evomesh: error: {lines[0] if lines else type(error).__name__}", file=sys.stderr)
         return 2
