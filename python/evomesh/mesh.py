@@ -445,11 +445,12 @@ class Mesh:
 
     def __reduce__(self):
         # Pickle and deepcopy round-trip every array bit for bit (checkpoints).
+        # Tag names only when there are some: a pickle then reads as before.
         return (
             _unpickle_mesh,
             (self.points, self.triangles, self.segments, self.segment_is_boundary, self.kind, self.origin,
              dict(self.stats), self.lineage, self._nn, self.segment_tags, self.triangle_tags, self.required,
-             self._nn_grew, dict(self.tag_names)),
+             self._nn_grew) + ((dict(self.tag_names),) if self.tag_names else ()),
         )
 
     def __copy__(self) -> "Mesh":
