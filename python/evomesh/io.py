@@ -185,6 +185,16 @@ def check_writable_format(path: str | Path) -> str:
     """The meshio format :func:`write_mesh` would write ``path`` in, after
     checking that it can: a known suffix, and h5py installed for XDMF.
 
+    Parameters
+    ----------
+    path : str or Path
+        The file to write; only its suffix is looked at.
+
+    Returns
+    -------
+    str
+        meshio's format name ("vtu", "gmsh", "xdmf", ...; ``.msh`` is Gmsh).
+
     Raises
     ------
     ValueError
