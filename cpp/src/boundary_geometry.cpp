@@ -5,8 +5,10 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <queue>
 #include <string>
 #include <unordered_map>
+#include <utility>
 
 #include "evomesh/step.hpp"
 #include "evomesh/triangulation.hpp"
@@ -32,6 +34,98 @@ std::string where(const Vec2& x) {
   return buffer;
 }
 
+// Units of rounding of its coordinates within which a point counts as on its
+// curve: a polygon's vertices computed as c + r (cos t, sin t), and the
+// projection's own rounding, are within a few.
+constexpr double kOnCurveUlps = 64;
+
+double rounding_of(const Vec2& a, const Vec2& b) {
+  return std::numeric_limits<double>::epsilon() *
+         std::max({std::abs(a[0]), std::abs(a[1]), std::abs(b[0]), std::abs(b[1])});
+}
+
+// A polygon along curves: nodes (a point with the tag of the curve it lies on;
+// a point where two curved tags meet is one node per tag) and its edges.
+struct Curve_polygon {
+  std::vector<std::pair<std::int64_t, Index>> keys;  // (tag, point), sorted, no repeats
+  std::vector<std::array<std::size_t, 2>> edges;
+
+  // Call with every edge's ends first (add_key), then finish_keys, then add_edge.
+  void add_key(Index point, std::int64_t tag) { keys.emplace_back(tag, point); }
+  void finish_keys() {
+    std::sort(keys.begin(), keys.end());
+    keys.erase(std::unique(keys.begin(), keys.end()), keys.end());
+  }
+  std::size_t node(Index point, std::int64_t tag) const {
+    return static_cast<std::size_t>(std::lower_bound(keys.begin(), keys.end(), std::make_pair(tag, point)) -
+                                    keys.begin());
+  }
+  void add_edge(Index a, Index b, std::int64_t tag) { edges.push_back({node(a, tag), node(b, tag)}); }
+};
+
+// For every node of `polygon` (coordinates from `points`), its distance along
+// the polygon to the nearest node that lies on its curve (within kOnCurveUlps
+// units of rounding; infinite where no node of its part does).
+//
+// Why this bounds a move: if w lies on the curve, a point p of the polygon is
+// at most |p - w| from the curve, and |p - w| is at most the length of any path
+// from p to w along the polygon (triangle inequality). A projection onto the
+// nearest point of the curve moves p by no more, however coarse the polygon is
+// for the curve (a 12-gon's chords stray from its circle by 3.4 % of the
+// radius, far more than a fine spacing near them) and whatever points of it
+// were kept off the curve in earlier steps.
+std::vector<double> distance_along_to_curve(const Boundary_geometry& geometry, const Curve_polygon& polygon,
+                                            const std::vector<Vec2>& points) {
+  const std::size_t n = polygon.keys.size();
+  std::vector<Vec2> at(n);
+  std::vector<std::int64_t> tags(n);
+  for (std::size_t k = 0; k < n; ++k) {
+    tags[k] = polygon.keys[k].first;
+    at[k] = points[polygon.keys[k].second];
+  }
+  std::vector<Vec2> projected = at;
+  geometry.project(projected, tags);
+  if (projected.size() != n) throw Input_error("geometry: the projection returned a different number of points");
+  std::vector<double> distance(n, std::numeric_limits<double>::infinity());
+  using Entry = std::pair<double, std::size_t>;
+  std::priority_queue<Entry, std::vector<Entry>, std::greater<Entry>> queue;
+  for (std::size_t k = 0; k < n; ++k) {
+    const double move = std::hypot(projected[k][0] - at[k][0], projected[k][1] - at[k][1]);
+    if (move <= kOnCurveUlps * rounding_of(at[k], projected[k])) {  // false for NaN
+      distance[k] = 0;
+      queue.emplace(0.0, k);
+    }
+  }
+  // Dijkstra along the edges (compressed neighbour lists).
+  std::vector<std::size_t> xadj(n + 1, 0), adj(2 * polygon.edges.size());
+  for (const auto& e : polygon.edges) {
+    ++xadj[e[0] + 1];
+    ++xadj[e[1] + 1];
+  }
+  for (std::size_t k = 0; k < n; ++k) xadj[k + 1] += xadj[k];
+  {
+    std::vector<std::size_t> fill(xadj.begin(), xadj.end() - 1);
+    for (const auto& e : polygon.edges) {
+      adj[fill[e[0]]++] = e[1];
+      adj[fill[e[1]]++] = e[0];
+    }
+  }
+  while (!queue.empty()) {
+    const auto [d, k] = queue.top();
+    queue.pop();
+    if (d > distance[k]) continue;
+    for (std::size_t a = xadj[k]; a < xadj[k + 1]; ++a) {
+      const std::size_t j = adj[a];
+      const double through = d + std::hypot(at[j][0] - at[k][0], at[j][1] - at[k][1]);
+      if (through < distance[j]) {
+        distance[j] = through;
+        queue.emplace(through, j);
+      }
+    }
+  }
+  return distance;
+}
+
 // Projects `points` (on segments tagged `tags`) onto their curves; each may move
 // by at most limit[k]. Returns the largest move.
 double project_points(const Boundary_geometry& geometry, std::vector<Vec2>& points,
@@ -46,7 +140,8 @@ double project_points(const Boundary_geometry& geometry, std::vector<Vec2>& poin
     if (!std::isfinite(points[k][0]) || !std::isfinite(points[k][1]) || !(move <= limit[k])) {
       throw Input_error("geometry: projecting the boundary point " + where(before[k]) + " (segment tag " +
                         std::to_string(tags[k]) + ") gave " + where(points[k]) + ", a move of " + format_count(move) +
-                        ", more than the local spacing allows (" + format_count(limit[k]) +
+                        ", more than the local spacing or the distance along the boundary to a point on the curve "
+                        "allows (" + format_count(limit[k]) +
                         "): is this the curve that the segments of that tag approximate?");
     }
     largest = std::max(largest, move);
@@ -60,6 +155,19 @@ Mesh_arrays with_curve_kinds(const Mesh_arrays& input) {
   Mesh_arrays mesh = input;
   mesh.geometry->validate();
   if (mesh.segment_tags.empty()) mesh.segment_tags.assign(mesh.segments.size(), 0);
+  // A curve for a tag no segment has is a mistake (a wrong tag number, or a
+  // geometry meant for another mesh): said, not ignored.
+  std::vector<std::int64_t> used = mesh.segment_tags;
+  std::sort(used.begin(), used.end());
+  used.erase(std::unique(used.begin(), used.end()), used.end());
+  for (const std::int64_t tag : mesh.geometry->curved_tags) {
+    if (std::binary_search(used.begin(), used.end(), tag)) continue;
+    std::string listed;
+    for (std::size_t k = 0; k < used.size() && k < 10; ++k) listed += (k ? ", " : "") + std::to_string(used[k]);
+    if (used.size() > 10) listed += ", ...";
+    throw Input_error("geometry: segment tag " + std::to_string(tag) + " has a curve, but no segment of the mesh has "
+                      "that tag (its segment tags: " + (listed.empty() ? std::string("none") : listed) + ")");
+  }
   // A point on segments of curved tags only is a corner exactly when the geometry
   // says so (classify_points); on straight chains the given kinds stand.
   const std::vector<Point_kind> geometric = classify_points(mesh);
@@ -91,8 +199,37 @@ double project_segment_candidates(const Mesh_arrays& mesh, const std::vector<std
     tags.push_back(tag);
     limit.push_back(radius[c]);
   }
+  if (which.empty()) return 0;
+  // A candidate on segment (a, b) may also move by its distance to a or b plus
+  // that end's distance along the input's curved segments to a point on the
+  // curve (distance_along_to_curve).
+  Curve_polygon polygon;
+  for (std::size_t s = 0; s < mesh.segments.size(); ++s) {
+    if (!geometry.is_curved(mesh.segment_tags[s])) continue;
+    polygon.add_key(mesh.segments[s][0], mesh.segment_tags[s]);
+    polygon.add_key(mesh.segments[s][1], mesh.segment_tags[s]);
+  }
+  polygon.finish_keys();
+  for (std::size_t s = 0; s < mesh.segments.size(); ++s) {
+    if (geometry.is_curved(mesh.segment_tags[s])) polygon.add_edge(mesh.segments[s][0], mesh.segments[s][1], mesh.segment_tags[s]);
+  }
+  const std::vector<double> along = distance_along_to_curve(geometry, polygon, mesh.points);
+  std::size_t k = 0;
+  for (std::size_t j = 0; j < segment_of_candidate.size(); ++j) {
+    const std::size_t c = first + j;
+    if (k == which.size() || which[k] != c) continue;
+    const Edge& e = mesh.segments[segment_of_candidate[j]];
+    double bound = std::numeric_limits<double>::infinity();
+    for (const Index end : e) {
+      const Vec2& q = mesh.points[end];
+      bound = std::min(bound, std::hypot(points[k][0] - q[0], points[k][1] - q[1]) + along[polygon.node(end, tags[k])]);
+    }
+    if (std::isfinite(bound)) limit[k] = std::max(limit[k], bound);
+    limit[k] += kOnCurveUlps * rounding_of(points[k], points[k]);
+    ++k;
+  }
   const double largest = project_points(geometry, points, tags, limit);
-  for (std::size_t k = 0; k < which.size(); ++k) centers[which[k]] = points[k];
+  for (std::size_t j = 0; j < which.size(); ++j) centers[which[j]] = points[j];
   return largest;
 }
 
@@ -172,6 +309,8 @@ double fit_to_curves(const Boundary_geometry& geometry, const std::vector<Constr
   std::vector<std::int64_t> tag_of(n, 0);
   std::vector<std::uint8_t> curved(n, 0);
   double longest = 0;  // of the pieces on curves
+  std::vector<std::vector<Index>> walked;  // the curved pieces, end to end through their inserted points
+  std::vector<std::int64_t> walked_tag;
   for (std::size_t v = 0; v < n; ++v) {
     if (selection_index[v] < 0) continue;
     for (Index a = xadj[v]; a < xadj[v + 1]; ++a) {
@@ -192,6 +331,10 @@ double fit_to_curves(const Boundary_geometry& geometry, const std::vector<Constr
       if (!geometry.is_curved(found->second)) continue;
       const Vec2 &from = mesh.points[v], &to = mesh.points[w];
       longest = std::max(longest, std::hypot(to[0] - from[0], to[1] - from[1]));
+      walked.push_back({static_cast<Index>(v)});
+      walked.back().insert(walked.back().end(), inside.begin(), inside.end());
+      walked.back().push_back(w);
+      walked_tag.push_back(found->second);
       for (Index u : inside) {
         curved[u] = 1;
         tag_of[u] = found->second;
@@ -205,6 +348,19 @@ double fit_to_curves(const Boundary_geometry& geometry, const std::vector<Constr
       }
     }
   }
+  // A point may also move by its distance along the curved pieces to a point
+  // on the curve (distance_along_to_curve): kept points that lie off the
+  // curve (a coarse input polygon) are where it is needed.
+  Curve_polygon polygon;
+  for (std::size_t p = 0; p < walked.size(); ++p) {
+    for (Index u : walked[p]) polygon.add_key(u, walked_tag[p]);
+  }
+  polygon.finish_keys();
+  for (std::size_t p = 0; p < walked.size(); ++p) {
+    for (std::size_t k = 0; k + 1 < walked[p].size(); ++k) polygon.add_edge(walked[p][k], walked[p][k + 1], walked_tag[p]);
+  }
+  const std::vector<double> along =
+      polygon.keys.empty() ? std::vector<double>() : distance_along_to_curve(geometry, polygon, mesh.points);
   std::vector<Index> which;
   std::vector<Vec2> points;
   std::vector<std::int64_t> tags;
@@ -219,7 +375,9 @@ double fit_to_curves(const Boundary_geometry& geometry, const std::vector<Constr
     which.push_back(static_cast<Index>(v));
     points.push_back(mesh.points[v]);
     tags.push_back(tag_of[v]);
-    limit.push_back(0.5 * shortest);
+    const double bound = along[polygon.node(static_cast<Index>(v), tag_of[v])];
+    limit.push_back(std::max(0.5 * shortest, std::isfinite(bound) ? bound : 0.0) +
+                    kOnCurveUlps * rounding_of(mesh.points[v], mesh.points[v]));
   }
   const double largest = project_points(geometry, points, tags, limit);
   bool moved = false;

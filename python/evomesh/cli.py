@@ -3,8 +3,9 @@
 from __future__ import annotations
 
 import argparse
+import ast
 import sys
-from typing import Any, Sequence
+from typing import Any, Callable, Sequence
 
 import numpy as np
 
@@ -79,7 +80,9 @@ def build_parser() -> argparse.ArgumentParser:
     target.add_argument("--size", metavar="FIELD", help="point data of IN holding the absolute target spacing")
     target.add_argument("--delta", metavar="FIELD", help="point data of IN holding the factor delta (<1 refine)")
     target.add_argument("--size-expr", metavar="EXPR",
-                        help="absolute spacing as a numpy expression in x and y, e.g. '0.02 + 0.1*x'")
+                        help="absolute spacing as an expression in x and y, e.g. '0.02 + 0.1*x': numbers, pi, e, "
+                             "+ - * / **, comparisons and abs sqrt exp log log10 sin cos tan tanh arctan2 hypot "
+                             "minimum maximum clip where; at most 1000 characters")
     adapt.add_argument("--method", choices=("frfc", "drfc"), default="frfc", help="default %(default)s")
     adapt.add_argument("--seed", type=int, default=0, help="seed of the sampling (default %(default)s)")
     adapt.add_argument("--paper", action="store_true", help="the paper's algorithm exactly (options preset paper())")
@@ -97,38 +100,156 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-# Names an --size-expr may use: x, y and numpy's elementwise functions.
-_EXPR_NAMES = ("abs", "sqrt", "exp", "log", "log10", "sin", "cos", "tan", "arctan2", "hypot", "minimum", "maximum",
-               "clip", "where", "tanh", "pi", "e")
+# What an --size-expr may use: numbers, x and y, the constants pi and e,
+# + - * / ** and comparisons (for where), and these numpy functions with their
+# number of arguments. Nothing else: the text comes from a command line and is
+# evaluated by walking its syntax tree, never by eval().
+_EXPR_FUNCTIONS: dict[str, tuple[Any, int]] = {
+    "abs": (np.abs, 1), "sqrt": (np.sqrt, 1), "exp": (np.exp, 1), "log": (np.log, 1), "log10": (np.log10, 1),
+    "sin": (np.sin, 1), "cos": (np.cos, 1), "tan": (np.tan, 1), "tanh": (np.tanh, 1), "arctan2": (np.arctan2, 2),
+    "hypot": (np.hypot, 2), "minimum": (np.minimum, 2), "maximum": (np.maximum, 2), "clip": (np.clip, 3),
+    "where": (np.where, 3),
+}
+_EXPR_CONSTANTS = {"pi": np.pi, "e": np.e}
+_EXPR_NAMES = ("x", "y", *_EXPR_CONSTANTS, *_EXPR_FUNCTIONS)
+# Bounds that keep parsing and evaluation short whatever the text: its length,
+# its number of syntax nodes and how deeply they nest (each node is one numpy
+# operation over the points, in float64: no Python integer power can run away).
+_EXPR_MAX_LENGTH = 1000
+_EXPR_MAX_NODES = 200
+_EXPR_MAX_DEPTH = 32
+_EXPR_BINARY = {ast.Add: np.add, ast.Sub: np.subtract, ast.Mult: np.multiply, ast.Div: np.true_divide,
+                ast.Pow: np.power}
+_EXPR_COMPARE = {ast.Lt: np.less, ast.LtE: np.less_equal, ast.Gt: np.greater, ast.GtE: np.greater_equal}
 
 
-def _size_expression(text: str):
-    """A checked function h(points) from an --size-expr text (refused before any work)."""
-    import ast
+def _size_expression(text: str) -> Callable[[np.ndarray], np.ndarray]:
+    """A checked function h(points) from an --size-expr text.
 
-    import numpy as np
-
+    Everything that can be refused without points is refused here, before any
+    work: text longer than 1000 characters, syntax other than numbers, ``x``,
+    ``y``, ``pi``, ``e``, ``+ - * / **``, comparisons and calls of the allowed
+    numpy functions with their number of arguments, more than 200 syntax nodes
+    or 32 levels of nesting, and constant parts that are not finite
+    (``9**9**9``, ``1/0``, ``e**1000``: constants are folded in float64). The
+    function raises ValueError naming the first point where the size is not a
+    finite number > 0 (``1/x`` at x = 0, ``log(x)`` at x < 0).
+    """
+    if not isinstance(text, str):
+        raise TypeError(f"--size-expr must be a string, got {type(text).__name__}")
+    if len(text) > _EXPR_MAX_LENGTH:
+        raise ValueError(f"--size-expr is {len(text)} characters long; at most {_EXPR_MAX_LENGTH} are allowed")
     try:
-        tree = ast.parse(text, mode="eval")
+        tree = ast.parse(text.strip(), mode="eval")
     except SyntaxError as error:
         raise ValueError(f"--size-expr is not a valid expression: {error.msg}") from None
-    allowed_nodes = (ast.Expression, ast.BinOp, ast.UnaryOp, ast.Call, ast.Name, ast.Load, ast.Constant, ast.operator,
-                     ast.unaryop, ast.Compare, ast.cmpop, ast.keyword)
-    for node in ast.walk(tree):
-        if not isinstance(node, allowed_nodes):
-            raise ValueError(
-                f"--size-expr may use numbers, x, y, arithmetic and numpy functions; not {type(node).__name__}"
-            )
-        if isinstance(node, ast.Name) and node.id not in ("x", "y") + _EXPR_NAMES:
-            raise ValueError(f"--size-expr uses unknown name {node.id!r}; allowed: x, y, {', '.join(_EXPR_NAMES)}")
-    code = compile(tree, "<size-expr>", "eval")
-    namespace = {name: getattr(np, name) for name in _EXPR_NAMES}
+    except (RecursionError, MemoryError):
+        raise ValueError("--size-expr nests too deeply") from None
+    nodes = list(ast.walk(tree))
+    if len(nodes) > _EXPR_MAX_NODES:
+        raise ValueError(f"--size-expr has {len(nodes)} syntax nodes; at most {_EXPR_MAX_NODES} are allowed")
+    depth = {id(tree): 0}
+    for node in nodes:  # breadth first: a parent before its children
+        for child in ast.iter_child_nodes(node):
+            depth[id(child)] = depth[id(node)] + 1
+            if depth[id(child)] > _EXPR_MAX_DEPTH:
+                raise ValueError(f"--size-expr nests deeper than {_EXPR_MAX_DEPTH} levels")
+    evaluate = _compile_expression(tree.body)
 
-    def size(points):
-        values = eval(code, {"__builtins__": {}}, {**namespace, "x": points[:, 0], "y": points[:, 1]})  # noqa: S307
-        return np.broadcast_to(np.asarray(values, dtype=float), (len(points),))
+    def size(points: np.ndarray) -> np.ndarray:
+        x = np.ascontiguousarray(points[:, 0], dtype=np.float64)
+        y = np.ascontiguousarray(points[:, 1], dtype=np.float64)
+        with np.errstate(all="ignore"):  # judged on the result below, point by point
+            values = np.broadcast_to(np.asarray(evaluate(x, y), dtype=np.float64), (len(points),))
+        bad = ~(np.isfinite(values) & (values > 0))
+        if bad.any():
+            k = int(np.argmax(bad))
+            raise ValueError(f"--size-expr gives {values[k]:.6g} at point {k} (x = {x[k]:.6g}, y = {y[k]:.6g}); "
+                             "a size must be a finite number > 0")
+        return values
 
     return size
+
+
+def _compile_expression(node: ast.AST) -> Callable[[np.ndarray, np.ndarray], Any]:
+    """A function (x, y) -> values for one checked node of an --size-expr tree;
+    parts without x or y are folded into one float64 constant, which must be
+    finite (so 9**9**9 and 1/0 are refused here)."""
+    evaluate = _compile_node(node)
+    if not _uses_coordinates(node):
+        with np.errstate(all="ignore"):
+            value = np.asarray(evaluate(np.zeros(1), np.zeros(1)), dtype=np.float64)
+        if not np.isfinite(value).all():
+            raise ValueError(f"--size-expr: {ast.unparse(node)} is not a finite number in float64 "
+                             f"(it is {float(value.reshape(-1)[0])})")
+        constant = value.reshape(-1)[0] if value.size == 1 else value
+        return lambda x, y: constant
+    return evaluate
+
+
+def _uses_coordinates(node: ast.AST) -> bool:
+    return any(isinstance(n, ast.Name) and n.id in ("x", "y") for n in ast.walk(node))
+
+
+def _compile_node(node: ast.AST) -> Callable[[np.ndarray, np.ndarray], Any]:
+    allowed = f"allowed: numbers, {', '.join(_EXPR_NAMES)}, + - * / ** and comparisons"
+    if isinstance(node, ast.Constant):
+        value = node.value
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise ValueError(f"--size-expr may not use the constant {value!r}; {allowed}")
+        try:
+            number = np.float64(float(value))
+        except OverflowError:
+            number = np.float64(np.inf)
+        if not np.isfinite(number):
+            raise ValueError("--size-expr has a number beyond float64's range (about 1.8e308)")
+        return lambda x, y: number
+    if isinstance(node, ast.Name):
+        if node.id == "x":
+            return lambda x, y: x
+        if node.id == "y":
+            return lambda x, y: y
+        if node.id in _EXPR_CONSTANTS:
+            constant = np.float64(_EXPR_CONSTANTS[node.id])
+            return lambda x, y: constant
+        if node.id in _EXPR_FUNCTIONS:
+            raise ValueError(f"--size-expr uses the function {node.id!r} without calling it")
+        raise ValueError(f"--size-expr uses unknown name {node.id!r}; {allowed}")
+    if isinstance(node, ast.BinOp) and type(node.op) in _EXPR_BINARY:
+        op = _EXPR_BINARY[type(node.op)]
+        left, right = _compile_expression(node.left), _compile_expression(node.right)
+        return lambda x, y: op(left(x, y), right(x, y))
+    if isinstance(node, ast.UnaryOp) and isinstance(node.op, (ast.USub, ast.UAdd)):
+        operand = _compile_expression(node.operand)
+        if isinstance(node.op, ast.USub):
+            return lambda x, y: np.negative(operand(x, y))
+        return operand
+    if isinstance(node, ast.Compare) and all(type(op) in _EXPR_COMPARE for op in node.ops):
+        # a < b < c means a < b and b < c, element by element
+        terms = [_compile_expression(n) for n in (node.left, *node.comparators)]
+        ops = [_EXPR_COMPARE[type(op)] for op in node.ops]
+
+        def compare(x: np.ndarray, y: np.ndarray) -> Any:
+            values = [term(x, y) for term in terms]
+            result = ops[0](values[0], values[1])
+            for k in range(1, len(ops)):
+                result = np.logical_and(result, ops[k](values[k], values[k + 1]))
+            return result.astype(np.float64)  # 1 or 0; bool would make numpy compute sqrt(x < y) in float16
+
+        return compare
+    if isinstance(node, ast.Call):
+        name = node.func.id if isinstance(node.func, ast.Name) else None
+        if name not in _EXPR_FUNCTIONS:
+            called = name if name is not None else ast.unparse(node.func)[:40]
+            raise ValueError(f"--size-expr calls unknown name {called!r}; its functions are "
+                             f"{', '.join(_EXPR_FUNCTIONS)}")
+        function, arity = _EXPR_FUNCTIONS[name]
+        if node.keywords or len(node.args) != arity or any(isinstance(a, ast.Starred) for a in node.args):
+            raise ValueError(f"--size-expr: {name} takes {arity} argument{'s' if arity > 1 else ''} "
+                             "(no keywords)")
+        arguments = [_compile_expression(a) for a in node.args]
+        return lambda x, y: function(*(argument(x, y) for argument in arguments))
+    raise ValueError(f"--size-expr may not use {ast.unparse(node)[:40]!r} ({type(node).__name__}); {allowed}")
 
 
 def _parse_options(items: Sequence[str]) -> dict:
@@ -171,11 +292,10 @@ def _check_output(path: str) -> None:
     import os
     from pathlib import Path
 
-    import meshio
+    from evomesh.io import check_writable_format
 
     out = Path(path)
-    if out.suffix.lower() not in meshio.extension_to_filetypes:
-        raise ValueError(f"cannot tell the format of {path} from its suffix {out.suffix!r}")
+    check_writable_format(out)  # the suffix; h5py for .xdmf
     folder = out.parent if str(out.parent) else Path(".")
     if not folder.is_dir():
         raise ValueError(f"output folder {folder} does not exist")
@@ -271,7 +391,8 @@ def _growing_circle(args: argparse.Namespace) -> int:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``evomesh`` command; returns the exit status
-    (0 success, 2 bad arguments or failure, with a one-line message)."""
+    (0 success, 2 bad arguments or failure, with a one-line message; also for
+    a missing optional package, such as h5py for .xdmf files)."""
     parser = build_parser()
     args = parser.parse_args(argv)  # argparse exits with status 2 on malformed options
     try:
@@ -281,7 +402,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             return _adapt(args)
         if args.command == "info":
             return _info(args)
-    except (ValueError, TypeError, OSError) as error:
+    except (ValueError, TypeError, OSError, ImportError) as error:
         lines = str(error).strip().splitlines()
         print(f"evomesh: error: {lines[0] if lines else type(error).__name__}", file=sys.stderr)
         return 2

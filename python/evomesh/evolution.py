@@ -393,6 +393,7 @@ def _wrap(result: dict[str, Any], old: Mesh | None = None) -> Mesh:
         result.get("triangle_tags"),
         result.get("required"),
         nn_grew,
+        tag_names=None if old is None else old.tag_names,  # the tags are the input's: so are their names
     )
 
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import importlib
 import math
 import numbers
 import re
@@ -19,7 +20,8 @@ from evomesh.time_loop import Run, front_at
 if TYPE_CHECKING:
     import meshio
 
-__all__ = ["to_meshio", "write_mesh", "read_mesh", "write_pvd", "write_run", "RESERVED_POINT_DATA"]
+__all__ = ["to_meshio", "write_mesh", "read_mesh", "write_pvd", "write_run", "check_writable_format",
+           "RESERVED_POINT_DATA"]
 
 #: Point data that :func:`write_run` always writes.
 RESERVED_POINT_DATA = ("kind", "origin", "required", "nn_spacing", "delta")
@@ -134,19 +136,164 @@ def to_meshio(mesh: Mesh, point_data: Mapping[str, ArrayLike] | None = None) -> 
     return out
 
 
+def _gmsh_arrays(name: str, values: Any) -> list[tuple[str, np.ndarray]]:
+    """The arrays a Gmsh file stores for one checked field (:func:`_check_point_data`):
+    Gmsh holds 1, 3 or 9 components a point, so a 2-D vector (n, 2) gets a zero
+    z, a 2 x 2 tensor (n, 2, 2) a zero third row and column; other widths are
+    refused. Complex fields become ``<name>_real`` and ``<name>_imag``."""
+    array = np.asarray(values)
+    if array.dtype.kind == "c":
+        return _gmsh_arrays(f"{name}_real", array.real) + _gmsh_arrays(f"{name}_imag", array.imag)
+    if array.dtype.kind == "b":
+        array = array.astype(np.uint8)
+    shape = array.shape[1:]
+    if shape in ((), (1,), (3,), (9,), (3, 3)):
+        return [(name, array.reshape(len(array), -1) if array.ndim > 1 else array)]
+    if shape == (2,):
+        return [(name, np.concatenate([array, np.zeros((len(array), 1), array.dtype)], axis=1))]
+    if shape == (2, 2):
+        padded = np.zeros((len(array), 3, 3), array.dtype)
+        padded[:, :2, :2] = array
+        return [(name, padded.reshape(len(array), 9))]
+    raise ValueError(
+        f"point data {name!r} has shape {array.shape}: Gmsh files hold 1, 3 or 9 components a point (a 2-D vector "
+        "(n, 2) and a tensor (n, 2, 2) are padded with zeros); write .vtu for other shapes"
+    )
+
+
+#: The format evomesh writes for a suffix where meshio knows several (.msh: Gmsh, not ANSYS).
+_FORMAT_OF_SUFFIX = {".msh": "gmsh"}
+_INT32 = np.iinfo(np.int32)
+
+
+def _file_format(path: Path) -> str:
+    """meshio's format name for a file name's suffix; ValueError when meshio
+    has none."""
+    import meshio
+
+    suffix = path.suffix.lower()
+    if suffix in _FORMAT_OF_SUFFIX:
+        return _FORMAT_OF_SUFFIX[suffix]
+    formats = meshio.extension_to_filetypes.get(suffix)
+    if not formats:
+        raise ValueError(f"cannot tell the format of {path} from its suffix {path.suffix!r} (meshio knows "
+                         f"{', '.join(sorted(meshio.extension_to_filetypes))})")
+    return formats[0]
+
+
+def check_writable_format(path: str | Path) -> str:
+    """The meshio format :func:`write_mesh` would write ``path`` in, after
+    checking that it can: a known suffix, and h5py installed for XDMF.
+
+    Parameters
+    ----------
+    path : str or Path
+        The file to write; only its suffix is looked at.
+
+    Returns
+    -------
+    str
+        meshio's format name ("vtu", "gmsh", "xdmf", ...; ``.msh`` is Gmsh).
+
+    Raises
+    ------
+    ValueError
+        If meshio knows no format for the suffix.
+    ImportError
+        For ``.xdmf`` / ``.xmf`` without h5py (meshio stores XDMF's arrays in
+        HDF5): ``pip install h5py`` (or ``pip install evomesh[xdmf]``).
+    """
+    file_format = _file_format(Path(path))
+    if file_format == "xdmf":
+        try:
+            importlib.import_module("h5py")
+        except ImportError as error:
+            raise ImportError(f"writing {Path(path).name} needs h5py (meshio stores XDMF's arrays in HDF5): "
+                              "pip install h5py, or pip install evomesh[xdmf]") from error
+    return file_format
+
+
+def _check_gmsh_tags(mesh: Mesh) -> None:
+    """Gmsh files hold 32-bit tags: a larger one would be wrapped, so it is refused."""
+    for name, tags in (("segment", mesh.segment_tags), ("triangle", mesh.triangle_tags)):
+        if len(tags) and (tags.min() < _INT32.min or tags.max() > _INT32.max):
+            bad = int(tags[(tags < _INT32.min) | (tags > _INT32.max)][0])
+            raise ValueError(f"{name} tag {bad} does not fit in the 32-bit tags of Gmsh files; write .vtu or .xdmf "
+                             "(64-bit tags), or renumber the tags")
+
+
+def _write_atomically(path: Path, out: meshio.Mesh, file_format: str) -> None:
+    """meshio writes into a new folder beside ``path``; the file (and the
+    files it refers to, such as an XDMF's .h5) then replace the old ones by
+    rename. A failure leaves the old files as they were."""
+    import os
+    import shutil
+    import tempfile
+
+    target = path.resolve() if path.is_symlink() else path  # write through a link, as open() would
+    folder = target.parent if str(target.parent) else Path(".")
+    scratch = Path(tempfile.mkdtemp(prefix=f".{target.name}.", dir=folder))
+    try:
+        written = scratch / target.name
+        try:
+            out.write(written, file_format=file_format)
+        except (OSError, ImportError):
+            raise
+        except Exception as error:  # meshio's writers raise many things (WriteError, ValueError, KeyError, ...)
+            raise ValueError(f"cannot write {path}: {type(error).__name__}: {error}") from error
+        # companions first, the file itself last: it is complete once it appears
+        for produced in sorted(scratch.iterdir(), key=lambda item: item.name == target.name):
+            os.replace(produced, folder / produced.name)
+    finally:
+        shutil.rmtree(scratch, ignore_errors=True)
+
+
 def write_mesh(path: str | Path, mesh: Mesh, point_data: Mapping[str, ArrayLike] | None = None) -> Path:
     """Write a mesh with meshio (format from the suffix; ``.vtu`` for ParaView).
 
-    Per-point data: ``kind``, ``origin`` and the arrays of ``point_data``
-    (each shape (n,) or (n, ...)), converted and checked as in
+    Per-point data: ``kind``, ``origin``, ``required`` and the arrays of
+    ``point_data`` (each shape (n,) or (n, ...)), converted and checked as in
     :func:`to_meshio` (complex fields become ``<name>_real`` and
-    ``<name>_imag``); nothing is written if they are refused.
+    ``<name>_imag``). Tags as in :meth:`Mesh.to_meshio` (tag names too, in
+    Gmsh files). Gmsh files (``.msh``, written as Gmsh 2.2) hold 1, 3 or 9
+    components a point and 32-bit tags: a 2-D vector field gets a zero z
+    component, a (n, 2, 2) tensor a zero third row and column.
+
+    Everything is checked before anything is written, and the file is written
+    beside ``path`` under another name, then renamed: a failure leaves an
+    existing file at ``path`` as it was.
+
+    Returns
+    -------
+    Path
+        ``path``.
+
+    Raises
+    ------
+    TypeError, ValueError
+        A field or name refused by :func:`to_meshio`; a suffix meshio does
+        not know; for Gmsh, a field of another width or a tag beyond int32;
+        anything meshio's writer refuses (naming the file).
+    ImportError
+        ``.xdmf`` without h5py (:func:`check_writable_format`).
+    OSError
+        The folder does not exist or cannot be written.
     """
     path = Path(path)
-    out = to_meshio(mesh, point_data)
-    if path.suffix.lower() != ".msh":
+    _require_mesh(mesh)
+    file_format = check_writable_format(path)
+    _check_point_data(point_data, mesh.n_points, _MESH_POINT_DATA)
+    if file_format == "gmsh":
+        _check_gmsh_tags(mesh)
+        arrays = [a for name, values in (point_data or {}).items() for a in _gmsh_arrays(name, values)]
+        file_format = "gmsh22"  # tags per cell, read back by meshio and Gmsh alike
+    else:
+        arrays = [a for name, values in (point_data or {}).items() for a in _vtu_arrays(name, values)]
+    out = mesh.to_meshio()
+    if file_format != "gmsh22":
         out.point_data.pop("gmsh:dim_tags", None)  # only Gmsh files need it
-    out.write(path, file_format="gmsh22" if path.suffix.lower() == ".msh" else None)  # tags read back
+    out.point_data.update(arrays)
+    _write_atomically(path, out, file_format)
     return path
 
 
@@ -162,7 +309,8 @@ def read_mesh(path: str | Path) -> tuple[Mesh, dict[str, np.ndarray]]:
     Returns
     -------
     mesh : Mesh
-        With the file's kind, origin and interior segments (line cells).
+        With the file's kind, origin, interior segments (line cells), tags
+        and, from Gmsh files, tag names (:meth:`Mesh.from_meshio`).
     point_data : dict of ndarray
         The other point data, as stored (a complex field written by
         :func:`write_mesh` comes back as ``<name>_real`` and ``<name>_imag``).
@@ -177,6 +325,9 @@ def read_mesh(path: str | Path) -> tuple[Mesh, dict[str, np.ndarray]]:
         ``origin`` values that are not integers (floats are accepted when
         integral: some writers store them as floats), or does not hold a
         valid mesh.
+    ImportError
+        If meshio's reader of the format needs a package that is missing
+        (h5py for XDMF files with HDF5 arrays).
     """
     import meshio
 
@@ -185,6 +336,9 @@ def read_mesh(path: str | Path) -> tuple[Mesh, dict[str, np.ndarray]]:
         raise FileNotFoundError(f"mesh file not found: {path}")
     try:
         m = meshio.read(path)
+    except ImportError as error:  # an optional reader dependency (h5py for XDMF's HDF5 arrays)
+        raise ImportError(f"reading {path.name} needs {error.name or 'a missing module'}: "
+                          f"pip install {error.name or str(error)}") from error
     except SystemExit as error:  # meshio exits on some malformed files
         raise ValueError(f"cannot read mesh file {path}: not a valid mesh file") from error
     except (meshio.ReadError, KeyError, IndexError, TypeError, ValueError, EOFError, UnicodeDecodeError) as error:

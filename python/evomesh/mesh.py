@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 import warnings
 from enum import IntEnum
 from types import MappingProxyType
@@ -265,6 +266,11 @@ class Mesh:
     required : array_like of bool, shape (n,), optional
         Points every step keeps, at their exact coordinates and with their
         origin (a required point on segments is a corner).
+    tag_names : mapping of (int, int) to str, optional
+        Names of tags, keyed like Gmsh's physical groups: ``(1, tag)`` names a
+        segment tag, ``(2, tag)`` a triangle tag (``{(1, 3): "dirichlet"}``).
+        Read from and written to Gmsh files (``$PhysicalNames``), carried by
+        every step; read-only (``mesh.tag_names``).
     origin : array_like of int, shape (n,), optional
         Index of each point in the mesh it was evolved from, -1 for a new point.
 
@@ -281,12 +287,13 @@ class Mesh:
         within 1024 units of rounding of a boundary edge it is not an end of),
         repeated, overlapping or inverted triangles, duplicate or orphan
         points, an edge shared by more than two triangles, a segment that is
-        not a mesh edge, bad ``kind`` or ``origin``.
+        not a mesh edge, the same segment given twice with different tags, bad
+        ``kind``, ``origin`` or ``tag_names``.
         The caller's arrays are never modified.
     """
 
     __slots__ = ("points", "triangles", "segments", "segment_is_boundary", "kind", "origin", "stats", "lineage", "_nn",
-                 "_nn_grew", "segment_tags", "triangle_tags", "required")
+                 "_nn_grew", "segment_tags", "triangle_tags", "required", "tag_names")
 
     points: np.ndarray
     triangles: np.ndarray
@@ -299,9 +306,11 @@ class Mesh:
     segment_tags: np.ndarray
     triangle_tags: np.ndarray
     required: np.ndarray
+    tag_names: Mapping[tuple[int, int], str]
 
     def __init__(self, points: Any, triangles: Any, segments: Any = None, *, segment_tags: Any = None,
-                 triangle_tags: Any = None, required: Any = None, kind: Any = None, origin: Any = None):
+                 triangle_tags: Any = None, required: Any = None, kind: Any = None, origin: Any = None,
+                 tag_names: Any = None):
         pts = _as_points(points)
         n = len(pts)
         if n < 3:
@@ -315,8 +324,10 @@ class Mesh:
             if segs is None:
                 raise ValueError("segment_tags need segments: one tag per row of segments")
             seg_tags = _as_tags(segment_tags, len(segs), "segment_tags", "segments")
+            _check_repeated_segments_agree(segs, seg_tags)
         tri_tags = None if triangle_tags is None else _as_tags(triangle_tags, len(tris), "triangle_tags", "triangles")
         req = None if required is None else _as_mask(required, n)
+        names = _as_tag_names(tag_names)
         _check_topology(pts, tris)
         nn = _check_point_distances(pts)
         if tri_tags is not None:
@@ -362,10 +373,10 @@ class Mesh:
                 raise ValueError("origin values must be point indices >= 0, or -1 for a new point")
             org = org.astype(np.int64)
         self._assign(pts, tris, segs, boundary, kinds, org, {}, None, nn, built_tags if seg_tags is not None else None,
-                     tri_tags, req)
+                     tri_tags, req, tag_names=names)
 
     def _assign(self, points, triangles, segments, segment_is_boundary, kind, origin, stats, lineage, nn,
-                segment_tags=None, triangle_tags=None, required=None, nn_grew=None) -> None:
+                segment_tags=None, triangle_tags=None, required=None, nn_grew=None, tag_names=None) -> None:
         set_ = object.__setattr__
         set_(self, "points", _frozen(np.asarray(points, dtype=np.float64)))
         set_(self, "triangles", _frozen(np.asarray(triangles, dtype=np.int64)))
@@ -382,6 +393,7 @@ class Mesh:
              else _frozen(np.asarray(triangle_tags, dtype=np.int64)))
         set_(self, "required", _frozen_constant(n_points, False, bool) if required is None
              else _frozen(np.asarray(required, dtype=bool)))
+        set_(self, "tag_names", MappingProxyType(dict(tag_names or {})))
         # nn: the Euclidean distances, made distances within the domain, unless
         # nn_grew (the points where that made them larger) says it was done.
         if nn is not None and nn_grew is None:
@@ -391,11 +403,12 @@ class Mesh:
 
     @classmethod
     def _trusted(cls, points, triangles, segments, segment_is_boundary, kind, origin, stats=None, lineage=None,
-                 nn=None, segment_tags=None, triangle_tags=None, required=None, nn_grew=None) -> "Mesh":
+                 nn=None, segment_tags=None, triangle_tags=None, required=None, nn_grew=None,
+                 tag_names=None) -> "Mesh":
         """Wrap arrays that evomesh itself produced (already valid); no checks."""
         mesh = cls.__new__(cls)
         mesh._assign(points, triangles, segments, segment_is_boundary, kind, origin, stats or {}, lineage, nn,
-                     segment_tags, triangle_tags, required, nn_grew)
+                     segment_tags, triangle_tags, required, nn_grew, tag_names)
         return mesh
 
     def _labels(self) -> dict[str, Any]:
@@ -432,11 +445,12 @@ class Mesh:
 
     def __reduce__(self):
         # Pickle and deepcopy round-trip every array bit for bit (checkpoints).
+        # Tag names only when there are some: a pickle then reads as before.
         return (
             _unpickle_mesh,
             (self.points, self.triangles, self.segments, self.segment_is_boundary, self.kind, self.origin,
              dict(self.stats), self.lineage, self._nn, self.segment_tags, self.triangle_tags, self.required,
-             self._nn_grew),
+             self._nn_grew) + ((dict(self.tag_names),) if self.tag_names else ()),
         )
 
     def __copy__(self) -> "Mesh":
@@ -456,6 +470,9 @@ class Mesh:
         triangle (a Gmsh circle's centre, an isolated physical point) are removed
         with a warning that says how many. Other cells (vertex cells) are
         ignored; quadrilaterals, polygons and higher-order cells are refused.
+        With Gmsh tags (``gmsh:physical``), the names of physical groups of
+        dimension 1 and 2 (meshio's ``field_data``, name -> [tag, dim]) become
+        ``tag_names``.
         """
         return cls._from_meshio(m, tags)[0]
 
@@ -496,8 +513,10 @@ class Mesh:
             raise ValueError("meshio mesh has no triangle cells")
         tris = np.concatenate(triangles)
         segs = np.concatenate(lines) if lines else None
-        tri_tags = None if tags is None else _integral_values(np.concatenate(triangle_tags), tags)
-        seg_tags = None if tags is None or not lines else _integral_values(np.concatenate(line_tags), tags)
+        tri_tags = None if tags is None else _integral_values(np.concatenate(triangle_tags), tags, "cell data",
+                                                              "triangle")
+        seg_tags = None if tags is None or not lines else _integral_values(np.concatenate(line_tags), tags,
+                                                                           "cell data", "line cell")
         data = {name: np.asarray(values) for name, values in m.point_data.items() if not name.startswith("gmsh:")}
         kind, origin, required = data.get("kind"), data.get("origin"), data.get("required")
         used = np.zeros(len(points), dtype=bool)
@@ -513,31 +532,65 @@ class Mesh:
             kind = None if kind is None else kind[used]
             origin = None if origin is None else origin[used]
             required = None if required is None else required[used]
-        mesh = cls(points, tris, segs, segment_tags=seg_tags, triangle_tags=tri_tags,
+        names = _names_from_field_data(getattr(m, "field_data", None) or {}) if tags == "gmsh:physical" else {}
+        mesh = cls(points, tris, segs, segment_tags=seg_tags, triangle_tags=tri_tags, tag_names=names,
                    required=None if required is None else _integral_values(required, "required").astype(bool),
                    kind=None if kind is None else _integral_values(kind, "kind"),
                    origin=None if origin is None else _integral_values(origin, "origin"))
         return mesh, used
 
     def to_meshio(self) -> Any:
-        """A ``meshio.Mesh``: points with z = 0, one "triangle" block and one
-        "line" block for the segments, their tags as cell data ``gmsh:physical``
-        (and ``gmsh:geometrical``, which Gmsh files need), point data ``kind``,
-        ``origin`` and ``required``."""
+        """A ``meshio.Mesh`` that Gmsh (2.2 and 4.1) and VTU files hold with its tags.
+
+        Points with z = 0; one "triangle" block per triangle tag and one "line"
+        block per segment tag (Gmsh 4.1 keeps one physical tag per block), in
+        increasing tag order, each in the mesh's order: a mesh with one triangle
+        tag reads back with its triangles in the same order, one with several
+        with them grouped by tag (as from any Gmsh file). Tags are cell data
+        ``gmsh:physical`` (int64: a tag beyond int32 is kept exactly in VTU;
+        Gmsh files hold int32 only), with ``gmsh:geometrical`` (one entity per
+        block) and point data ``gmsh:dim_tags`` (the entity of each point)
+        that Gmsh files need; ``tag_names`` become ``field_data``
+        (name -> [tag, dim], Gmsh's ``$PhysicalNames``). Point data ``kind``,
+        ``origin`` and ``required``.
+
+        A mesh with more blocks than points cannot be written as Gmsh 4.1
+        (meshio needs a point on every entity; a UserWarning says so): write
+        Gmsh 2.2 (:func:`evomesh.io.write_mesh` does) or VTU.
+        """
         import meshio
 
         points = np.c_[self.points, np.zeros(self.n_points)]
-        cells = [("triangle", np.array(self.triangles))]
-        tags = [np.array(self.triangle_tags, dtype=np.int32)]
-        if len(self.segments):
-            cells.append(("line", np.array(self.segments)))
-            tags.append(np.array(self.segment_tags, dtype=np.int32))
+        blocks: list[tuple[str, int, np.ndarray]] = []  # (type, tag, cells)
+        for kind, cells, cell_tags in (("triangle", self.triangles, self.triangle_tags),
+                                       ("line", self.segments, self.segment_tags)):
+            if len(cells) == 0:
+                continue
+            order = np.argsort(cell_tags, kind="stable")
+            sorted_tags = cell_tags[order]
+            starts = np.flatnonzero(np.r_[True, sorted_tags[1:] != sorted_tags[:-1]])
+            for first, last in zip(starts, np.r_[starts[1:], len(order)]):
+                blocks.append((kind, int(sorted_tags[first]), np.array(cells[order[first:last]])))
+        # Gmsh entities: one per block (geometrical tag k + 1 of block k). Every
+        # entity must hold a point (meshio's Gmsh 4.1 writer lists only those),
+        # and meshio's 4.1 reader keeps points and point data in step only when
+        # the points come in entity order: so the points are spread over the
+        # entities in index order, sorted by (dim, tag). This classification
+        # means nothing else; the cells carry the tags.
+        dims = np.array([2 if kind == "triangle" else 1 for kind, _, _ in blocks], dtype=np.int32)
+        entities = np.lexsort((np.arange(len(blocks)), dims))
+        if self.n_points < len(blocks):
+            warnings.warn(f"the mesh has more tags ({len(blocks)} blocks of cells) than points: meshio cannot write it "
+                          "as Gmsh 4.1 (write Gmsh 2.2 or VTU)", UserWarning, stacklevel=2)
+        entity = entities[np.arange(self.n_points, dtype=np.int64) * len(blocks) // self.n_points]
+        dim_tags = np.c_[dims[entity], entity + 1].astype(np.int32)
+        cell_data = {"gmsh:physical": [np.full(len(c), tag, np.int64) for _, tag, c in blocks],
+                     "gmsh:geometrical": [np.full(len(c), k + 1, np.int32) for k, (_, _, c) in enumerate(blocks)]}
         point_data = {"kind": np.array(self.kind, dtype=np.int32), "origin": np.array(self.origin),
-                      "required": np.array(self.required, dtype=np.uint8),
-                      # Gmsh files need an entity per node when they hold several cell types
-                      "gmsh:dim_tags": np.tile(np.array([2, 0], dtype=np.int32), (self.n_points, 1))}
-        cell_data = {"gmsh:physical": tags, "gmsh:geometrical": [t.copy() for t in tags]}
-        return meshio.Mesh(points, cells, point_data=point_data, cell_data=cell_data)
+                      "required": np.array(self.required, dtype=np.uint8), "gmsh:dim_tags": dim_tags}
+        field_data = {name: np.array([tag, dim], dtype=np.int64) for (dim, tag), name in self.tag_names.items()}
+        return meshio.Mesh(points, [(kind, c) for kind, _, c in blocks], point_data=point_data, cell_data=cell_data,
+                           field_data=field_data)
 
     @staticmethod
     def skfem_names(m: Any) -> "tuple[dict[int, str], dict[int, str]]":
@@ -729,11 +782,12 @@ class Mesh:
 
 
 def _unpickle_mesh(points, triangles, segments, segment_is_boundary, kind, origin, stats, lineage=None,
-                   nn=None, segment_tags=None, triangle_tags=None, required=None, nn_grew=None) -> Mesh:
+                   nn=None, segment_tags=None, triangle_tags=None, required=None, nn_grew=None,
+                   tag_names=None) -> Mesh:
     # A pickle without nn_grew (before 2026-12) holds nn within the domain but
     # not where it grew: nn is then computed again, when first needed.
     return Mesh._trusted(points, triangles, segments, segment_is_boundary, kind, origin, stats, lineage,
-                         None if nn_grew is None else nn, segment_tags, triangle_tags, required, nn_grew)
+                         None if nn_grew is None else nn, segment_tags, triangle_tags, required, nn_grew, tag_names)
 
 
 def _as_tags(values: Any, length: int, name: str, rows: str) -> np.ndarray:
@@ -745,6 +799,51 @@ def _as_tags(values: Any, length: int, name: str, rows: str) -> np.ndarray:
     if array.dtype.kind == "u" and array.size and array.max() > np.iinfo(np.int64).max:
         raise ValueError(f"{name} must fit in int64")
     return array.astype(np.int64)
+
+
+def _check_repeated_segments_agree(segments: np.ndarray, tags: np.ndarray) -> None:
+    """A segment given twice (either direction) must have one tag: a step keeps one."""
+    if len(segments) < 2:
+        return
+    edges = np.sort(segments, axis=1)
+    order = np.lexsort((tags, edges[:, 1], edges[:, 0]))
+    same = (edges[order[1:]] == edges[order[:-1]]).all(axis=1) & (tags[order[1:]] != tags[order[:-1]])
+    if same.any():
+        k = int(np.argmax(same))
+        i, j = sorted((int(order[k]), int(order[k + 1])))
+        a, b = (int(v) for v in edges[order[k]])
+        raise ValueError(f"segment ({a}, {b}) is given twice with different tags: row {i} has tag {int(tags[i])}, "
+                         f"row {j} has tag {int(tags[j])}; a segment has one tag")
+
+
+#: Characters a tag name may not hold: Gmsh writes names in double quotes, one a line.
+_BAD_TAG_NAME_CHARACTER = re.compile(r'["\x00-\x1f\x7f]')
+
+
+def _as_tag_names(names: Any) -> dict[tuple[int, int], str]:
+    """Checked tag names: (dim, tag) -> name, dim 1 (segments) or 2 (triangles)."""
+    if names is None:
+        return {}
+    if not isinstance(names, Mapping):
+        raise TypeError(f"tag_names must be a mapping of (dim, tag) -> name, got {type(names).__name__}")
+    checked: dict[tuple[int, int], str] = {}
+    for key, name in names.items():
+        if (not isinstance(key, tuple) or len(key) != 2
+                or not all(isinstance(k, (int, np.integer)) and not isinstance(k, bool) for k in key)):
+            raise TypeError(f"tag_names keys must be (dim, tag) pairs of integers, got {key!r}")
+        dim, tag = int(key[0]), int(key[1])
+        if dim not in (1, 2):
+            raise ValueError(f"tag_names key {key!r}: dim must be 1 (segment tags) or 2 (triangle tags)")
+        if not -(2**63) <= tag < 2**63:
+            raise ValueError(f"tag_names key {key!r}: the tag must fit in int64")
+        if not isinstance(name, str) or not name:
+            raise TypeError(f"tag_names[{key!r}] must be a non-empty string, got {name!r}")
+        bad = _BAD_TAG_NAME_CHARACTER.search(name)
+        if bad:
+            raise ValueError(f"tag_names[{key!r}] = {name!r} contains {bad.group()!r}: Gmsh files cannot hold "
+                             "double quotes or control characters in names")
+        checked[(dim, tag)] = name
+    return checked
 
 
 def _as_mask(values: Any, n: int) -> np.ndarray:
@@ -777,18 +876,36 @@ def _with_region_borders(triangles: np.ndarray, tags: np.ndarray, segments: np.n
     return np.concatenate([base, border]), np.concatenate([base_tags, np.zeros(len(border), np.int64)])
 
 
-def _integral_values(values: np.ndarray, name: str) -> np.ndarray:
+def _names_from_field_data(field_data: Mapping[str, Any]) -> dict[tuple[int, int], str]:
+    """Gmsh's physical names (meshio field_data, name -> [tag, dim]) of
+    dimension 1 and 2, as tag_names; other entries are not names of tags."""
+    names: dict[tuple[int, int], str] = {}
+    for name, value in field_data.items():
+        array = np.asarray(value)
+        if array.shape != (2,) or array.dtype.kind not in "iuf" or not np.isfinite(array).all():
+            continue
+        tag, dim = (int(v) for v in array)
+        if dim in (1, 2) and isinstance(name, str) and name and not _BAD_TAG_NAME_CHARACTER.search(name):
+            names.setdefault((dim, tag), name)
+    return names
+
+
+def _integral_values(values: np.ndarray, name: str, data: str = "point data", item: str = "point") -> np.ndarray:
     """Integer data that files may store as floats: integral floats become
-    int64, other floats are an error naming the first bad point."""
-    if values.dtype.kind != "f":
+    int64, other floats (and other dtypes) are an error naming the first bad
+    item (``data``: "point data" or "cell data"; ``item``: "point", "triangle",
+    "line cell")."""
+    if values.dtype.kind in "iub":
         return values
+    if values.dtype.kind != "f":
+        raise ValueError(f"{data} {name!r} must hold integers, got dtype {values.dtype}")
     with np.errstate(invalid="ignore"):
         integral = np.isfinite(values) & (values == np.round(values)) & (np.abs(values) < 2.0**63)
     if not integral.all():
         bad = np.flatnonzero(~integral.reshape(len(values), -1).all(axis=1))
         raise ValueError(
-            f"point data {name!r} must hold integers, but {len(bad)} points do not (first: point {int(bad[0])}, "
-            f"{name} = {values[int(bad[0])]!r})"
+            f"{data} {name!r} must hold integers, but {len(bad)} of {len(values)} {item}s do not (first: {item} "
+            f"{int(bad[0])}, {name} = {values[int(bad[0])]!r})"
         )
     return values.astype(np.int64)
 

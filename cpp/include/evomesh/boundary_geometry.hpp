@@ -41,20 +41,23 @@ struct Constraint_piece;
 // The step's input with the kinds of points on curved chains taken from the
 // geometry (corners only where it turns by more than corner_angle, at tag
 // changes and at required points), and a zero tag on every segment when it had
-// none. mesh.geometry must be set.
+// none. mesh.geometry must be set; Input_error for a curved tag no segment has.
 Mesh_arrays with_curve_kinds(const Mesh_arrays& mesh);
 
 // FRFC, before triangulating: moves the kept segment candidates of curved tags
 // onto their curves. Candidate k is centers[first + k], on segment
-// segment_of_candidate[k]; each may move by at most its sphere's radius (else
-// Input_error). Returns the largest move.
+// segment_of_candidate[k]; each may move by at most its sphere's radius, or by
+// its distance along the curved segments to a vertex on the curve (else
+// Input_error: the curve is not the one the segments approximate). Returns the
+// largest move.
 double project_segment_candidates(const Mesh_arrays& mesh, const std::vector<std::uint32_t>& segment_of_candidate,
                                   std::size_t first, const std::vector<std::uint8_t>& kept,
                                   const std::vector<double>& radius, std::vector<Vec2>& centers);
 
 // After triangulating the selection with `pieces`: every new point on a curved
 // piece (a new selected point, or one the quality pass inserted; by at most half
-// its shortest segment) is moved onto its curve and the constraints are
+// its shortest segment, or its distance along the pieces to a point on the
+// curve) is moved onto its curve and the constraints are
 // triangulated again through the moved points; points that end up outside the
 // domain are dropped (stats "curve_points_projected", "curve_points_dropped_outside",
 // "curve_largest_move"). selection_index: of every output point, -1 for one the
