@@ -4,6 +4,8 @@
 #include <cmath>
 #include <limits>
 #include <memory>
+#include <optional>
+#include <stdexcept>
 #include <utility>
 
 #include "evomesh/candidates.hpp"
@@ -405,13 +407,19 @@ double coordinate_magnitude(const std::vector<Vec2>& points) {
 
 }  // namespace
 
-std::optional<Evolve_result> incremental_frfc(const Mesh_arrays& mesh, const std::vector<double>& delta,
-                                              const Frfc_options& options) {
-  if (mesh.geometry || !options.filter_samples) return std::nullopt;
-  const std::size_t n = mesh.points.size();
+bool incremental_applies(const Mesh_arrays& mesh, const std::vector<double>& delta, const Frfc_options& options) {
+  if (mesh.geometry || !options.filter_samples) return false;
   std::size_t n_active = 0;
   for (double d : delta) n_active += d != 1;
-  if (static_cast<double>(n_active) > kMaxActiveShare * static_cast<double>(n)) return std::nullopt;
+  return static_cast<double>(n_active) <= kMaxActiveShare * static_cast<double>(mesh.points.size());
+}
+
+Evolve_result incremental_frfc(const Mesh_arrays& mesh, const std::vector<double>& delta,
+                               const Frfc_options& options) {
+  if (!incremental_applies(mesh, delta, options)) {
+    throw std::invalid_argument("incremental_frfc: the incremental step does not apply here (incremental_applies)");
+  }
+  const std::size_t n = mesh.points.size();
 
   Evolve_result result;
   Stage_timer timer(result.stats);
@@ -457,18 +465,51 @@ std::optional<Evolve_result> incremental_frfc(const Mesh_arrays& mesh, const std
   std::size_t n_forced = 0;
   const auto forced = forced_corners(mesh, chains, n_forced, mesh.required);
   const auto demoted = demoted_points(mesh.triangles, weights.nn, f, forced, options.demote_ratio);
-  check_sample_budget(estimate_sample_count(mesh, f, options.cell_factor, options.max_samples, options.adaptive_cells),
-                      options.max_samples, "sampling");
-  // A segment far longer than f at its ends has its grid sized by f inside it
-  // (sampling.hpp, Spacing_queries), from the Apollonius graph of all sites:
-  // the full step.
-  if (options.adaptive_cells && options.samples == Sample_mode::random_grid) {
-    for (const auto& e : mesh.segments) {
-      if (asks_spacing(mesh, f, e, options.cell_factor)) return std::nullopt;
+  // The adaptive grids of strongly graded triangles and of segments far longer
+  // than f at their ends (asks_spacing) ask f itself (sampling.hpp), in the
+  // sample budget's estimate and in the sampling; the full step asks the graph
+  // of all sites, certified. Here a graph of the sites near them answers the
+  // same: every query x lies in the bounding box B of its triangle (or on its
+  // segment ab), f is 1-Lipschitz, so the site c attaining f(x) has |x - c| <=
+  // f(x) <= f(v) + |x - v| for any vertex v: c lies within f(v) + 1.5 diag(B)
+  // of B's centre (within 2 |ab| + f(e) of an end e). Triangles that do not
+  // ask never query (their grid has at most kQueryCells fine cells), so the
+  // estimate is the full step's, and so is a refused budget's error.
+  std::optional<Restricted_spacing> spacing_near_graded;
+  if (options.adaptive_cells) {
+    Mark_sites near_graded(grid, n, magnitude);
+    bool any = false;
+    for (const Triangle& t : mesh.triangles) {
+      if (!asks_spacing(mesh, f, t, options.cell_factor)) continue;
+      any = true;
+      Vec2 lo = mesh.points[t[0]], hi = lo;
+      double f_min = f[t[0]];
+      for (Index v : t) {
+        lo = {std::min(lo[0], mesh.points[v][0]), std::min(lo[1], mesh.points[v][1])};
+        hi = {std::max(hi[0], mesh.points[v][0]), std::max(hi[1], mesh.points[v][1])};
+        f_min = std::min(f_min, f[v]);
+      }
+      near_graded.near({0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1])},
+                       f_min + 1.5 * std::hypot(hi[0] - lo[0], hi[1] - lo[1]));
     }
+    for (const Edge& e : mesh.segments) {
+      if (!asks_spacing(mesh, f, e, options.cell_factor)) continue;
+      any = true;
+      const Index end = f[e[0]] <= f[e[1]] ? e[0] : e[1];
+      const Vec2& a = mesh.points[e[0]];
+      const Vec2& b = mesh.points[e[1]];
+      near_graded.near(mesh.points[end], 2 * std::hypot(b[0] - a[0], b[1] - a[1]) + f[end]);
+    }
+    if (any) spacing_near_graded.emplace(mesh.points, weight, near_graded.marked);
   }
+  const Spacing_queries graded_queries =
+      spacing_near_graded ? spacing_queries(spacing_near_graded->function()) : Spacing_queries();
+  const Spacing_queries* queries = spacing_near_graded ? &graded_queries : nullptr;
+  check_sample_budget(
+      estimate_sample_count(mesh, f, options.cell_factor, options.max_samples, options.adaptive_cells, queries),
+      options.max_samples, "sampling");
   timer.lap("incremental_budget");
-  Candidates on_segments = segment_candidates(mesh, delta, f, chains, options);
+  Candidates on_segments = segment_candidates(mesh, delta, f, chains, options, queries);
   timer.lap("sampling");
   candidate_radii(mesh, spacing_near_points.function(), f, demoted, options, /*on_segment=*/true, on_segments);
   timer.lap("sample_radii");
@@ -486,14 +527,10 @@ std::optional<Evolve_result> incremental_frfc(const Mesh_arrays& mesh, const std
   const std::vector<std::uint8_t> quiet = quiet_triangles(mesh, grid, weight, packing.radius, packing.kept, demoted,
                                                           options.radius_scale, magnitude, options.threads);
   timer.lap("incremental_quiet");
-  // The same for a strongly graded triangle.
-  if (options.adaptive_cells && options.samples == Sample_mode::random_grid) {
-    for (std::size_t t = 0; t < mesh.triangles.size(); ++t) {
-      if (!quiet[t] && asks_spacing(mesh, f, mesh.triangles[t], options.cell_factor)) return std::nullopt;
-    }
-  }
   std::size_t n_drawn = 0;
-  Candidates inside = interior_candidates(mesh, fans, delta, f, demoted, cover, options, n_drawn, &quiet);
+  Candidates inside = interior_candidates(mesh, fans, delta, f, demoted, cover, options, n_drawn, &quiet, queries);
+  const std::size_t n_graded_sites = spacing_near_graded ? spacing_near_graded->n_sites() : 0;
+  spacing_near_graded.reset();  // its last use
   timer.lap("sampling");
   // The interior candidates' graph: x in triangle t has f(x) <= f(v) + |x - v| at its vertices v.
   Mark_sites near_samples(grid, n, magnitude);
@@ -567,7 +604,8 @@ std::optional<Evolve_result> incremental_frfc(const Mesh_arrays& mesh, const std
                            {"incremental_quiet_triangles", n_quiet},
                            {"incremental_packed_first", n_packed_first},
                            {"incremental_packed_second", n_packed_second},
-                           {"incremental_sites", spacing_near_points.n_sites() + spacing_near_samples.n_sites()}});
+                           {"incremental_sites", spacing_near_points.n_sites() + spacing_near_samples.n_sites() + n_graded_sites},
+                           {"incremental_step", 1}});
   result.input_nn = std::move(weights.nn);
   result.input_f = std::move(f);
   return result;
