@@ -32,7 +32,8 @@ Command (tables in benchmarks/README.md, "Issue 13 goal 2: cost follows the chan
     .venv/bin/python benchmarks/bench_incremental.py --sizes 1e5,1e6 --repeats 3 --order-evidence
 
 ``--one-point`` (issue 27, section 3): delta = 1 except at the point nearest the
-centre (1e-6: refine there, 1e3: coarsen there). Each path runs in a fresh process
+centre (1e-6: refine there, 1e3: coarsen there), and for comparison the 5 % front
+band above. Each path runs in a fresh process
 (one per path and case): the peak resident memory of the step (the largest
 ``memory_peak_mib_*`` stat under ``EVOMESH_STAGE_PROFILE=1``, VmHWM reset just
 before the step), the same less the resident memory before the step, and the
@@ -177,7 +178,7 @@ def markdown(rows: list[dict]) -> str:
     return "\n".join(lines)
 
 
-ONE_POINT_DELTAS = (1e-6, 1e3)
+ONE_POINT_CASES = (("point", 1e-6), ("point", 1e3), ("band", 0.05))
 
 
 def _resident_mib(field: str) -> float:
@@ -192,11 +193,14 @@ def _resident_mib(field: str) -> float:
     return float("nan")
 
 
-def one_point_worker(n: int, value: float, incremental: bool, repeats: int) -> dict:
-    """In a fresh process: the one-point step's peak memory (profiled run), then its time (plain runs)."""
+def one_point_worker(n: int, kind: str, value: float, incremental: bool, repeats: int) -> dict:
+    """In a fresh process: the step's peak memory (profiled run), then its time (plain runs)."""
     mesh = stepped_mesh(n)
-    delta = np.ones(mesh.n_points)
-    delta[int(np.argmin(np.hypot(mesh.points[:, 0] - 0.5, mesh.points[:, 1] - 0.5)))] = value
+    if kind == "point":
+        delta = np.ones(mesh.n_points)
+        delta[int(np.argmin(np.hypot(mesh.points[:, 0] - 0.5, mesh.points[:, 1] - 0.5)))] = value
+    else:
+        delta = front_delta(mesh, value)[0]
     os.environ["EVOMESH_STAGE_PROFILE"] = "1"
     before = _resident_mib("VmRSS")
     try:  # the step's peak, not the mesh building's (the step resets it after every stage too)
@@ -224,16 +228,17 @@ def one_point_worker(n: int, value: float, incremental: bool, repeats: int) -> d
 
 def run_one_point(n: int, repeats: int) -> None:
     print(f"# one point changed, n = {n}: each path in a fresh process", flush=True)
-    for value in ONE_POINT_DELTAS:
+    for kind, value in ONE_POINT_CASES:
         res = {}
         for incremental in (False, True):
-            cmd = [sys.executable, __file__, "--one-point-worker", json.dumps([n, value, incremental, repeats])]
+            cmd = [sys.executable, __file__, "--one-point-worker", json.dumps([n, kind, value, incremental, repeats])]
             line = subprocess.run(cmd, check=True, capture_output=True, text=True).stdout.strip().splitlines()[-1]
             res[incremental] = json.loads(line)
         full, fast = res[False], res[True]
         assert full["digest"] == fast["digest"], "the two paths differ"
         path = "incremental" if fast["incremental_step"] == 1 else "full"
-        print(f"{full['n']:>9} delta {value:g} at one point | full {full['seconds']:.4f} s peak {full['peak_mib']:.1f} MiB "
+        case = f"delta {value:g} at one point" if kind == "point" else f"{100 * value:g} % front band"
+        print(f"{full['n']:>9} {case:<22} | full {full['seconds']:.4f} s peak {full['peak_mib']:.1f} MiB "
               f"(step {full['step_mib']:.1f}) | default ({path}) {fast['seconds']:.4f} s peak {fast['peak_mib']:.1f} MiB "
               f"(step {fast['step_mib']:.1f}) | time ratio {fast['seconds'] / full['seconds']:.3f}, peak ratio "
               f"{fast['peak_mib'] / full['peak_mib']:.3f} | same bits", flush=True)
