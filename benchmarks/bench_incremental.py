@@ -30,12 +30,28 @@ and the medians, with the ratios taken run by run.
 Command (tables in benchmarks/README.md, "Issue 13 goal 2: cost follows the change")::
 
     .venv/bin/python benchmarks/bench_incremental.py --sizes 1e5,1e6 --repeats 3 --order-evidence
+
+``--one-point`` (issue 27, section 3): delta = 1 except at the point nearest the
+centre (1e-6: refine there, 1e3: coarsen there), and for comparison the 5 % front
+band above. Each path runs in a fresh process
+(one per path and case): the peak resident memory of the step (the largest
+``memory_peak_mib_*`` stat under ``EVOMESH_STAGE_PROFILE=1``, VmHWM reset just
+before the step), the same less the resident memory before the step, and the
+median wall seconds of ``--repeats`` steps without the profile; the two paths'
+outputs are compared by digest::
+
+    .venv/bin/python benchmarks/bench_incremental.py --one-point --sizes 2e3,1e5 --repeats 5
 """
 
 from __future__ import annotations
 
 import argparse
+import hashlib
+import json
+import os
 import statistics
+import subprocess
+import sys
 import time
 
 import numpy as np
@@ -162,12 +178,87 @@ def markdown(rows: list[dict]) -> str:
     return "\n".join(lines)
 
 
+ONE_POINT_CASES = (("point", 1e-6), ("point", 1e3), ("band", 0.05))
+
+
+def _resident_mib(field: str) -> float:
+    """VmRSS or VmHWM of this process in MiB (Linux), NaN elsewhere."""
+    try:
+        with open("/proc/self/status") as status:
+            for line in status:
+                if line.startswith(field + ":"):
+                    return float(line.split()[1]) / 1024
+    except OSError:
+        pass
+    return float("nan")
+
+
+def one_point_worker(n: int, kind: str, value: float, incremental: bool, repeats: int) -> dict:
+    """In a fresh process: the step's peak memory (profiled run), then its time (plain runs)."""
+    mesh = stepped_mesh(n)
+    if kind == "point":
+        delta = np.ones(mesh.n_points)
+        delta[int(np.argmin(np.hypot(mesh.points[:, 0] - 0.5, mesh.points[:, 1] - 0.5)))] = value
+    else:
+        delta = front_delta(mesh, value)[0]
+    os.environ["EVOMESH_STAGE_PROFILE"] = "1"
+    before = _resident_mib("VmRSS")
+    try:  # the step's peak, not the mesh building's (the step resets it after every stage too)
+        with open("/proc/self/clear_refs", "w") as refs:
+            refs.write("5")
+    except OSError:
+        pass
+    out = evomesh.evolve(mesh, delta, seed=1, incremental=incremental)
+    peaks = [v for k, v in out.stats.items() if k.startswith("memory_peak_mib_")]
+    peak = max(peaks) if peaks else _resident_mib("VmHWM")
+    os.environ["EVOMESH_STAGE_PROFILE"] = "0"
+    seconds = []
+    for _ in range(repeats):
+        t = time.perf_counter()
+        evomesh.evolve(mesh, delta, seed=1, incremental=incremental)
+        seconds.append(time.perf_counter() - t)
+    digest = hashlib.sha256()
+    for name in ARRAYS:
+        digest.update(np.ascontiguousarray(getattr(out, name)).tobytes())
+    for name in LINEAGE:
+        digest.update(np.ascontiguousarray(getattr(out.lineage, name)).tobytes())
+    return {"n": mesh.n_points, "peak_mib": peak, "step_mib": peak - before, "seconds": statistics.median(seconds),
+            "incremental_step": out.stats.get("incremental_step", float("nan")), "digest": digest.hexdigest()}
+
+
+def run_one_point(n: int, repeats: int) -> None:
+    print(f"# one point changed, n = {n}: each path in a fresh process", flush=True)
+    for kind, value in ONE_POINT_CASES:
+        res = {}
+        for incremental in (False, True):
+            cmd = [sys.executable, __file__, "--one-point-worker", json.dumps([n, kind, value, incremental, repeats])]
+            line = subprocess.run(cmd, check=True, capture_output=True, text=True).stdout.strip().splitlines()[-1]
+            res[incremental] = json.loads(line)
+        full, fast = res[False], res[True]
+        assert full["digest"] == fast["digest"], "the two paths differ"
+        path = "incremental" if fast["incremental_step"] == 1 else "full"
+        case = f"delta {value:g} at one point" if kind == "point" else f"{100 * value:g} % front band"
+        print(f"{full['n']:>9} {case:<22} | full {full['seconds']:.4f} s peak {full['peak_mib']:.1f} MiB "
+              f"(step {full['step_mib']:.1f}) | default ({path}) {fast['seconds']:.4f} s peak {fast['peak_mib']:.1f} MiB "
+              f"(step {fast['step_mib']:.1f}) | time ratio {fast['seconds'] / full['seconds']:.3f}, peak ratio "
+              f"{fast['peak_mib'] / full['peak_mib']:.3f} | same bits", flush=True)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--sizes", default="1e5,1e6")
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--order-evidence", action="store_true")
+    parser.add_argument("--one-point", action="store_true", help="the one-point table (issue 27) instead")
+    parser.add_argument("--one-point-worker", help=argparse.SUPPRESS)
     args = parser.parse_args()
+    if args.one_point_worker:
+        print(json.dumps(one_point_worker(*json.loads(args.one_point_worker))))
+        return
+    if args.one_point:
+        for size in args.sizes.split(","):
+            run_one_point(int(float(size)), args.repeats)
+        return
     rows = []
     for size in args.sizes.split(","):
         rows += run(int(float(size)), args.repeats, args.order_evidence)

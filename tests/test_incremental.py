@@ -1,16 +1,26 @@
 """Issue 13 goal 2: the incremental step (cpp/src/incremental_step.cpp) returns
 what the full algorithm returns, bit for bit, on every array of the new mesh
 and its lineage; it is taken where delta = 1 on most of the mesh and declines
-where it does not apply."""
+where it does not apply.
+
+Issue 27, section 3: the path is chosen before the work from O(n) counts
+(stats["incremental_step"] says which ran), the incremental step's peak memory
+is not above the full step's, and a refused sample budget is the same error on
+both paths. (That a failure inside the incremental step reaches the caller is
+checked in C++, cpp/tests/test_incremental_failures.cpp, by injecting one.)"""
 
 from __future__ import annotations
 
+import json
+import subprocess
+import sys
 import warnings
 
 import numpy as np
 import pytest
 from hypothesis import given
 from hypothesis import strategies as st
+from scipy.spatial import Delaunay
 
 import evomesh
 from evomesh.fronts import CircleFront
@@ -189,3 +199,120 @@ def test_curved_boundaries_take_the_full_path():
     result = evomesh.evolve(mesh, np.ones(mesh.n_points), seed=0, geometry=geometry)
     assert not _taken(result)
     assert _taken(evomesh.evolve(mesh, np.ones(mesh.n_points), seed=0))
+
+
+# Issue 27, section 3 ----------------------------------------------------------------------
+
+
+def _centre_point(mesh: evomesh.Mesh) -> int:
+    return int(np.argmin(np.hypot(mesh.points[:, 0] - 0.5, mesh.points[:, 1] - 0.5)))
+
+
+def _graded_mesh() -> evomesh.Mesh:
+    """A grid with three extra points 1e-6 apart in one cell: the triangles around them are
+    strongly graded (their adaptive grids ask f itself, sampling.hpp asks_spacing)."""
+    base = grid_mesh(30, 30, jitter=0.2, seed=0)
+    c = np.array([[0.5 + 0.3 / 29, 0.5 + 0.3 / 29]])
+    pts = np.vstack([base.points, c, c + [1e-6, 3e-7], c + [2e-7, 1e-6]])
+    return evomesh.Mesh(pts, Delaunay(pts).simplices)
+
+
+@pytest.mark.parametrize("value", [1e-6, 1e-3, 1e3, 1e6])
+@pytest.mark.parametrize("where", ["centre", "boundary", "corner"])
+def test_one_changed_point_takes_the_incremental_path_with_the_same_bits(value, where):
+    mesh = _stepped_mesh(2000, 0)
+    kind = np.asarray(mesh.kind)
+    index = {"centre": _centre_point(mesh), "boundary": int(np.flatnonzero(kind == 1)[0]),
+             "corner": int(np.flatnonzero(kind == 0)[0])}[where]
+    delta = np.ones(mesh.n_points)
+    delta[index] = value
+    fast = _check_same_step(mesh, delta, 2)
+    assert fast.stats["incremental_step"] == 1
+    assert evomesh.evolve(mesh, delta, seed=2, incremental=False).stats["incremental_step"] == 0
+
+
+@pytest.mark.parametrize("band", [None, 0.5, 2.0])
+def test_strongly_graded_triangles_take_the_incremental_path_with_the_same_bits(band):
+    # The grids of these triangles ask f at their blocks: before issue 27 the step gave up
+    # on them late (after the packing), or its sample estimate, lacking f, refused them.
+    mesh = _graded_mesh()
+    delta = np.ones(mesh.n_points)
+    if band is not None:
+        delta[np.abs(mesh.points[:, 0] - 0.3) < 0.1] = band
+    fast = _check_same_step(mesh, delta, 4)
+    assert fast.stats["incremental_step"] == 1
+
+
+def _both_paths(mesh, delta, **options):
+    """(result or the ValueError's message) of the full and of the default step."""
+    out = []
+    for incremental in (False, True):
+        try:
+            out.append(evolve_quietly(mesh, delta, 1, incremental=incremental, **options))
+        except ValueError as error:
+            out.append(str(error))
+    return out
+
+
+@pytest.mark.parametrize("case", ["one point", "band", "graded"])
+def test_a_refused_sample_budget_is_the_same_error_on_both_paths(case):
+    mesh = _graded_mesh() if case == "graded" else _stepped_mesh(2000, 0)
+    delta = np.ones(mesh.n_points)
+    if case == "one point":
+        delta[_centre_point(mesh)] = 1e-6
+    elif case == "band":
+        delta = _front_delta(mesh, (0.5, 0.5), 0.2, 0.06, 0.5)
+    # The default path here is the incremental one, so its own error is what the user sees.
+    assert evolve_quietly(mesh, delta, 1).stats["incremental_step"] == 1
+    refused = 0
+    for max_samples in (10.0, 1e3, 1e4, 3e4):
+        full, fast = _both_paths(mesh, delta, max_samples=max_samples)
+        if isinstance(full, str):
+            refused += 1
+            assert fast == full and "max_samples" in full
+        else:
+            assert not isinstance(fast, str), fast
+            assert np.array_equal(full.points, fast.points)
+    assert refused >= 1
+
+
+_PEAK_WORKER = """
+import json, os, sys
+import numpy as np
+import evomesh
+n, value, incremental = json.loads(sys.argv[1])
+base = evomesh.unit_square_mesh(n, seed=0)
+mesh = evomesh.evolve(base, np.ones(base.n_points), seed=0)
+delta = np.ones(mesh.n_points)
+delta[int(np.argmin(np.hypot(mesh.points[:, 0] - 0.5, mesh.points[:, 1] - 0.5)))] = value
+os.environ["EVOMESH_STAGE_PROFILE"] = "1"
+try:  # the peak from here on (the step resets it after every stage too)
+    with open("/proc/self/clear_refs", "w") as refs:
+        refs.write("5")
+except OSError:
+    pass
+out = evomesh.evolve(mesh, delta, seed=1, incremental=incremental)
+peaks = [v for k, v in out.stats.items() if k.startswith("memory_peak_mib_")]
+print(json.dumps({"peak_mib": max(peaks) if peaks else None, "incremental_step": out.stats.get("incremental_step"),
+                  "points": out.points.tolist()}))
+"""
+
+
+def test_one_point_at_tiny_delta_takes_no_more_memory_than_the_full_step():
+    # Issue 27: one point at delta = 1e-6 on a 2,000-point mesh took 1.6 GB by default
+    # against 72 MB with incremental=False (the incremental attempt sized a sample grid
+    # without f, gave up, and the full step ran). Each path in a fresh process; the peak
+    # resident memory of the step from the core's own stats (EVOMESH_STAGE_PROFILE).
+    runs = {}
+    for incremental in (False, True):
+        done = subprocess.run([sys.executable, "-c", _PEAK_WORKER, json.dumps([2000, 1e-6, incremental])],
+                              capture_output=True, text=True, timeout=600)
+        assert done.returncode == 0, done.stderr
+        runs[incremental] = json.loads(done.stdout.strip().splitlines()[-1])
+    full, fast = runs[False], runs[True]
+    assert fast["incremental_step"] == 1 and full["incremental_step"] == 0
+    assert fast["points"] == full["points"]
+    if full["peak_mib"] is None:
+        pytest.skip("no memory statistics on this platform (EVOMESH_STAGE_PROFILE reads /proc)")
+    # Resident memory is mostly the interpreter's here; 5 % is its noise, the old path was 20x.
+    assert fast["peak_mib"] <= 1.05 * full["peak_mib"], (fast["peak_mib"], full["peak_mib"])

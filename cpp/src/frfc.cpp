@@ -1,6 +1,5 @@
 #include "evomesh/frfc.hpp"
 
-#include <exception>
 #include <optional>
 #include <utility>
 
@@ -236,17 +235,10 @@ Evolve_result frfc(const Mesh_arrays& input, const std::vector<double>& delta, c
   options.validate();
   using namespace frfc_stages;
   // Where delta = 1 on most of the mesh, the same step at the cost of the
-  // change (incremental_step.hpp); it declines when it does not apply.
-  // Whatever stops it (also a refused sample budget) is left to the full step to say.
-  if (options.incremental && !input.geometry) {
-    std::optional<Evolve_result> incremental;
-    try {
-      incremental = incremental_frfc(input, delta, options);
-    } catch (const std::exception&) {
-      incremental.reset();
-    }
-    if (incremental) return std::move(*incremental);
-  }
+  // change (incremental_step.hpp). The path is chosen here, before any work,
+  // from O(n) counts; what the incremental step throws propagates (a bug there
+  // must show, not cost a second step).
+  if (options.incremental && incremental_applies(input, delta, options)) return incremental_frfc(input, delta, options);
   // With curved boundaries, the corners of curved chains come from the geometry.
   const Mesh_arrays with_curves = input.geometry ? with_curve_kinds(input) : Mesh_arrays{};
   const Mesh_arrays& mesh = input.geometry ? with_curves : input;
@@ -333,7 +325,8 @@ Evolve_result frfc(const Mesh_arrays& input, const std::vector<double>& delta, c
                            {"n_demoted_points", n_demoted},
                            {"n_spacing_repairs", n_repairs},
                            {"n_hidden_sites", n_hidden},
-                           {"n_filtered_sites", n_filtered}});
+                           {"n_filtered_sites", n_filtered},
+                           {"incremental_step", 0}});
   result.input_nn = std::move(spacing.nn);
   result.input_f = std::move(spacing.f);
   return result;

@@ -4,6 +4,8 @@
 #include <cmath>
 #include <limits>
 #include <memory>
+#include <optional>
+#include <stdexcept>
 #include <utility>
 
 #include "evomesh/candidates.hpp"
@@ -397,6 +399,22 @@ void second_pass_near(const Mesh_arrays& mesh, const Candidates& inside, const s
   packing.radius.insert(packing.radius.end(), inside.radius.begin(), inside.radius.end());
 }
 
+// An upper bound of f at every point: f(p) = min_c (w_c + |p - c|) over all
+// sites (Eq. 3), so f(p) <= w_q + |p - q| for p itself and its mesh neighbours q.
+std::vector<double> spacing_upper_bounds(const Mesh_arrays& mesh, const std::vector<double>& weight) {
+  std::vector<double> u = weight;
+  const auto& P = mesh.points;
+  for (const Triangle& t : mesh.triangles) {
+    for (int k = 0; k < 3; ++k) {
+      const Index p = t[k], q = t[(k + 1) % 3];
+      const double d = std::hypot(P[p][0] - P[q][0], P[p][1] - P[q][1]);
+      u[p] = std::min(u[p], weight[q] + d);
+      u[q] = std::min(u[q], weight[p] + d);
+    }
+  }
+  return u;
+}
+
 double coordinate_magnitude(const std::vector<Vec2>& points) {
   double m = 0;
   for (const Vec2& p : points) m = std::max({m, std::abs(p[0]), std::abs(p[1])});
@@ -405,50 +423,64 @@ double coordinate_magnitude(const std::vector<Vec2>& points) {
 
 }  // namespace
 
-std::optional<Evolve_result> incremental_frfc(const Mesh_arrays& mesh, const std::vector<double>& delta,
-                                              const Frfc_options& options) {
-  if (mesh.geometry || !options.filter_samples) return std::nullopt;
-  const std::size_t n = mesh.points.size();
+bool incremental_applies(const Mesh_arrays& mesh, const std::vector<double>& delta, const Frfc_options& options) {
+  if (mesh.geometry || !options.filter_samples) return false;
   std::size_t n_active = 0;
   for (double d : delta) n_active += d != 1;
-  if (static_cast<double>(n_active) > kMaxActiveShare * static_cast<double>(n)) return std::nullopt;
+  return static_cast<double>(n_active) <= kMaxActiveShare * static_cast<double>(mesh.points.size());
+}
+
+Evolve_result incremental_frfc(const Mesh_arrays& mesh, const std::vector<double>& delta,
+                               const Frfc_options& options) {
+  if (!incremental_applies(mesh, delta, options)) {
+    throw std::invalid_argument("incremental_frfc: the incremental step does not apply here (incremental_applies)");
+  }
+  const std::size_t n = mesh.points.size();
 
   Evolve_result result;
   Stage_timer timer(result.stats);
   const Thread_limit thread_limit(options.threads);
   const double magnitude = coordinate_magnitude(mesh.points);
+  // Memory (issue 27): what a stage leaves behind goes as soon as nothing reads
+  // it, as in the full step, so that the step's peak (the quality pass, the
+  // same in both) does not carry the grid, the graphs and the packing.
 
   // Step 1: nn_M and the weights as in the full step; f at the points by Lemma
   // 3.1, from a graph of the sites near the points that need it.
   const auto chains = segment_chains(mesh);
   Step_weights weights = step_weights(mesh, delta, timer, options.within_domain ? &chains : nullptr);
-  const std::vector<double>& weight = weights.weight;
-  Point_grid grid(mesh.points);
-  grid.set_weights(weight);
+  std::vector<double>& weight = weights.weight;
+  std::optional<Point_grid> grid(std::in_place, mesh.points);
+  grid->set_weights(weight);
   std::vector<double> f = weight;
-  std::vector<Index> asked;
-  for (std::size_t i = 0; i < n; ++i) {
-    if (delta[i] > 1 || (!weights.evaluate.empty() && weights.evaluate[i])) asked.push_back(static_cast<Index>(i));
-  }
-  // One graph for f at the points and the radii of the segment candidates:
-  // a candidate x on segment ab has f(x) <= w_e + |x - e| for its end e of
-  // smaller weight, so its sites lie within 2 |ab| + w_e of e.
-  Mark_sites near_points(grid, n, magnitude);
-  for (Index i : asked) near_points.near(mesh.points[i], weight[i]);
-  for (const Edge& e : mesh.segments) {
-    const Index end = weight[e[0]] <= weight[e[1]] ? e[0] : e[1];
-    const Vec2& a = mesh.points[e[0]];
-    const Vec2& b = mesh.points[e[1]];
-    near_points.near(mesh.points[end], 2 * std::hypot(b[0] - a[0], b[1] - a[1]) + weight[end]);
-  }
-  timer.lap("nn");
-  const Restricted_spacing spacing_near_points(mesh.points, weight, near_points.marked);
-  timer.lap("apollonius");
+  std::optional<Restricted_spacing> spacing_near_points;
   {
+    std::vector<Index> asked;
+    for (std::size_t i = 0; i < n; ++i) {
+      if (delta[i] > 1 || (!weights.evaluate.empty() && weights.evaluate[i])) asked.push_back(static_cast<Index>(i));
+    }
+    // One graph for f at the points and the radii of the segment candidates.
+    // f(p) <= u(p), the least cone of p and its mesh neighbours at p
+    // (spacing_upper_bounds), so the site attaining f(p) lies within u(p) of
+    // p; a candidate x on segment ab has f(x) <= u(e) + |x - e| for its end e
+    // of smaller u, so its sites lie within 2 |ab| + u(e) of e. (u, not w: the
+    // weight of a point that coarsens reaches far, its cone does not win there.)
+    const std::vector<double> u = spacing_upper_bounds(mesh, weight);
+    Mark_sites near_points(*grid, n, magnitude);
+    for (Index i : asked) near_points.near(mesh.points[i], u[i]);
+    for (const Edge& e : mesh.segments) {
+      const Index end = u[e[0]] <= u[e[1]] ? e[0] : e[1];
+      const Vec2& a = mesh.points[e[0]];
+      const Vec2& b = mesh.points[e[1]];
+      near_points.near(mesh.points[end], 2 * std::hypot(b[0] - a[0], b[1] - a[1]) + u[end]);
+    }
+    timer.lap("nn");
+    spacing_near_points.emplace(mesh.points, weight, near_points.marked);
+    timer.lap("apollonius");
     std::vector<Vec2> at;
     for (Index i : asked) at.push_back(mesh.points[i]);
     std::vector<double> value(at.size());
-    spacing_near_points.function().evaluate(at.data(), at.size(), value.data(), nullptr, options.threads);
+    spacing_near_points->function().evaluate(at.data(), at.size(), value.data(), nullptr, options.threads);
     for (std::size_t k = 0; k < asked.size(); ++k) f[asked[k]] = std::min(value[k], weight[asked[k]]);
   }
   timer.lap("spacing_at_points");
@@ -456,61 +488,115 @@ std::optional<Evolve_result> incremental_frfc(const Mesh_arrays& mesh, const std
   // Steps 2-5 as in frfc.cpp.
   std::size_t n_forced = 0;
   const auto forced = forced_corners(mesh, chains, n_forced, mesh.required);
-  const auto demoted = demoted_points(mesh.triangles, weights.nn, f, forced, options.demote_ratio);
-  check_sample_budget(estimate_sample_count(mesh, f, options.cell_factor, options.max_samples, options.adaptive_cells),
-                      options.max_samples, "sampling");
-  // A segment far longer than f at its ends has its grid sized by f inside it
-  // (sampling.hpp, Spacing_queries), from the Apollonius graph of all sites:
-  // the full step.
-  if (options.adaptive_cells && options.samples == Sample_mode::random_grid) {
-    for (const auto& e : mesh.segments) {
-      if (asks_spacing(mesh, f, e, options.cell_factor)) return std::nullopt;
+  std::vector<std::uint8_t> demoted = demoted_points(mesh.triangles, weights.nn, f, forced, options.demote_ratio);
+  // The adaptive grids of strongly graded triangles and of segments far longer
+  // than f at their ends (asks_spacing) ask f itself (sampling.hpp), in the
+  // sample budget's estimate and in the sampling; the full step asks the graph
+  // of all sites, certified. Here a graph of the sites near them answers the
+  // same: every query x lies in the bounding box B of its triangle (or on its
+  // segment ab), f is 1-Lipschitz, so the site c attaining f(x) has |x - c| <=
+  // f(x) <= f(v) + |x - v| for any vertex v: c lies within f(v) + 1.5 diag(B)
+  // of B's centre (within 2 |ab| + f(e) of an end e). Triangles that do not
+  // ask never query (their grid has at most kQueryCells fine cells), so the
+  // estimate is the full step's, and so is a refused budget's error.
+  std::optional<Restricted_spacing> spacing_near_graded;
+  if (options.adaptive_cells) {
+    Mark_sites near_graded(*grid, n, magnitude);
+    bool any = false;
+    for (const Triangle& t : mesh.triangles) {
+      if (!asks_spacing(mesh, f, t, options.cell_factor)) continue;
+      any = true;
+      Vec2 lo = mesh.points[t[0]], hi = lo;
+      double f_min = f[t[0]];
+      for (Index v : t) {
+        lo = {std::min(lo[0], mesh.points[v][0]), std::min(lo[1], mesh.points[v][1])};
+        hi = {std::max(hi[0], mesh.points[v][0]), std::max(hi[1], mesh.points[v][1])};
+        f_min = std::min(f_min, f[v]);
+      }
+      near_graded.near({0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1])},
+                       f_min + 1.5 * std::hypot(hi[0] - lo[0], hi[1] - lo[1]));
     }
+    for (const Edge& e : mesh.segments) {
+      if (!asks_spacing(mesh, f, e, options.cell_factor)) continue;
+      any = true;
+      const Index end = f[e[0]] <= f[e[1]] ? e[0] : e[1];
+      const Vec2& a = mesh.points[e[0]];
+      const Vec2& b = mesh.points[e[1]];
+      near_graded.near(mesh.points[end], 2 * std::hypot(b[0] - a[0], b[1] - a[1]) + f[end]);
+    }
+    if (any) spacing_near_graded.emplace(mesh.points, weight, near_graded.marked);
   }
+  const Spacing_queries graded_queries =
+      spacing_near_graded ? spacing_queries(spacing_near_graded->function()) : Spacing_queries();
+  const Spacing_queries* queries = spacing_near_graded ? &graded_queries : nullptr;
+  check_sample_budget(
+      estimate_sample_count(mesh, f, options.cell_factor, options.max_samples, options.adaptive_cells, queries),
+      options.max_samples, "sampling");
   timer.lap("incremental_budget");
-  Candidates on_segments = segment_candidates(mesh, delta, f, chains, options);
+  Candidates on_segments = segment_candidates(mesh, delta, f, chains, options, queries);
   timer.lap("sampling");
-  candidate_radii(mesh, spacing_near_points.function(), f, demoted, options, /*on_segment=*/true, on_segments);
+  candidate_radii(mesh, spacing_near_points->function(), f, demoted, options, /*on_segment=*/true, on_segments);
+  std::size_t n_sites = spacing_near_points->n_sites();
+  const std::size_t n_hidden = spacing_near_points->function().n_hidden();
+  const std::size_t n_filtered = spacing_near_points->function().n_filtered();
+  spacing_near_points.reset();  // its last use
   timer.lap("sample_radii");
   std::vector<std::uint8_t> safe;
   std::size_t n_packed_first = 0, n_packed_second = 0;
   Packing packing = first_pass_near(mesh, f, weights.nn, weights.evaluate, on_segments, forced, n_forced, demoted,
-                                    options, grid, magnitude, safe, n_packed_first);
+                                    options, *grid, magnitude, safe, n_packed_first);
   Early_start early(packing, options, false);
   timer.lap("lfmis");
 
   Triangle_fans fans(mesh);
   timer.lap("incremental_fans");
-  const Cover_discs cover = cover_discs(mesh, f, packing.radius, packing.kept, packing.blocker,
-                                       options.radius_scale, options.radius == Radius_rule::interpolated);
-  const std::vector<std::uint8_t> quiet = quiet_triangles(mesh, grid, weight, packing.radius, packing.kept, demoted,
-                                                          options.radius_scale, magnitude, options.threads);
-  timer.lap("incremental_quiet");
-  // The same for a strongly graded triangle.
-  if (options.adaptive_cells && options.samples == Sample_mode::random_grid) {
-    for (std::size_t t = 0; t < mesh.triangles.size(); ++t) {
-      if (!quiet[t] && asks_spacing(mesh, f, mesh.triangles[t], options.cell_factor)) return std::nullopt;
+  std::size_t n_quiet = 0, n_region = 0, n_drawn = 0;
+  Candidates inside;
+  {
+    const Cover_discs cover = cover_discs(mesh, f, packing.radius, packing.kept, packing.blocker,
+                                         options.radius_scale, options.radius == Radius_rule::interpolated);
+    const std::vector<std::uint8_t> quiet = quiet_triangles(mesh, *grid, weight, packing.radius, packing.kept,
+                                                            demoted, options.radius_scale, magnitude, options.threads);
+    timer.lap("incremental_quiet");
+    inside = interior_candidates(mesh, fans, delta, f, demoted, cover, options, n_drawn, &quiet, queries);
+    std::vector<std::uint8_t> in_region(n, 0);
+    for (std::size_t t = 0; t < quiet.size(); ++t) {
+      n_quiet += quiet[t];
+      if (!quiet[t]) {
+        for (Index v : mesh.triangles[t]) in_region[v] = 1;
+      }
     }
+    for (std::uint8_t r : in_region) n_region += r;
   }
-  std::size_t n_drawn = 0;
-  Candidates inside = interior_candidates(mesh, fans, delta, f, demoted, cover, options, n_drawn, &quiet);
+  if (spacing_near_graded) n_sites += spacing_near_graded->n_sites();
+  spacing_near_graded.reset();  // its last use
+  detail::release_free_memory();  // the sampling threads' blocks
   timer.lap("sampling");
-  // The interior candidates' graph: x in triangle t has f(x) <= f(v) + |x - v| at its vertices v.
-  Mark_sites near_samples(grid, n, magnitude);
-  for (std::size_t j = 0; j < inside.size(); ++j) {
-    const Vec2& x = inside.samples.points[j];
-    double u = std::numeric_limits<double>::infinity();
-    for (Index v : mesh.triangles[inside.samples.parent[j]]) {
-      u = std::min(u, f[v] + std::hypot(x[0] - mesh.points[v][0], x[1] - mesh.points[v][1]));
+  {
+    // The interior candidates' graph: x in triangle t has f(x) <= f(v) + |x - v| at its vertices v.
+    Mark_sites near_samples(*grid, n, magnitude);
+    for (std::size_t j = 0; j < inside.size(); ++j) {
+      const Vec2& x = inside.samples.points[j];
+      double u = std::numeric_limits<double>::infinity();
+      for (Index v : mesh.triangles[inside.samples.parent[j]]) {
+        u = std::min(u, f[v] + std::hypot(x[0] - mesh.points[v][0], x[1] - mesh.points[v][1]));
+      }
+      near_samples.near(x, u);
     }
-    near_samples.near(x, u);
+    const Restricted_spacing spacing_near_samples(mesh.points, weight, near_samples.marked);
+    weight = std::vector<double>();  // the sites' weights: the graphs were their last use
+    timer.lap("apollonius");
+    candidate_radii(mesh, spacing_near_samples.function(), f, demoted, options, /*on_segment=*/false, inside);
+    n_sites += spacing_near_samples.n_sites();
   }
-  const Restricted_spacing spacing_near_samples(mesh.points, weight, near_samples.marked);
-  timer.lap("apollonius");
-  candidate_radii(mesh, spacing_near_samples.function(), f, demoted, options, /*on_segment=*/false, inside);
   timer.lap("sample_radii");
   drop_blocked_candidates(mesh, packing.centers, packing.radius, packing.kept, packing.blocker, options.threads, inside);
-  second_pass_near(mesh, inside, safe, grid, magnitude, packing, n_packed_second);
+  second_pass_near(mesh, inside, safe, *grid, magnitude, packing, n_packed_second);
+  const std::size_t n_interior = inside.size();
+  inside = Candidates();  // (second_pass_near copied them into the packing)
+  safe = std::vector<std::uint8_t>();
+  grid.reset();
+  detail::release_free_memory();
   early.insert_late(packing, n, n + on_segments.size());
   timer.lap("lfmis");
 
@@ -523,6 +609,7 @@ std::optional<Evolve_result> incremental_frfc(const Mesh_arrays& mesh, const std
     const Spacing_repair_input input{mesh, fans, delta, weights.nn, f, packing.centers, on_segments.owner, demoted};
     repair_points = repair_spacing(input, options, packing.kept, n_repairs);
   }
+  demoted = std::vector<std::uint8_t>();
   early.insert_rest(packing, n, n + on_segments.size(), repair_points);
   timer.lap("spacing_repair");
 
@@ -531,11 +618,17 @@ std::optional<Evolve_result> incremental_frfc(const Mesh_arrays& mesh, const std
   Selection selection = select_output(mesh, forced, packing, on_segments.size(), repair_points, out_index);
   selection.pin(mesh.required);
   const auto pieces = pieces_along_chains(mesh, chains, on_segments, out_index);
+  const std::size_t n_candidates = packing.centers.size();
+  const std::size_t n_demoted = packing.n_demoted;
+  packing = Packing();
+  out_index = std::vector<Index>();
   const Quality_options quality = options.quality_settings();
   Old_mesh_start old_mesh(mesh, options.threads, std::move(fans));  // beside the early triangulation (frfc.cpp)
   early.wait();
+  detail::release_free_memory();
   triangulate_selection(std::move(selection), pieces, options.quality ? &quality : nullptr, result,
                         options.quality ? &early.triangulation : nullptr, nullptr);
+  detail::release_free_memory();
   timer.lap(options.quality ? "quality" : "cdt");
   // The output's nn from the input's where nothing near changed: the input's
   // Euclidean nn is weights.nn except where it grew within the domain.
@@ -544,30 +637,21 @@ std::optional<Evolve_result> incremental_frfc(const Mesh_arrays& mesh, const std
     if (weights.evaluate[i]) euclidean_nn[i] = std::numeric_limits<double>::quiet_NaN();
   }
   finish_step(mesh, result, timer, &old_mesh, &euclidean_nn);
-  std::size_t n_quiet = 0;
-  for (std::uint8_t q : quiet) n_quiet += q;
-  std::vector<std::uint8_t> in_region(n, 0);
-  for (std::size_t t = 0; t < quiet.size(); ++t) {
-    if (!quiet[t]) {
-      for (Index v : mesh.triangles[t]) in_region[v] = 1;
-    }
-  }
-  std::size_t n_region = 0;
-  for (std::uint8_t r : in_region) n_region += r;
   add_step_counts(result, {{"n_input_points", n},
                            {"n_segment_samples", on_segments.size()},
-                           {"n_interior_samples", inside.size()},
+                           {"n_interior_samples", n_interior},
                            {"n_interior_samples_drawn", n_drawn},
-                           {"n_candidates", packing.centers.size()},
-                           {"n_demoted_points", packing.n_demoted},
+                           {"n_candidates", n_candidates},
+                           {"n_demoted_points", n_demoted},
                            {"n_spacing_repairs", n_repairs},
-                           {"n_hidden_sites", spacing_near_points.function().n_hidden()},
-                           {"n_filtered_sites", spacing_near_points.function().n_filtered()},
+                           {"n_hidden_sites", n_hidden},
+                           {"n_filtered_sites", n_filtered},
                            {"incremental_region_points", n_region},
                            {"incremental_quiet_triangles", n_quiet},
                            {"incremental_packed_first", n_packed_first},
                            {"incremental_packed_second", n_packed_second},
-                           {"incremental_sites", spacing_near_points.n_sites() + spacing_near_samples.n_sites()}});
+                           {"incremental_sites", n_sites},
+                           {"incremental_step", 1}});
   result.input_nn = std::move(weights.nn);
   result.input_f = std::move(f);
   return result;

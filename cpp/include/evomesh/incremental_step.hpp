@@ -20,7 +20,6 @@
 // point), and O(n) loops.
 #pragma once
 
-#include <optional>
 #include <vector>
 
 #include "evomesh/options.hpp"
@@ -29,14 +28,25 @@
 
 namespace evomesh {
 
-// frfc(mesh, delta, options) when it applies (no curved boundaries, the sample
-// filter on, delta != 1 at no more than half of the points); std::nullopt
-// otherwise (the caller runs the full step). Preconditions: those of frfc,
-// checked by it (check_delta, options.validate()).
-// Adds the stats "incremental_region_points" (points of triangles sampled or of
-// spheres packed), "incremental_quiet_triangles" and "incremental_sites" (sites
-// of the Apollonius graphs).
-std::optional<Evolve_result> incremental_frfc(const Mesh_arrays& mesh, const std::vector<double>& delta,
-                                              const Frfc_options& options);
+// Whether the incremental step runs: no curved boundaries, the sample filter
+// on, and delta != 1 at no more than half of the points (beyond that the full
+// step is as fast). O(n) counts, decided before any work; frfc() asks it (with
+// options.incremental). No other input is declined: what made the step give up
+// late (a triangle or segment whose adaptive grid asks f itself, asks_spacing)
+// is answered by a graph of the sites near it (incremental_step.cpp).
+// Preconditions: those of frfc (check_delta).
+bool incremental_applies(const Mesh_arrays& mesh, const std::vector<double>& delta, const Frfc_options& options);
+
+// frfc(mesh, delta, options), bit for bit, where incremental_applies(mesh,
+// delta, options) (else throws std::invalid_argument). Preconditions: those of
+// frfc, checked by it (check_delta, options.validate()). What fails inside
+// throws, as in the full step: a refused sample budget (max_samples) is the
+// same Input_error with the same message (the same estimate).
+// Adds the stats "incremental_step" (1; the full step's is 0),
+// "incremental_region_points" (points of triangles sampled or of spheres
+// packed), "incremental_quiet_triangles" and "incremental_sites" (sites of the
+// Apollonius graphs).
+Evolve_result incremental_frfc(const Mesh_arrays& mesh, const std::vector<double>& delta,
+                               const Frfc_options& options);
 
 }  // namespace evomesh
