@@ -1,15 +1,19 @@
-"""The README's Python examples run as written, and its growing-circle table is
-what the command it shows prints."""
+"""The Python examples of README.md and docs/ run as written, and the README's growing-circle
+table is what the command it shows prints."""
 
 import pathlib
 import re
 import shlex
 import textwrap
 
+import pytest
+
 from evomesh.cli import main
 from evomesh.statistics import STATISTICS_COLUMNS
 
-README = pathlib.Path(__file__).resolve().parents[1] / "README.md"
+ROOT = pathlib.Path(__file__).resolve().parents[1]
+README = ROOT / "README.md"
+DOCS = ROOT / "docs"
 
 # The README table's columns; ours are these columns of the printed table, then come the paper's.
 HEADER = ["step", "points", "original", "% original", "triangles", "min angle",
@@ -17,13 +21,15 @@ HEADER = ["step", "points", "original", "% original", "triangles", "min angle",
 OURS = ("iteration", "points", "original_points", "original_pct", "triangles", "min_angle_deg")
 
 
-def test_readme_python_blocks_run(capsys):
+@pytest.mark.parametrize("document", [README, *sorted(DOCS.glob("*.md"))], ids=lambda path: path.name)
+def test_python_blocks_run(document, capsys):
+    """Every Python block of README.md and docs/*.md runs as written."""
     # blocks may be indented (inside a list item)
-    found = re.findall(r"^ *```python\n(.*?)^ *```", README.read_text(), flags=re.S | re.M)
+    found = re.findall(r"^ *```python\n(.*?)^ *```", document.read_text(), flags=re.S | re.M)
     blocks = [textwrap.dedent(block) for block in found]
-    assert blocks
+    assert blocks or document != README
     for block in blocks:
-        exec(compile(block, str(README), "exec"), {})
+        exec(compile(block, str(document), "exec"), {})
 
 
 def readme_growing_circle_arguments(text: str) -> list[str]:
