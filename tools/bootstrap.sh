@@ -2,7 +2,8 @@
 # Sets up evomesh on a fresh Debian machine: installs the Debian packages it
 # needs when they are missing (CGAL's libcgal-dev, a C++ compiler, Python headers
 # and venv), creates the virtual environment .venv and installs evomesh into it
-# with its test tools. Safe to run again: it only installs what is missing.
+# with its test tools (building the C++ core takes a few minutes; it says so and
+# shows one line per compiled file). Safe to run again: it only installs what is missing.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -52,6 +53,25 @@ rm -f "$stamp"
 # The package (C++ extension built against Debian's CGAL) and the test tools;
 # also its build requirements, so that the developers' in-place rebuild
 # (pip install --no-build-isolation -ve . -Cbuild-dir=build/dev) works.
-.venv/bin/python -m pip install -q ".[test]" "scikit-build-core>=0.10" "pybind11>=2.12"
+# pip's verbose output goes to a log; the terminal gets one line per compiled
+# file, and the end of the log if the install fails.
+log=.venv/evomesh-install.log
+echo "evomesh: building the C++ core against CGAL and installing it with its Python dependencies"
+echo "evomesh: this takes a few minutes (3-5 on 2 cores; 3 minutes of CPU time to compile); log: $(pwd)/$log"
+start=$SECONDS
+compile_progress() {
+  local line
+  while IFS= read -r line; do
+    if [[ $line =~ \[([0-9]+/[0-9]+)\]\ (Building|Linking)\ .*[\ /]([^\ /]+)$ ]]; then
+      echo "evomesh:   [${BASH_REMATCH[1]}] ${BASH_REMATCH[2],,} ${BASH_REMATCH[3]%.o}"
+    fi
+  done
+}
+if ! .venv/bin/python -m pip install -v ".[test]" "scikit-build-core>=0.10" "pybind11>=2.12" 2>&1 |
+  tee "$log" | compile_progress; then
+  echo "evomesh: the install failed; the end of $log:" >&2
+  tail -n 40 "$log" >&2
+  exit 1
+fi
 echo "$source_hash $(installed_module)" >"$stamp"
-echo "evomesh: installed in $(pwd)/.venv"
+echo "evomesh: installed in $(pwd)/.venv ($((SECONDS - start)) s)"
