@@ -298,8 +298,10 @@ def evolve(mesh: Mesh, delta: Any = None, *, size: Any = None, method: str = "fr
     displacement : array_like of shape (n, 2) or (2,), or callable, optional
         Lagrangian motion (issue 28): every point p (boundary, interface and
         interior) first moves to p + u(p), then the moved mesh evolves
-        (``delta`` and ``size`` arrays are per point of ``mesh``; a callable
-        size is evaluated at the moved points). u is given at the points, as
+        (``delta`` and ``size`` arrays are per point of ``mesh``; ``delta`` is
+        relative to nn_M before the move, so 1 keeps the resolution however
+        the motion squeezed or stretched the mesh; a callable size is
+        evaluated at the moved points). u is given at the points, as
         one (dx, dy) for all, or as a function u(x) of an (n, 2) array. A point
         all of whose segments carry one curved tag of ``geometry`` is
         projected onto that curve after the move. Where the motion folds

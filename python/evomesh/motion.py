@@ -25,7 +25,6 @@ from evomesh.mesh import (
     _MIN_RELATIVE_HEIGHT,
     Lineage,
     Mesh,
-    PointKind,
     _as_array,
 )
 from evomesh.spacing_function import _require_mesh, as_delta
@@ -58,9 +57,11 @@ class Motion(NamedTuple):
         ``motion_largest_displacement``, ``motion_folded_triangles`` (turned
         over or flat after the move), ``motion_remeshed`` (1 when the folded
         region was triangulated again), ``motion_points_dropped`` (interior
-        points of folded regions), ``motion_points_dropped_outside`` (interior
-        points a moving boundary passed), ``motion_points_projected`` (boundary
-        points moved onto their curve).
+        points the repair dropped: brought within a quarter of their spacing of
+        another point by a fold, moved onto a segment, or passed by a moving
+        boundary), ``motion_points_dropped_outside`` (of those, the ones a
+        moving boundary passed), ``motion_points_projected`` (boundary points
+        moved onto their curve).
     origin : ndarray of int, shape (n_new,), or None
         After a step: each new point's index in ``mesh`` (-1: new).
     lineage : Lineage or None
@@ -180,7 +181,8 @@ def _remesh(mesh: Mesh, moved: np.ndarray, folded: np.ndarray, stats: dict) -> t
     regions from the segments' sides (_core.triangulate_moved). Returns (kept
     point indices, triangles in kept indices, triangle tags)."""
     n = mesh.n_points
-    droppable = (mesh.kind > PointKind.BOUNDARY) & ~mesh.required
+    droppable = ~mesh.required  # interior points (not on a segment) that no step must keep
+    droppable[mesh.segments.ravel()] = False
     suspect = np.zeros(n, dtype=bool)
     suspect[mesh.triangles[folded].ravel()] = True
     suspect &= droppable
@@ -343,18 +345,22 @@ def move(mesh: Mesh, displacement: Any, *, geometry: BoundaryGeometry | None = N
 def step_input(mesh: Mesh, displacement: Any, delta: Any, size: Any,
                geometry: BoundaryGeometry | None) -> tuple[Motion, Any, Any]:
     """What :func:`evomesh.evolve` evolves for ``displacement=``: the move, and
-    ``delta``/``size`` at the moved mesh's points (arrays are checked against
-    ``mesh`` first, then restricted to the points the move kept; a callable
-    size is evaluated at the moved points by the step)."""
+    the absolute spacing to ask at the moved mesh's points.
+
+    ``delta`` is relative to the spacing BEFORE the move: the moved point p is
+    asked for delta(p) nn_M(p) with the old nn_M, so delta = 1 keeps the
+    resolution the mesh had wherever the motion squeezed or stretched it (a
+    shear brings points closer: relative to the moved spacing, delta = 1 would
+    refine there, step after step). Arrays are checked against ``mesh`` and
+    restricted to the points the move kept; a callable size is evaluated at the
+    moved points by the step."""
     if delta is not None:
-        delta = as_delta(mesh, delta)
+        size = as_delta(mesh, delta) * mesh.nn_spacing
     elif not callable(size):
         array = _as_array(size, "size")
         if array.ndim and array.shape != (mesh.n_points,):
             raise ValueError(f"size must give one value per point: shape ({mesh.n_points},), got {array.shape}")
     motion = move(mesh, displacement, geometry=geometry)
-    if delta is not None:
-        return motion, delta[motion.mesh.origin], None
     if not callable(size) and np.ndim(size):
         size = np.asarray(size)[motion.mesh.origin]
     return motion, None, size
