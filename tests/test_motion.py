@@ -217,6 +217,28 @@ def test_twenty_moving_steps_chain_their_conservative_transfers():
     assert min(kept) >= 0.6 and folded > 0
 
 
+def test_a_zero_displacement_is_the_step_without_one():
+    mesh = two_regions(700)
+    plain = evomesh.evolve(mesh, 0.8, seed=3)
+    still = evomesh.evolve(mesh, 0.8, displacement=np.zeros((mesh.n_points, 2)), seed=3)
+    for name in ("points", "triangles", "segments", "origin", "kind", "triangle_tags"):
+        np.testing.assert_array_equal(getattr(still, name), getattr(plain, name))
+    u = np.random.default_rng(0).random(mesh.n_points)
+    for method in ("linear", "conservative"):
+        np.testing.assert_allclose(evomesh.transfer(mesh, still, u, method=method),
+                                   evomesh.transfer(mesh, plain, u, method=method), rtol=0, atol=1e-14)
+
+
+def test_points_the_motion_leaves_in_place_copy_their_values():
+    mesh = evomesh.unit_square_mesh(800)
+    new = evomesh.evolve(mesh, 1.0, displacement=swirl(1.0, radius=0.3), seed=0)
+    kept = new.origin >= 0
+    still = kept & (new.points == mesh.points[np.maximum(new.origin, 0)]).all(axis=1)
+    assert 0 < still.sum() < kept.sum()
+    u = np.random.default_rng(1).random(mesh.n_points)
+    np.testing.assert_array_equal(evomesh.transfer(mesh, new, u)[still], u[new.origin[still]])
+
+
 def test_the_lineage_locates_every_new_point_at_the_old_positions():
     mesh = two_regions(800)
     new = evomesh.evolve(mesh, 0.8, displacement=expansion(0.1), seed=5)

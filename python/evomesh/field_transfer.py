@@ -455,6 +455,13 @@ def transfer_cells(
     :func:`domain_change`'s ``integral_gained - integral_lost``. A NaN reaches
     only the new triangles that overlap its old triangle.
 
+    After a step that moved the points (``displacement=``) this remaps from the
+    old mesh at its old positions (Eulerian, as :func:`transfer`): when an
+    interface between regions moved, the material it swept is carried into the
+    region that now covers it, and each new region's total is what
+    :func:`region_exchange` says came into it (from every old region, plus the
+    strip gained), to rounding.
+
     Over several steps, chain the calls, one per step::
 
         c1 = transfer_cells(m0, m1, c0)
@@ -531,8 +538,10 @@ class Supermesh:
     its one pair is written directly (|t| and the element mass matrix), which
     covers about 70% of the triangles of a typical step. Every other new
     triangle starts from the old triangles at its vertices (the old star of a
-    kept vertex, the lineage's parent triangle of a new one) and floods over
-    old edge adjacency; each intersection is clipped (Sutherland-Hodgman) and
+    kept vertex, the lineage's parent triangle of a new one; after a step that
+    moved the points, a kept point that moved seeds from its parent too, where
+    the step located it, or from the old triangle of the nearest old boundary
+    edge when it lies outside the old domain) and floods over old edge adjacency; each intersection is clipped (Sutherland-Hodgman) and
     measured (shoelace); with ``mass=True`` also ``int phi_a^new phi_b^old``
     over it (exact for the quadratic integrand on a fan of the polygon).
     Parallel over fixed blocks of new triangles: independent of the thread count.

@@ -36,6 +36,8 @@ __all__ = ["Motion", "move"]
 # that a fold brought together would otherwise ask the step for a spacing of
 # their distance (delta is relative to nn_M), a refinement that never goes away.
 _FOLD_SPACING = 0.25
+# Triangles within this factor of Mesh's flatness limits count as folded (see _folded).
+_FLAT_MARGIN = 2.0
 # Rounds of "triangulate, drop the points that keep the result from being a
 # mesh"; each drops every offending point at once, so two or three suffice.
 _MAX_REPAIR_ROUNDS = 16
@@ -138,15 +140,18 @@ def _side_tags(mesh: Mesh) -> tuple[np.ndarray, np.ndarray]:
 
 def _folded(points: np.ndarray, triangles: np.ndarray) -> np.ndarray:
     """Triangles turned over or flat by Mesh's limits (height below 1e-10 of the
-    longest edge or below 1024 units of rounding). Such a limit certifies the
-    sign of the floating-point area, so no exact predicate is needed here."""
+    longest edge or below 1024 units of rounding), with a margin of
+    _FLAT_MARGIN so that Mesh(), whose arithmetic may round differently, never
+    refuses what passes here. The limits certify the sign of the floating-point
+    area, so no exact predicate is needed."""
     p = points[triangles]
     e0, e1, e2 = p[:, 1] - p[:, 0], p[:, 2] - p[:, 1], p[:, 0] - p[:, 2]
     twice_area = e0[:, 0] * (-e2[:, 1]) - e0[:, 1] * (-e2[:, 0])
     longest = np.sqrt(np.maximum(np.maximum((e0**2).sum(1), (e1**2).sum(1)), (e2**2).sum(1)))
     height = twice_area / np.where(longest > 0, longest, 1.0)
     rounding = np.finfo(np.float64).eps * np.abs(p).max(axis=(1, 2))
-    return ~(twice_area > 0) | (height < _MIN_RELATIVE_HEIGHT * longest) | (height < _MIN_HEIGHT_ULPS * rounding)
+    return (~(twice_area > 0) | (height < _FLAT_MARGIN * _MIN_RELATIVE_HEIGHT * longest)
+            | (height < _FLAT_MARGIN * _MIN_HEIGHT_ULPS * rounding))
 
 
 def _flat_vertex(points: np.ndarray, triangles: np.ndarray, droppable: np.ndarray) -> np.ndarray:
