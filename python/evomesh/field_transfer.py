@@ -541,9 +541,10 @@ class Supermesh:
     kept vertex, the lineage's parent triangle of a new one; after a step that
     moved the points, a kept point that moved seeds from its parent too, where
     the step located it, or from the old triangle of the nearest old boundary
-    edge when it lies outside the old domain) and floods over old edge adjacency; each intersection is clipped (Sutherland-Hodgman) and
-    measured (shoelace); with ``mass=True`` also ``int phi_a^new phi_b^old``
-    over it (exact for the quadratic integrand on a fan of the polygon).
+    edge when it lies outside the old domain) and floods over old edge
+    adjacency; each intersection is clipped (Sutherland-Hodgman) and measured
+    (shoelace); with ``mass=True`` also ``int phi_a^new phi_b^old`` over it
+    (exact for the quadratic integrand on a fan of the polygon).
     Parallel over fixed blocks of new triangles: independent of the thread count.
 
     Attributes
