@@ -163,6 +163,14 @@ def test_a_swirl_that_folds_triangles_is_repaired_by_remeshing(amplitude):
     check_transfers(mesh, new, np.random.default_rng(2), fixed_domain=True)
 
 
+def test_drfc_steps_move_too():
+    mesh = evomesh.unit_square_mesh(800)
+    new = evomesh.evolve(mesh, 0.8, displacement=swirl(6.0), method="drfc")
+    check_valid_mesh(new)
+    assert new.stats["motion_remeshed"] == 1 and new.lineage.moved
+    check_transfers(mesh, new, np.random.default_rng(7), fixed_domain=True)
+
+
 def test_without_a_fold_the_moved_mesh_keeps_the_triangles_and_every_point():
     mesh = evomesh.unit_square_mesh(600)
     motion = move(mesh, swirl(1.0))
@@ -193,6 +201,27 @@ def test_a_moving_interface_reports_the_material_that_changed_sides():
         assert (carried.integral[outer] == 0.0).all()
         assert carried.changed_sides == pytest.approx(exchange.area[inner, outer], rel=1e-12)
         check_transfers(mesh, new, np.random.default_rng(3), fixed_domain=True)
+
+
+def test_interface_points_moved_alone_further_than_a_cell():
+    """The issue's case: only the interface moves, by three cells, over points that stay
+    (refused before as overlapping triangles). The fold is remeshed, the swept points
+    join the region that now covers them, every one of them is kept."""
+    mesh = two_regions(1500)
+    on_interface = np.zeros(mesh.n_points, dtype=bool)
+    on_interface[mesh.segments[~mesh.segment_is_boundary].ravel()] = True
+    d = mesh.points - CENTRE
+    h = float(np.median(mesh.nn_spacing))
+    u = np.where(on_interface[:, None], 3 * h * d / np.hypot(d[:, 0], d[:, 1])[:, None], 0.0)
+    with pytest.raises(ValueError, match="overlap"):
+        evomesh.Mesh(mesh.points + u, mesh.triangles, triangle_tags=mesh.triangle_tags)
+    new = evomesh.evolve(mesh, 1.0, displacement=u, seed=0)
+    check_valid_mesh(new)
+    assert new.stats["motion_remeshed"] == 1 and new.stats["motion_points_dropped"] == 0
+    exchange = evomesh.region_exchange(mesh, new)
+    inner, outer = (int(np.flatnonzero(exchange.tags == t)[0]) for t in (1, 2))
+    assert exchange.area[inner, outer] == 0.0 and exchange.area[outer, inner] > 0.3 * exchange.area[inner, inner]
+    check_transfers(mesh, new, np.random.default_rng(5), fixed_domain=True)
 
 
 def test_twenty_moving_steps_chain_their_conservative_transfers():
