@@ -176,7 +176,7 @@ def main() -> None:
     if args.png:
         from evomesh.plotting import _figure, plot_mesh, save
 
-        small = evomesh.unit_square_mesh(1500)
+        small = evomesh.unit_square_mesh(700)
         hs = float(np.median(small.nn_spacing))
         moved = move(small, swirl(6.0))
         after = evomesh.evolve(small, size=hs, displacement=swirl(6.0), seed=0)
@@ -185,7 +185,7 @@ def main() -> None:
         plot_mesh(moved.mesh, ax=axes[1], title=f"moved: {moved.stats['motion_folded_triangles']:.0f} folded "
                                                  "triangles remeshed")
         plot_mesh(after, ax=axes[2], title=f"after the step ({100 * (after.origin >= 0).mean():.0f}% of points kept)")
-        print(f"\nwrote {save(fig, args.png)}")
+        print(f"\nwrote {save(fig, args.png, dpi=60)}")
 
 
 if __name__ == "__main__":
