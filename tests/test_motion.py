@@ -317,6 +317,21 @@ def test_a_boundary_moving_inwards_drops_the_points_it_passes():
     check_transfers(mesh, new, np.random.default_rng(4), fixed_domain=False)
 
 
+@pytest.mark.parametrize("gap", [0.0, 1e-13])
+def test_an_interior_point_moved_onto_a_side_is_dropped(gap):
+    """Exactly on a boundary segment (the triangulation splits it there) or within
+    rounding of it (a flat triangle): the repair drops the point."""
+    mesh = evomesh.unit_square_mesh(400)
+    inner = int(np.flatnonzero((np.abs(mesh.points[:, 0] - 0.5) < 0.05) & (mesh.points[:, 1] > 0.05)
+                               & (mesh.points[:, 1] < 0.15))[0])
+    u = np.zeros((mesh.n_points, 2))
+    u[inner, 1] = -mesh.points[inner, 1] * (1.0 - gap)
+    motion = move(mesh, u)
+    check_valid_mesh(motion.mesh)
+    assert motion.stats["motion_points_dropped"] == 1 and inner not in motion.mesh.origin
+    assert motion.mesh.area == pytest.approx(1.0, rel=1e-14)
+
+
 def test_a_step_with_a_displacement_is_deterministic():
     mesh = evomesh.unit_square_mesh(700)
     a = evomesh.evolve(mesh, 0.8, displacement=swirl(8.0), seed=9)

@@ -191,8 +191,8 @@ def _remesh(mesh: Mesh, moved: np.ndarray, folded: np.ndarray, stats: dict) -> t
     suspect = np.zeros(n, dtype=bool)
     suspect[mesh.triangles[folded].ravel()] = True
     suspect &= droppable
-    # Points of the folded region that came closer than _FOLD_SPACING (nn_M + nn_M')
-    # to a point kept before them are dropped: every other point first, then the
+    # Points of the folded region that came closer than _FOLD_SPACING (nn_M(p) + nn_M(q))
+    # to a point q kept before them are dropped: every other point first, then the
     # folded region's in index order (deterministic; lexical-first MIS).
     order = np.concatenate([np.flatnonzero(~suspect), np.flatnonzero(suspect)])
     radius = _FOLD_SPACING * mesh.nn_spacing
@@ -210,6 +210,9 @@ def _remesh(mesh: Mesh, moved: np.ndarray, folded: np.ndarray, stats: dict) -> t
     left, right = _side_tags(mesh)
     is_boundary = mesh.segment_is_boundary.astype(np.uint8)
     dropped_outside = 0
+    # Each round triangulates and drops the interior points of one kind of
+    # trouble (on a segment, outside the domain, in a flat triangle), or fails
+    # naming a point it must not drop.
     for _ in range(_MAX_REPAIR_ROUNDS):
         index = np.flatnonzero(keep)
         local = np.full(n, -1, dtype=np.int64)
@@ -222,9 +225,8 @@ def _remesh(mesh: Mesh, moved: np.ndarray, folded: np.ndarray, stats: dict) -> t
             raise _nothing_changed(
                 f"the displacement makes {what} segment {k} (points {a}, {b}, moved to {moved[a].tolist()}, "
                 f"{moved[b].tolist()}) cross another segment: the moved boundary and interfaces must not cross")
-        drop: list[np.ndarray] = []
         on_piece = result["on_piece"]
-        if len(on_piece):
+        if len(on_piece):  # (the pieces it splits seed no region: nothing else is final this round)
             point = index[on_piece[:, 0]]
             stuck = ~droppable[point]
             if stuck.any():
@@ -232,8 +234,9 @@ def _remesh(mesh: Mesh, moved: np.ndarray, folded: np.ndarray, stats: dict) -> t
                 a, b = (int(v) for v in mesh.segments[on_piece[k, 1]])
                 raise _nothing_changed(f"the displacement moves {_describe(mesh, int(point[k]), moved)} onto "
                                        f"segment ({a}, {b}): boundary and interface segments must not touch")
-            drop.append(point)
-        elif result["conflict"] >= 0:
+            keep[point] = False
+            continue
+        if result["conflict"] >= 0:
             k = int(result["conflict"])
             a, b = (int(v) for v in mesh.segments[k])
             raise _nothing_changed(
@@ -251,23 +254,22 @@ def _remesh(mesh: Mesh, moved: np.ndarray, folded: np.ndarray, stats: dict) -> t
                 raise _nothing_changed(
                     f"the displacement moves {_describe(mesh, k, moved)} outside the domain (the boundary does not "
                     f"move there); {int((~inside_old).sum())} point(s) leave the domain")
-            drop.append(unused)  # the moving boundary passed them: the domain shrank there
+            keep[unused] = False  # the moving boundary passed them: the domain shrank there
             dropped_outside += len(unused)
-        if not drop and len(result["triangles"]):
-            triangles = index[result["triangles"]]
-            flat = np.flatnonzero(_folded(moved, triangles))
-            if len(flat):
-                vertex = _flat_vertex(moved, triangles[flat], droppable)
-                if (vertex < 0).any():
-                    t = triangles[flat[int(np.argmax(vertex < 0))]]
-                    raise _nothing_changed(
-                        f"the displacement squeezes boundary/interface points {t.tolist()} (moved to "
-                        f"{moved[t].tolist()}) into a flat triangle")
-                drop.append(vertex)
-        if not drop:
-            stats["motion_points_dropped_outside"] = float(dropped_outside)
-            return index, local[triangles], result["triangle_tags"]
-        keep[np.concatenate(drop)] = False
+            continue
+        triangles = index[result["triangles"]]
+        flat = np.flatnonzero(_folded(moved, triangles))
+        if len(flat):
+            vertex = _flat_vertex(moved, triangles[flat], droppable)
+            if (vertex < 0).any():
+                t = triangles[flat[int(np.argmax(vertex < 0))]]
+                raise _nothing_changed(
+                    f"the displacement squeezes boundary/interface points {t.tolist()} (moved to "
+                    f"{moved[t].tolist()}) into a flat triangle")
+            keep[vertex] = False
+            continue
+        stats["motion_points_dropped_outside"] = float(dropped_outside)
+        return index, local[triangles], result["triangle_tags"]
     raise _nothing_changed(f"the folded region could not be remeshed in {_MAX_REPAIR_ROUNDS} rounds")
 
 
