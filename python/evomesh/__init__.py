@@ -55,7 +55,14 @@ from evomesh._core import default_thread_count  # noqa: E402
 
 # Moving-front workflow.
 from evomesh.experiments.growing_circle import growing_circle  # noqa: E402
-from evomesh.field_transfer import DomainChange, domain_change, transfer, transfer_cells  # noqa: E402
+from evomesh.field_transfer import (  # noqa: E402
+    DomainChange,
+    RegionExchange,
+    domain_change,
+    region_exchange,
+    transfer,
+    transfer_cells,
+)
 from evomesh.fronts import CircleFront, Front, LevelSetFront, PointFront, SpacingLaw  # noqa: E402
 from evomesh.meshgen import unit_square_mesh  # noqa: E402
 from evomesh.statistics import step_statistics  # noqa: E402
@@ -71,6 +78,8 @@ __all__ += [
     "transfer_cells",
     "domain_change",
     "DomainChange",
+    "region_exchange",
+    "RegionExchange",
     "run",
     "Run",
     "Step",

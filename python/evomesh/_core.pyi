@@ -310,3 +310,19 @@ def locate_points(
     points: ArrayLike, triangles: ArrayLike, queries: ArrayLike
 ) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
     """(triangle index per query, -1 if outside; barycentric coordinates (k, 3))."""
+
+class MovedTriangulation(TypedDict):
+    """What :func:`triangulate_moved` returns (a plain dict at run time)."""
+
+    triangles: NDArray[np.int64]  # (m, 3) counter-clockwise, inside the domain
+    triangle_tags: NDArray[np.int64]  # (m,)
+    unused: NDArray[np.int64]  # points in no triangle of the domain
+    on_piece: NDArray[np.int64]  # (j, 2): (point, piece) for points inside a piece
+    conflict: int  # a piece whose side met another region's fill, or -1
+    crossing: int  # a piece that crossed an earlier one, or -1
+
+def triangulate_moved(
+    points: ArrayLike, pieces: ArrayLike, boundary: ArrayLike, left: ArrayLike, right: ArrayLike
+) -> MovedTriangulation:
+    """Constrained Delaunay triangulation of the moved points with the pieces as constraints, regions
+    flood-filled from the pieces' sides (cpp/src/motion.cpp)."""

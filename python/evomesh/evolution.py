@@ -12,6 +12,7 @@ import numpy as np
 from evomesh import _core
 from evomesh.geometry import as_geometry
 from evomesh.mesh import Lineage, Mesh, check_boundary_not_pinched, check_mesh_limits
+from evomesh.motion import after_step, step_input
 from evomesh.spacing_function import _require_mesh, as_delta, delta_from_size
 
 __all__ = ["evolve", "delaunay_refine", "make_options", "FRFC_DEFAULTS", "DRFC_DEFAULTS", "FrfcOptions", "DrfcOptions",
@@ -125,7 +126,7 @@ def _check_seed(seed: Any) -> int:
 
 
 def evolve(mesh: Mesh, delta: Any = None, *, size: Any = None, method: str = "frfc", seed: int | None = None,
-           options: Any = None, geometry: Any = None, **overrides: Any) -> Mesh:
+           options: Any = None, geometry: Any = None, displacement: Any = None, **overrides: Any) -> Mesh:
     """Evolve a mesh one step: new spacing delta(p) * nn_M(p) at every point p
     (or the absolute spacing ``size``).
 
@@ -293,6 +294,26 @@ def evolve(mesh: Mesh, delta: Any = None, *, size: Any = None, method: str = "fr
         ``curve_points_projected``, ``curve_largest_move`` and
         ``curve_points_dropped_outside`` (interior points a coarser curved
         boundary left outside). Without it the polygon is the domain, exactly.
+        With ``displacement``: the curves after the move.
+    displacement : array_like of shape (n, 2) or (2,), or callable, optional
+        Lagrangian motion (issue 28): every point p (boundary, interface and
+        interior) first moves to p + u(p), then the moved mesh evolves
+        (``delta`` and ``size`` arrays are per point of ``mesh``; ``delta`` is
+        relative to nn_M before the move, so 1 keeps the resolution however
+        the motion squeezed or stretched the mesh; a callable size is
+        evaluated at the moved points). u is given at the points, as
+        one (dx, dy) for all, or as a function u(x) of an (n, 2) array. A point
+        all of whose segments carry one curved tag of ``geometry`` is
+        projected onto that curve after the move. Where the motion folds
+        triangles (turns one over, or flattens it) the folded region is
+        remeshed instead of refused (:func:`evomesh.motion.move`). The
+        output's ``origin`` still names the old point each kept point came
+        from (it is not at its old coordinates), and its ``lineage``
+        (``lineage.moved``) locates every new point in ``mesh`` at the OLD
+        positions: :func:`evomesh.transfer` and :func:`evomesh.transfer_cells`
+        remap fields from the old mesh as it was (Eulerian; ``frame=
+        "lagrangian"`` carries P1 values with the points instead).
+        ``stats`` adds the ``motion_*`` counts of :class:`evomesh.motion.Motion`.
 
     Returns
     -------
@@ -308,7 +329,9 @@ def evolve(mesh: Mesh, delta: Any = None, *, size: Any = None, method: str = "fr
     ValueError
         If delta has the wrong shape or a NaN, infinite or out-of-range value,
         the method is unknown, an option value is out of range, or the step
-        would need more than ``max_samples`` samples. The input is never modified.
+        would need more than ``max_samples`` samples; for a displacement, as
+        :func:`evomesh.motion.move` (NaN/inf values, points moved out of the
+        domain, crossing boundaries). The input is never modified.
     """
     _require_mesh(mesh)
     if (delta is None) == (size is None):
@@ -316,6 +339,10 @@ def evolve(mesh: Mesh, delta: Any = None, *, size: Any = None, method: str = "fr
             "evolve needs exactly one of delta (a real numeric factor per point, relative to the current spacing) "
             "and size (an absolute spacing)"
         )
+    old, motion = mesh, None
+    if displacement is not None:  # Lagrangian motion (issue 28): move the points, then evolve the moved mesh
+        motion, delta, size = step_input(mesh, displacement, delta, size, as_geometry(geometry))
+        mesh = motion.mesh
     d = as_delta(mesh, delta) if size is None else delta_from_size(mesh, size)
     o = make_options(method, options, **overrides)
     if method == "frfc" and seed is not None:
@@ -326,7 +353,8 @@ def evolve(mesh: Mesh, delta: Any = None, *, size: Any = None, method: str = "fr
     core = _core.frfc if method == "frfc" else _core.drfc
     result = core(mesh.points, mesh.triangles, mesh.segments, mesh.segment_is_boundary.astype(np.uint8), mesh.kind, d, o,
                   **mesh._labels(), **mesh._known_nn(), **({} if g is None else g._core_arguments()))
-    return _wrap(result, mesh)
+    new = _wrap(result, mesh)
+    return new if motion is None else after_step(old, motion, new)
 
 
 class QualityWarning(UserWarning):

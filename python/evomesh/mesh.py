@@ -921,15 +921,21 @@ class Lineage:
     parent_triangle : ndarray of int, shape (n_new,)
         For every point not kept (``origin == -1``), the old triangle that
         contains it; -1 for kept points (their old index is ``origin``) and for
-        the rare point no old triangle contains.
+        the rare point no old triangle contains. After a step that moved the
+        points (``moved``), every point's: kept points moved too.
     barycentric : ndarray, shape (n_new, 3)
         Its barycentric coordinates in that triangle (vertex order of
         ``old.triangles``); they sum to 1 and reproduce linear functions.
     old_nn, old_f : ndarray, shape (n_old,)
-        nn_M and the spacing function f at the old points, as the step used them.
+        nn_M and the spacing function f at the old points, as the step used them
+        (after a move: at the moved points; NaN at points the move dropped).
+    motion : Motion or None
+        For a step with ``displacement=`` (:func:`evomesh.evolve`): the move
+        (:class:`evomesh.motion.Motion`: the moved mesh, the displacement, and
+        the step's own lineage relative to the moved mesh). None otherwise.
     """
 
-    __slots__ = ("n_old_points", "n_old_triangles", "parent_triangle", "barycentric", "old_nn", "old_f")
+    __slots__ = ("n_old_points", "n_old_triangles", "parent_triangle", "barycentric", "old_nn", "old_f", "motion")
 
     n_old_points: int
     n_old_triangles: int
@@ -937,10 +943,12 @@ class Lineage:
     barycentric: np.ndarray
     old_nn: np.ndarray
     old_f: np.ndarray
+    motion: Any
 
     def __init__(self, n_old_points: int, n_old_triangles: int, parent_triangle: np.ndarray, barycentric: np.ndarray,
-                 old_nn: np.ndarray, old_f: np.ndarray) -> None:
+                 old_nn: np.ndarray, old_f: np.ndarray, motion: Any = None) -> None:
         set_ = object.__setattr__
+        set_(self, "motion", motion)
         set_(self, "n_old_points", int(n_old_points))
         set_(self, "n_old_triangles", int(n_old_triangles))
         set_(self, "parent_triangle", _frozen(np.asarray(parent_triangle, dtype=np.int64)))
@@ -953,7 +961,14 @@ class Lineage:
 
     def __reduce__(self):
         return (Lineage, (self.n_old_points, self.n_old_triangles, self.parent_triangle, self.barycentric, self.old_nn,
-                          self.old_f))
+                          self.old_f, self.motion))
+
+    @property
+    def moved(self) -> bool:
+        """Whether the step moved the old points (``displacement=``): then kept
+        points are not at their old coordinates, and ``parent_triangle`` locates
+        every new point in the old mesh at the old positions."""
+        return self.motion is not None
 
     def matches(self, old: "Mesh") -> bool:
         """Whether ``old`` has the sizes of the mesh this lineage refers to."""
@@ -961,4 +976,5 @@ class Lineage:
 
     def __repr__(self) -> str:
         located = int((self.parent_triangle >= 0).sum())
-        return f"Lineage(n_old_points={self.n_old_points}, located={located})"
+        moved = ", moved=True" if self.moved else ""
+        return f"Lineage(n_old_points={self.n_old_points}, located={located}{moved})"
