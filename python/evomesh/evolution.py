@@ -425,12 +425,18 @@ def delaunay_refine(mesh: Mesh, delta: Any, *, min_angle: float = 20.0, max_samp
         index), then the new points (``origin`` -1; kind BOUNDARY on segments,
         SAMPLED inside). ``stats``: ``points_added``,
         ``points_added_on_segments``, ``rounds`` (passes with exact f),
-        ``capped`` (1 if it stopped at its bound, twice the estimate).
+        ``capped`` (1 if it stopped at its bound, twice the estimate). The
+        input's labels carry over as in :func:`evolve`: a new segment has the
+        tag of the input segment it splits (``segment_tags``), a triangle the
+        tag of the input triangle's region it lies in (``triangle_tags``), and
+        every input point keeps its ``required`` flag (refinement never moves
+        or removes a point).
     """
     _require_mesh(mesh)
     d = as_delta(mesh, delta)
     o = make_options("drfc", min_angle=min_angle, max_samples=max_samples, threads=threads)
     result = _core.drfc_refine(
-        mesh.points, mesh.triangles, mesh.segments, mesh.segment_is_boundary.astype(np.uint8), mesh.kind, d, o
+        mesh.points, mesh.triangles, mesh.segments, mesh.segment_is_boundary.astype(np.uint8), mesh.kind, d, o,
+        **mesh._labels(),
     )
     return _wrap(result)
