@@ -2,9 +2,11 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <stdexcept>
 
 #include "evomesh/detail/delaunay_mesher.hpp"
+#include "evomesh/detail/parallel_sweep.hpp"
 #include "evomesh/parallel.hpp"
 #include "evomesh/triangulation.hpp"
 
@@ -54,6 +56,45 @@ std::vector<std::pair<Vertex_handle, Vertex_handle>> drop_crowding_points(
   return crowded;
 }
 
+// Points the constraint edges need for their features: the sum over the
+// constraint edges e of the domain, from each domain side, of |e| / h, h the
+// height over e of the triangle on that side. Ruppert's refinement spaces the
+// points along e no closer than about the local feature size there (Ruppert
+// 1995, Theorem 1), and the apex of that triangle is a feature within h of e,
+// so where a feature faces e along its whole length (a channel's wall, whose
+// triangles reach across the channel) the refinement puts about |e| / h points
+// on e; where it comes close only somewhere (an apex near e), fewer.
+double feature_points(Cdt& cdt) {
+  if (cdt.dimension() < 2) return 0;
+  auto& faces = cdt.tds().faces();
+  std::vector<double> in_chunk(sweep_chunks(faces), 0.0);
+  parallel_sweep(faces, [&](std::size_t c, Face_handle f) {
+    if (cdt.is_infinite(f) || !f->is_in_domain()) return;
+    const Point_2 &a = f->vertex(0)->point(), &b = f->vertex(1)->point(), &d = f->vertex(2)->point();
+    const double twice_area = std::abs((b.x() - a.x()) * (d.y() - a.y()) - (b.y() - a.y()) * (d.x() - a.x()));
+    for (int i = 0; i < 3; ++i) {
+      if (!f->is_constrained(i)) continue;
+      // |e| / h = |e|^2 / (2 area)
+      const double length_squared = squared_distance(f->vertex(Cdt::ccw(i))->point(), f->vertex(Cdt::cw(i))->point());
+      in_chunk[c] += twice_area > 0 ? length_squared / twice_area : std::numeric_limits<double>::infinity();
+    }
+  });
+  double sum = 0;
+  for (double s : in_chunk) sum += s;  // (in chunk order: the same sum on any thread count)
+  return sum;
+}
+
+// The insertions the pass may make beyond its bound where no constraints meet
+// under less than 60 degrees: Ruppert's rules then end (proven up to 20.7
+// degrees, with off-centres in practice up to 30), and the points they need
+// follow the domain's features, not the points handed in (a channel 1e-3 wide
+// from a mesh of spacing 0.2 needs about 2 / 1e-3 points on its walls). Twice
+// the features' points, at most 64 n + 1e6 (a safeguard, should some input not
+// let the rules end: one step never grows a mesh without bound).
+double feature_allowance(Cdt& cdt, std::size_t n) {
+  return std::min(2 * feature_points(cdt), 64 * static_cast<double>(n) + 1e6);
+}
+
 // The quality pass on `cdt`, which holds all points (handles by point index).
 Refined_mesh quality_pass(Cdt& cdt, const std::vector<Vertex_handle>& handles, const Scaling& scaling,
                           const std::vector<Vec2>& points, const std::vector<Point_kind>& kind,
@@ -74,7 +115,8 @@ Refined_mesh quality_pass(Cdt& cdt, const std::vector<Vertex_handle>& handles, c
   Mesher mesher(cdt, Refinement_criteria(options.min_angle, cdt, nullptr, /*off_centres=*/true));
   mesher.init();
   for (const auto& e : crowded) mesher.queue_split(e.first, e.second);
-  const double budget = options.max_inserted_fraction * static_cast<double>(points.size()) + options.max_inserted_extra;
+  double budget = options.max_inserted_fraction * static_cast<double>(points.size()) + options.max_inserted_extra;
+  if (!mesher.has_small_angles()) budget += feature_allowance(cdt, points.size());
   run_mesher(mesher, static_cast<std::size_t>(std::max(0.0, budget)), report);
   report.rounds = 1;
   Refined_mesh result = extract(cdt, handles, points, kind, removed, scaling);
