@@ -246,20 +246,23 @@ def evolve(mesh: Mesh, delta: Any = None, *, size: Any = None, method: str = "fr
             ``quality_max_fraction`` n + ``quality_max_extra`` (0.5 n + 1000)
             insertions at most and the small angles stay near the small input
             angles. Where no two segments meet under less than 60 degrees
-            (consecutive around their common point, measured on either side),
-            Ruppert's rules end and the result has no angle below
-            ``min_angle``, with exactly these exceptions: triangles within
+            (consecutive around their common point, measured on either side)
+            Ruppert's rules end, and the result has no angle below
+            ``min_angle`` with exactly these exceptions: triangles within
             16384 units of rounding of flat (features at the limit of float64)
             are not split for their angles; the pass stops (``quality_capped``
-            = 1, a :class:`QualityWarning`) after that bound plus twice the
-            points the segments' features ask for (the sum over segment pieces
-            e of |e| / h, h the height of the triangle on e, at most
-            64 n + 10**6: a channel of width w and length L asks for about
-            2 L / w); CGAL's mesher may fail on
-            near-degenerate geometry (``quality_failed`` = 1, a warning); and
-            with ``geometry`` the new boundary points move onto their curves
-            after the pass, which changes the angles next to the curve (28.6
-            instead of 30 degrees measured after coarsening a disc by 3).
+            = 1, a :class:`QualityWarning`) after that bound plus twice F,
+            at most 64 n + 10**6, where F estimates the points Ruppert's rules
+            need from the constrained Delaunay triangulation of the selected
+            points: the sum over its triangles of longest edge**2 / (4 area)
+            and over its segment pieces e of |e| / h (h the height of the
+            triangle on e) (measured: 1.5 to 40 times what the pass inserts;
+            a channel of width w and length L asks for about 2 L / w points);
+            CGAL's mesher may fail on near-degenerate geometry
+            (``quality_failed`` = 1, a warning); and with ``geometry`` the new
+            boundary points move onto their curves after the pass, which
+            changes the angles next to the curve (28.6 instead of 30 degrees
+            measured after coarsening a disc by 3).
             ``stats`` reports ``quality_points_added`` (``_on_segments``),
             ``quality_points_removed``, ``quality_capped``. False reproduces the
             paper's algorithm.
