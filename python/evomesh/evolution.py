@@ -232,7 +232,10 @@ def evolve(mesh: Mesh, delta: Any = None, *, size: Any = None, method: str = "fr
             started beside the packing); None: evomesh.default_thread_count()
             (EVOMESH_NUM_THREADS, else OMP_NUM_THREADS, else the CPUs this
             process may use: affinity and cgroup quota), 1: everything on
-            the calling thread. Results do not depend on it.
+            the calling thread. At most this many threads work at once, also
+            counting those the step starts beside its stages (several
+            processes per node can so share the cores). Results do not
+            depend on it.
         quality : bool, default True
             The quality pass (Section 6's suggestion, for both methods): a
             point that sees a segment under more than 120 degrees is dropped and
