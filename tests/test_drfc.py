@@ -1,16 +1,19 @@
 """DRFC (Section 5): Delaunay refinement with rules 1-4, then the one-level
 coarsening of Miller, Talmor and Teng, with FRFC's validity properties."""
 
+import warnings
+
 import numpy as np
 import pytest
-from hypothesis import given
+from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import evomesh
 from evomesh import PointKind
 from evomesh.evolution import DRFC_DEFAULTS, delaunay_refine
 from invariants import check_evolved, nn_in, spacing_ratio
-from strategies import grid_mesh, mesh_and_delta
+from strategies import grid_mesh, mesh_and_delta, random_meshes
+from test_tags import check_labels, tagged
 
 # Relative slack for comparing distances computed in floating point.
 RTOL = 1e-12
@@ -164,3 +167,34 @@ def test_defaults_are_documented():
     mesh = grid_mesh(6, 6)
     with pytest.raises(TypeError, match="mesh"):
         delaunay_refine(mesh.points, 1.0)
+
+
+# Issue 27: delaunay_refine and evolve(method="drfc") carry segment tags,
+# triangle tags and required points (test_tags.py's labelling and checks).
+@settings(max_examples=12)
+@given(random_meshes(max_points=80), st.integers(0, 2**16), st.sampled_from([0.3, 0.6, 1.0]))
+def test_delaunay_refine_keeps_the_labels(mesh, seed, delta):
+    initial = tagged(mesh, seed)
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", evomesh.QualityWarning)
+            refined = delaunay_refine(initial, delta)
+    except ValueError as error:  # a random cloud may ask too much of float64 or of memory: refused, fine
+        assert "max_samples" in str(error) or "not a valid mesh in float64" in str(error)
+        return
+    check_labels(initial, refined)
+    n = initial.n_points
+    # refinement only adds: every input point keeps its index and flag
+    assert np.array_equal(refined.origin[:n], np.arange(n))
+    assert np.array_equal(refined.required[:n], initial.required) and not refined.required[n:].any()
+    assert np.array_equal(np.unique(refined.segment_tags), np.unique(initial.segment_tags))
+
+
+@pytest.mark.parametrize("delta", [0.4, 2.5])
+def test_drfc_step_keeps_the_labels(delta):
+    initial = tagged(grid_mesh(14, 14, jitter=0.2, seed=4), 3)
+    refined = delaunay_refine(initial, delta)
+    check_labels(initial, refined)
+    new = evomesh.evolve(initial, delta, method="drfc")
+    check_labels(initial, new)
+    assert new.segment_tags.size == len(new.segments) and new.triangle_tags.size == new.n_triangles

@@ -63,3 +63,76 @@ def test_sampling_that_asks_f_gives_the_same_bits_on_any_number_of_threads():
             new = evomesh.evolve(mesh, np.full(mesh.n_points, 0.1), seed=3, threads=threads)
         digests.add(hashlib.sha256(new.points.tobytes() + new.triangles.tobytes()).hexdigest())
     assert len(digests) == 1
+
+
+# Issue 27: a step with threads=k keeps at most k threads working, also in the
+# threads it starts beside its stages (the early triangulation, the old mesh's
+# walker, the output's nn) and in the pool's workers, which an earlier call
+# with more threads left behind (several processes per node each take their
+# share of the cores). Seen from the process's threads in /proc (Linux), in a
+# fresh process whose default is 8 threads.
+_WATCH = r"""
+import json, os, sys, threading, warnings
+import numpy as np
+sys.path.insert(0, sys.argv[1])
+import evomesh
+from strategies import grid_mesh
+
+def threads_now():
+    # thread id -> (state, utime + stime in clock ticks)
+    out = {}
+    for tid in os.listdir("/proc/self/task"):
+        try:
+            with open(f"/proc/self/task/{tid}/stat") as f:
+                fields = f.read().rsplit(")", 1)[1].split()
+        except OSError:
+            continue  # ended meanwhile
+        out[int(tid)] = (fields[0], int(fields[11]) + int(fields[12]))
+    return out
+
+warnings.simplefilter("ignore", evomesh.QualityWarning)
+mesh = grid_mesh(120, 120, jitter=0.2, seed=3)
+delta = np.exp(np.random.default_rng(0).uniform(np.log(0.3), np.log(3), mesh.n_points))
+evomesh.evolve(mesh, 1.0)  # the pool now has default_thread_count() - 1 = 7 workers
+main = threading.get_native_id()
+report = {}
+for threads in (1, 2):
+    for method in ("frfc", "drfc"):
+        before, seen, peak, done = threads_now(), set(), [0], threading.Event()
+        def watch():
+            me = threading.get_native_id()
+            while not done.is_set():
+                now = {t: v for t, v in threads_now().items() if t != me}
+                seen.update(now)
+                peak[0] = max(peak[0], sum(state == "R" for state, _ in now.values()))
+        watcher = threading.Thread(target=watch)
+        watcher.start()
+        new = evomesh.evolve(mesh, delta, method=method, threads=threads)
+        done.set()
+        watcher.join()
+        after = threads_now()
+        workers = [t for t in before if t != main and t in after and after[t][1] > before[t][1]]
+        report[f"{method} {threads}"] = {"peak": peak[0], "new_threads": len(seen - set(before)),
+                                         "workers_that_worked": len(workers),
+                                         "bits": hash((new.points.tobytes(), new.triangles.tobytes()))}
+print(json.dumps(report))
+"""
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc/self/task")
+def test_a_step_keeps_to_its_threads():
+    env = {k: v for k, v in os.environ.items() if k not in ("EVOMESH_NUM_THREADS", "OMP_NUM_THREADS")}
+    env.update(EVOMESH_NUM_THREADS="8", OPENBLAS_NUM_THREADS="1", MKL_NUM_THREADS="1", PYTHONHASHSEED="0")
+    out = subprocess.run([sys.executable, "-c", _WATCH, str(Path(__file__).parent)], env=env, capture_output=True,
+                         text=True, timeout=300)
+    assert out.returncode == 0, out.stderr
+    report = __import__("json").loads(out.stdout.split("\n")[-2])
+    for method in ("frfc", "drfc"):
+        one, two = report[f"{method} 1"], report[f"{method} 2"]
+        # threads=1: everything on the calling thread, no thread started, no worker woken
+        assert one["peak"] <= 1 and one["new_threads"] == 0 and one["workers_that_worked"] == 0, (method, one)
+        # threads=2: of the pool's 7 workers, one at most (the caller is the other
+        # thread); at most 3 running at once: a thread that hands its turn on (or
+        # is just started, to wait for one) may be seen running for a moment
+        assert two["workers_that_worked"] <= 1 and two["peak"] <= 3, (method, two)
+        assert one["bits"] == two["bits"], method

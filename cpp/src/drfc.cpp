@@ -7,6 +7,7 @@
 #include <utility>
 
 #include "evomesh/packing.hpp"
+#include "evomesh/parent_map.hpp"
 #include "evomesh/parallel.hpp"
 #include "evomesh/sampling.hpp"
 #include "evomesh/segment_chains.hpp"
@@ -87,7 +88,17 @@ Refined_mesh drfc_refine(const Mesh_arrays& mesh, const std::vector<double>& del
   std::vector<std::pair<std::string, double>> unused;
   Stage_timer timer(unused);
   const Thread_limit thread_limit(options.threads);
-  return std::move(refinement_stage(mesh, delta, options, timer).refined);
+  Refined_mesh refined = std::move(refinement_stage(mesh, delta, options, timer).refined);
+  // The input's labels, as a step carries them (finish_step): refinement only
+  // adds points, so every input point is kept (its `required` flag with it), a
+  // new segment lies on the input segment it split and a new triangle in the
+  // input triangle's region.
+  if (!mesh.segment_tags.empty() || !mesh.triangle_tags.empty() || !mesh.required.empty()) {
+    const Old_mesh_walker walker(mesh);
+    const Parent_map parents = parent_map(walker, refined.mesh, refined.source);
+    carry_tags(walker, refined.source, parents, refined.mesh);
+  }
+  return refined;
 }
 
 Evolve_result drfc(const Mesh_arrays& mesh, const std::vector<double>& delta, const Drfc_options& options) {

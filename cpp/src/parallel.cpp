@@ -6,6 +6,7 @@
 #include <condition_variable>
 #include <cstdint>
 #include <cstdlib>
+#include <deque>
 #include <exception>
 #include <fstream>
 #include <mutex>
@@ -171,12 +172,15 @@ class Region_guard {
   bool saved_;
 };
 
-// One parallel_for call: threads take the next item until none is left.
+// One parallel_for call: threads take the next item until none is left, all
+// under the caller's Thread_context (the caller took the helpers' units).
 struct Job {
-  Job(std::size_t n_items, detail::Item_function function, void* data) : n(n_items), item(function), context(data) {}
+  Job(std::size_t n_items, detail::Item_function function, void* data)
+      : n(n_items), item(function), context(data), caller(detail::thread_context()) {}
   std::size_t n;
   detail::Item_function item;
   void* context;
+  detail::Thread_context caller;
   std::atomic<std::size_t> next{0};
   std::mutex error_mutex;
   std::exception_ptr error;
@@ -184,6 +188,7 @@ struct Job {
   void run() noexcept {
     const Region_guard guard;
     try {
+      const detail::Working_under working(caller, /*unit_taken=*/true);
       for (std::size_t i = next++; i < n; i = next++) item(context, i);
     } catch (...) {
       std::lock_guard<std::mutex> lock(error_mutex);
@@ -208,8 +213,10 @@ class Pool {
     // Only the holder of busy_ writes generation_, so reading it here is safe.
     while (workers_.size() < helpers) {
       try {
-        workers_.emplace_back(&Pool::work, this, workers_.size(), generation_);
+        wakes_.emplace_back();
+        workers_.emplace_back(&Pool::work, this, workers_.size(), generation_, &wakes_.back());
       } catch (...) {
+        if (wakes_.size() > workers_.size()) wakes_.pop_back();
         break;  // no more threads to be had: run with those there are
       }
     }
@@ -220,7 +227,9 @@ class Pool {
       finished_ = 0;
       ++generation_;
     }
-    wake_.notify_all();
+    // Only the helpers wake: the other workers sleep on (a step with threads = k
+    // keeps its other workers, from an earlier call with more threads, idle).
+    for (std::size_t k = 0; k < helpers_; ++k) wakes_[k].notify_one();
     job.run();
     std::unique_lock<std::mutex> lock(mutex_);
     done_.wait(lock, [this] { return finished_ == helpers_; });
@@ -231,12 +240,12 @@ class Pool {
  private:
   // A helper of generation g is counted in finished_ before generation g + 1
   // can start, so no helper misses the job it is part of.
-  void work(std::size_t id, std::uint64_t seen) {
+  // A worker not among a generation's helpers skips it (is not woken).
+  void work(std::size_t id, std::uint64_t seen, std::condition_variable* wake) {
     std::unique_lock<std::mutex> lock(mutex_);
     for (;;) {
-      wake_.wait(lock, [&] { return generation_ != seen; });
+      wake->wait(lock, [&] { return generation_ != seen && id < helpers_; });
       seen = generation_;
-      if (id >= helpers_) continue;
       Job* job = job_;
       lock.unlock();
       job->run();
@@ -247,11 +256,12 @@ class Pool {
 
   std::mutex busy_;
   std::mutex mutex_;  // guards the fields below
-  std::condition_variable wake_, done_;
+  std::condition_variable done_;
   std::uint64_t generation_ = 0;
   Job* job_ = nullptr;
   std::size_t helpers_ = 0, finished_ = 0;
   std::vector<std::thread> workers_;  // touched only by the holder of busy_
+  std::deque<std::condition_variable> wakes_;  // one a worker (stable addresses), as workers_
 };
 
 // Never destroyed: workers blocked in a wait are simply ended with the process
@@ -288,10 +298,67 @@ namespace detail {
 
 bool in_parallel_region() { return t_in_region; }
 
+std::size_t Thread_budget::take_up_to(std::size_t wanted) {
+  std::lock_guard<std::mutex> lock(mutex_);
+  const std::size_t taken = std::min(wanted, free_);
+  free_ -= taken;
+  return taken;
+}
+
+void Thread_budget::take_one() {
+  std::unique_lock<std::mutex> lock(mutex_);
+  freed_.wait(lock, [this] { return free_ > 0; });
+  --free_;
+}
+
+void Thread_budget::give(std::size_t units) {
+  if (units == 0) return;
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    free_ += units;
+  }
+  freed_.notify_all();
+}
+
+Working_under::Working_under(const Thread_context& context, bool unit_taken)
+    : saved_(thread_context()), gives_back_(context.budget != nullptr && !unit_taken) {
+  if (gives_back_) context.budget->take_one();
+  thread_context() = {context.limit, context.budget, context.budget != nullptr};
+}
+
+Working_under::~Working_under() {
+  Thread_context& current = thread_context();
+  if (gives_back_) current.budget->give(1);
+  current = saved_;
+}
+
+Lent_unit::Lent_unit() : lent_(thread_context().budget != nullptr && thread_context().holds_unit) {
+  if (!lent_) return;
+  thread_context().holds_unit = false;
+  thread_context().budget->give(1);
+}
+
+Lent_unit::~Lent_unit() {
+  if (!lent_) return;
+  thread_context().budget->take_one();
+  thread_context().holds_unit = true;
+}
+
 void run_parallel(std::size_t n, std::size_t threads, Item_function item, void* context) {
   Job job(n, item, context);
-  const std::size_t helpers = threads - 1;
-  if (helpers > Pool::kMaxWorkers || !pool().try_run(job, helpers)) {
+  // The helpers' units, given back once they are done (as many as are free).
+  Thread_budget* const budget = job.caller.budget;
+  const std::size_t helpers = budget ? budget->take_up_to(threads - 1) : threads - 1;
+  struct Give_back {
+    Thread_budget* budget;
+    std::size_t units;
+    ~Give_back() {
+      if (budget) budget->give(units);
+    }
+  } give_back{budget, helpers};
+  if (helpers == 0) {
+    job.run();
+  } else if (helpers > Pool::kMaxWorkers || !pool().try_run(job, helpers)) {
     std::vector<std::thread> extra;
     try {
       for (std::size_t k = 0; k < helpers; ++k) extra.emplace_back([&job] { job.run(); });
@@ -305,5 +372,15 @@ void run_parallel(std::size_t n, std::size_t threads, Item_function item, void* 
 }
 
 }  // namespace detail
+
+Thread_limit::Thread_limit(int threads) : saved_(detail::thread_context()) {
+  detail::Thread_context& context = detail::thread_context();
+  context.limit = threads;
+  budget_ = std::make_unique<detail::Thread_budget>(resolve_threads(threads));
+  context.budget = budget_.get();
+  context.holds_unit = true;
+}
+
+Thread_limit::~Thread_limit() { detail::thread_context() = saved_; }
 
 }  // namespace evomesh

@@ -233,19 +233,43 @@ def evolve(mesh: Mesh, delta: Any = None, *, size: Any = None, method: str = "fr
             started beside the packing); None: evomesh.default_thread_count()
             (EVOMESH_NUM_THREADS, else OMP_NUM_THREADS, else the CPUs this
             process may use: affinity and cgroup quota), 1: everything on
-            the calling thread. Results do not depend on it.
+            the calling thread. At most this many threads work at once, also
+            counting those the step starts beside its stages (several
+            processes per node can so share the cores). Results do not
+            depend on it.
         quality : bool, default True
             The quality pass (Section 6's suggestion, for both methods): a
             point that sees a segment under more than 120 degrees is dropped and
             the segment split at its midpoint instead; then Delaunay refinement
             (CGAL's mesher: Ruppert's rules 1 and 3) splits every triangle with an
             angle below ``min_angle``. There is no size criterion, so new points
-            follow the spacing of the selected points. The result has no angle
-            below ``min_angle`` whenever the domain has none below 60 degrees;
-            otherwise the pass stops after 0.5 n + 1000 insertions at most and
-            the small angles stay near the small input angles. ``stats`` reports
-            ``quality_points_added`` (``_on_segments``), ``quality_points_removed``,
-            ``quality_capped``. False reproduces the paper's algorithm.
+            follow the spacing of the selected points, except where the
+            domain's features need more (a channel narrower than that spacing
+            gets points at its width). Where segments (boundary or interior)
+            meet under less than 60 degrees, the pass stops after
+            ``quality_max_fraction`` n + ``quality_max_extra`` (0.5 n + 1000)
+            insertions at most and the small angles stay near the small input
+            angles. Where no two segments meet under less than 60 degrees
+            (consecutive around their common point, measured on either side)
+            Ruppert's rules end, and the result has no angle below
+            ``min_angle`` with exactly these exceptions: triangles within
+            16384 units of rounding of flat (features at the limit of float64)
+            are not split for their angles; the pass stops (``quality_capped``
+            = 1, a :class:`QualityWarning`) after that bound plus twice F,
+            at most 64 n + 10**6, where F estimates the points Ruppert's rules
+            need from the constrained Delaunay triangulation of the selected
+            points: the sum over its triangles of longest edge**2 / (4 area)
+            and over its segment pieces e of |e| / h (h the height of the
+            triangle on e) (measured: 1.5 to 40 times what the pass inserts;
+            a channel of width w and length L asks for about 2 L / w points);
+            CGAL's mesher may fail on near-degenerate geometry
+            (``quality_failed`` = 1, a warning); and with ``geometry`` the new
+            boundary points move onto their curves after the pass, which
+            changes the angles next to the curve (28.6 instead of 30 degrees
+            measured after coarsening a disc by 3).
+            ``stats`` reports ``quality_points_added`` (``_on_segments``),
+            ``quality_points_removed``, ``quality_capped``. False reproduces the
+            paper's algorithm.
         within_domain : bool, default True
             Spacing within the domain: nn_M(p) of a point whose nearest point
             hides behind a constraint (across a slit or a thin wall) is its
@@ -454,12 +478,18 @@ def delaunay_refine(mesh: Mesh, delta: Any, *, min_angle: float = 20.0, max_samp
         index), then the new points (``origin`` -1; kind BOUNDARY on segments,
         SAMPLED inside). ``stats``: ``points_added``,
         ``points_added_on_segments``, ``rounds`` (passes with exact f),
-        ``capped`` (1 if it stopped at its bound, twice the estimate).
+        ``capped`` (1 if it stopped at its bound, twice the estimate). The
+        input's labels carry over as in :func:`evolve`: a new segment has the
+        tag of the input segment it splits (``segment_tags``), a triangle the
+        tag of the input triangle's region it lies in (``triangle_tags``), and
+        every input point keeps its ``required`` flag (refinement never moves
+        or removes a point).
     """
     _require_mesh(mesh)
     d = as_delta(mesh, delta)
     o = make_options("drfc", min_angle=min_angle, max_samples=max_samples, threads=threads)
     result = _core.drfc_refine(
-        mesh.points, mesh.triangles, mesh.segments, mesh.segment_is_boundary.astype(np.uint8), mesh.kind, d, o
+        mesh.points, mesh.triangles, mesh.segments, mesh.segment_is_boundary.astype(np.uint8), mesh.kind, d, o,
+        **mesh._labels(),
     )
     return _wrap(result)

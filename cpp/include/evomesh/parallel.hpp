@@ -3,8 +3,11 @@
 #pragma once
 
 #include <algorithm>
+#include <condition_variable>
 #include <cstddef>
 #include <exception>
+#include <memory>
+#include <mutex>
 #include <string>
 #include <cstring>
 #include <thread>
@@ -21,23 +24,92 @@ namespace evomesh {
 // Invalid values are ignored. At least 1; read once, on first use.
 int default_thread_count();
 
-// The thread count that parallel_for uses when asked for 0 threads, on the
-// calling thread (0: default_thread_count()). Set for a scope with Thread_limit.
-inline int& default_threads() {
-  thread_local int threads = 0;
-  return threads;
+namespace detail {
+
+// The threads that the work of one Thread_limit scope may keep busy at once
+// (units): the thread that opened the scope holds one; parallel_for takes
+// helpers only from the free ones (none free: its items run on the caller),
+// and a Background thread holds one while it works. A thread that waits for a
+// Background thread lends its unit meanwhile. So a step with threads = k never
+// has more than k threads working, whatever its stages start beside each
+// other (several processes per node, each with its share of the cores).
+class Thread_budget {
+ public:
+  explicit Thread_budget(int units) : free_(units > 1 ? static_cast<std::size_t>(units) - 1 : 0) {}
+  // Takes up to `wanted` free units at once, without waiting; returns how many.
+  std::size_t take_up_to(std::size_t wanted);
+  // Takes one unit, waiting until one is free.
+  void take_one();
+  void give(std::size_t units);
+
+ private:
+  std::mutex mutex_;
+  std::condition_variable freed_;
+  std::size_t free_;
+};
+
+// What the calling thread works under: the thread count of parallel_for(..., 0,
+// ...) (0: default_thread_count()), the budget it draws from (null: none) and
+// whether it holds a unit of it. Set by Thread_limit and passed on to the
+// threads that work for it (parallel_for's helpers, Background threads).
+struct Thread_context {
+  int limit = 0;
+  Thread_budget* budget = nullptr;
+  bool holds_unit = false;
+};
+inline Thread_context& thread_context() {
+  thread_local Thread_context context;
+  return context;
 }
 
-// Limits every parallel_for(..., 0, ...) called from this thread, for its lifetime.
+// For its lifetime, the calling thread works under `context` (holding a unit
+// if it has a budget: taken here, waiting for one if need be, and given back
+// at the end; or, with `unit_taken`, one its caller took for it and gives
+// back). A helper's or a Background thread's share of a Thread_limit.
+class Working_under {
+ public:
+  explicit Working_under(const Thread_context& context, bool unit_taken = false);
+  ~Working_under();
+  Working_under(const Working_under&) = delete;
+  Working_under& operator=(const Working_under&) = delete;
+
+ private:
+  Thread_context saved_;
+  bool gives_back_;
+};
+
+// While it lives, the calling thread's unit (if it holds one) is free for
+// others: around a wait for another thread, which may need it to go on.
+class Lent_unit {
+ public:
+  Lent_unit();
+  ~Lent_unit();  // takes the unit back (waiting until one is free)
+  Lent_unit(const Lent_unit&) = delete;
+  Lent_unit& operator=(const Lent_unit&) = delete;
+
+ private:
+  bool lent_;
+};
+
+}  // namespace detail
+
+// The thread count that parallel_for uses when asked for 0 threads, on the
+// calling thread (0: default_thread_count()). Set for a scope with Thread_limit.
+inline int& default_threads() { return detail::thread_context().limit; }
+
+// Limits every parallel_for(..., 0, ...) called from this thread, for its
+// lifetime, to `threads` threads (0: default_thread_count()), and everything
+// it runs at once, on any thread, to that many (detail::Thread_budget).
 class Thread_limit {
  public:
-  explicit Thread_limit(int threads) : saved_(default_threads()) { default_threads() = threads; }
-  ~Thread_limit() { default_threads() = saved_; }
+  explicit Thread_limit(int threads);
+  ~Thread_limit();
   Thread_limit(const Thread_limit&) = delete;
   Thread_limit& operator=(const Thread_limit&) = delete;
 
  private:
-  int saved_;
+  detail::Thread_context saved_;
+  std::unique_ptr<detail::Thread_budget> budget_;
 };
 
 // The number of threads parallel_for(..., threads, ...) would use for many items.
@@ -64,10 +136,12 @@ int parse_cpu_max(const std::string& text);
 bool in_parallel_region();
 
 using Item_function = void (*)(void* context, std::size_t i);
-// Runs item(context, i) for i in [0, n) on the caller and threads - 1 helpers
-// (threads >= 2), then rethrows the first exception an item threw. Helpers come
+// Runs item(context, i) for i in [0, n) on the caller and up to threads - 1
+// helpers (threads >= 2; as many as the caller's Thread_budget has free, all
+// without one), then rethrows the first exception an item threw. Helpers come
 // from a persistent pool; while another thread's loop holds the pool, or when
 // the pool cannot supply that many, they are threads started for the call.
+// They work under the caller's Thread_context.
 void run_parallel(std::size_t n, std::size_t threads, Item_function item, void* context);
 
 }  // namespace detail
@@ -124,6 +198,10 @@ void parallel_resize(std::vector<T>& v, std::size_t n, const T& value = T()) {
 
 // Work started on another thread and waited for later; the destructor waits
 // too, so an exception on the main path never leaves a running thread behind.
+// The thread works under its starter's Thread_limit: its parallel_for calls
+// see the same limit, and it works only while it holds a unit of the
+// starter's budget (it may so start late, when the budget is all in use); a
+// thread waiting for it lends its own unit meanwhile.
 class Background {
  public:
   template <class Work>
@@ -132,8 +210,9 @@ class Background {
       work();
       return;
     }
-    thread_ = std::thread([this, work]() {
+    thread_ = std::thread([this, work, context = detail::thread_context()]() {
       try {
+        const detail::Working_under working(context);
         work();
       } catch (...) {
         error_ = std::current_exception();
@@ -141,14 +220,17 @@ class Background {
     });
   }
   void wait() {
-    if (thread_.joinable()) thread_.join();
+    join();
     if (error_) std::rethrow_exception(std::exchange(error_, nullptr));
   }
-  ~Background() {
-    if (thread_.joinable()) thread_.join();
-  }
+  ~Background() { join(); }
 
  private:
+  void join() {
+    if (!thread_.joinable()) return;
+    const detail::Lent_unit lent;
+    thread_.join();
+  }
   std::thread thread_;
   std::exception_ptr error_;
 };

@@ -22,7 +22,10 @@ namespace evomesh {
 // (midpoint splits of encroached segments, off-centres (Ungor) of triangles below
 // min_angle, concentric-shell splits near small input angles). There is no size
 // criterion: new points only go where a triangle is badly shaped, so their spacing
-// follows that of the points handed in.
+// follows that of the points handed in (or the domain's features where those are
+// finer). The number of insertions is bounded by options.max_inserted_fraction n +
+// max_inserted_extra where constraints meet under less than 60 degrees; where none
+// do, by that plus what the features need (quality_pass.cpp, feature_allowance).
 // `pinned` (aligned with points; empty: none) marks points the pass never drops
 // (required points), even where they crowd a segment.
 Refined_mesh quality_triangulate(const std::vector<Vec2>& points, const std::vector<Point_kind>& kind,

@@ -766,6 +766,9 @@ class Mesher {
   // Inserts one point; false when nothing is left to refine.
   bool insert_one_point() { return faces_.try_to_insert_one_point(visitor_); }
   bool is_done() { return faces_.is_algorithm_done(); }
+  // After init(): whether two constraint edges meet under less than 60 degrees
+  // (CGAL's clusters, Clusters::is_small_angle above), either side of the domain.
+  bool has_small_angles() const { return clusters_.size() > 0; }
 
  private:
   Refinement_criteria criteria_;
