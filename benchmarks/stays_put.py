@@ -56,7 +56,7 @@ def cases(scale: float):
     h_uniform = 0.01 / np.sqrt(scale)
     yield "uniform", unit_square_mesh(int(4000 * scale)), h_uniform, None
     yield "graded", unit_square_mesh(int(4000 * scale)), lambda x: (0.01 + 0.05 * x[:, 0]) / np.sqrt(scale), None
-    yield "curved", disc_with_hole_mesh(0.05), 0.03 / np.sqrt(scale), geometry
+    yield "curved", disc_with_hole_mesh(0.05 / np.sqrt(scale)), 0.03 / np.sqrt(scale), geometry
     yield "tagged", tagged(unit_square_mesh(int(4000 * scale))), h_uniform, None
 
 
@@ -71,6 +71,7 @@ def main() -> None:
     parser.add_argument("--steps", type=int, default=5)
     parser.add_argument("--scale", type=float, default=1.0, help="point count factor of the meshes")
     parser.add_argument("--threads", type=int, default=1)
+    parser.add_argument("--stages", action="store_true", help="the costliest stages of each case's last step")
     args = parser.parse_args()
     kw = {"threads": args.threads}
     print(f"{'case':8} {'request':7} {'step':>4} {'n_in':>7} {'n_out':>7} {'changed':>8} {'edge/h':>7} "
@@ -88,6 +89,12 @@ def main() -> None:
                 print(f"{name:8} {request:7} {step:>4} {current.n_points:>7} {new.n_points:>7} "
                       f"{changed_fraction(current, new):8.2%} {median_edge_over_request(new, size):7.3f} "
                       f"{seconds:7.3f} {full:7.3f} {seconds / full:6.2f}")
+                if args.stages and step == args.steps:
+                    stages = sorted(((v, k[8:]) for k, v in new.stats.items()
+                                     if k.startswith("seconds_") and k != "seconds_total"), reverse=True)
+                    python = seconds - new.stats.get("seconds_total", 0.0)
+                    print("    stages of the last step (s): " + ", ".join(f"{k} {v:.3f}" for v, k in stages[:6])
+                          + f"; outside the core {python:.3f}")
                 current = new
 
 

@@ -101,13 +101,12 @@ def _size_values(mesh: Mesh, size: Any) -> NDArray[np.float64]:
     return h
 
 
-def _neighbourhood_mean(triangles: np.ndarray, values: np.ndarray, n: int) -> np.ndarray:
+def _neighbourhood_mean(triangles: np.ndarray, corners_at: np.ndarray, values: np.ndarray) -> np.ndarray:
     """The mean of `values` over p and the points that share a triangle with p
-    (weighted by the triangles they share)."""
-    total = np.bincount(triangles.ravel(), np.repeat(values[triangles].sum(axis=1), 3), n)
-    count = np.bincount(triangles.ravel(), minlength=n) * 3
+    (each counted once per triangle shared); corners_at: triangles per point."""
+    total = np.bincount(triangles.ravel(), np.repeat(values[triangles].sum(axis=1), 3), len(values))
     with np.errstate(invalid="ignore", divide="ignore"):
-        return total / count
+        return total / (3 * corners_at)
 
 
 def _near(triangles: np.ndarray, seeds: np.ndarray, rings: int) -> np.ndarray:
@@ -116,6 +115,14 @@ def _near(triangles: np.ndarray, seeds: np.ndarray, rings: int) -> np.ndarray:
     for _ in range(rings):
         near[triangles[near[triangles].any(axis=1)].ravel()] = True
     return near
+
+
+def _near_only(triangles: np.ndarray, points: np.ndarray, seeds: np.ndarray, rings: int) -> np.ndarray:
+    """Of `points`, those within `rings` edges of a seed; the search runs on the
+    triangles within `rings` edges of `points` only (few, where this is asked)."""
+    region = _near(triangles, points, rings - 1) if rings > 0 else points
+    around = triangles[region[triangles].any(axis=1)]
+    return points & _near(around, seeds, rings)
 
 
 def delta_from_size(mesh: Mesh, size: ArrayLike | Callable[[np.ndarray], ArrayLike]) -> NDArray[np.float64]:
@@ -172,23 +179,26 @@ def delta_from_size(mesh: Mesh, size: ArrayLike | Callable[[np.ndarray], ArrayLi
     triangles = np.asarray(mesh.triangles)
     n = mesh.n_points
     h = _size_values(mesh, size)
-    corners = points[triangles]  # (m, 3, 2)
-    edges = corners[:, [1, 2, 0]] - corners  # edge k: from corner k to corner k + 1
+    following = triangles[:, [1, 2, 0]]  # edge k of a triangle: from corner k to corner k + 1
+    x, y = np.ascontiguousarray(points[:, 0]), np.ascontiguousarray(points[:, 1])  # (gathers of one column are fast)
+    length = np.hypot(x[following] - x[triangles], y[following] - y[triangles])
     # each edge against the request at its midpoint (h taken as linear along it)
-    ratio = np.sqrt(edges[..., 0] ** 2 + edges[..., 1] ** 2) / (0.5 * (h[triangles] + h[triangles[:, [1, 2, 0]]]))
+    ratio = length / (float(h[0]) if np.ndim(size) == 0 and not callable(size) else 0.5 * (h[triangles] + h[following]))
     # The mean over the edges at p, each counted once per triangle corner at p
-    # (corner k lies on edges k and k - 1; an interior edge counts twice).
-    at_corner = ratio + ratio[:, [2, 0, 1]]
+    # (corner k lies on edges k and k - 1; an interior edge counts twice), then
+    # over p and its neighbours: L(p).
+    corners_at = np.bincount(triangles.ravel(), minlength=n)
     with np.errstate(invalid="ignore", divide="ignore"):
-        edge_over_size = np.bincount(triangles.ravel(), at_corner.ravel(), n) / (
-            2 * np.bincount(triangles.ravel(), minlength=n))
-    local = _neighbourhood_mean(triangles, edge_over_size, n)
+        edge_over_size = np.bincount(triangles.ravel(), (ratio + ratio[:, [2, 0, 1]]).ravel(), n) / (2 * corners_at)
+    local = _neighbourhood_mean(triangles, corners_at, edge_over_size)
     nn = mesh.nn_spacing
     with np.errstate(over="ignore"):
         refine = h / (_EDGE_OVER_NN_REFINED * nn)
         coarsen = np.maximum(1.0, h / (_EDGE_OVER_NN_COARSENED * nn))
     too_coarse = (local > _COARSE_TOLERANCE) & (refine < _REFINE_BELOW)
-    too_fine = (local < 1 / _FINE_TOLERANCE) & ~_near(triangles, local >= 1 / _MEETS, _CLEARANCE_RINGS)
+    too_fine = local < 1 / _FINE_TOLERANCE
+    if too_fine.any():
+        too_fine &= ~_near_only(triangles, too_fine, local >= 1 / _MEETS, _CLEARANCE_RINGS)
     delta = np.where(too_coarse, refine, np.where(too_fine, coarsen, 1.0))
     bad = (delta < DELTA_MIN) | (delta > DELTA_MAX)
     if bad.any():
