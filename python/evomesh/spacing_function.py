@@ -183,7 +183,7 @@ def delta_from_size(mesh: Mesh, size: ArrayLike | Callable[[np.ndarray], ArrayLi
     x, y = np.ascontiguousarray(points[:, 0]), np.ascontiguousarray(points[:, 1])  # (gathers of one column are fast)
     length = np.hypot(x[following] - x[triangles], y[following] - y[triangles])
     # each edge against the request at its midpoint (h taken as linear along it)
-    ratio = length / (float(h[0]) if np.ndim(size) == 0 and not callable(size) else 0.5 * (h[triangles] + h[following]))
+    ratio = length / (h[0] if (h == h[0]).all() else 0.5 * (h[triangles] + h[following]))
     # The mean over the edges at p, each counted once per triangle corner at p
     # (corner k lies on edges k and k - 1; an interior edge counts twice), then
     # over p and its neighbours: L(p).
