@@ -333,7 +333,8 @@ bool adopt_input_order(const Mesh_arrays& input, Evolve_result& result) {
 void finish_step(const Mesh_arrays& input, Evolve_result& result, detail::Stage_timer& timer, Old_mesh_start* start,
                  const std::vector<double>* input_nn) {
   result.stats.emplace_back("restored_points", static_cast<double>(restore_origins(input, result)));
-  result.stats.emplace_back("unchanged", adopt_input_order(input, result) ? 1.0 : 0.0);
+  const bool unchanged = adopt_input_order(input, result);
+  result.stats.emplace_back("unchanged", unchanged ? 1.0 : 0.0);
   std::unique_ptr<Old_mesh_walker> walker;
   if (start != nullptr) {
     start->work.wait();
@@ -372,7 +373,13 @@ void finish_step(const Mesh_arrays& input, Evolve_result& result, detail::Stage_
       resolve_threads(0) > 1);
   const auto walks_begin = std::chrono::steady_clock::now();
   result.parents = parent_map(old_mesh, result.mesh, result.origin);
-  carry_tags(old_mesh, result.origin, result.parents, result.mesh);
+  if (unchanged) {  // the input's triangles and segments, in their order: their tags
+    result.mesh.segment_tags = input.segment_tags;
+    result.mesh.triangle_tags = input.triangle_tags;
+    result.mesh.required = input.required;
+  } else {
+    carry_tags(old_mesh, result.origin, result.parents, result.mesh);
+  }
   const double walk_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - walks_begin).count();
   output_nn.wait();
   timer.lap("parent_map");
