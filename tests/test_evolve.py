@@ -179,7 +179,7 @@ def test_absolute_size_equals_the_relative_delta_it_stands_for():
     mesh = grid_mesh(12, 12, jitter=0.2, seed=5)
     h = 0.04 + 0.1 * mesh.points[:, 0]
     by_size = evomesh.evolve(mesh, size=h, seed=3)
-    by_delta = evomesh.evolve(mesh, h / evomesh.nn_spacing(mesh), seed=3)
+    by_delta = evomesh.evolve(mesh, evomesh.spacing_function.delta_from_size(mesh, h), seed=3)
     assert by_size.points.tobytes() == by_delta.points.tobytes()
     by_callable = evomesh.evolve(mesh, size=lambda x: 0.04 + 0.1 * x[:, 0], seed=3)
     assert by_callable.points.tobytes() == by_size.points.tobytes()

@@ -240,7 +240,7 @@ py::dict evolve_result_dict(const Evolve_result& r) {
 // The option types, with the same field names as in C++ (one list per type).
 #define EVOMESH_FRFC_FIELDS(X)                                                                                  \
   X(cell_factor) X(radius) X(radius_scale) X(boundary_scale) X(ring_samples) X(repair_ratio)                   \
-  X(gap_repair_ratio) X(refine_gap_ratio) X(demote_ratio) X(samples) X(adaptive_cells) X(skip_coarse) X(filter_samples)            \
+  X(gap_repair_ratio) X(refine_gap_ratio) X(demote_ratio) X(samples) X(adaptive_cells) X(skip_coarse) X(skip_settled) X(filter_samples)            \
   X(max_samples) X(threads) X(seed) X(quality) X(within_domain) X(min_angle) X(crowding_angle)                 \
   X(quality_max_fraction) X(quality_max_extra) X(incremental)
 #define EVOMESH_DRFC_FIELDS(X)                                                                                  \

@@ -231,12 +231,49 @@ int ring_candidates_of(const Mesh_arrays& mesh, const Triangle_fans& fans, const
   return count;
 }
 
+std::vector<std::uint8_t> settled_points(const Mesh_arrays& mesh, const std::vector<double>& delta,
+                                         const std::vector<double>& f) {
+  const std::size_t n = mesh.points.size();
+  std::vector<double> shortest2(n, std::numeric_limits<double>::infinity());
+  for (const Triangle& t : mesh.triangles) {
+    for (int k = 0; k < 3; ++k) {
+      const Index u = t[k], v = t[(k + 1) % 3];
+      const double dx = mesh.points[u][0] - mesh.points[v][0], dy = mesh.points[u][1] - mesh.points[v][1];
+      const double d2 = dx * dx + dy * dy;
+      shortest2[u] = std::min(shortest2[u], d2);
+      shortest2[v] = std::min(shortest2[v], d2);
+    }
+  }
+  constexpr double kRoundings = 8 * std::numeric_limits<double>::epsilon();
+  std::vector<std::uint8_t> settled(n, 0);
+  for (std::size_t p = 0; p < n; ++p) {
+    settled[p] = delta[p] == 1 && std::isfinite(shortest2[p]) && f[p] >= std::sqrt(shortest2[p]) * (1 - kRoundings);
+  }
+  return settled;
+}
+
 Candidates segment_candidates(const Mesh_arrays& mesh, const std::vector<double>& delta, const std::vector<double>& f,
                               const std::vector<Segment_chain>& chains, const Frfc_options& options,
                               const Spacing_queries* queries) {
   Candidates on_segments;
   on_segments.samples = sample_segments(mesh, f, options.cell_factor, options.samples, options.seed,
                                         options.adaptive_cells, queries);
+  if (options.skip_settled) {
+    // (the samples of a segment come from its own random stream: dropping a
+    // segment's changes no other's)
+    const auto settled = settled_points(mesh, delta, f);
+    Sample_set& samples = on_segments.samples;
+    std::size_t k = 0;
+    for (std::size_t j = 0; j < samples.points.size(); ++j) {
+      const Edge& e = mesh.segments[samples.parent[j]];
+      if (settled[e[0]] && settled[e[1]]) continue;
+      samples.points[k] = samples.points[j];
+      samples.parent[k] = samples.parent[j];
+      ++k;
+    }
+    samples.points.resize(k);
+    samples.parent.resize(k);
+  }
   on_segments.round.assign(on_segments.size(), -1);
   on_segments.owner.assign(on_segments.size(), -1);
   if (options.ring_samples) {
@@ -258,6 +295,37 @@ Candidates interior_candidates(const Mesh_arrays& mesh, const Triangle_fans& fan
     for (std::size_t t = 0; t < mesh.triangles.size(); ++t) {
       const auto& tri = mesh.triangles[t];
       skip[t] = delta[tri[0]] > 1 && delta[tri[1]] > 1 && delta[tri[2]] > 1;
+    }
+  }
+  if (options.skip_settled) {
+    // Why a step is idempotent on its own output (issue 27). Let M be the
+    // output of a step, and step again with delta = 1 (or with a size= request
+    // that M meets: delta_from_size gives exactly 1 there). At every point p,
+    // f(p) = nn_M(p) (Lemma 3.1), and nn_M(p) is an edge of p (the nearest
+    // neighbour is a Delaunay neighbour; M is a constrained Delaunay
+    // triangulation with non-encroached segments), so every point is settled
+    // (settled_points) and:
+    // 1. no candidate: every triangle and segment is skipped here, and ring
+    //    candidates exist only around points with delta < 1;
+    // 2. every point is kept: spheres B(p, s f(p) / 2) with s <= 1 are pairwise
+    //    disjoint (s nn(p) / 2 + s nn(q) / 2 <= |p - q|), nothing else is
+    //    packed, and none is demoted (nn = f is below demote_ratio f);
+    // 3. no repair: the spacing repair serves points with delta < 1, and the
+    //    gap repair's distance at a kept point with delta = 1 is that of its
+    //    nearest other output point, nn(p) <= gap_repair_ratio nn(p);
+    // 4. the same points with the same constraint pieces (the segments between
+    //    consecutive kept chain points: M's segments) have the same constrained
+    //    Delaunay triangulation, M up to cocircular ties, in which the quality
+    //    pass finds no crowded segment and, when M met min_angle, no triangle
+    //    to split.
+    // So the step returns M's points, every one kept. The paper's sampling
+    // (skip_settled = false) offers samples wherever a sphere fits between
+    // the old ones: in M's larger triangles, a few per thousand points a step.
+    const auto settled = settled_points(mesh, delta, f);
+    skip.resize(mesh.triangles.size(), 0);
+    for (std::size_t t = 0; t < mesh.triangles.size(); ++t) {
+      const auto& tri = mesh.triangles[t];
+      skip[t] = skip[t] || (settled[tri[0]] && settled[tri[1]] && settled[tri[2]]);
     }
   }
   if (quiet != nullptr) {

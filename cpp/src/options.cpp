@@ -44,6 +44,7 @@ Frfc_options Frfc_options::paper() {
   o.samples = Sample_mode::random_grid;
   o.adaptive_cells = false;
   o.skip_coarse = false;
+  o.skip_settled = false;
   o.quality = false;
   o.within_domain = false;
   return o;

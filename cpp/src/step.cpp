@@ -5,10 +5,12 @@
 #include <CGAL/exceptions.h>
 
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <ctime>
 #include <fstream>
 #include <cmath>
+#include <cstdint>
 #include <cstdlib>
 #include <string>
 #include <stdexcept>
@@ -236,8 +238,103 @@ void triangulate_selection(Selection selected, const std::vector<Constraint_piec
   stats.emplace_back("min_angle_y", angle.second[1]);
 }
 
+namespace {
+
+// An output point at exactly the coordinates of an input point that the
+// selection dropped is that point (issue 27): the quality pass splits a
+// segment at its midpoint or a triangle at its circumcentre, which is often
+// where the previous step's pass had put the point the packing just dropped (a
+// coarsening that the segments' Gabriel condition or the angle bound undoes).
+// It gets that input point's origin, and the kind of a kept point (on a
+// segment or not as before: else it stays new), so the lineage says the point
+// stayed: a transfer copies its value, the output's nn comes from the input's.
+// Returns how many were restored.
+std::size_t restore_origins(const Mesh_arrays& input, Evolve_result& result) {
+  std::vector<std::uint8_t> referenced(input.points.size(), 0);
+  std::size_t n_new = 0;
+  for (Index o : result.origin) {
+    if (o >= 0) referenced[o] = 1;
+    else ++n_new;
+  }
+  if (n_new == 0) return 0;
+  std::vector<Index> dropped;  // sorted by coordinates
+  for (std::size_t o = 0; o < input.points.size(); ++o) {
+    if (!referenced[o]) dropped.push_back(static_cast<Index>(o));
+  }
+  if (dropped.empty()) return 0;
+  auto less = [&](Index a, Index b) { return input.points[a] < input.points[b]; };
+  std::sort(dropped.begin(), dropped.end(), less);
+  auto on_segment = [](Point_kind k) { return k == Point_kind::corner || k == Point_kind::boundary; };
+  std::size_t n_restored = 0;
+  for (std::size_t i = 0; i < result.origin.size(); ++i) {
+    if (result.origin[i] >= 0) continue;
+    const Vec2& p = result.mesh.points[i];
+    const auto it = std::lower_bound(dropped.begin(), dropped.end(), p,
+                                     [&](Index a, const Vec2& x) { return input.points[a] < x; });
+    if (it == dropped.end() || input.points[*it] != p) continue;  // (input points are distinct)
+    const Point_kind was = input.kind[*it];
+    if (on_segment(was) != on_segment(result.mesh.kind[i])) continue;
+    result.origin[i] = *it;
+    result.mesh.kind[i] = kept_point_kind(was, false);
+    ++n_restored;
+  }
+  return n_restored;
+}
+
+// A step that kept every input point and added none, in input order, and
+// whose triangles and segments are the input's (as sets: the constrained
+// Delaunay triangulation of the same points and segments, and nothing for the
+// quality pass to do), returns the input's arrays, in their order: a mesh that
+// stays put keeps the indices of its triangles and segments (per-cell data and
+// tags stay aligned), whichever path built it. Sorting O(m log m), and only
+// when the points did not change.
+bool adopt_input_order(const Mesh_arrays& input, Evolve_result& result) {
+  Mesh_arrays& out = result.mesh;
+  if (out.points.size() != input.points.size() || out.triangles.size() != input.triangles.size() ||
+      out.segments.size() != input.segments.size() ||
+      out.segment_is_boundary.size() != input.segment_is_boundary.size()) {
+    return false;
+  }
+  for (std::size_t i = 0; i < result.origin.size(); ++i) {
+    if (result.origin[i] != static_cast<Index>(i)) return false;
+  }
+  // Triangles by their rotation that starts at the least index (orientation kept).
+  auto rotated = [](Triangle t) {
+    while (t[0] > t[1] || t[0] > t[2]) t = {t[1], t[2], t[0]};
+    return t;
+  };
+  auto same_set = [](auto a, auto b) {
+    std::sort(a.begin(), a.end());
+    std::sort(b.begin(), b.end());
+    return a == b;
+  };
+  std::vector<Triangle> a(input.triangles.size()), b(out.triangles.size());
+  for (std::size_t t = 0; t < a.size(); ++t) a[t] = rotated(input.triangles[t]);
+  for (std::size_t t = 0; t < b.size(); ++t) b[t] = rotated(out.triangles[t]);
+  if (!same_set(std::move(a), std::move(b))) return false;
+  std::vector<std::array<Index, 3>> sa(input.segments.size()), sb(out.segments.size());
+  for (std::size_t s = 0; s < sa.size(); ++s) {
+    const Edge& e = input.segments[s];
+    sa[s] = {std::min(e[0], e[1]), std::max(e[0], e[1]), input.segment_is_boundary[s]};
+  }
+  for (std::size_t s = 0; s < sb.size(); ++s) {
+    const Edge& e = out.segments[s];
+    sb[s] = {std::min(e[0], e[1]), std::max(e[0], e[1]), out.segment_is_boundary[s]};
+  }
+  if (!same_set(std::move(sa), std::move(sb))) return false;
+  out.triangles = input.triangles;
+  out.segments = input.segments;
+  out.segment_is_boundary = input.segment_is_boundary;
+  return true;
+}
+
+}  // namespace
+
 void finish_step(const Mesh_arrays& input, Evolve_result& result, detail::Stage_timer& timer, Old_mesh_start* start,
                  const std::vector<double>* input_nn) {
+  result.stats.emplace_back("restored_points", static_cast<double>(restore_origins(input, result)));
+  const bool unchanged = adopt_input_order(input, result);
+  result.stats.emplace_back("unchanged", unchanged ? 1.0 : 0.0);
   std::unique_ptr<Old_mesh_walker> walker;
   if (start != nullptr) {
     start->work.wait();
@@ -276,7 +373,13 @@ void finish_step(const Mesh_arrays& input, Evolve_result& result, detail::Stage_
       resolve_threads(0) > 1);
   const auto walks_begin = std::chrono::steady_clock::now();
   result.parents = parent_map(old_mesh, result.mesh, result.origin);
-  carry_tags(old_mesh, result.origin, result.parents, result.mesh);
+  if (unchanged) {  // the input's triangles and segments, in their order: their tags
+    result.mesh.segment_tags = input.segment_tags;
+    result.mesh.triangle_tags = input.triangle_tags;
+    result.mesh.required = input.required;
+  } else {
+    carry_tags(old_mesh, result.origin, result.parents, result.mesh);
+  }
   const double walk_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - walks_begin).count();
   output_nn.wait();
   timer.lap("parent_map");

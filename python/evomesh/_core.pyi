@@ -70,6 +70,7 @@ class FrfcOptions:
     samples: SampleMode
     adaptive_cells: bool
     skip_coarse: bool
+    skip_settled: bool
     filter_samples: bool
     max_samples: float
     threads: int

@@ -55,9 +55,20 @@ struct Ring_candidate {
 int ring_candidates_of(const Mesh_arrays& mesh, const Triangle_fans& fans, const std::vector<double>& f, double reach,
                        std::uint64_t seed, std::size_t p, std::array<Ring_candidate, kRingDirections>& out);
 
+// Settled points (issue 27): delta(p) = 1 and f(p) = the length of p's
+// shortest mesh edge. Always f(p) <= w_p = delta(p) nn_M(p) <= nn_M(p) <= that
+// length (Lemma 3.1, Eq. 3), so equality says that the request at p is the
+// spacing the mesh already has there: not lowered by the local feature size or
+// by another point's cone, and met by an edge of p. (Lengths are compared up to
+// a few units of rounding: nn_M and the edge may be computed by sqrt or hypot.)
+std::vector<std::uint8_t> settled_points(const Mesh_arrays& mesh, const std::vector<double>& delta,
+                                         const std::vector<double>& f);
+
 // Candidates on segments: grid samples, then (options.ring_samples) one ring
 // candidate each way from every R-point, merged in so that each segment's list
 // stays sorted along it, then snapped to straight chains. Radii not yet set.
+// With options.skip_settled, no grid samples on a segment whose two ends are
+// settled (settled_points).
 // `queries` (optional): f for the grids of segments far longer than f at their
 // ends (sample_segments).
 Candidates segment_candidates(const Mesh_arrays& mesh, const std::vector<double>& delta, const std::vector<double>& f,
@@ -66,7 +77,9 @@ Candidates segment_candidates(const Mesh_arrays& mesh, const std::vector<double>
 
 // Candidates inside triangles: grid samples and (options.ring_samples) the ring
 // candidates of every R-point, except those in a cover disc of their triangle
-// (cover empty: none dropped). `n_drawn` receives the number of grid samples drawn.
+// (cover empty: none dropped). With options.skip_settled, none in a triangle
+// whose three vertices are settled (settled_points). `n_drawn` receives the
+// number of grid samples drawn.
 // `quiet` (optional, one flag per triangle): triangles whose grid samples all lie
 // in a cover disc (incremental_step.cpp); they are not sampled, the result is the same.
 // `queries` (optional): f for the adaptive grids of strongly graded triangles

@@ -84,6 +84,11 @@ struct Frfc_options {
   // allows (sampling.cpp); false: the paper's uniform cells of side c f(q)/(2 sqrt 2).
   bool adaptive_cells = true;
   bool skip_coarse = false;     // no samples where all three vertices have delta > 1
+  // No samples in a triangle (on a segment) whose every vertex is settled:
+  // delta = 1 and f = nn_M = its shortest edge, the request there being the
+  // spacing the mesh has (candidates.hpp, settled_points). With it a step is
+  // idempotent on its own output (issue 27); false: the paper's sampling.
+  bool skip_settled = true;
   // Interior samples that certainly overlap a kept sphere are dropped before
   // their radius is computed; the output is the same either way.
   bool filter_samples = true;

@@ -202,7 +202,11 @@ struct Old_mesh_start {
   }
 };
 
-// After triangulate_selection: the parent map of the new mesh in `input` (timed
+// After triangulate_selection: an output point at exactly the coordinates of an
+// input point the selection dropped gets that point's origin and kept kind
+// (stat "restored_points"); an output with the input's points, triangles and
+// segments (as sets) takes the input's arrays, in their order (stat
+// "unchanged"); then the parent map of the new mesh in `input` (timed
 // as "parent_map") and the step's total time; the walker from `start` if given.
 // `input_nn`, if given: nn_spacing of the input points (NaN where unknown), for
 // the output's nn from what the step changed (nn_spacing_after_change; kept

@@ -1,0 +1,102 @@
+"""Issue 27, section 2: does a mesh stay put when the request does not change?
+
+For a uniform, a graded (h = 0.01 + 0.05 x), a curved (disc with a hole and its
+circles) and a tagged mesh: first ``new = evolve(m, size=h)``, then
+``evolve(size=h)`` and ``evolve(delta=1)`` step after step. Printed per step:
+the points changed ((points not kept + points added) / n of the input), the
+median edge length over the request, and the cost of the step against a full
+step (``incremental=False``) on the same input, timed in the same run.
+
+    .venv/bin/python benchmarks/stays_put.py [--steps 5] [--scale 1]
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+import numpy as np
+
+import evomesh
+from evomesh.geometry import Circle
+from evomesh.meshgen import HOLE_TAG, OUTER_TAG, disc_with_hole_mesh, unit_square_mesh
+
+
+def changed_fraction(old: evomesh.Mesh, new: evomesh.Mesh) -> float:
+    """(input points not kept + output points that are new) / input points."""
+    origin = np.asarray(new.origin)
+    kept = np.unique(origin[origin >= 0]).size
+    added = int((origin < 0).sum())
+    return ((old.n_points - kept) + added) / old.n_points
+
+
+def median_edge_over_request(mesh: evomesh.Mesh, size) -> float:
+    t = np.asarray(mesh.triangles)
+    edges = np.unique(np.sort(np.concatenate([t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]]), axis=1), axis=0)
+    p = np.asarray(mesh.points)
+    length = np.linalg.norm(p[edges[:, 0]] - p[edges[:, 1]], axis=1)
+    mid = 0.5 * (p[edges[:, 0]] + p[edges[:, 1]])
+    request = size(mid) if callable(size) else np.full(len(edges), float(size))
+    return float(np.median(length / request))
+
+
+def tagged(mesh: evomesh.Mesh) -> evomesh.Mesh:
+    p, t, s = np.array(mesh.points), np.array(mesh.triangles), np.array(mesh.segments)
+    mid = p[s].mean(axis=1)
+    segment_tags = np.select([mid[:, 1] < 0.5, mid[:, 0] > 0.5], [1 + (mid[:, 0] > 0.5), 3], 4)
+    centre = p[t].mean(axis=1)
+    triangle_tags = np.where(np.hypot(*(centre - 0.5).T) < 0.3, 7, 8)
+    required = np.zeros(len(p), bool)
+    required[[5, len(p) // 2, len(p) - 7]] = True
+    return evomesh.Mesh(p, t, s, segment_tags=segment_tags, triangle_tags=triangle_tags, required=required)
+
+
+def cases(scale: float):
+    geometry = {OUTER_TAG: Circle((0, 0), 1.0), HOLE_TAG: Circle((0, 0), 0.35)}
+    h_uniform = 0.01 / np.sqrt(scale)
+    yield "uniform", unit_square_mesh(int(4000 * scale)), h_uniform, None
+    yield "graded", unit_square_mesh(int(4000 * scale)), lambda x: (0.01 + 0.05 * x[:, 0]) / np.sqrt(scale), None
+    yield "curved", disc_with_hole_mesh(0.05 / np.sqrt(scale)), 0.03 / np.sqrt(scale), geometry
+    yield "tagged", tagged(unit_square_mesh(int(4000 * scale))), h_uniform, None
+
+
+def timed(function, *args, **kwargs):
+    start = time.perf_counter()
+    result = function(*args, **kwargs)
+    return result, time.perf_counter() - start
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--steps", type=int, default=5)
+    parser.add_argument("--scale", type=float, default=1.0, help="point count factor of the meshes")
+    parser.add_argument("--threads", type=int, default=1)
+    parser.add_argument("--stages", action="store_true", help="the costliest stages of each case's last step")
+    args = parser.parse_args()
+    kw = {"threads": args.threads}
+    print(f"{'case':8} {'request':7} {'step':>4} {'n_in':>7} {'n_out':>7} {'changed':>8} {'edge/h':>7} "
+          f"{'t_step':>7} {'t_full':>7} {'ratio':>6}")
+    for name, mesh, size, geometry in cases(args.scale):
+        first = evomesh.evolve(mesh, size=size, geometry=geometry, **kw)
+        print(f"{name:8} {'first':7} {0:>4} {mesh.n_points:>7} {first.n_points:>7} {'':>8} "
+              f"{median_edge_over_request(first, size):7.3f}")
+        for request in ("size", "delta"):
+            current = first
+            for step in range(1, args.steps + 1):
+                what = {"size": size} if request == "size" else {"delta": 1.0}
+                new, seconds = timed(evomesh.evolve, current, geometry=geometry, **what, **kw)
+                _, full = timed(evomesh.evolve, current, geometry=geometry, incremental=False, **what, **kw)
+                print(f"{name:8} {request:7} {step:>4} {current.n_points:>7} {new.n_points:>7} "
+                      f"{changed_fraction(current, new):8.2%} {median_edge_over_request(new, size):7.3f} "
+                      f"{seconds:7.3f} {full:7.3f} {seconds / full:6.2f}")
+                if args.stages and step == args.steps:
+                    stages = sorted(((v, k[8:]) for k, v in new.stats.items()
+                                     if k.startswith("seconds_") and k != "seconds_total"), reverse=True)
+                    python = seconds - new.stats.get("seconds_total", 0.0)
+                    print("    stages of the last step (s): " + ", ".join(f"{k} {v:.3f}" for v, k in stages[:6])
+                          + f"; outside the core {python:.3f}")
+                current = new
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,176 @@
+"""A mesh stays put when the request does not change (issue 27, section 2).
+
+``evolve(new, size=h)`` after ``new = evolve(m, size=h)`` changes at most 0.1 %
+of the points after at most two steps, and ``evolve(new, delta=1)`` changes
+nothing; ``size=`` is the target edge length (median output edge over the
+request in [0.9, 1.1]). The argument is in cpp/src/candidates.cpp
+(interior_candidates) and python/evomesh/spacing_function.py (delta_from_size).
+"""
+
+import warnings
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+
+import evomesh
+from evomesh import FrfcOptions
+from evomesh.geometry import Circle
+from evomesh.meshgen import HOLE_TAG, OUTER_TAG, disc_with_hole_mesh, unit_square_mesh
+from evomesh.spacing_function import delta_from_size
+from invariants import check_evolved, check_valid_mesh, edges_with_counts
+from strategies import grid_mesh, mesh_and_delta
+
+CURVES = {OUTER_TAG: Circle((0, 0), 1.0), HOLE_TAG: Circle((0, 0), 0.35)}
+
+
+def tagged(mesh: evomesh.Mesh) -> evomesh.Mesh:
+    """Segment tags by side, region tags (a disc of radius 0.3) and three required points."""
+    p, t, s = np.array(mesh.points), np.array(mesh.triangles), np.array(mesh.segments)
+    mid = p[s].mean(axis=1)
+    segment_tags = np.select([mid[:, 1] < 0.5, mid[:, 0] > 0.5], [1 + (mid[:, 0] > 0.5), 3], 4)
+    triangle_tags = np.where(np.hypot(*(p[t].mean(axis=1) - 0.5).T) < 0.3, 7, 8)
+    required = np.zeros(len(p), bool)
+    required[[5, len(p) // 2, len(p) - 7]] = True
+    return evomesh.Mesh(p, t, s, segment_tags=segment_tags, triangle_tags=triangle_tags, required=required)
+
+
+def graded(x: np.ndarray) -> np.ndarray:
+    return 0.01 + 0.05 * x[:, 0]
+
+
+# (mesh, size, geometry): 2e3 to 1e4 points after the first step
+CASES = {
+    "uniform": (lambda: unit_square_mesh(2000), 0.012, None),
+    "graded": (lambda: unit_square_mesh(2000), graded, None),
+    "curved": (lambda: disc_with_hole_mesh(0.05), 0.03, CURVES),
+    "tagged": (lambda: tagged(unit_square_mesh(2000)), 0.012, None),
+}
+
+
+def changed(old: evomesh.Mesh, new: evomesh.Mesh) -> int:
+    """Input points not kept plus output points that are new."""
+    kept = new.origin >= 0
+    return (old.n_points - len(np.unique(new.origin[kept]))) + int((~kept).sum())
+
+
+def edge_over_request(mesh: evomesh.Mesh, size) -> np.ndarray:
+    edges, _ = edges_with_counts(mesh.triangles)
+    a, b = mesh.points[edges[:, 0]], mesh.points[edges[:, 1]]
+    h = size(0.5 * (a + b)) if callable(size) else np.full(len(edges), float(size))
+    return np.linalg.norm(a - b, axis=1) / h
+
+
+def check_step(old: evomesh.Mesh, new: evomesh.Mesh, curved: bool) -> None:
+    if curved:
+        check_valid_mesh(new)  # (the area follows the circles)
+        kept = new.origin >= 0
+        assert np.array_equal(new.points[kept], old.points[new.origin[kept]])
+    else:
+        check_evolved(old, new)
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+@pytest.mark.parametrize("case", sorted(CASES))
+def test_the_same_size_again_changes_at_most_a_thousandth_after_two_steps(case, seed):
+    make, size, curves = CASES[case]
+    mesh = make()
+    current = evomesh.evolve(mesh, size=size, geometry=curves, seed=seed)
+    check_step(mesh, current, curves is not None)
+    counts = []
+    for step in range(4):
+        new = evomesh.evolve(current, size=size, geometry=curves, seed=seed + 1 + step)
+        check_step(current, new, curves is not None)
+        counts.append(changed(current, new) / current.n_points)
+        current = new
+    assert 2e3 <= current.n_points <= 2e4
+    assert max(counts[2:]) <= 1e-3, counts
+    if case == "tagged":
+        assert current.required.sum() == 3 and set(np.unique(current.triangle_tags)) == {7, 8}
+
+
+@pytest.mark.parametrize("case", sorted(CASES))
+def test_delta_one_on_its_own_output_returns_it(case):
+    make, size, curves = CASES[case]
+    new = evomesh.evolve(make(), size=size, geometry=curves)
+    again = new
+    for step in range(2):
+        previous, again = again, evomesh.evolve(again, 1.0, geometry=curves, seed=7 + step)
+        check_step(previous, again, curves is not None)
+        assert changed(previous, again) == 0
+        assert again.stats["unchanged"] == 1
+        # the arrays themselves, in their order: per-cell data stays aligned
+        for name in ("points", "triangles", "segments", "segment_is_boundary", "segment_tags", "triangle_tags",
+                     "required"):
+            assert np.array_equal(getattr(again, name), getattr(previous, name)), name
+    # the full step (incremental=False) agrees bit for bit
+    full = evomesh.evolve(new, 1.0, geometry=curves, seed=7, incremental=False)
+    assert np.array_equal(full.triangles, new.triangles) and np.array_equal(full.points, new.points)
+
+
+@settings(max_examples=20)
+@given(mesh_and_delta(max_side=10))
+def test_delta_one_is_a_fixed_point_of_any_step(case):
+    mesh, delta = case
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", evomesh.QualityWarning)
+        out = evomesh.evolve(mesh, delta)
+        again = evomesh.evolve(out, 1.0, seed=1)
+    check_evolved(out, again)
+    assert again.n_points == out.n_points and np.array_equal(again.origin, np.arange(out.n_points))
+    assert np.array_equal(again.triangles, out.triangles)
+
+
+# (coarsening this jittered lattice by 1.5 first gives 1.12: its packing keeps
+# all points or about half of them; 0.99 from the second step on)
+@pytest.mark.parametrize("factor", [0.5, 0.7, 0.8, 2.0])
+def test_size_is_the_median_edge_length_on_uniform_requests(factor):
+    mesh = unit_square_mesh(2000)
+    h = factor * float(np.median(edge_over_request(mesh, 1.0)))
+    current = mesh
+    for step in range(3):
+        current = evomesh.evolve(current, size=h, seed=step)
+        assert 0.9 <= np.median(edge_over_request(current, h)) <= 1.1, step
+
+
+@pytest.mark.parametrize("size", [graded, lambda x: 0.008 + 0.03 * np.hypot(x[:, 0] - 0.5, x[:, 1] - 0.5)],
+                         ids=["linear", "radial"])
+def test_size_is_the_median_edge_length_on_graded_requests(size):
+    current = unit_square_mesh(2000)
+    for step in range(3):
+        current = evomesh.evolve(current, size=size, seed=step)
+        assert 0.9 <= np.median(edge_over_request(current, size)) <= 1.1, step
+
+
+def test_delta_from_size_is_one_where_the_mesh_meets_the_request():
+    mesh = evomesh.evolve(unit_square_mesh(2000), size=0.012)
+    assert np.mean(delta_from_size(mesh, 0.012) == 1) > 0.97  # the second step refines what is left
+    mesh = evomesh.evolve(mesh, size=0.012)
+    assert (delta_from_size(mesh, 0.012) == 1).all()
+    # a request 2x finer refines everywhere, by about the spacing asked (nn meaning of delta)
+    finer = delta_from_size(mesh, 0.006)
+    assert np.mean(finer < 1) > 0.99  # (not in the finer clusters near segments)
+    assert np.median(finer) == pytest.approx(0.006 / (1.3 * np.median(mesh.nn_spacing)), rel=0.05)
+    coarser = delta_from_size(mesh, 0.024)
+    assert np.mean(coarser > 1) > 0.8 and (coarser >= 1).all()
+    # the same function as the evolve keyword, and a callable is the array of its values
+    assert np.array_equal(delta_from_size(mesh, lambda x: 0.006 + 0.01 * x[:, 0]),
+                          delta_from_size(mesh, 0.006 + 0.01 * mesh.points[:, 0]))
+    by_size = evomesh.evolve(mesh, size=0.006, seed=2)
+    by_delta = evomesh.evolve(mesh, finer, seed=2)
+    assert np.array_equal(by_size.points, by_delta.points)
+
+
+def test_skip_settled_is_off_in_the_paper_preset():
+    assert FrfcOptions.recommended().skip_settled and not FrfcOptions.paper().skip_settled
+    assert evomesh.FRFC_DEFAULTS["skip_settled"] is True
+    mesh = grid_mesh(20, 20, jitter=0.2, seed=3)
+    settled = evomesh.evolve(mesh, 1.0, incremental=False)
+    paper_sampling = evomesh.evolve(mesh, 1.0, incremental=False, skip_settled=False)
+    assert settled.stats["n_interior_samples_drawn"] == 0 and settled.stats["n_segment_samples"] == 0
+    assert paper_sampling.stats["n_interior_samples_drawn"] > 0
+    # where delta != 1 the sampling is the paper's either way
+    delta = np.where(mesh.points[:, 0] < 0.5, 0.5, 1.0)
+    a = evomesh.evolve(mesh, delta, incremental=False)
+    b = evomesh.evolve(mesh, delta, incremental=False, skip_settled=False)
+    assert 0 < a.stats["n_interior_samples_drawn"] < b.stats["n_interior_samples_drawn"]
