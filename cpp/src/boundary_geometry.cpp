@@ -453,10 +453,24 @@ double fit_to_curves(const Boundary_geometry& geometry, const std::vector<Constr
   // about sagitta / spacing): where that leaves one below min_angle, the quality
   // pass runs again on the fitted mesh (its segments as pieces, no point
   // dropped) and its new points on curves are fitted in turn. Each round's moves
-  // are sagittas of shorter chords; two rounds settle it in practice (issue 28).
+  // are sagittas of shorter chords when the chords' ends lie on the curve; two
+  // rounds settle it in practice (issue 28). Where they do not (kept points of
+  // a coarse input polygon, which stay on its chords), a point the pass puts
+  // between two of them moves by up to the polygon's sagitta, far more than its
+  // new segments' length: a spike whose thin triangles the next round splits
+  // again, down to degenerate ones. So a round must raise the smallest angle
+  // (or keep it) and succeed, else the mesh before it stands.
   constexpr int kMaxRefits = 2;
-  while (quality != nullptr && round.moved && rounds < kMaxRefits &&
-         smallest_angle(result.mesh.points, result.mesh.triangles).first < quality->min_angle) {
+  double smallest = smallest_angle(result.mesh.points, result.mesh.triangles).first;
+  std::size_t undone = 0;
+  while (quality != nullptr && round.moved && rounds < kMaxRefits && smallest < quality->min_angle) {
+    Mesh_arrays before = result.mesh;
+    std::vector<Index> before_origin = result.origin;
+    auto undo = [&] {
+      result.mesh = std::move(before);
+      result.origin = std::move(before_origin);
+      ++undone;
+    };
     Mesh_arrays& mesh = result.mesh;
     std::vector<Constraint_piece> again(mesh.segments.size());
     for (std::size_t s = 0; s < mesh.segments.size(); ++s) {
@@ -476,7 +490,23 @@ double fit_to_curves(const Boundary_geometry& geometry, const std::vector<Constr
     }
     result.origin = std::move(origin);
     result.mesh = std::move(refined.mesh);
-    round = fit_once(geometry, again, refined.source, result);
+    Fit_round next;
+    try {
+      next = fit_once(geometry, again, refined.source, result);
+    } catch (const Input_error&) {
+      undo();  // the first round's fit stood the same checks: the geometry is the one the segments approximate
+      break;
+    } catch (const CGAL::Failure_exception&) {
+      undo();
+      break;
+    }
+    const double now = smallest_angle(result.mesh.points, result.mesh.triangles).first;
+    if (!(now >= smallest)) {
+      undo();
+      break;
+    }
+    smallest = now;
+    round = std::move(next);
     largest = std::max(largest, round.largest);
     longest = std::max(longest, round.longest);
     projected += round.projected;
@@ -488,6 +518,7 @@ double fit_to_curves(const Boundary_geometry& geometry, const std::vector<Constr
   result.stats.emplace_back("curve_points_dropped_outside", static_cast<double>(dropped));
   result.stats.emplace_back("curve_largest_move", largest);
   result.stats.emplace_back("curve_refits", static_cast<double>(rounds));
+  result.stats.emplace_back("curve_refits_undone", static_cast<double>(undone));
   result.stats.emplace_back("curve_points_left_on_chords", static_cast<double>(left));
   // A chord between points of a curve strays from the input's polygon by at
   // most about its sagitta, well under its length.

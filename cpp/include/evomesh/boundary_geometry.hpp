@@ -65,7 +65,8 @@ double project_segment_candidates(const Mesh_arrays& mesh, const std::vector<std
 // quality pass inserted. With `quality` (the step's quality pass), where the
 // moves leave an angle below its min_angle the pass runs again on the fitted
 // mesh, and its new points on curves are fitted too (at most twice; stats
-// "curve_refits"). Returns how far outside the input's domain the new boundary
+// "curve_refits"); a round that fails or lowers the smallest angle is undone and
+// ends the refits ("curve_refits_undone"). Returns how far outside the input's domain the new boundary
 // may lie (at most the longest piece on a curve, or twice the largest move).
 double fit_to_curves(const Boundary_geometry& geometry, const std::vector<Constraint_piece>& pieces,
                      const std::vector<Index>& selection_index, Evolve_result& result,
