@@ -13,7 +13,7 @@ Sections (all by default; pick some with --only):
   the same steps without the interface, the circle only setting the spacing),
   smallest angle, max |phi| on the interface, the drift of the conservative
   transfers (transfer_cells, and transfer(method="conservative")) and the area
-  that changed region (evomesh.interface.region_exchange); the figure
+  that changed region (evomesh.region_exchange); the figure
   benchmarks/interface_growing_circle.png.
 * ``mmg``: side by side with MMG2D's level-set mode (``mmg2d_O3 -ls``, MMG
   5.7.0 from the pymmg 1.0.0 wheel; tools/get-peers.sh, or EVOMESH_MMG2D) on
@@ -38,7 +38,7 @@ from pathlib import Path
 import numpy as np
 
 import evomesh
-from evomesh.interface import INTERFACE_TAG, region_exchange
+from evomesh.interface import INTERFACE_TAG
 from evomesh.mesh_quality import triangle_angles
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
@@ -135,8 +135,9 @@ def growing(figure: Path | None) -> None:
         drift_cells = abs((new.triangle_areas * moved_cells).sum() / (mesh.triangle_areas * cells).sum() - 1)
         integral = lambda m, u: (m.triangle_areas * u[m.triangles].mean(axis=1)).sum()  # noqa: E731
         drift_nodal = abs(integral(new, moved_nodal) / integral(mesh, nodal) - 1)
-        old_tags, new_tags, exchange = region_exchange(mesh, new)
-        swept = exchange[list(old_tags).index(0), list(new_tags).index(1)] if 0 in old_tags and 1 in new_tags else 0.0
+        exchange = evomesh.region_exchange(mesh, new)
+        tags = list(exchange.tags)
+        swept = exchange.area[tags.index(0), tags.index(1)] if 0 in tags and 1 in tags else 0.0
         on = new.points[np.unique(interface_segments(new))]
         print(f"| {step} | {r:.2f} | {new.n_points} | {(new.origin >= 0).sum() / mesh.n_points:.1%} | "
               f"{(plain_new.origin >= 0).sum() / plain.n_points:.1%} | {new.stats['min_angle']:.2f} | "

@@ -39,7 +39,7 @@ from evomesh.geometry import DEFAULT_CORNER_ANGLE, BoundaryGeometry, as_geometry
 from evomesh.mesh import Lineage, Mesh, PointKind
 from evomesh.spacing_function import DELTA_MAX, DELTA_MIN, _require_mesh, as_delta, delta_from_size
 
-__all__ = ["LevelSet", "INTERFACE_TAG", "cut_mesh", "Cut", "region_exchange", "default_regions"]
+__all__ = ["LevelSet", "INTERFACE_TAG", "cut_mesh", "Cut", "default_regions"]
 
 _CORNER, _BOUNDARY, _STEINER = (int(PointKind[name]) for name in ("CORNER", "BOUNDARY", "STEINER"))
 
@@ -1038,44 +1038,3 @@ def _compose(mesh: Mesh, cut: Cut, out: Mesh, interface_tag: int) -> Mesh:
     return Mesh._trusted(out.points, out.triangles, out.segments, out.segment_is_boundary, out.kind, origin, stats,
                          composed, nn.get("nn"), out.segment_tags, tags,
                          out.required if out.required.any() else None, nn.get("nn_grew"))
-
-
-def region_exchange(old: Mesh, new: Mesh, values: Any = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Where the integral of a per-triangle field of ``old`` goes, region by
-    region, in the step to ``new = evolve(old, ...)`` (conservatively, as
-    :func:`evomesh.transfer_cells` moves it): material that a moving interface
-    swept changes region.
-
-    Parameters
-    ----------
-    old, new : Mesh
-        ``new.lineage`` must refer to ``old``.
-    values : array_like, shape (n_old_triangles,), optional
-        The field (default 1: the areas).
-
-    Returns
-    -------
-    old_tags, new_tags : ndarray of int
-        The region tags of old and of new (sorted).
-    exchange : ndarray, shape (len(old_tags), len(new_tags))
-        ``exchange[i, j]`` = the integral of ``values`` over the part of old
-        region i that lies in new region j (exact intersections, a
-        :class:`evomesh.field_transfer.Supermesh`). Row sums are the old
-        regions' integrals and column sums the new regions' integrals of the
-        transferred field, up to rounding; off-diagonal entries are the mass
-        that changed sides.
-    """
-    from evomesh.field_transfer import Supermesh  # (field_transfer imports little, but keep the cut light)
-
-    supermesh = Supermesh(old, new, mass=False)
-    field = np.ones(old.n_triangles) if values is None else np.asarray(values, dtype=np.float64)
-    if field.shape != (old.n_triangles,) or not np.isfinite(field).all():
-        raise ValueError(f"values must be one finite value per old triangle: shape ({old.n_triangles},)")
-    old_tags, old_index = np.unique(old.triangle_tags, return_inverse=True)
-    new_tags, new_index = np.unique(new.triangle_tags, return_inverse=True)
-    rows = old_index[supermesh.old_triangle]
-    columns = new_index[supermesh.new_triangle]
-    weight = supermesh.area * field[supermesh.old_triangle]
-    exchange = np.zeros((len(old_tags), len(new_tags)))
-    np.add.at(exchange, (rows, columns), weight)
-    return old_tags, new_tags, exchange
