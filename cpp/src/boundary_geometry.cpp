@@ -10,6 +10,7 @@
 #include <unordered_map>
 #include <utility>
 
+#include "evomesh/quality_pass.hpp"
 #include "evomesh/step.hpp"
 #include "evomesh/triangulation.hpp"
 
@@ -127,9 +128,14 @@ std::vector<double> distance_along_to_curve(const Boundary_geometry& geometry, c
 }
 
 // Projects `points` (on segments tagged `tags`) onto their curves; each may move
-// by at most limit[k]. Returns the largest move.
+// by at most limit[k]. A point of an interior chain (interior[k]; an interface,
+// issue 28) that would move farther stays where it is, on its chord: there the
+// curve is not resolved at the local spacing (two level-set circles touching),
+// and an interior chain does not bound the domain. Returns the largest move;
+// adds the points left so to *left.
 double project_points(const Boundary_geometry& geometry, std::vector<Vec2>& points,
-                      const std::vector<std::int64_t>& tags, const std::vector<double>& limit) {
+                      const std::vector<std::int64_t>& tags, const std::vector<double>& limit,
+                      const std::vector<std::uint8_t>& interior, std::size_t* left = nullptr) {
   if (points.empty()) return 0;
   const std::vector<Vec2> before = points;
   geometry.project(points, tags);
@@ -137,6 +143,11 @@ double project_points(const Boundary_geometry& geometry, std::vector<Vec2>& poin
   double largest = 0;
   for (std::size_t k = 0; k < points.size(); ++k) {
     const double move = std::hypot(points[k][0] - before[k][0], points[k][1] - before[k][1]);
+    if (interior[k] && std::isfinite(move) && !(move <= limit[k])) {
+      points[k] = before[k];
+      if (left != nullptr) ++*left;
+      continue;
+    }
     if (!std::isfinite(points[k][0]) || !std::isfinite(points[k][1]) || !(move <= limit[k])) {
       throw Input_error("geometry: projecting the boundary point " + where(before[k]) + " (segment tag " +
                         std::to_string(tags[k]) + ") gave " + where(points[k]) + ", a move of " + format_count(move) +
@@ -190,6 +201,7 @@ double project_segment_candidates(const Mesh_arrays& mesh, const std::vector<std
   std::vector<Vec2> points;
   std::vector<std::int64_t> tags;
   std::vector<double> limit;
+  std::vector<std::uint8_t> interior;
   for (std::size_t k = 0; k < segment_of_candidate.size(); ++k) {
     const std::size_t c = first + k;
     const std::int64_t tag = mesh.segment_tags[segment_of_candidate[k]];
@@ -198,6 +210,7 @@ double project_segment_candidates(const Mesh_arrays& mesh, const std::vector<std
     points.push_back(centers[c]);
     tags.push_back(tag);
     limit.push_back(radius[c]);
+    interior.push_back(mesh.segment_is_boundary[segment_of_candidate[k]] == 0);
   }
   if (which.empty()) return 0;
   // A candidate on segment (a, b) may also move by its distance to a or b plus
@@ -228,7 +241,7 @@ double project_segment_candidates(const Mesh_arrays& mesh, const std::vector<std
     limit[k] += kOnCurveUlps * rounding_of(points[k], points[k]);
     ++k;
   }
-  const double largest = project_points(geometry, points, tags, limit);
+  const double largest = project_points(geometry, points, tags, limit, interior);
   for (std::size_t j = 0; j < which.size(); ++j) centers[which[j]] = points[j];
   return largest;
 }
@@ -280,16 +293,30 @@ std::size_t drop_unused_points(Evolve_result& result) {
 
 }  // namespace
 
-double fit_to_curves(const Boundary_geometry& geometry, const std::vector<Constraint_piece>& pieces,
-                     const std::vector<Index>& selection_index, Evolve_result& result) {
+namespace {
+
+// One round of fit_to_curves: what it did, and the tag of every output segment.
+struct Fit_round {
+  double largest = 0;  // move
+  double longest = 0;  // piece on a curve
+  std::size_t projected = 0;
+  std::size_t dropped = 0;
+  std::size_t left_on_chords = 0;  // points of interior chains not moved (too far)
+  bool moved = false;
+  std::vector<std::int64_t> segment_tags;
+};
+
+Fit_round fit_once(const Boundary_geometry& geometry, const std::vector<Constraint_piece>& pieces,
+                   const std::vector<Index>& selection_index, Evolve_result& result) {
+  Fit_round round;
   Mesh_arrays& mesh = result.mesh;
   const std::size_t n = mesh.points.size();
   // The tag of every output segment: the piece (between selected points) it is part of.
-  std::unordered_map<std::uint64_t, std::int64_t> piece_tag;
+  std::unordered_map<std::uint64_t, const Constraint_piece*> piece_of;
   auto key = [](Index a, Index b) {
     return (static_cast<std::uint64_t>(std::min(a, b)) << 32) ^ static_cast<std::uint64_t>(std::max(a, b));
   };
-  for (const auto& piece : pieces) piece_tag[key(piece.a, piece.b)] = piece.tag;
+  for (const auto& piece : pieces) piece_of[key(piece.a, piece.b)] = &piece;
   std::vector<Index> xadj(n + 1, 0), adj(2 * mesh.segments.size());
   for (const auto& e : mesh.segments) {
     ++xadj[e[0] + 1];
@@ -307,43 +334,49 @@ double fit_to_curves(const Boundary_geometry& geometry, const std::vector<Constr
   // Points the step created: those of the selection that are new, and those the
   // quality pass inserted on segments (inside pieces, two segments each).
   std::vector<std::int64_t> tag_of(n, 0);
-  std::vector<std::uint8_t> curved(n, 0);
-  double longest = 0;  // of the pieces on curves
-  std::vector<std::vector<Index>> walked;  // the curved pieces, end to end through their inserted points
-  std::vector<std::int64_t> walked_tag;
+  std::vector<std::uint8_t> curved(n, 0), interior(n, 0);
+  double& longest = round.longest;  // of the pieces on curves
+  round.segment_tags.assign(mesh.segments.size(), 0);
+  std::vector<std::vector<Index>> curved_pieces;  // end to end through their inserted points
+  std::vector<std::int64_t> curved_piece_tag;
   for (std::size_t v = 0; v < n; ++v) {
     if (selection_index[v] < 0) continue;
     for (Index a = xadj[v]; a < xadj[v + 1]; ++a) {
       // follow the piece from v through inserted points to the next selected point
       Index prev = static_cast<Index>(v), s = adj[a], w = other(s, prev);
-      std::vector<Index> inside;
+      std::vector<Index> inside, walked{s};
       while (selection_index[w] < 0) {
         if (xadj[w + 1] - xadj[w] != 2) throw std::logic_error("fit_to_curves: an inserted point off a piece");
         inside.push_back(w);
         const Index s0 = adj[xadj[w]], s1 = adj[xadj[w] + 1];
         s = s0 == s ? s1 : s0;
+        walked.push_back(s);
         prev = w;
         w = other(s, prev);
       }
       if (selection_index[w] < static_cast<Index>(selection_index[v])) continue;  // walked from the other end
-      const auto found = piece_tag.find(key(selection_index[v], selection_index[w]));
-      if (found == piece_tag.end()) throw std::logic_error("fit_to_curves: a segment on no constraint piece");
-      if (!geometry.is_curved(found->second)) continue;
+      const auto found = piece_of.find(key(selection_index[v], selection_index[w]));
+      if (found == piece_of.end()) throw std::logic_error("fit_to_curves: a segment on no constraint piece");
+      const Constraint_piece& piece = *found->second;
+      for (Index t : walked) round.segment_tags[t] = piece.tag;
+      if (!geometry.is_curved(piece.tag)) continue;
       const Vec2 &from = mesh.points[v], &to = mesh.points[w];
       longest = std::max(longest, std::hypot(to[0] - from[0], to[1] - from[1]));
-      walked.push_back({static_cast<Index>(v)});
-      walked.back().insert(walked.back().end(), inside.begin(), inside.end());
-      walked.back().push_back(w);
-      walked_tag.push_back(found->second);
+      curved_pieces.push_back({static_cast<Index>(v)});
+      curved_pieces.back().insert(curved_pieces.back().end(), inside.begin(), inside.end());
+      curved_pieces.back().push_back(w);
+      curved_piece_tag.push_back(piece.tag);
       for (Index u : inside) {
         curved[u] = 1;
-        tag_of[u] = found->second;
+        tag_of[u] = piece.tag;
+        interior[u] = !piece.boundary;
       }
       // new selected points on a curve (already projected in FRFC; a projection is idempotent)
       for (Index end : {static_cast<Index>(v), w}) {
         if (result.origin[end] < 0 && mesh.kind[end] != Point_kind::corner) {
           curved[end] = 1;
-          tag_of[end] = found->second;
+          tag_of[end] = piece.tag;
+          interior[end] = interior[end] || !piece.boundary;
         }
       }
     }
@@ -352,12 +385,13 @@ double fit_to_curves(const Boundary_geometry& geometry, const std::vector<Constr
   // on the curve (distance_along_to_curve): kept points that lie off the
   // curve (a coarse input polygon) are where it is needed.
   Curve_polygon polygon;
-  for (std::size_t p = 0; p < walked.size(); ++p) {
-    for (Index u : walked[p]) polygon.add_key(u, walked_tag[p]);
+  for (std::size_t p = 0; p < curved_pieces.size(); ++p) {
+    for (Index u : curved_pieces[p]) polygon.add_key(u, curved_piece_tag[p]);
   }
   polygon.finish_keys();
-  for (std::size_t p = 0; p < walked.size(); ++p) {
-    for (std::size_t k = 0; k + 1 < walked[p].size(); ++k) polygon.add_edge(walked[p][k], walked[p][k + 1], walked_tag[p]);
+  for (std::size_t p = 0; p < curved_pieces.size(); ++p) {
+    const auto& piece = curved_pieces[p];
+    for (std::size_t k = 0; k + 1 < piece.size(); ++k) polygon.add_edge(piece[k], piece[k + 1], curved_piece_tag[p]);
   }
   const std::vector<double> along =
       polygon.keys.empty() ? std::vector<double>() : distance_along_to_curve(geometry, polygon, mesh.points);
@@ -365,8 +399,10 @@ double fit_to_curves(const Boundary_geometry& geometry, const std::vector<Constr
   std::vector<Vec2> points;
   std::vector<std::int64_t> tags;
   std::vector<double> limit;
+  std::vector<std::uint8_t> on_interior;
   for (std::size_t v = 0; v < n; ++v) {
     if (!curved[v]) continue;
+    on_interior.push_back(interior[v]);
     double shortest = std::numeric_limits<double>::infinity();
     for (Index a = xadj[v]; a < xadj[v + 1]; ++a) {
       const Vec2& w = mesh.points[other(adj[a], static_cast<Index>(v))];
@@ -379,8 +415,8 @@ double fit_to_curves(const Boundary_geometry& geometry, const std::vector<Constr
     limit.push_back(std::max(0.5 * shortest, std::isfinite(bound) ? bound : 0.0) +
                     kOnCurveUlps * rounding_of(mesh.points[v], mesh.points[v]));
   }
-  const double largest = project_points(geometry, points, tags, limit);
-  bool moved = false;
+  const double largest = project_points(geometry, points, tags, limit, on_interior, &round.left_on_chords);
+  bool& moved = round.moved;
   for (std::size_t k = 0; k < which.size(); ++k) {
     moved = moved || points[k] != mesh.points[which[k]];
     mesh.points[which[k]] = points[k];
@@ -400,10 +436,90 @@ double fit_to_curves(const Boundary_geometry& geometry, const std::vector<Constr
       throw Input_error("geometry: the boundary moved onto its curves no longer bounds a domain");
     }
   }
-  const std::size_t dropped = drop_unused_points(result);
-  result.stats.emplace_back("curve_points_projected", static_cast<double>(which.size()));
+  round.dropped = drop_unused_points(result);
+  round.projected = which.size();
+  round.largest = largest;
+  return round;
+}
+
+}  // namespace
+
+double fit_to_curves(const Boundary_geometry& geometry, const std::vector<Constraint_piece>& pieces,
+                     const std::vector<Index>& selection_index, Evolve_result& result, const Quality_options* quality) {
+  Fit_round round = fit_once(geometry, pieces, selection_index, result);
+  double largest = round.largest, longest = round.longest;
+  std::size_t projected = round.projected, dropped = round.dropped, left = round.left_on_chords, rounds = 0;
+  // Points moved onto their curves change the angles of their triangles (by
+  // about sagitta / spacing): where that leaves one below min_angle, the quality
+  // pass runs again on the fitted mesh (its segments as pieces, no point
+  // dropped) and its new points on curves are fitted in turn. Each round's moves
+  // are sagittas of shorter chords when the chords' ends lie on the curve; two
+  // rounds settle it in practice (issue 28). Where they do not (kept points of
+  // a coarse input polygon, which stay on its chords), a point the pass puts
+  // between two of them moves by up to the polygon's sagitta, far more than its
+  // new segments' length: a spike whose thin triangles the next round splits
+  // again, down to degenerate ones. So a round must raise the smallest angle
+  // (or keep it) and succeed, else the mesh before it stands.
+  constexpr int kMaxRefits = 2;
+  double smallest = smallest_angle(result.mesh.points, result.mesh.triangles).first;
+  std::size_t undone = 0;
+  while (quality != nullptr && round.moved && rounds < kMaxRefits && smallest < quality->min_angle) {
+    Mesh_arrays before = result.mesh;
+    std::vector<Index> before_origin = result.origin;
+    auto undo = [&] {
+      result.mesh = std::move(before);
+      result.origin = std::move(before_origin);
+      ++undone;
+    };
+    Mesh_arrays& mesh = result.mesh;
+    std::vector<Constraint_piece> again(mesh.segments.size());
+    for (std::size_t s = 0; s < mesh.segments.size(); ++s) {
+      again[s] = {mesh.segments[s][0], mesh.segments[s][1], mesh.segment_is_boundary[s] != 0, round.segment_tags[s]};
+    }
+    Quality_options options = *quality;
+    options.crowding_angle = 0;  // keep every point: only Ruppert's insertions
+    Refined_mesh refined;
+    try {
+      refined = quality_triangulate(mesh.points, mesh.kind, again, options);
+    } catch (const CGAL::Failure_exception&) {
+      break;  // (the fitted mesh stands, as after a failed quality pass)
+    }
+    std::vector<Index> origin(refined.source.size());
+    for (std::size_t i = 0; i < origin.size(); ++i) {
+      origin[i] = refined.source[i] < 0 ? -1 : result.origin[refined.source[i]];
+    }
+    result.origin = std::move(origin);
+    result.mesh = std::move(refined.mesh);
+    Fit_round next;
+    try {
+      next = fit_once(geometry, again, refined.source, result);
+    } catch (const Input_error&) {
+      undo();  // the first round's fit stood the same checks: the geometry is the one the segments approximate
+      break;
+    } catch (const CGAL::Failure_exception&) {
+      undo();
+      break;
+    }
+    const double now = smallest_angle(result.mesh.points, result.mesh.triangles).first;
+    if (!(now >= smallest)) {
+      undo();
+      break;
+    }
+    smallest = now;
+    round = std::move(next);
+    largest = std::max(largest, round.largest);
+    longest = std::max(longest, round.longest);
+    projected += round.projected;
+    dropped += round.dropped;
+    left += round.left_on_chords;
+    ++rounds;
+  }
+  result.stats.emplace_back("curve_points_projected", static_cast<double>(projected));
   result.stats.emplace_back("curve_points_dropped_outside", static_cast<double>(dropped));
   result.stats.emplace_back("curve_largest_move", largest);
+  result.stats.emplace_back("curve_refits", static_cast<double>(rounds));
+  result.stats.emplace_back("curve_refits_undone", static_cast<double>(undone));
+  result.stats.emplace_back("curve_points_left_on_chords", static_cast<double>(left));
   // A chord between points of a curve strays from the input's polygon by at
   // most about its sagitta, well under its length.
   return std::max(2 * largest, longest);

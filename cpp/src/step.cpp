@@ -229,7 +229,7 @@ void triangulate_selection(Selection selected, const std::vector<Constraint_piec
     }
   }
   if (geometry) {
-    result.curve_reach = fit_to_curves(*geometry, pieces, selection_index, result);
+    result.curve_reach = fit_to_curves(*geometry, pieces, selection_index, result, quality);
   }
   // The smallest angle and where it is (Section 6 reports it per step).
   const auto angle = smallest_angle(result.mesh.points, result.mesh.triangles);

@@ -18,6 +18,7 @@ from evomesh.evolution import (
     evolve,
 )
 from evomesh.geometry import Arc, BoundaryGeometry, Circle, SignedDistance
+from evomesh.interface import INTERFACE_TAG, LevelSet
 from evomesh.mesh import Lineage, Mesh, PointKind
 from evomesh.mesh_quality import Quality, quality
 from evomesh.packing import lexical_first_mis
@@ -30,6 +31,8 @@ __all__ = [
     "Circle",
     "Arc",
     "SignedDistance",
+    "LevelSet",
+    "INTERFACE_TAG",
     "Lineage",
     "QualityWarning",
     "default_thread_count",

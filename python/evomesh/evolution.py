@@ -126,7 +126,9 @@ def _check_seed(seed: Any) -> int:
 
 
 def evolve(mesh: Mesh, delta: Any = None, *, size: Any = None, method: str = "frfc", seed: int | None = None,
-           options: Any = None, geometry: Any = None, displacement: Any = None, **overrides: Any) -> Mesh:
+           options: Any = None, geometry: Any = None, displacement: Any = None, interface: Any = None,
+           interface_tag: int | None = None, interface_regions: Any = None, interface_band: Any = None,
+           **overrides: Any) -> Mesh:
     """Evolve a mesh one step: new spacing delta(p) * nn_M(p) at every point p
     (or the target edge length ``size``).
 
@@ -355,6 +357,50 @@ def evolve(mesh: Mesh, delta: Any = None, *, size: Any = None, method: str = "fr
         remap fields from the old mesh as it was (Eulerian; ``frame=
         "lagrangian"`` carries P1 values with the points instead).
         ``stats`` adds the ``motion_*`` counts of :class:`evomesh.motion.Motion`.
+    interface : callable, LevelSet, or array_like of shape (n,), optional
+        A level-set interface (issue 28; "frfc" only): phi(x) on (k, 2)
+        arrays (or an :class:`evomesh.LevelSet`), or its values at the mesh
+        points. Its zero set becomes interior segments of tag ``interface_tag``
+        and every triangle gets the region tag of its side. The mesh is first
+        cut along phi = 0 (crossings on the edges where phi changes sign: by
+        bracketed root finding to 1e-14 of the coordinate scale for a
+        function, linearly for values; phi = 0 exactly at points and along
+        whole edges is the interface there), the previous interface (interior
+        segments of ``interface_tag``) is released so that its points can be
+        removed like any other, and the step runs with the interface as a
+        curve: every point it creates on it lies on phi = 0 (within a few
+        units of rounding for a function; on the piecewise-linear zero set of
+        the values), except where the zero set is not a curve at the local
+        spacing (two circles touching): there a point stays on its chord. The
+        spacing comes from ``delta``/``size`` at the old points as usual
+        (absolute: the cut's short edges next to crossings do not refine).
+        Several components, merging and splitting work. ``new.lineage``
+        refers to ``mesh``, so :func:`evomesh.transfer` and
+        :func:`evomesh.transfer_cells` work across the move. ValueError when
+        phi is not finite, has no sign change on the mesh, or its zero set
+        meets the boundary (or another constraint) at less than 5 degrees or
+        runs along it without crossing (tangent). ``stats`` adds
+        ``interface_crossings``, ``interface_points_moved`` (old points moved
+        onto a crossing within 1e-3 of an edge from them),
+        ``interface_segments``, ``interface_negative_tag``,
+        ``interface_positive_tag`` and ``curve_refits`` (rounds of the quality
+        pass after points were projected, so that angles stay above
+        ``min_angle``).
+    interface_tag : int, optional
+        Segment tag of the interface (default :data:`evomesh.INTERFACE_TAG`,
+        -1). Keep it from step to step: interior segments of this tag are the
+        previous interface, which the next step releases.
+    interface_regions : (int, int), optional
+        Triangle tags of the negative and the positive side of phi. Default:
+        of the mesh's regions, the one where phi is lowest on average for the
+        negative side and the one where it is highest for the positive side,
+        so a moving interface keeps its two tags; with one region (the first
+        step) the negative side gets a new tag, the largest plus one. Every
+        triangle gets the tag of its side (other regions are not kept).
+    interface_band : (width, spacing) or (width, spacing, grade), optional
+        Spacing ``spacing`` within ``width / 2`` of the interface, growing by
+        ``grade`` (default 0.3) per unit of distance beyond; the spacing of
+        ``delta``/``size`` where that is smaller.
 
     Returns
     -------
@@ -380,6 +426,20 @@ def evolve(mesh: Mesh, delta: Any = None, *, size: Any = None, method: str = "fr
             "evolve needs exactly one of delta (a real numeric factor per point, relative to the current spacing) "
             "and size (an absolute spacing)"
         )
+    if interface is not None:
+        if method != "frfc":
+            raise ValueError("interface (a level-set interface) is supported by method='frfc' only")
+        if displacement is not None:
+            raise ValueError(
+                "interface= and displacement= cannot be combined in one step: move the mesh first "
+                "(evolve(mesh, ..., displacement=u)), then give the interface on the moved mesh"
+            )
+        from evomesh.interface import evolve_with_interface  # (it calls evolve: imported here, not at the top)
+
+        return evolve_with_interface(mesh, delta, size, interface, interface_tag, interface_regions, interface_band,
+                                     geometry, evolve, method=method, seed=seed, options=options, **overrides)
+    if interface_tag is not None or interface_regions is not None or interface_band is not None:
+        raise TypeError("interface_tag, interface_regions and interface_band need interface (phi)")
     old, motion = mesh, None
     if displacement is not None:  # Lagrangian motion (issue 28): move the points, then evolve the moved mesh
         motion, delta, size = step_input(mesh, displacement, delta, size, as_geometry(geometry))

@@ -37,6 +37,7 @@ struct Boundary_geometry {
 struct Mesh_arrays;
 struct Evolve_result;
 struct Constraint_piece;
+struct Quality_options;
 
 // The step's input with the kinds of points on curved chains taken from the
 // geometry (corners only where it turns by more than corner_angle, at tag
@@ -61,9 +62,14 @@ double project_segment_candidates(const Mesh_arrays& mesh, const std::vector<std
 // triangulated again through the moved points; points that end up outside the
 // domain are dropped (stats "curve_points_projected", "curve_points_dropped_outside",
 // "curve_largest_move"). selection_index: of every output point, -1 for one the
-// quality pass inserted. Returns how far outside the input's domain the new
-// boundary may lie (at most the longest piece on a curve, or twice the largest move).
+// quality pass inserted. With `quality` (the step's quality pass), where the
+// moves leave an angle below its min_angle the pass runs again on the fitted
+// mesh, and its new points on curves are fitted too (at most twice; stats
+// "curve_refits"); a round that fails or lowers the smallest angle is undone and
+// ends the refits ("curve_refits_undone"). Returns how far outside the input's domain the new boundary
+// may lie (at most the longest piece on a curve, or twice the largest move).
 double fit_to_curves(const Boundary_geometry& geometry, const std::vector<Constraint_piece>& pieces,
-                     const std::vector<Index>& selection_index, Evolve_result& result);
+                     const std::vector<Index>& selection_index, Evolve_result& result,
+                     const Quality_options* quality = nullptr);
 
 }  // namespace evomesh

@@ -1,0 +1,1040 @@
+"""Level-set interfaces (issue 28): the zero set of phi as interior constraints that move with phi.
+
+``evolve(mesh, delta, interface=phi)`` runs in three stages:
+
+1. The cut (:func:`cut_mesh`, numpy, O(n log n)): the mesh edges where phi
+   changes sign are found, the crossing points placed on phi = 0 (bracketed
+   root finding on the edge for a function, linear interpolation for values
+   at the points), and every triangle the zero set crosses is split along it.
+   The previous interface (interior segments of the interface tag) is
+   released: its edges become ordinary interior edges and its points ordinary
+   interior points, which the step may remove. Triangles take the region tag
+   of their side. Every piece of the cut lies in one old triangle, so the
+   cut's lineage is exact (barycentric coordinates in the old triangle).
+2. The step: :func:`evomesh.evolve` on the cut mesh, with the interface as a
+   curve (:class:`LevelSet`) so that every point the step creates on it lies
+   on phi = 0 (on the piecewise-linear zero set for values at the points),
+   and the spacing as an absolute size taken from the old mesh (the cut's
+   short edges next to the crossings must not refine).
+3. The lineage of the step (points in the cut) composed with the cut's
+   (cut in the old mesh): ``new.lineage`` refers to the old mesh, so
+   :func:`evomesh.transfer` and :func:`evomesh.transfer_cells` work as after
+   any step.
+"""
+
+from __future__ import annotations
+
+import numbers
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+from scipy.spatial import cKDTree
+
+from evomesh import _core
+from evomesh.geometry import DEFAULT_CORNER_ANGLE, BoundaryGeometry, as_geometry
+from evomesh.mesh import Lineage, Mesh, PointKind
+from evomesh.spacing_function import DELTA_MAX, DELTA_MIN, _require_mesh, as_delta, delta_from_size
+
+__all__ = ["LevelSet", "INTERFACE_TAG", "cut_mesh", "Cut", "default_regions"]
+
+_CORNER, _BOUNDARY, _STEINER = (int(PointKind[name]) for name in ("CORNER", "BOUNDARY", "STEINER"))
+
+#: Default segment tag of the interface's segments (interface_tag=).
+INTERFACE_TAG: int = -1
+
+# Root finding stops when the bracket is below this fraction of the coordinate
+# scale (max |x| of the mesh): the crossing is then within 1e-14 of phi = 0,
+# two orders inside the 1e-12 that issue 28 asks for.
+_ROOT_TOLERANCE = 1e-14
+# A crossing this close (relative to the coordinate scale) to a vertex is the
+# vertex: phi there is taken as 0 and no point is added.
+_ON_VERTEX_TOLERANCE = 1e-13
+# A crossing within this fraction of its edge from an interior vertex that no
+# constraint holds moves the vertex onto it (instead of a new point next to it):
+# the step would remove the vertex anyway (the crossing's sphere covers it), and
+# the cut gets no edge shorter than this fraction, so no spacing below it.
+_SNAP_FRACTION = 0.1
+# The interface must meet the boundary (and other constraints) at least at this
+# angle (degrees); below it is "tangent": refused with a clear error.
+_MIN_MEETING_ANGLE = 5.0
+
+
+class LevelSet:
+    """The zero set of a function phi(x) of (k, 2) arrays, as an interface.
+
+    Parameters
+    ----------
+    phi : callable
+        ``phi(x) -> (k,)`` for points x of shape (k, 2), vectorised; negative on
+        one side of the interface, positive on the other. Smooth with a non-zero
+        gradient near the zero set (a signed distance is ideal).
+    gradient : callable, optional
+        ``gradient(x) -> (k, 2)``; default: central differences with a step of
+        cbrt(eps) times the coordinate scale.
+    max_iterations : int, default 50
+        Of the Newton projection (:meth:`project`).
+
+    Notes
+    -----
+    ``project`` moves points onto phi = 0 by Newton's iteration
+    x <- x - phi(x) grad phi(x) / |grad phi(x)|^2 until the step is below four
+    units of rounding of the coordinates: the result is within a few units of
+    rounding of the zero set, whatever the accuracy of the gradient.
+    """
+
+    phi: Callable[[np.ndarray], Any]
+    gradient: Callable[[np.ndarray], Any] | None
+    max_iterations: int
+
+    def __init__(self, phi: Callable[[np.ndarray], Any], gradient: Callable[[np.ndarray], Any] | None = None, *,
+                 max_iterations: int = 50):
+        if not callable(phi):
+            raise TypeError(f"phi must be a function of a (k, 2) array, got {type(phi).__name__}")
+        if gradient is not None and not callable(gradient):
+            raise TypeError("gradient must be a function of a (k, 2) array or None")
+        if isinstance(max_iterations, bool) or not isinstance(max_iterations, numbers.Integral) or max_iterations < 1:
+            raise ValueError(f"max_iterations must be a positive integer, got {max_iterations!r}")
+        self.phi = phi
+        self.gradient = gradient
+        self.max_iterations = int(max_iterations)
+
+    def value(self, x: Any) -> np.ndarray:
+        """phi at the points x (k, 2), checked: one finite real value each, shape (k,)."""
+        points = np.array(x, dtype=np.float64).reshape(-1, 2)
+        raw = np.asarray(self.phi(points.copy()))
+        if raw.dtype == object or raw.dtype.kind not in "fiu":
+            raise TypeError(f"interface phi must return real numbers, got dtype {raw.dtype}")
+        values = np.array(np.broadcast_to(raw, (len(points),)) if raw.ndim == 0 else raw, dtype=np.float64)
+        if values.shape != (len(points),):
+            raise ValueError(f"interface phi(x) must return shape ({len(points)},) for {len(points)} points, got "
+                             f"{values.shape}")
+        bad = ~np.isfinite(values)
+        if bad.any():
+            k = int(np.argmax(bad))
+            raise ValueError(f"interface phi is {values[k]} at ({points[k, 0]:.17g}, {points[k, 1]:.17g}): it must be "
+                             "finite wherever the mesh is")
+        return values
+
+    def _gradient(self, x: np.ndarray, scale: float) -> np.ndarray:
+        if self.gradient is not None:
+            g = np.asarray(self.gradient(x.copy()), dtype=np.float64)
+            if g.shape != x.shape or not np.isfinite(g).all():
+                raise ValueError("the interface gradient must return one finite (gx, gy) per point")
+            return g
+        h = np.cbrt(np.finfo(np.float64).eps) * scale
+        ex = np.array([h, 0.0])
+        ey = np.array([0.0, h])
+        both = self.value(np.concatenate([x + ex, x - ex, x + ey, x - ey])).reshape(4, -1)
+        return np.stack([both[0] - both[1], both[2] - both[3]], axis=1) / (2 * h)
+
+    def project(self, points: Any, scale: float | None = None) -> np.ndarray:
+        """The points moved onto phi = 0 (Newton), shape (k, 2); ValueError where
+        the gradient vanishes or the iteration does not settle."""
+        x = np.array(points, dtype=np.float64).reshape(-1, 2)
+        moved, settled = self._newton(x, scale)
+        if not settled.all():
+            k = int(np.argmin(settled))
+            raise ValueError(f"the projection of ({x[k, 0]:.17g}, {x[k, 1]:.17g}) onto phi = 0 did not settle in "
+                             f"{self.max_iterations} Newton steps (is phi smooth with a non-zero gradient near its "
+                             "zero set?)")
+        return moved
+
+    def _newton(self, x: np.ndarray, scale: float | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """Newton's iteration from every point: (the points reached, whether each settled)."""
+        x = x.copy()
+        settled = np.zeros(len(x), dtype=bool)
+        if len(x) == 0:
+            return x, settled
+        if scale is None:
+            scale = float(max(np.abs(x).max(), np.finfo(np.float64).tiny))
+        ulp = np.finfo(np.float64).eps * np.maximum(np.abs(x).max(axis=1), np.finfo(np.float64).tiny)
+        active = np.arange(len(x))
+        for _ in range(self.max_iterations):
+            xa = x[active]
+            value = self.value(xa)
+            g = self._gradient(xa, scale)
+            g2 = (g * g).sum(axis=1)
+            flat = g2 == 0
+            step = np.zeros_like(xa)
+            step[~flat] = (value[~flat] / g2[~flat])[:, None] * g[~flat]
+            x[active] = xa - step
+            done = ~flat & (np.hypot(step[:, 0], step[:, 1]) <= 4 * ulp[active])
+            settled[active[done]] = True
+            active = active[~done & ~flat]
+            if len(active) == 0:
+                break
+        return x, settled
+
+    def __repr__(self) -> str:
+        return f"LevelSet({self.phi!r})"
+
+
+class _Polyline:
+    """Projection onto a set of segments (the piecewise-linear zero set of
+    values at the points): the nearest point of the nearest segment, among
+    those whose midpoints are the 16 nearest (exact where segments are of
+    similar length, which holds for a zero set cut from one mesh)."""
+
+    def __init__(self, a: np.ndarray, b: np.ndarray):
+        self.a = a
+        self.d = b - a
+        self.dd = np.einsum("ij,ij->i", self.d, self.d)
+        self.tree = cKDTree(a + 0.5 * self.d)
+
+    def distance_and_closest(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        k = min(16, len(self.a))
+        _, item = self.tree.query(x, k=k)
+        item = item.reshape(len(x), k)
+        q = x[:, None, :] - self.a[item]
+        t = np.clip(np.einsum("pkj,pkj->pk", q, self.d[item]) / np.maximum(self.dd[item], np.finfo(float).tiny), 0, 1)
+        closest = self.a[item] + t[..., None] * self.d[item]
+        gap = np.hypot(*(x[:, None, :] - closest).transpose(2, 0, 1))
+        best = np.argmin(gap, axis=1)
+        rows = np.arange(len(x))
+        return gap[rows, best], closest[rows, best]
+
+    def project(self, points: Any) -> np.ndarray:
+        x = np.array(points, dtype=np.float64).reshape(-1, 2)
+        return self.distance_and_closest(x)[1] if len(x) else x
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# The cut
+
+
+def _unique_edges(triangles: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """Unique edges (e, 2) with e[:, 0] < e[:, 1], and the edge of every side
+    (m, 3): side k runs from vertex k to vertex k + 1."""
+    a = triangles
+    b = np.roll(triangles, -1, axis=1)
+    key = np.minimum(a, b).astype(np.int64) * n + np.maximum(a, b)
+    unique, inverse = np.unique(key.ravel(), return_inverse=True)
+    return np.stack([unique // n, unique % n], axis=1), inverse.reshape(triangles.shape)
+
+
+def _edge_roots(level: LevelSet, a: np.ndarray, b: np.ndarray, fa: np.ndarray, fb: np.ndarray,
+                tolerance: float) -> np.ndarray:
+    """t in (0, 1] with phi(a + t (b - a)) = 0 for phi(a) = fa < 0 <= fb = phi(b),
+    to ``tolerance`` in length: the Illinois variant of regula falsi, vectorised
+    over the edges (one call of phi per round for all unsettled edges), with a
+    bisection whenever a round did not halve the bracket. The result is the
+    end of the final bracket where |phi| is smaller."""
+    k = len(a)
+    t = np.ones(k)
+    low, high = np.zeros(k), np.ones(k)
+    value_low, value_high = fa.copy(), fb.copy()  # phi at the ends
+    weight_low, weight_high = fa.copy(), fb.copy()  # the same, halved by Illinois
+    last = np.zeros(k, dtype=np.int8)  # the end replaced in the previous round: -1 low, +1 high
+    bisect = np.zeros(k, dtype=bool)
+    length = np.hypot(*(b - a).T)
+    active = np.flatnonzero(fb != 0)
+    for _ in range(200):
+        if len(active) == 0:
+            break
+        lo, hi = low[active], high[active]
+        wlo, whi = weight_low[active], weight_high[active]
+        width = hi - lo
+        guess = lo + width * (wlo / (wlo - whi))
+        use_middle = bisect[active] | ~((guess > lo) & (guess < hi))
+        guess = np.where(use_middle, lo + 0.5 * width, guess)
+        value = level.value(a[active] + guess[:, None] * (b[active] - a[active]))
+        on = value == 0
+        below = (value < 0) & ~on
+        above = (value > 0) & ~on
+        # Illinois: an end that stays twice in a row has its weight halved
+        weight_high[active[below & (last[active] == -1)]] *= 0.5
+        weight_low[active[above & (last[active] == 1)]] *= 0.5
+        low[active[below]] = guess[below]
+        value_low[active[below]] = value[below]
+        weight_low[active[below]] = value[below]
+        high[active[above]] = guess[above]
+        value_high[active[above]] = value[above]
+        weight_high[active[above]] = value[above]
+        last[active] = np.where(below, -1, 1)
+        new_width = high[active] - low[active]
+        bisect[active] = new_width > 0.5 * width
+        t[active[on]] = guess[on]
+        settled = on | (new_width * length[active] <= tolerance) | (np.nextafter(low[active], 2.0) >= high[active])
+        done = active[settled & ~on]
+        t[done] = np.where(np.abs(value_low[done]) < np.abs(value_high[done]), low[done], high[done])
+        active = active[~settled]
+    if len(active):
+        raise ValueError("the interface phi: root finding on an edge did not settle in 200 rounds (is phi "
+                         "continuous?)")
+    return np.where(t > 0, t, np.nextafter(0.0, 1.0))
+
+
+def _along(a: np.ndarray, b: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """a + t (b - a), from the nearer end (the rounding is relative to the short part)."""
+    return np.where((t <= 0.5)[:, None], a + t[:, None] * (b - a), b - (1 - t)[:, None] * (b - a))
+
+
+@dataclass(frozen=True)
+class Cut:
+    """A mesh cut along the zero set of phi (see :func:`cut_mesh`).
+
+    Attributes
+    ----------
+    mesh : Mesh
+        The cut mesh: the interface as interior segments of the interface tag,
+        the triangles tagged by side, the previous interface released.
+    old_index : ndarray of int, shape (n_cut,)
+        The old point each cut point is (-1: a crossing, or an old point moved
+        onto a crossing next to it).
+    parent_triangle, barycentric : ndarray, shapes (n_cut,) and (n_cut, 3)
+        For the others: the old triangle holding them and their barycentric
+        coordinates there.
+    triangle_parent : ndarray of int, shape (m_cut,)
+        The old triangle each cut triangle lies in; -1 for those at a moved
+        point (they overlap several).
+    triangle_weights : ndarray, shape (m_cut, 3, 3)
+        Barycentric coordinates of each cut triangle's vertices in its parent.
+    curve : LevelSet or _Polyline
+        What new interface points are projected onto: phi's zero set, or the
+        piecewise-linear zero set of the values.
+    n_crossings, n_moved : int
+        Points added on edges, old points moved onto a crossing.
+    regions : (int, int)
+        Triangle tags of the negative and the positive side.
+    scale : float
+        The coordinate scale, max |x| of the mesh.
+    """
+
+    mesh: Mesh
+    old_index: np.ndarray
+    parent_triangle: np.ndarray
+    barycentric: np.ndarray
+    triangle_parent: np.ndarray
+    triangle_weights: np.ndarray
+    curve: Any
+    n_crossings: int
+    n_moved: int
+    regions: tuple[int, int]
+    scale: float
+
+
+def _level_values(mesh: Mesh, interface: Any) -> tuple[np.ndarray, LevelSet | None]:
+    if isinstance(interface, LevelSet):
+        return interface.value(mesh.points), interface
+    if callable(interface):
+        level = LevelSet(interface)
+        return level.value(mesh.points), level
+    try:
+        values = np.asarray(interface)
+    except ValueError as error:
+        raise ValueError("interface must be a function phi(x) or one value per mesh point") from error
+    if values.dtype == object or values.dtype.kind not in "fiu":
+        raise TypeError(f"interface must be a function phi(x) of (k, 2) arrays or real values at the points, got "
+                        f"{type(interface).__name__} of dtype {values.dtype}")
+    if values.shape != (mesh.n_points,):
+        raise ValueError(f"interface values must have one value per mesh point: shape ({mesh.n_points},), got "
+                         f"{values.shape}")
+    values = values.astype(np.float64)
+    bad = ~np.isfinite(values)
+    if bad.any():
+        k = int(np.argmax(bad))
+        raise ValueError(f"interface values must be finite; at point {k} it is {values[k]}")
+    return values, None
+
+
+def cut_mesh(mesh: Mesh, interface: Any, *, interface_tag: int = INTERFACE_TAG,
+             regions: tuple[int, int] | None = None) -> Cut:
+    """The mesh cut along the zero set of phi, with its lineage in ``mesh``.
+
+    Parameters
+    ----------
+    mesh : Mesh
+    interface : callable, LevelSet, or array_like of shape (n,)
+        phi(x) on (k, 2) arrays, or its values at the mesh points.
+    interface_tag : int
+        Segment tag of the interface; interior segments of this tag in
+        ``mesh`` (the previous interface) are released.
+    regions : (int, int), optional
+        Triangle tags of the negative and the positive side (default: see
+        :func:`default_regions`).
+
+    Returns
+    -------
+    Cut
+
+    Raises
+    ------
+    ValueError
+        phi is not finite, does not change sign on the mesh, or its zero set
+        meets a boundary (or another constraint) at less than 5 degrees.
+    """
+    _require_mesh(mesh)
+    interface_tag = _tag(interface_tag, "interface_tag")
+    phi, level = _level_values(mesh, interface)
+    P, T = mesh.points, mesh.triangles
+    n = mesh.n_points
+    scale = float(np.abs(P).max())
+    if not (phi < 0).any() or not (phi > 0).any():
+        raise ValueError(
+            f"the interface phi does not change sign on the mesh (min {phi.min():.6g}, max {phi.max():.6g} at the "
+            "points): there is no zero set to mesh (a zero set between the points is not resolved: refine first)")
+    edges, side_edge = _unique_edges(T, n)
+    # Constraints that stay: boundary segments and interior segments of other tags.
+    interior = ~mesh.segment_is_boundary
+    released = interior & (mesh.segment_tags == interface_tag)
+    kept_segments = mesh.segments[~released]
+    kept_tags = mesh.segment_tags[~released]
+    on_constraint = np.zeros(n, dtype=bool)
+    on_constraint[kept_segments.ravel()] = True
+    old_kind = mesh.kind
+    movable = ~on_constraint & ~mesh.required
+    key_constraint = np.sort(kept_segments, axis=1)
+    edge_key = edges[:, 0] * n + edges[:, 1]
+    edge_is_constraint = np.isin(edge_key, key_constraint[:, 0] * n + key_constraint[:, 1])
+    # Boundary points of straight chains may slide along their segment onto a crossing there.
+    slides = on_constraint & (old_kind == _BOUNDARY) & ~mesh.required
+
+    # Crossing edges and their parameter t from the negative end (phi < 0) to the other (phi >= 0).
+    values = phi.copy()
+    neg = values < 0
+    cross = np.flatnonzero(neg[edges[:, 0]] != neg[edges[:, 1]])
+    lo_first = neg[edges[cross, 0]]
+    a_end = np.where(lo_first, edges[cross, 0], edges[cross, 1])
+    b_end = np.where(lo_first, edges[cross, 1], edges[cross, 0])
+    if level is None:
+        fa, fb = values[a_end], values[b_end]
+        t = np.where(fb == 0, 1.0, fa / (fa - fb))
+    else:
+        t = _edge_roots(level, P[a_end], P[b_end], values[a_end], values[b_end], _ROOT_TOLERANCE * scale)
+    length = np.hypot(*(P[b_end] - P[a_end]).T)
+    raw_crossing = _along(P[a_end], P[b_end], t)
+
+    # The piecewise-linear zero set of the values (before any snapping): what new
+    # interface points are projected onto when phi is given at the points.
+    curve: Any = level
+    if level is None:
+        pa, pb = _zero_set_segments(T, side_edge, neg, cross, raw_crossing)
+        curve = _Polyline(pa, pb)
+
+    # 1. Crossings at (or within rounding of) a vertex are that vertex: phi there is 0.
+    near_a = t * length <= _ON_VERTEX_TOLERANCE * scale
+    near_b = (1 - t) * length <= _ON_VERTEX_TOLERANCE * scale
+    values[a_end[near_a]] = 0.0
+    values[b_end[near_b]] = 0.0
+    # 2. A crossing within _SNAP_FRACTION of its edge from a movable vertex moves the vertex onto it.
+    d_a, d_b = t * length, (1 - t) * length
+    close_a = ~near_a & ~near_b & (t <= _SNAP_FRACTION)
+    close_b = ~near_a & ~near_b & (1 - t <= _SNAP_FRACTION)
+    along_constraint = edge_is_constraint[cross]
+    can_a = close_a & (movable[a_end] | (slides[a_end] & along_constraint))
+    can_b = close_b & (movable[b_end] | (slides[b_end] & along_constraint))
+    vertex = np.concatenate([a_end[can_a], b_end[can_b]])
+    distance = np.concatenate([d_a[can_a], d_b[can_b]])
+    crossing_of = np.concatenate([np.flatnonzero(can_a), np.flatnonzero(can_b)])  # (positions in cross)
+    order = np.lexsort((distance, vertex))
+    first = order[np.r_[True, vertex[order][1:] != vertex[order][:-1]]] if len(order) else order
+    moved, crossing_of = vertex[first], crossing_of[first]
+    points = P.copy()
+    if len(moved):
+        valid = _valid_moves(points, T, moved, raw_crossing[crossing_of])
+        moved, crossing_of = moved[valid], crossing_of[valid]
+        points[moved] = raw_crossing[crossing_of]
+        values[moved] = 0.0
+    is_moved = np.zeros(n, dtype=bool)
+    is_moved[moved] = True
+
+    # The crossings again with the snapped values: t is kept where the edge's
+    # ends kept their values, and a zero end is the crossing itself.
+    neg = values < 0
+    zero = values == 0
+    cross2 = np.flatnonzero(neg[edges[:, 0]] != neg[edges[:, 1]])
+    lo_first = neg[edges[cross2, 0]]
+    a2 = np.where(lo_first, edges[cross2, 0], edges[cross2, 1])
+    b2 = np.where(lo_first, edges[cross2, 1], edges[cross2, 0])
+    position = np.searchsorted(cross, cross2)
+    position = np.minimum(position, max(len(cross) - 1, 0))
+    same = (cross[position] == cross2) if len(cross) else np.zeros(len(cross2), bool)
+    at_vertex = zero[b2]
+    new_point = ~at_vertex
+    if not same[new_point].all():  # (an edge crossing now had no sign change before: impossible)
+        raise AssertionError("cut: a crossing without a computed root")
+    crossing_id = np.where(at_vertex, b2, -1)
+    new_index = np.flatnonzero(new_point)
+    crossing_id[new_index] = n + np.arange(len(new_index))
+    new_points = raw_crossing[position[new_index]]
+    t_new = t[position[new_index]]
+    n_cut = n + len(new_index)
+    all_points = np.concatenate([points, new_points])
+    edge_crossing = np.full(len(edges), -1, dtype=np.int64)
+    edge_crossing[cross2] = crossing_id
+
+    # Lineage of the new points: on their edge, in a triangle holding it.
+    side_owner = np.full(len(edges), -1, dtype=np.int64)
+    side_slot = np.zeros(len(edges), dtype=np.int64)
+    flat = side_edge.ravel()
+    side_owner[flat[::-1]] = (np.arange(flat.size) // 3)[::-1]
+    side_slot[flat[::-1]] = (np.arange(flat.size) % 3)[::-1]
+
+    def on_edges(edge: np.ndarray, start: np.ndarray, along: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The first triangle with side `edge` and the barycentric coordinates
+        there of the point at `along` from the edge's end `start`."""
+        owner, slot = side_owner[edge], side_slot[edge]
+        weights = np.zeros((len(edge), 3))
+        rows = np.arange(len(edge))
+        from_start = T[owner, slot] == start  # the side runs start -> other end
+        weights[rows, slot] = np.where(from_start, 1 - along, along)
+        weights[rows, (slot + 1) % 3] = np.where(from_start, along, 1 - along)
+        return owner, weights
+
+    owner, weights_new = on_edges(cross2[new_index], a2[new_index], t_new)
+
+    # Split the triangles the zero set crosses.
+    triangles, parent, negative, seg_a, seg_b = _split(T, side_edge, neg, edge_crossing, all_points)
+    if len(seg_a) == 0:
+        raise ValueError("the interface phi = 0 crosses no triangle of the mesh (its sign changes only at points "
+                         "where phi = 0 exactly): there is no zero set to mesh")
+    # Barycentric coordinates of the cut triangles' vertices in their parents:
+    # an old vertex is a unit vector, a crossing has its weights on its edge.
+    point_weights = np.zeros((n_cut, 3))
+    point_owner = np.full(n_cut, -1, dtype=np.int64)
+    point_weights[n:] = weights_new
+    point_owner[n:] = owner
+    vertex_weights = np.zeros((len(triangles), 3, 3))
+    parent_vertices = T[parent]
+    for k in range(3):
+        v = triangles[:, k]
+        old_vertex = v < n
+        for j in range(3):
+            vertex_weights[:, k, j] = np.where(old_vertex, v == parent_vertices[:, j], 0.0)
+        crossing = np.flatnonzero(~old_vertex)
+        owner_vertices = T[point_owner[triangles[crossing, k]]]
+        for j in range(3):
+            for i in range(3):
+                vertex_weights[crossing, k, j] += np.where(owner_vertices[:, i] == parent_vertices[crossing, j],
+                                                           point_weights[triangles[crossing, k], i], 0.0)
+    # (a crossing lies on an edge of its parent, so its two weights land on that edge's ends)
+    triangle_parent = parent.copy()
+    # a piece at a moved point is not inside one old triangle: its points are located instead
+    triangle_parent[(is_moved[np.minimum(triangles, n - 1)] & (triangles < n)).any(axis=1)] = -1
+
+    # Interface segments: one per crossed triangle; an edge on the zero set with
+    # the same side on both of its triangles (phi touches 0 there) or on the
+    # boundary is no interface.
+    seg = np.stack([seg_a, seg_b], axis=1)
+    key = np.minimum(seg_a, seg_b) * n_cut + np.maximum(seg_a, seg_b)
+    unique_key, first_index, counts = np.unique(key, return_index=True, return_counts=True)
+    interface_segments = seg[first_index[counts == 1]]
+    # Region tags
+    if regions is None:
+        regions = default_regions(mesh, phi)
+    negative_tag, positive_tag = _regions(regions)
+    tags = np.where(negative, negative_tag, positive_tag).astype(np.int64)
+    # Constraints of the cut: kept segments split at their crossings, the interface.
+    kept_sorted = np.sort(kept_segments, axis=1)
+    kept_edge = np.searchsorted(edge_key, kept_sorted[:, 0] * n + kept_sorted[:, 1])
+    split_at = edge_crossing[kept_edge]
+    splits = split_at >= n
+    pieces = [kept_segments[~splits], np.stack([kept_segments[splits, 0], split_at[splits]], axis=1),
+              np.stack([split_at[splits], kept_segments[splits, 1]], axis=1)]
+    piece_tags = [kept_tags[~splits], kept_tags[splits], kept_tags[splits]]
+    segments = np.concatenate(pieces + [interface_segments])
+    segment_tags = np.concatenate(piece_tags + [np.full(len(interface_segments), interface_tag, np.int64)])
+    # the interface along a boundary edge is that boundary edge
+    boundary_key = np.sort(segments[: len(segments) - len(interface_segments)], axis=1)
+    interface_key = np.sort(interface_segments, axis=1)
+    duplicate = np.isin(interface_key[:, 0] * n_cut + interface_key[:, 1],
+                        boundary_key[:, 0] * n_cut + boundary_key[:, 1])
+    if duplicate.any():
+        keep = np.r_[np.ones(len(segments) - len(interface_segments), bool), ~duplicate]
+        segments, segment_tags = segments[keep], segment_tags[keep]
+        interface_segments = interface_segments[~duplicate]
+    if len(interface_segments) == 0:
+        raise ValueError("the interface phi = 0 lies on the boundary only: there is no interior zero set to mesh")
+    required = np.concatenate([mesh.required & ~is_moved, np.zeros(len(new_index), bool)])
+    tris, segs, boundary, kind, _, built_tags, _ = _core.prepare_mesh(
+        all_points, triangles, segments, False, segment_tags, required.astype(np.uint8) if required.any() else None)
+    boundary = boundary.astype(bool)
+    if len(tris) != len(triangles) or not (tris == triangles).all():
+        raise AssertionError("cut: a piece is not counter-clockwise")
+    # Kinds: geometric on the constraints (old interface junctions are no corners
+    # any more), except corners the old mesh pinned on constraints that stay;
+    # released interface points are Steiner points; other interior points keep theirs.
+    old_kinds = np.asarray(old_kind)
+    was_on_released = np.zeros(n, dtype=bool)
+    was_on_released[mesh.segments[released].ravel()] = True
+    kinds = kind.copy()
+    old_part = kinds[:n]
+    on_segment_now = old_part <= _BOUNDARY
+    pinned = on_segment_now & (old_kinds == _CORNER) & ~was_on_released & on_constraint
+    old_part[pinned] = _CORNER
+    interior_now = ~on_segment_now
+    old_part[interior_now] = np.where(old_kinds[interior_now] <= _BOUNDARY, np.uint8(_STEINER),
+                                      old_kinds[interior_now])
+    kinds[:n] = old_part
+    _check_meeting_angles(all_points, segs, built_tags, boundary, interface_tag)
+    origin = np.concatenate([np.where(is_moved, -1, np.arange(n)), np.full(len(new_index), -1)])
+    cut = Mesh._trusted(all_points, tris, segs, boundary, kinds, origin, {}, None, None, built_tags, tags,
+                        required if required.any() else None)
+    parent_triangle = np.full(n_cut, -1, dtype=np.int64)
+    barycentric = np.zeros((n_cut, 3))
+    parent_triangle[n:] = owner
+    barycentric[n:] = weights_new
+    if len(moved):  # (on the old edge of their crossing)
+        parent_triangle[moved], barycentric[moved] = on_edges(cross[crossing_of], a_end[crossing_of], t[crossing_of])
+    return Cut(mesh=cut, old_index=np.where(origin >= 0, origin, -1), parent_triangle=parent_triangle,
+               barycentric=barycentric, triangle_parent=triangle_parent, triangle_weights=vertex_weights,
+               curve=curve, n_crossings=len(new_index), n_moved=len(moved), regions=(negative_tag, positive_tag),
+               scale=scale)
+
+
+def _tag(value: Any, name: str) -> int:
+    if isinstance(value, bool) or not isinstance(value, numbers.Integral):
+        raise TypeError(f"{name} must be an integer, got {type(value).__name__}")
+    if not -(2**63) <= int(value) < 2**63:
+        raise ValueError(f"{name} must fit in int64, got {value}")
+    return int(value)
+
+
+def _regions(regions: Any) -> tuple[int, int]:
+    try:
+        negative, positive = regions
+    except (TypeError, ValueError):
+        raise TypeError("interface_regions must be a pair (tag of the negative side, tag of the positive side), got "
+                        f"{regions!r}") from None
+    return _tag(negative, "interface_regions[0]"), _tag(positive, "interface_regions[1]")
+
+
+def default_regions(mesh: Mesh, phi: np.ndarray) -> tuple[int, int]:
+    """The triangle tags of the two sides when none are given: of the mesh's
+    regions (triangle tags), the one where phi is lowest on average (over its
+    area) for the negative side, the one where it is highest for the positive
+    side. A moving interface thus keeps its two tags from step to step, however
+    far it moved (the old inside is where the new phi is lowest, even with no
+    overlap left). With a single region (the first step) the positive side keeps
+    its tag and the negative side gets a new one, the largest tag plus one.
+
+    Parameters
+    ----------
+    mesh : Mesh
+    phi : ndarray, shape (n,)
+        phi at the mesh points.
+    """
+    tags = mesh.triangle_tags
+    values, index = np.unique(tags, return_inverse=True)
+    area = mesh.triangle_areas
+    mean = np.bincount(index, weights=area * phi[mesh.triangles].mean(axis=1)) / np.bincount(index, weights=area)
+    if len(values) == 1:
+        return int(values[0]) + 1, int(values[0])
+    return int(values[np.argmin(mean)]), int(values[np.argmax(mean)])
+
+
+def _zero_set_segments(T: np.ndarray, side_edge: np.ndarray, neg: np.ndarray, cross: np.ndarray,
+                       crossing: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The zero set of the piecewise-linear interpolant: in every triangle with
+    a sign change, the segment between the crossings of its two crossed edges
+    (degenerate ones dropped)."""
+    where = np.full(side_edge.max() + 1, -1, dtype=np.int64)
+    where[cross] = np.arange(len(cross))
+    s = neg[T]
+    count = s.sum(axis=1)
+    rows = np.flatnonzero((count == 1) | (count == 2))
+    lone = np.where(count[rows] == 1, np.argmax(s[rows], axis=1), np.argmin(s[rows], axis=1))
+    first = crossing[where[side_edge[rows, lone]]]
+    second = crossing[where[side_edge[rows, (lone + 2) % 3]]]
+    proper = (first != second).any(axis=1)
+    return first[proper], second[proper]
+
+
+def _valid_moves(points: np.ndarray, T: np.ndarray, moved: np.ndarray, moved_to: np.ndarray) -> np.ndarray:
+    """Which of the moves (point moved[k] to moved_to[k]) to make: those that
+    keep every triangle at a moved point at least half its area (so positively
+    oriented and not much thinner); the moves in a triangle that would lose
+    more are undone, until none does. Returns a mask over ``moved``."""
+    n = len(points)
+    moving = np.zeros(n, dtype=bool)
+    moving[moved] = True
+    target = points.copy()
+    target[moved] = moved_to
+    involved = np.flatnonzero(moving[T].any(axis=1))
+
+    def doubled_area(p: np.ndarray) -> np.ndarray:
+        d1, d2 = p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]
+        return d1[:, 0] * d2[:, 1] - d1[:, 1] * d2[:, 0]
+
+    before = doubled_area(points[T[involved]])
+    while True:
+        after = doubled_area(target[T[involved]])
+        bad = after < 0.5 * before
+        if not bad.any():
+            break
+        undo = T[involved[bad]].ravel()
+        undo = undo[moving[undo]]
+        moving[undo] = False
+        target[undo] = points[undo]
+    return moving[moved]
+
+
+def _split(T: np.ndarray, side_edge: np.ndarray, neg: np.ndarray, edge_crossing: np.ndarray, points: np.ndarray
+           ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Splits every triangle the zero set crosses along it.
+
+    With the lone vertex a (the one on its own side) first and (a, b, c)
+    counter-clockwise, the crossings X_ab and X_ac (a crossing point, or the
+    vertex b / c itself when phi is 0 there) cut the triangle into (a, X_ab,
+    X_ac), on a's side, and the convex polygon (X_ab, b, c, X_ac) (repeated
+    vertices dropped), split by its shorter diagonal. A triangle whose lone
+    vertex is a zero of phi (X_ab = X_ac = a) is not split.
+
+    Returns the pieces (counter-clockwise), the old triangle of each, each
+    piece's side (True: negative) and the ends of the interface segments
+    (X_ab, X_ac), oriented with the negative side on their left.
+    """
+    s = neg[T]
+    count = s.sum(axis=1)
+    crossed = (count == 1) | (count == 2)
+    rows = np.flatnonzero(crossed)
+    lone = np.where(count[rows] == 1, np.argmax(s[rows], axis=1), np.argmin(s[rows], axis=1))
+    a = T[rows, lone]
+    b = T[rows, (lone + 1) % 3]
+    c = T[rows, (lone + 2) % 3]
+    x_ab = edge_crossing[side_edge[rows, lone]]
+    x_ac = edge_crossing[side_edge[rows, (lone + 2) % 3]]
+    lone_negative = neg[a]
+    degenerate = x_ab == x_ac
+    whole = np.flatnonzero(~crossed)
+    pieces = [T[whole]]
+    parents = [whole]
+    sides = [count[whole] == 3]
+    # degenerate: the triangle is on the side of its other two vertices
+    pieces.append(T[rows[degenerate]])
+    parents.append(rows[degenerate])
+    sides.append(~lone_negative[degenerate])
+    proper = ~degenerate
+    r, a, b, c, x_ab, x_ac, lone_negative = (v[proper] for v in (rows, a, b, c, x_ab, x_ac, lone_negative))
+    pieces.append(np.stack([a, x_ab, x_ac], axis=1))
+    parents.append(r)
+    sides.append(lone_negative)
+    # the other polygon
+    b_is_x, c_is_x = x_ab == b, x_ac == c
+    quad = ~b_is_x & ~c_is_x
+    q = np.flatnonzero(quad)
+    d1 = np.hypot(*(points[x_ab[q]] - points[c[q]]).T)
+    d2 = np.hypot(*(points[b[q]] - points[x_ac[q]]).T)
+    first_diagonal = d1 <= d2
+    qa, qb = q[first_diagonal], q[~first_diagonal]
+    for block in (np.stack([x_ab[qa], b[qa], c[qa]], axis=1), np.stack([x_ab[qa], c[qa], x_ac[qa]], axis=1)):
+        pieces.append(block)
+        parents.append(r[qa])
+        sides.append(~lone_negative[qa])
+    for block in (np.stack([x_ab[qb], b[qb], x_ac[qb]], axis=1), np.stack([b[qb], c[qb], x_ac[qb]], axis=1)):
+        pieces.append(block)
+        parents.append(r[qb])
+        sides.append(~lone_negative[qb])
+    tri = np.flatnonzero(b_is_x ^ c_is_x)
+    third = np.where(b_is_x[tri][:, None], np.stack([b[tri], c[tri], x_ac[tri]], axis=1),
+                     np.stack([x_ab[tri], b[tri], c[tri]], axis=1))
+    pieces.append(third)
+    parents.append(r[tri])
+    sides.append(~lone_negative[tri])
+    seg_a = np.where(lone_negative, x_ab, x_ac)
+    seg_b = np.where(lone_negative, x_ac, x_ab)
+    return (np.concatenate(pieces).astype(np.int64), np.concatenate(parents).astype(np.int64),
+            np.concatenate(sides).astype(bool), seg_a.astype(np.int64), seg_b.astype(np.int64))
+
+
+def _check_meeting_angles(points: np.ndarray, segments: np.ndarray, tags: np.ndarray, boundary: np.ndarray,
+                          interface_tag: int) -> None:
+    """ValueError where the interface meets another constraint (the boundary, a
+    hole, an interior segment of another tag) at less than _MIN_MEETING_ANGLE
+    degrees, or runs along one closer than sin(_MIN_MEETING_ANGLE) times its
+    local segment length without meeting it: tangent, or nearly. The sliver
+    between them cannot be meshed well at any spacing the interface allows."""
+    is_interface = (tags == interface_tag) & ~np.asarray(boundary, dtype=bool)
+    n = len(points)
+    ends = np.concatenate([segments, segments[:, ::-1]])
+    end_interface = np.concatenate([is_interface, is_interface])
+    has_interface = np.zeros(n, dtype=bool)
+    has_interface[ends[end_interface, 0]] = True
+    has_other = np.zeros(n, dtype=bool)
+    has_other[ends[~end_interface, 0]] = True
+    junction = has_interface & has_other
+    limit = np.sin(np.radians(_MIN_MEETING_ANGLE))
+    if junction.any():
+        at = np.flatnonzero(junction[ends[:, 0]])
+        order = at[np.argsort(ends[at, 0], kind="stable")]
+        node = ends[order, 0]
+        direction = points[ends[order, 1]] - points[node]
+        direction /= np.hypot(*direction.T)[:, None]
+        kind = end_interface[order]
+        for shift in range(1, 8):
+            i = np.arange(len(order) - shift)
+            j = i + shift
+            pair = (node[i] == node[j]) & (kind[i] != kind[j])
+            if not pair.any():
+                continue
+            cosine = np.einsum("kj,kj->k", direction[i[pair]], direction[j[pair]])
+            bad = cosine > np.cos(np.radians(_MIN_MEETING_ANGLE))
+            if bad.any():
+                k = int(node[i[pair][np.argmax(bad)]])
+                angle = float(np.degrees(np.arccos(np.clip(cosine[np.argmax(bad)], -1, 1))))
+                raise ValueError(
+                    f"the interface phi = 0 meets a boundary or constraint segment at {angle:.3g} degrees at "
+                    f"({points[k, 0]:.6g}, {points[k, 1]:.6g}): it is tangent to it there (at least "
+                    f"{_MIN_MEETING_ANGLE:g} degrees are needed); move the interface or the boundary")
+    # Nearly tangent without meeting: an interface point closer to another
+    # constraint than sin(angle) times its distance to the nearest junction and
+    # than its longest interface segment (the local spacing). Next to a junction
+    # where the interface meets at angle theta, points are |x - junction| sin(theta) away.
+    others = segments[~is_interface]
+    if not len(others):
+        return
+    iface = segments[is_interface]
+    length = np.hypot(*(points[iface[:, 1]] - points[iface[:, 0]]).T)
+    longest = np.zeros(n)
+    np.maximum.at(longest, iface[:, 0], length)
+    np.maximum.at(longest, iface[:, 1], length)
+    free = np.flatnonzero((longest > 0) & ~has_other)
+    if not len(free):
+        return
+    reach = longest[free]
+    if junction.any():
+        to_junction, _ = cKDTree(points[junction]).query(points[free])
+        reach = np.minimum(reach, to_junction)
+    gap, _ = _Polyline(points[others[:, 0]], points[others[:, 1]]).distance_and_closest(points[free])
+    bad = gap < limit * reach
+    if bad.any():
+        k = int(free[np.argmax(bad)])
+        raise ValueError(
+            f"the interface phi = 0 comes within {float(gap[np.argmax(bad)]):.3g} of a boundary or constraint segment "
+            f"at ({points[k, 0]:.6g}, {points[k, 1]:.6g}) without crossing it there: it is tangent to it, or nearly "
+            f"(at this spacing, {longest[k]:.3g}); move the interface or the boundary, or refine there first")
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# The step
+
+
+def _band(band: Any) -> tuple[float, float, float] | None:
+    """(width, spacing, grade) of interface_band=(width, spacing[, grade])."""
+    if band is None:
+        return None
+    try:
+        values = [float(v) for v in band]
+    except (TypeError, ValueError):
+        raise TypeError(f"interface_band must be (width, spacing) or (width, spacing, grade), got {band!r}") from None
+    if len(values) not in (2, 3):
+        raise TypeError(f"interface_band must be (width, spacing) or (width, spacing, grade), got {band!r}")
+    width, spacing = values[:2]
+    grade = values[2] if len(values) == 3 else 0.3
+    if not (np.isfinite(width) and width >= 0):
+        raise ValueError(f"interface_band width must be finite and >= 0, got {width}")
+    if not (np.isfinite(spacing) and spacing > 0):
+        raise ValueError(f"interface_band spacing must be finite and > 0, got {spacing}")
+    if not (np.isfinite(grade) and grade > 0):
+        raise ValueError(f"interface_band grade must be finite and > 0, got {grade}")
+    return width, spacing, grade
+
+
+def _spacing_at_cut(mesh: Mesh, cut: Cut, delta: Any, size: Any) -> np.ndarray:
+    """The absolute target spacing h at the cut's points: h = delta nn_M at the
+    old points (or ``size``), linear along the edges at the crossings; a
+    callable size is evaluated at the cut's points. The old points' request is
+    checked as evolve checks it (the range of delta)."""
+    if size is None:
+        h_old = as_delta(mesh, delta) * mesh.nn_spacing
+    else:
+        h_old = delta_from_size(mesh, size) * mesh.nn_spacing
+        if callable(size):
+            h = np.asarray(size(np.array(cut.mesh.points)), dtype=np.float64)
+            h = np.array(np.broadcast_to(h, (cut.mesh.n_points,)) if h.ndim == 0 else h)
+            if h.shape != (cut.mesh.n_points,) or not (np.isfinite(h) & (h > 0)).all():
+                raise ValueError("size(x) must return one finite value > 0 per point (at the interface's points too)")
+            return h
+    h = np.empty(cut.mesh.n_points)
+    old = cut.old_index >= 0
+    h[old] = h_old[cut.old_index[old]]
+    new = np.flatnonzero(~old)
+    h[new] = np.einsum("kj,kj->k", cut.barycentric[new], h_old[mesh.triangles[cut.parent_triangle[new]]])
+    return h
+
+
+def _interface_geometry(geometry: Any, interface_tag: int, curve: Any, scale: float, on_interface: np.ndarray
+                        ) -> BoundaryGeometry:
+    """The user's curved boundaries (if any) with the interface's curve added under interface_tag."""
+    user = as_geometry(geometry)
+    if user is not None and interface_tag in user.tags:
+        raise ValueError(f"geometry has a curve for segment tag {interface_tag}, the interface's tag: choose another "
+                         "interface_tag")
+    on_zero_set = cKDTree(on_interface)
+
+    def to_curve(x: np.ndarray) -> np.ndarray:
+        # Newton may end on another branch of phi = 0 (two circles close
+        # together): a move longer than 1.5 times the distance to the nearest
+        # point known to be on the zero set (a cut's interface point; 1.5 for
+        # a phi that is not a distance) went astray, and the point stays on its
+        # chord. (The core leaves a point of an interface on its chord, too,
+        # where the move exceeds what the local spacing allows.)
+        reach, _ = on_zero_set.query(x)
+        if isinstance(curve, LevelSet):
+            moved, settled = curve._newton(x, scale)
+        else:
+            moved, settled = curve.project(x), np.ones(len(x), dtype=bool)
+        stays = ~settled | (np.hypot(*(moved - x).T) > 1.5 * reach)
+        moved[stays] = x[stays]
+        return moved
+
+    user_tags = () if user is None else user.tags
+
+    def project(points: np.ndarray, tags: np.ndarray) -> np.ndarray:
+        out = points.copy()
+        on_interface = tags == interface_tag
+        if on_interface.any():
+            out[on_interface] = to_curve(points[on_interface])
+        if user is not None and (~on_interface).any():
+            out[~on_interface] = user.project(points[~on_interface], tags[~on_interface])
+        return out
+
+    corner_angle = DEFAULT_CORNER_ANGLE if user is None else user.corner_angle
+    return BoundaryGeometry.from_projection(project, (*user_tags, interface_tag), corner_angle=corner_angle)
+
+
+def _distance_to_interface(cut: Cut, interface_tag: int) -> np.ndarray:
+    m = cut.mesh
+    segments = m.segments[(m.segment_tags == interface_tag) & ~m.segment_is_boundary]
+    line = _Polyline(m.points[segments[:, 0]], m.points[segments[:, 1]])
+    return line.distance_and_closest(np.array(m.points))[0]
+
+
+def _regions_by_component(mesh: Mesh) -> np.ndarray:
+    """Triangle tags made constant on every piece of the domain between
+    constraints: each piece takes the tag that covers most of its area. The
+    step tags a triangle by the region holding its centroid in the cut mesh;
+    next to an interface its points moved onto, a thin triangle's centroid can
+    fall across the cut's straight interface."""
+    T = mesh.triangles
+    m = len(T)
+    n = mesh.n_points
+    edges, side_edge = _unique_edges(T, n)
+    constraint = np.sort(mesh.segments, axis=1)
+    is_constraint = np.isin(edges[:, 0] * n + edges[:, 1], constraint[:, 0] * n + constraint[:, 1])
+    owner = np.repeat(np.arange(m), 3)
+    flat = side_edge.ravel()
+    order = np.argsort(flat, kind="stable")
+    e_sorted = flat[order]
+    pair = np.flatnonzero(e_sorted[1:] == e_sorted[:-1])
+    open_pair = pair[~is_constraint[e_sorted[pair]]]
+    left, right = owner[order[open_pair]], owner[order[open_pair + 1]]
+    graph = coo_matrix((np.ones(len(left)), (left, right)), shape=(m, m))
+    count, label = connected_components(graph, directed=False)
+    tags = mesh.triangle_tags
+    values, inverse = np.unique(tags, return_inverse=True)
+    weight = coo_matrix((mesh.triangle_areas, (label, inverse)), shape=(count, len(values))).toarray()
+    return values[np.argmax(weight, axis=1)][label].astype(np.int64)
+
+
+def evolve_with_interface(mesh: Mesh, delta: Any, size: Any, interface: Any, interface_tag: Any,
+                          interface_regions: Any, interface_band: Any, geometry: Any,
+                          run_step: Callable[..., Mesh], **step_arguments: Any) -> Mesh:
+    """evolve(mesh, ..., interface=phi): cut, step, compose the lineage (see the module docstring)."""
+    _require_mesh(mesh)
+    tag = INTERFACE_TAG if interface_tag is None else _tag(interface_tag, "interface_tag")
+    band = _band(interface_band)
+    cut = cut_mesh(mesh, interface, interface_tag=tag, regions=interface_regions)
+    h = _spacing_at_cut(mesh, cut, delta, size)
+    if band is not None:
+        width, spacing, grade = band
+        h = np.minimum(h, spacing + grade * np.maximum(0.0, _distance_to_interface(cut, tag) - 0.5 * width))
+    cut_delta = np.clip(h / cut.mesh.nn_spacing, DELTA_MIN, DELTA_MAX)
+    on_interface = np.unique(cut.mesh.segments[(cut.mesh.segment_tags == tag) & ~cut.mesh.segment_is_boundary])
+    g = _interface_geometry(geometry, tag, cut.curve, cut.scale, cut.mesh.points[on_interface])
+    out = run_step(cut.mesh, cut_delta, geometry=g, **step_arguments)
+    return _compose(mesh, cut, out, tag)
+
+
+def _locate_near(mesh: Mesh, cut: Cut, queries: np.ndarray, pieces: np.ndarray | None
+                 ) -> tuple[np.ndarray, np.ndarray]:
+    """The old triangle holding each query and its barycentric coordinates
+    there, for points of cut pieces at a moved point (`pieces`, -1: unknown):
+    a moved point stays inside the polygon of its old neighbours, so such a
+    piece lies in the old triangles at its old vertices; among those, the one
+    where the smallest coordinate is largest. Queries found in none (or in no
+    piece) are located by the core."""
+    T = mesh.triangles
+    n = mesh.n_points
+    parent = np.full(len(queries), -1, dtype=np.int64)
+    weights = np.zeros((len(queries), 3))
+    if pieces is not None:
+        # the old vertices' triangles (compressed: xadj / adj)
+        adj = np.argsort(T.ravel(), kind="stable") // 3
+        xadj = np.r_[0, np.cumsum(np.bincount(T.ravel(), minlength=n))]
+        corners = cut.mesh.triangles[np.maximum(pieces, 0)]
+        corners = np.where((corners < n) & (pieces >= 0)[:, None], corners, -1)
+        query_of, candidate = [], []
+        for k in range(3):
+            v = corners[:, k]
+            has = np.flatnonzero(v >= 0)
+            count = xadj[v[has] + 1] - xadj[v[has]]
+            query_of.append(np.repeat(has, count))
+            starts = np.repeat(xadj[v[has]], count)
+            offsets = np.arange(count.sum()) - np.repeat(np.cumsum(count) - count, count)
+            candidate.append(adj[starts + offsets])
+        q = np.concatenate(query_of)
+        c = np.concatenate(candidate)
+        p = mesh.points[T[c]]
+        d1, d2, d = p[:, 1] - p[:, 0], p[:, 2] - p[:, 0], queries[q] - p[:, 0]
+        det = d1[:, 0] * d2[:, 1] - d1[:, 1] * d2[:, 0]
+        w1 = (d[:, 0] * d2[:, 1] - d[:, 1] * d2[:, 0]) / det
+        w2 = (d1[:, 0] * d[:, 1] - d1[:, 1] * d[:, 0]) / det
+        w = np.stack([1 - w1 - w2, w1, w2], axis=1)
+        order = np.lexsort((-w.min(axis=1), q))
+        best = order[np.r_[True, q[order][1:] != q[order][:-1]]] if len(order) else order
+        inside = w[best].min(axis=1) >= -1e-9
+        parent[q[best[inside]]] = c[best[inside]]
+        weights[q[best[inside]]] = w[best[inside]]
+    missing = np.flatnonzero(parent < 0)
+    if len(missing):
+        parent[missing], weights[missing] = _core.locate_points(mesh.points, T, queries[missing])
+    return parent, weights
+
+
+def _compose(mesh: Mesh, cut: Cut, out: Mesh, interface_tag: int) -> Mesh:
+    """The step's output with origin and lineage referring to the old mesh."""
+    step_origin = out.origin
+    from_cut = step_origin >= 0
+    origin = np.full(out.n_points, -1, dtype=np.int64)
+    origin[from_cut] = cut.old_index[step_origin[from_cut]]
+    parent = np.full(out.n_points, -1, dtype=np.int64)
+    barycentric = np.zeros((out.n_points, 3))
+    crossing = np.flatnonzero(from_cut & (origin < 0))
+    parent[crossing] = cut.parent_triangle[step_origin[crossing]]
+    barycentric[crossing] = cut.barycentric[step_origin[crossing]]
+    new = np.flatnonzero(~from_cut)
+    lineage = out.lineage
+    if lineage is not None and len(new):
+        piece = lineage.parent_triangle[new]
+        known = piece >= 0
+        known[known] = cut.triangle_parent[piece[known]] >= 0
+        located = new[known]
+        pieces = piece[known]
+        parent[located] = cut.triangle_parent[pieces]
+        barycentric[located] = np.einsum("ki,kij->kj", lineage.barycentric[located], cut.triangle_weights[pieces])
+        unknown = new[~known]
+    else:
+        unknown = new
+    if len(unknown):
+        parent[unknown], barycentric[unknown] = _locate_near(mesh, cut, out.points[unknown],
+                                                             lineage.parent_triangle[unknown] if lineage else None)
+    old_f = mesh.nn_spacing.copy()
+    if lineage is not None:
+        in_cut = np.flatnonzero(cut.old_index >= 0)
+        old_f[cut.old_index[in_cut]] = lineage.old_f[in_cut]
+    composed = Lineage(mesh.n_points, mesh.n_triangles, parent, barycentric, mesh.nn_spacing, old_f)
+    stats = dict(out.stats)
+    stats.update({"interface_crossings": float(cut.n_crossings), "interface_points_moved": float(cut.n_moved),
+                  "interface_segments": float(((out.segment_tags == interface_tag) & ~out.segment_is_boundary).sum()),
+                  "interface_negative_tag": float(cut.regions[0]), "interface_positive_tag": float(cut.regions[1])})
+    tags = _regions_by_component(out)
+    stats["interface_triangles_retagged"] = float((tags != out.triangle_tags).sum())
+    nn = out._known_nn()
+    return Mesh._trusted(out.points, out.triangles, out.segments, out.segment_is_boundary, out.kind, origin, stats,
+                         composed, nn.get("nn"), out.segment_tags, tags,
+                         out.required if out.required.any() else None, nn.get("nn_grew"))
