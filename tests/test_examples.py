@@ -26,7 +26,8 @@ def test_heat_moving_source(tmp_path):
     rows = [line.split() for line in out.splitlines() if line.split() and line.split()[0].isdigit()]
     assert [row[0] for row in rows] == ["1", "2", "3"]
     for row in rows:
-        assert abs(float(row[5])) < 1e-10  # the conservative transfer keeps ∫u
+        # the conservative transfer keeps ∫u up to what the strips a moved curved boundary gains or loses carry
+        assert abs(float(row[6])) < 1e-10
 
 
 def test_curved_hole_cycle(tmp_path):

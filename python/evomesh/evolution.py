@@ -444,7 +444,7 @@ def evolve(mesh: Mesh, delta: Any = None, *, size: Any = None, method: str = "fr
     if displacement is not None:  # Lagrangian motion (issue 28): move the points, then evolve the moved mesh
         motion, delta, size = step_input(mesh, displacement, delta, size, as_geometry(geometry))
         mesh = motion.mesh
-    d = as_delta(mesh, delta) if size is None else delta_from_size(mesh, size)
+    d = as_delta(mesh, delta) if size is None else delta_from_size(mesh, size, keep_fine_clusters=motion is None)
     o = make_options(method, options, **overrides)
     if method == "frfc" and seed is not None:
         o.seed = _check_seed(seed)

@@ -27,7 +27,7 @@ from evomesh.mesh import (
     Mesh,
     _as_array,
 )
-from evomesh.spacing_function import _require_mesh, as_delta
+from evomesh.spacing_function import DELTA_MAX, DELTA_MIN, _require_mesh, as_delta
 
 __all__ = ["Motion", "move"]
 
@@ -352,24 +352,32 @@ def move(mesh: Mesh, displacement: Any, *, geometry: BoundaryGeometry | None = N
 def step_input(mesh: Mesh, displacement: Any, delta: Any, size: Any,
                geometry: BoundaryGeometry | None) -> tuple[Motion, Any, Any]:
     """What :func:`evomesh.evolve` evolves for ``displacement=``: the move, and
-    the absolute spacing to ask at the moved mesh's points.
+    the request (delta or size) at the moved mesh's points.
 
     ``delta`` is relative to the spacing BEFORE the move: the moved point p is
-    asked for delta(p) nn_M(p) with the old nn_M, so delta = 1 keeps the
+    asked for the spacing delta(p) nn_M(p) with the old nn_M, i.e. the factor
+    delta(p) nn_M(p) / nn_moved(p) on the moved mesh, so delta = 1 keeps the
     resolution the mesh had wherever the motion squeezed or stretched it (a
     shear brings points closer: relative to the moved spacing, delta = 1 would
-    refine there, step after step). Arrays are checked against ``mesh`` and
+    refine there, step after step), and a zero displacement is the step
+    without one, bit for bit. Arrays are checked against ``mesh`` and
     restricted to the points the move kept; a callable size is evaluated at the
     moved points by the step."""
     if delta is not None:
-        size = as_delta(mesh, delta) * mesh.nn_spacing
+        delta = as_delta(mesh, delta)
     elif not callable(size):
         array = _as_array(size, "size")
         if array.ndim and array.shape != (mesh.n_points,):
             raise ValueError(f"size must give one value per point: shape ({mesh.n_points},), got {array.shape}")
     motion = move(mesh, displacement, geometry=geometry)
+    origin = motion.mesh.origin
+    if delta is not None:
+        moved_nn = motion.mesh.nn_spacing
+        # (the same nn gives the factor 1 exactly: delta unchanged where nothing moved)
+        factor = np.where(moved_nn == mesh.nn_spacing[origin], 1.0, mesh.nn_spacing[origin] / moved_nn)
+        return motion, np.clip(delta[origin] * factor, DELTA_MIN, DELTA_MAX), None
     if not callable(size) and np.ndim(size):
-        size = np.asarray(size)[motion.mesh.origin]
+        size = np.asarray(size)[origin]
     return motion, None, size
 
 

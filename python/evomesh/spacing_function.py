@@ -125,7 +125,8 @@ def _near_only(triangles: np.ndarray, points: np.ndarray, seeds: np.ndarray, rin
     return points & _near(around, seeds, rings)
 
 
-def delta_from_size(mesh: Mesh, size: ArrayLike | Callable[[np.ndarray], ArrayLike]) -> NDArray[np.float64]:
+def delta_from_size(mesh: Mesh, size: ArrayLike | Callable[[np.ndarray], ArrayLike], *,
+                    keep_fine_clusters: bool = True) -> NDArray[np.float64]:
     """The relative factor delta(p) that :func:`evomesh.evolve` uses for ``size=h``.
 
     ``size`` is what MMG and Gmsh users mean by a size: the edge length wanted
@@ -143,8 +144,11 @@ def delta_from_size(mesh: Mesh, size: ArrayLike | Callable[[np.ndarray], ArrayLi
       here and there, step after step);
     - L(p) < 1 / 1.25: too fine; delta(p) = h(p) / nn_M(p), except within
       three edges of a point with L >= 1 / 1.1 (a finer cluster among points
-      that meet the request: near segments, small angles, required points; a
-      step that coarsens it gets it back from the quality pass);
+      that meet the request: near segments, small angles, required points,
+      graded requests; a step that coarsens it gets it back from the quality
+      pass). ``keep_fine_clusters=False`` (what ``evolve`` uses after a
+      ``displacement=``: a moved mesh has nothing settled to keep) drops this
+      exception;
     - elsewhere the mesh meets the request: delta(p) = 1 exactly, and a step
       leaves such a neighbourhood as it is (the option ``skip_settled``). So
       ``evolve(evolve(m, size=h), size=h)`` changes next to nothing: at most
@@ -162,6 +166,8 @@ def delta_from_size(mesh: Mesh, size: ArrayLike | Callable[[np.ndarray], ArrayLi
     size : float, array_like of shape (n,), or callable
         h > 0: a number, one value per point, or a function h(x) of an (n, 2)
         array of coordinates returning (n,) values (called once, on the points).
+    keep_fine_clusters : bool, default True
+        See above.
 
     Returns
     -------
@@ -197,7 +203,7 @@ def delta_from_size(mesh: Mesh, size: ArrayLike | Callable[[np.ndarray], ArrayLi
         coarsen = np.maximum(1.0, h / (_EDGE_OVER_NN_COARSENED * nn))
     too_coarse = (local > _COARSE_TOLERANCE) & (refine < _REFINE_BELOW)
     too_fine = local < 1 / _FINE_TOLERANCE
-    if too_fine.any():
+    if too_fine.any() and keep_fine_clusters:
         too_fine &= ~_near_only(triangles, too_fine, local >= 1 / _MEETS, _CLEARANCE_RINGS)
     delta = np.where(too_coarse, refine, np.where(too_fine, coarsen, 1.0))
     bad = (delta < DELTA_MIN) | (delta > DELTA_MAX)
