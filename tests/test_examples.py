@@ -40,3 +40,17 @@ def test_curved_hole_cycle(tmp_path):
     polygon = run_example("curved_hole_cycle.py", "--points", "2000", "--cycles", "1", "--polygon", cwd=tmp_path)
     rows = [line.split() for line in polygon.splitlines() if line.split() and line.split()[0].isdigit()]
     assert len({row[-2] for row in rows}) == 1  # without the geometry the polygon's vertices are corners: all kept
+
+
+def test_two_phase(tmp_path):
+    """The interface in the mesh moves with the disc; the transfer keeps the integral; the interface is on phi = 0."""
+    out = run_example("two_phase.py", "--steps", "4", "--points", "1500", "--out", str(tmp_path / "tp"), cwd=tmp_path)
+    rows = [line.split() for line in out.splitlines() if line.split() and line.split()[0].isdigit()]
+    assert [row[0] for row in rows] == ["1", "2", "3", "4"]
+    for row in rows:
+        assert float(row[2]) >= 60.0  # % of old points kept
+        assert abs(float(row[3])) < 1e-12  # conservative transfer
+        assert float(row[4]) > 0  # material changed phase as the disc moved
+        assert float(row[5]) >= 30.0 - 1e-9  # smallest angle
+        assert float(row[6]) < 1e-12  # interface points on phi = 0
+    assert (tmp_path / "tp" / "two_phase.pvd").exists() and len(list((tmp_path / "tp").glob("*.vtu"))) == 5
