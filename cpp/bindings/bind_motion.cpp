@@ -9,24 +9,11 @@
 
 #include "evomesh/motion.hpp"
 
+#include "numpy_arrays.hpp"
+
 namespace py = pybind11;
 using namespace evomesh;
-
-namespace {
-
-using Float_array = py::array_t<double, py::array::c_style | py::array::forcecast>;
-using Int_array = py::array_t<std::int64_t, py::array::c_style | py::array::forcecast>;
-using Byte_array = py::array_t<std::uint8_t, py::array::c_style | py::array::forcecast>;
-
-template <class T>
-py::array_t<T> to_array(std::vector<T>&& v, std::vector<py::ssize_t> shape = {}) {
-  if (shape.empty()) shape = {static_cast<py::ssize_t>(v.size())};
-  auto* holder = new std::vector<T>(std::move(v));
-  py::capsule owner(holder, [](void* p) { delete static_cast<std::vector<T>*>(p); });
-  return py::array_t<T>(shape, holder->data(), owner);
-}
-
-}  // namespace
+using namespace evomesh::bindings;
 
 void bind_motion(py::module_& m) {
   m.def(

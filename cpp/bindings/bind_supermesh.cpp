@@ -9,13 +9,13 @@
 
 #include "evomesh/supermesh.hpp"
 
+#include "numpy_arrays.hpp"
+
 namespace py = pybind11;
 using namespace evomesh;
+using namespace evomesh::bindings;
 
 namespace {
-
-using Float_array = py::array_t<double, py::array::c_style | py::array::forcecast>;
-using Int_array = py::array_t<std::int64_t, py::array::c_style | py::array::forcecast>;
 
 std::vector<Vec2> points_of(const Float_array& a, const char* name) {
   if (a.ndim() != 2 || a.shape(1) != 2) throw Input_error(std::string(name) + " must have shape (n, 2)");
@@ -42,16 +42,6 @@ std::vector<Index> indices_of(const Int_array& a, std::size_t n, const char* nam
   if (a.ndim() != 1 || static_cast<std::size_t>(a.shape(0)) != n)
     throw Input_error(std::string(name) + " must have shape (" + std::to_string(n) + ",)");
   return std::vector<Index>(a.data(), a.data() + n);
-}
-
-// The vector's buffer as an array of the given shape, without copying: the
-// array owns the vector (moved to the heap).
-template <class T>
-py::array_t<T> to_array(std::vector<T>&& v, std::vector<py::ssize_t> shape = {}) {
-  if (shape.empty()) shape = {static_cast<py::ssize_t>(v.size())};
-  auto* holder = new std::vector<T>(std::move(v));
-  py::capsule owner(holder, [](void* p) { delete static_cast<std::vector<T>*>(p); });
-  return py::array_t<T>(shape, holder->data(), owner);
 }
 
 // The triangles of an (m, 3) array in place (no copy), checked against n_points.

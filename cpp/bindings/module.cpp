@@ -22,14 +22,14 @@
 #include "evomesh/step.hpp"
 #include "evomesh/triangulation.hpp"
 
+#include "numpy_arrays.hpp"
+
 namespace py = pybind11;
 using namespace evomesh;
+using namespace evomesh::bindings;
 
 namespace {
 
-using Float_array = py::array_t<double, py::array::c_style | py::array::forcecast>;
-using Int_array = py::array_t<std::int64_t, py::array::c_style | py::array::forcecast>;
-using Byte_array = py::array_t<std::uint8_t, py::array::c_style | py::array::forcecast>;
 
 void require_shape(const py::array& a, py::ssize_t cols, const char* name) {
   if (a.ndim() != 2 || a.shape(1) != cols) {
