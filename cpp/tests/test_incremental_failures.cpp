@@ -18,6 +18,7 @@
 #include "evomesh/frfc.hpp"
 #include "evomesh/incremental_step.hpp"
 #include "evomesh/triangulation.hpp"
+#include "grid_mesh.hpp"
 
 namespace {
 
@@ -45,33 +46,9 @@ void operator delete(void* p, std::size_t) noexcept { std::free(p); }
 void operator delete[](void* p, std::size_t) noexcept { std::free(p); }
 
 using namespace evomesh;
+using evomesh::testing::grid_mesh;
 
 namespace {
-
-// An n x n grid of the unit square, jittered inside (deterministically), with
-// boundary segments and kinds as Mesh() makes them (as test_frfc_threads.cpp).
-Mesh_arrays grid_mesh(int n) {
-  Mesh_arrays mesh;
-  const double h = 1.0 / (n - 1);
-  for (int y = 0; y < n; ++y) {
-    for (int x = 0; x < n; ++x) {
-      const bool inside = x > 0 && y > 0 && x < n - 1 && y < n - 1;
-      const double jx = inside ? 0.2 * h * std::sin(12.9898 * x + 78.233 * y) : 0.0;
-      const double jy = inside ? 0.2 * h * std::cos(39.3468 * x + 11.135 * y) : 0.0;
-      mesh.points.push_back({x * h + jx, y * h + jy});
-    }
-  }
-  for (int y = 0; y + 1 < n; ++y) {
-    for (int x = 0; x + 1 < n; ++x) {
-      const Index a = static_cast<Index>(n) * y + x, b = a + 1, c = a + n + 1, d = a + n;
-      mesh.triangles.push_back({a, b, c});
-      mesh.triangles.push_back({a, c, d});
-    }
-  }
-  build_segments(mesh, {});
-  mesh.kind = classify_points(mesh);
-  return mesh;
-}
 
 double stat(const Evolve_result& result, const char* key) {
   for (const auto& entry : result.stats) {
