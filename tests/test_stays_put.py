@@ -240,8 +240,8 @@ def squeeze_one_angle(mesh: evomesh.Mesh) -> np.ndarray:
         if smallest.min() >= 29:
             return False
         # Delaunay: the two angles opposite every interior edge sum to at most 180 degrees
-        opposite = {}
-        for i, tri in enumerate(t):
+        opposite: dict = {}
+        for tri in t:
             for k in range(3):
                 a, b, c = q[tri[k]], q[tri[(k + 1) % 3]], q[tri[(k + 2) % 3]]
                 u, v = a - c, b - c

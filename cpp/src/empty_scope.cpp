@@ -9,6 +9,7 @@
 #include "evomesh/kernel.hpp"
 #include "evomesh/local_feature_size.hpp"
 #include "evomesh/packing.hpp"
+#include "evomesh/parallel.hpp"
 #include "evomesh/quality_pass.hpp"
 #include "evomesh/sampling.hpp"
 #include "evomesh/segment_chains.hpp"
@@ -291,6 +292,7 @@ std::optional<Evolve_result> empty_scope_frfc(const Mesh_arrays& mesh, const std
   }
   Evolve_result result;
   Stage_timer timer(result.stats);
+  const Thread_limit thread_limit(options.threads);  // (step_weights' trees, as in the full step)
   // C2-C6, C11-C13: the triangulation is the step's triangulation, untouched
   // by the quality pass. O(n) over the directed edges.
   Edge_table table;
