@@ -181,8 +181,12 @@ def test_declines_where_it_does_not_apply():
     x = mesh.points[:, 0]
     # delta != 1 at most points: the full step.
     assert not _taken(_check_same_step(mesh, np.where(x < 0.9, 0.7, 1.0)))
-    # delta = 1 everywhere: taken, and nothing is sampled.
-    fast = _check_same_step(mesh, np.ones(mesh.n_points))
+    # delta = 1 everywhere: the empty-scope step before it (tests/test_stays_put.py);
+    # at one point off 1: taken, and next to nothing is sampled.
+    assert _check_same_step(mesh, np.ones(mesh.n_points)).stats["empty_scope"] == 1
+    delta = np.ones(mesh.n_points)
+    delta[0] = 0.99
+    fast = _check_same_step(mesh, delta)
     assert _taken(fast)
     assert fast.stats["incremental_quiet_triangles"] > 0.9 * mesh.n_triangles
     # Switched off: never.

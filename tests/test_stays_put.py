@@ -174,3 +174,135 @@ def test_skip_settled_is_off_in_the_paper_preset():
     a = evomesh.evolve(mesh, delta, incremental=False)
     b = evomesh.evolve(mesh, delta, incremental=False, skip_settled=False)
     assert 0 < a.stats["n_interior_samples_drawn"] < b.stats["n_interior_samples_drawn"]
+
+
+# The empty-scope step (cpp/src/empty_scope.cpp): with delta = 1 on a mesh
+# certified to be the full step's fixed point, the step returns it without
+# running the stages; bit for bit what the full step returns.
+LINEAGE = ("parent_triangle", "barycentric", "old_nn", "old_f")
+ARRAYS = ("points", "triangles", "segments", "segment_is_boundary", "kind", "origin", "segment_tags",
+          "triangle_tags", "required", "nn_spacing")
+
+
+def assert_same_step(a: evomesh.Mesh, b: evomesh.Mesh) -> None:
+    for name in ARRAYS:
+        x, y = getattr(a, name), getattr(b, name)
+        assert (x is None) == (y is None), name
+        if x is not None:
+            assert np.array_equal(x, y) and np.asarray(x).dtype == np.asarray(y).dtype, name
+    for name in LINEAGE:
+        assert np.array_equal(getattr(a.lineage, name), getattr(b.lineage, name), equal_nan=True), name
+
+
+def rebuilt(mesh: evomesh.Mesh, points=None, triangles=None) -> evomesh.Mesh:
+    """The same mesh built by hand (a user's mesh), with points or triangles replaced."""
+    return evomesh.Mesh(mesh.points if points is None else points,
+                        mesh.triangles if triangles is None else triangles, mesh.segments,
+                        segment_tags=mesh.segment_tags, triangle_tags=mesh.triangle_tags, required=mesh.required)
+
+
+def flip_one_edge(mesh: evomesh.Mesh) -> np.ndarray:
+    """The triangles with one interior edge (not a segment) flipped, its quadrilateral convex."""
+    t, p = np.array(mesh.triangles), np.asarray(mesh.points)
+    segments = {tuple(sorted(map(int, s))) for s in mesh.segments}
+    where: dict = {}
+    for i, tri in enumerate(t):
+        for k in range(3):
+            where.setdefault(tuple(sorted((int(tri[k]), int(tri[(k + 1) % 3])))), []).append((i, k))
+    cross = lambda o, a, b: (a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0])  # noqa: E731
+    for edge, sides in sorted(where.items()):
+        if len(sides) != 2 or edge in segments:
+            continue
+        (i, k), (j, m) = sides
+        a, b, c = t[i][k], t[i][(k + 1) % 3], t[i][(k + 2) % 3]
+        d = t[j][(m + 2) % 3]
+        if cross(p[c], p[d], p[b]) > 0 and cross(p[d], p[c], p[a]) > 0:  # convex: the flip is valid
+            t[i], t[j] = (c, a, d), (d, b, c)
+            return t
+    raise AssertionError("no flippable edge")
+
+
+def squeeze_one_angle(mesh: evomesh.Mesh) -> np.ndarray:
+    """The points with one interior point moved towards a neighbour until a triangle
+    has an angle below 30 degrees while every edge stays (non-strictly) Delaunay."""
+    p, t = np.array(mesh.points), np.asarray(mesh.triangles)
+    on_segment = np.zeros(len(p), bool)
+    on_segment[np.asarray(mesh.segments).ravel()] = True
+
+    def ok(q: np.ndarray) -> bool:
+        x = q[t]
+        e = [x[:, (k + 1) % 3] - x[:, k] for k in range(3)]
+        area = e[0][:, 0] * e[1][:, 1] - e[0][:, 1] * e[1][:, 0]
+        if (area <= 0).any():
+            return False
+        lengths = np.stack([np.hypot(*v.T) for v in e])
+        smallest = np.degrees(np.arcsin(np.clip(area / np.max(lengths, axis=0) / np.median(lengths, axis=0), 0, 1)))
+        if smallest.min() >= 29:
+            return False
+        # Delaunay: the two angles opposite every interior edge sum to at most 180 degrees
+        opposite: dict = {}
+        for tri in t:
+            for k in range(3):
+                a, b, c = q[tri[k]], q[tri[(k + 1) % 3]], q[tri[(k + 2) % 3]]
+                u, v = a - c, b - c
+                angle = np.arctan2(abs(u[0] * v[1] - u[1] * v[0]), u @ v)
+                opposite.setdefault(tuple(sorted((int(tri[k]), int(tri[(k + 1) % 3])))), []).append(angle)
+        return all(sum(s) < np.pi - 1e-9 for s in opposite.values() if len(s) == 2)
+
+    centre = p.mean(axis=0)
+    for v in np.argsort(np.hypot(*(p - centre).T))[:20]:
+        if on_segment[v]:
+            continue
+        neighbours = np.unique(t[(t == v).any(axis=1)])
+        for w in neighbours[neighbours != v]:
+            for step in (0.15, 0.25, 0.35):
+                q = p.copy()
+                q[v] = p[v] + step * (p[w] - p[v])
+                if ok(q):
+                    return q
+    raise AssertionError("no point to move")
+
+
+@pytest.mark.parametrize("case", ["uniform", "graded", "tagged"])
+def test_empty_scope_returns_the_full_step_bit_for_bit(case):
+    make, size, _ = CASES[case]
+    new = evomesh.evolve(make(), size=size)
+    fast = evomesh.evolve(new, 1.0, seed=7)
+    full = evomesh.evolve(new, 1.0, seed=7, incremental=False)
+    assert fast.stats["empty_scope"] == 1 and full.stats["empty_scope"] == 0
+    assert fast.stats["unchanged"] == 1 and full.stats["unchanged"] == 1
+    assert_same_step(fast, full)
+    # the same size again: delta_from_size gives exactly 1 where the mesh meets it
+    again = evomesh.evolve(evomesh.evolve(new, size=size, seed=8), size=size, seed=9)
+    assert_same_step(evomesh.evolve(again, size=size, seed=10),
+                     evomesh.evolve(again, size=size, seed=10, incremental=False))
+    # a user's mesh with the same arrays (kinds "original"): certified too
+    user = rebuilt(new)
+    fast, full = evomesh.evolve(user, 1.0), evomesh.evolve(user, 1.0, incremental=False)
+    assert fast.stats["empty_scope"] == 1
+    assert_same_step(fast, full)
+
+
+def test_empty_scope_declines_where_a_certificate_fails():
+    make, size, curves = CASES["uniform"]
+    new = evomesh.evolve(make(), size=size)
+    delta = np.ones(new.n_points)
+    delta[new.n_points // 2] = 0.9
+    # (the first certificate that fails, numbered as in empty_scope.cpp)
+    mutants = {
+        "a flipped edge (not Delaunay)": (rebuilt(new, triangles=flip_one_edge(new)), 1.0, {}, 11),
+        "an angle below min_angle": (rebuilt(new, points=squeeze_one_angle(new)), 1.0, {}, 13),
+        "one point asks for a change": (new, delta, {}, 1),
+        "the paper's sampling": (new, 1.0, {"skip_settled": False}, 0),
+    }
+    for name, (mesh, d, options, certificate) in mutants.items():
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", evomesh.QualityWarning)
+            fast = evomesh.evolve(mesh, d, seed=3, **options)
+            full = evomesh.evolve(mesh, d, seed=3, incremental=False, **options)
+        assert fast.stats["empty_scope"] == 0 and fast.stats["empty_scope_declined_by"] == certificate, name
+        assert_same_step(fast, full)
+    # curved boundaries are never certified (the step fits points to the curves)
+    make, size, curves = CASES["curved"]
+    new = evomesh.evolve(make(), size=size, geometry=curves)
+    assert evomesh.evolve(new, 1.0, geometry=curves).stats["empty_scope"] == 0

@@ -4,6 +4,7 @@
 #include <utility>
 
 #include "evomesh/candidates.hpp"
+#include "evomesh/empty_scope.hpp"
 #include "evomesh/packing.hpp"
 #include "evomesh/parallel.hpp"
 #include "evomesh/sampling.hpp"
@@ -238,7 +239,16 @@ Evolve_result frfc(const Mesh_arrays& input, const std::vector<double>& delta, c
   // change (incremental_step.hpp). The path is chosen here, before any work,
   // from O(n) counts; what the incremental step throws propagates (a bug there
   // must show, not cost a second step).
-  if (options.incremental && incremental_applies(input, delta, options)) return incremental_frfc(input, delta, options);
+  // First, with delta = 1 everywhere: a step that certainly returns its input
+  // (empty_scope.hpp; the certificate, O(n), in empty_scope.cpp) returns it.
+  int declined_by = 0;
+  if (auto unchanged = empty_scope_frfc(input, delta, options, &declined_by)) return std::move(*unchanged);
+  if (options.incremental && incremental_applies(input, delta, options)) {
+    Evolve_result result = incremental_frfc(input, delta, options);
+    result.stats.emplace_back("empty_scope", 0.0);
+    result.stats.emplace_back("empty_scope_declined_by", declined_by);
+    return result;
+  }
   // With curved boundaries, the corners of curved chains come from the geometry.
   const Mesh_arrays with_curves = input.geometry ? with_curve_kinds(input) : Mesh_arrays{};
   const Mesh_arrays& mesh = input.geometry ? with_curves : input;
@@ -326,7 +336,9 @@ Evolve_result frfc(const Mesh_arrays& input, const std::vector<double>& delta, c
                            {"n_spacing_repairs", n_repairs},
                            {"n_hidden_sites", n_hidden},
                            {"n_filtered_sites", n_filtered},
-                           {"incremental_step", 0}});
+                           {"incremental_step", 0},
+                           {"empty_scope", 0},
+                           {"empty_scope_declined_by", declined_by}});
   result.input_nn = std::move(spacing.nn);
   result.input_f = std::move(spacing.f);
   return result;

@@ -224,11 +224,50 @@ class Refinement_criteria {
   using Quality = double;
 
   Refinement_criteria(double min_angle_degrees, const Cdt& tr, const Spacing_data* spacing, bool off_centres)
-      : bound_(std::pow(std::sin(min_angle_degrees * kPi / 180.0), 2)),
+      : bound_(angle_bound(min_angle_degrees)),
         min_angle_(min_angle_degrees),
         off_centres_(off_centres),
         tr_(&tr),
         spacing_(spacing) {}
+
+  // The bound of rule 3 on the squared sine of the smallest angle.
+  static double angle_bound(double min_angle_degrees) { return std::pow(std::sin(min_angle_degrees * kPi / 180.0), 2); }
+
+  // Rule 3 alone (a mesh without rule 4, as FRFC's quality pass) on a face's
+  // points in the face's order: what Is_bad answers for that face, bit for bit
+  // (the same operations; empty_scope.cpp certifies a mesh with it).
+  static CGAL::Mesh_2::Face_badness angle_badness(const Point_2& pa, const Point_2& pb, const Point_2& pc,
+                                                  double bound, Quality& q) {
+    const double a = std::sqrt(squared_distance(pb, pc)), b = std::sqrt(squared_distance(pc, pa)),
+                 c = std::sqrt(squared_distance(pa, pb));
+    const double twice_area = (pb.x() - pa.x()) * (pc.y() - pa.y()) - (pb.y() - pa.y()) * (pc.x() - pa.x());
+    // Below the resolution floor the angle rule stops: the triangle is left as
+    // it is. Only a cascade can get there (at a small input angle whose cluster
+    // CGAL does not reduce, concentric shells halving without end: measured on a
+    // 12-point mesh, points 1e-12 from the apex and triangles below Mesh()'s
+    // limit of 1024 units of rounding); rule 4 and the edges' Gabriel test are
+    // untouched.
+    const double longest = std::max({a, b, c});
+    const double reach = std::max({std::abs(pa.x()), std::abs(pa.y()), std::abs(pb.x()), std::abs(pb.y()),
+                                   std::abs(pc.x()), std::abs(pc.y())});
+    if (twice_area < kAngleRuleFloorUlps * std::numeric_limits<double>::epsilon() * reach * longest) {
+      q = 1;
+      return CGAL::Mesh_2::NOT_BAD;
+    }
+    // Squared sine of the angle opposite the shortest edge: 2 area / (product of the others).
+    double sine;
+    if (a < b) sine = a < c ? twice_area / b / c : twice_area / a / b;
+    else sine = b < c ? twice_area / a / c : twice_area / a / b;
+    q = rounded(sine * sine);
+    return q < bound ? CGAL::Mesh_2::BAD : CGAL::Mesh_2::NOT_BAD;
+  }
+
+  // The queue order must not depend on rounding: the same mesh scaled by 1e-100
+  // has qualities equal up to a few ulps, and near-ties would then be refined in
+  // another order. Rounded to float, they tie exactly, and the queue
+  // (Bad_face_queue) breaks ties by the points' lexicographic order, which
+  // scaling keeps.
+  static double rounded(double q) { return static_cast<double>(static_cast<float>(q)); }
 
   // Whether rule 4 (sizes from the spacing function) is on.
   bool has_spacing() const { return spacing_ != nullptr; }
@@ -253,10 +292,6 @@ class Refinement_criteria {
       const Point_2& pa = fh->vertex(0)->point();
       const Point_2& pb = fh->vertex(1)->point();
       const Point_2& pc = fh->vertex(2)->point();
-      // Edge lengths, not their products (which could leave the range of double).
-      const double a = std::sqrt(squared_distance(pb, pc)), b = std::sqrt(squared_distance(pc, pa)),
-                   c = std::sqrt(squared_distance(pa, pb));
-      const double twice_area = (pb.x() - pa.x()) * (pc.y() - pa.y()) - (pb.y() - pa.y()) * (pc.x() - pa.x());
       if (spacing_ != nullptr) {
         // Rule 4: a vertex whose neighbour spacing exceeds f there.
         double worst = 0;
@@ -265,6 +300,10 @@ class Refinement_criteria {
           const double f = target_spacing(*tr_, v, *spacing_);
           if (!(f < std::numeric_limits<double>::infinity())) continue;
           if (std::sqrt(neighbour_spacing_squared(*tr_, v)) > f) {
+            // Edge lengths, not their products (which could leave the range of double).
+            const double a = std::sqrt(squared_distance(pb, pc)), b = std::sqrt(squared_distance(pc, pa)),
+                         c = std::sqrt(squared_distance(pa, pb));
+            const double twice_area = (pb.x() - pa.x()) * (pc.y() - pa.y()) - (pb.y() - pa.y()) * (pc.x() - pa.x());
             const double circumradius = a / twice_area * b * c / 2;
             worst = std::max(worst, (circumradius / f) * (circumradius / f));
           }
@@ -274,35 +313,10 @@ class Refinement_criteria {
           return CGAL::Mesh_2::BAD;
         }
       }
-      // Below the resolution floor the angle rule stops: the triangle is left as
-      // it is. Only a cascade can get there (at a small input angle whose cluster
-      // CGAL does not reduce, concentric shells halving without end: measured on a
-      // 12-point mesh, points 1e-12 from the apex and triangles below Mesh()'s
-      // limit of 1024 units of rounding); rule 4 above and the edges' Gabriel
-      // test are untouched.
-      const double longest = std::max({a, b, c});
-      const double reach = std::max({std::abs(pa.x()), std::abs(pa.y()), std::abs(pb.x()), std::abs(pb.y()),
-                                     std::abs(pc.x()), std::abs(pc.y())});
-      if (twice_area < kAngleRuleFloorUlps * std::numeric_limits<double>::epsilon() * reach * longest) {
-        q = 1;
-        return CGAL::Mesh_2::NOT_BAD;
-      }
-      // Squared sine of the angle opposite the shortest edge: 2 area / (product of the others).
-      double sine;
-      if (a < b) sine = a < c ? twice_area / b / c : twice_area / a / b;
-      else sine = b < c ? twice_area / a / c : twice_area / a / b;
-      q = rounded(sine * sine);
-      return operator()(q);
+      return angle_badness(pa, pb, pc, bound_, q);
     }
 
    private:
-    // The queue order must not depend on rounding: the same mesh scaled by 1e-100
-    // has qualities equal up to a few ulps, and near-ties would then be refined in
-    // another order. Rounded to float, they tie exactly, and the queue
-    // (Bad_face_queue) breaks ties by the points' lexicographic order, which
-    // scaling keeps.
-    static double rounded(double q) { return static_cast<double>(static_cast<float>(q)); }
-
     double bound_;
     const Cdt* tr_;
     const Spacing_data* spacing_;
