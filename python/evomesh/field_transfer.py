@@ -743,30 +743,13 @@ class Supermesh:
         -------
         DomainChange
         """
-        lost_triangle, lost_area, old_area = self._lost_part()
-        area_gained = float(self.gap_area.sum())
-        area_lost = float(lost_area.sum())
-        if values is None:
+        # the region exchange summed over the regions (one home for the strips' integrals)
+        exchange = self.region_exchange(values)
+        area_gained, area_lost = float(exchange.area_gained.sum()), float(exchange.area_lost.sum())
+        gained, lost = exchange.integral_gained, exchange.integral_lost
+        if gained is None or lost is None:
             return DomainChange(area_gained, area_lost, None, None)
-        field = np.asarray(values, dtype=np.float64)
-        if field.shape == (self.old.n_points,):
-            gap_values = field[self.old.triangles[self.gap_old_triangle]]
-            if self.mass.size == 0 and len(self.area):
-                raise ValueError("a P1 field's domain change needs a Supermesh built with mass=True")
-            gained = float(np.einsum("gab,gb->", self._gap_mass, gap_values))
-            whole = old_area[lost_triangle] / 3.0 * field[self.old.triangles[lost_triangle]].sum(axis=1)
-            members = np.flatnonzero(np.isin(self.old_triangle, lost_triangle))
-            inside = np.einsum("kab,kb->k", self.mass[members], field[self.old.triangles[self.old_triangle[members]]])
-            lost = float(whole.sum() - inside.sum())
-        elif field.shape == (self.old.n_triangles,):
-            gained = float((self.gap_area * field[self.gap_old_triangle]).sum())
-            lost = float((lost_area * field[lost_triangle]).sum())
-        else:
-            raise ValueError(
-                f"values must be a scalar field on the old points ({self.old.n_points},) or triangles "
-                f"({self.old.n_triangles},), got shape {field.shape}"
-            )
-        return DomainChange(area_gained, area_lost, gained, lost)
+        return DomainChange(area_gained, area_lost, float(gained.sum()), float(lost.sum()))
 
     def region_exchange(self, values: Any = None) -> RegionExchange:
         """How old and new regions (triangle tags) overlap, and a field's integral
