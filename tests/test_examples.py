@@ -39,7 +39,10 @@ def test_curved_hole_cycle(tmp_path):
     assert hole[2] > 1.3 * hole[1] and hole[4] > 1.3 * hole[3]  # refining puts new ones on the circle
     polygon = run_example("curved_hole_cycle.py", "--points", "2000", "--cycles", "1", "--polygon", cwd=tmp_path)
     rows = [line.split() for line in polygon.splitlines() if line.split() and line.split()[0].isdigit()]
-    assert len({row[-2] for row in rows}) == 1  # without the geometry the polygon's vertices are corners: all kept
+    # without the geometry the polygon's vertices are corners, all kept (a step may add points on its chords,
+    # which leaves the polygon, and so the hole's area error, as it was)
+    assert all(int(row[-2]) >= int(rows[0][-2]) for row in rows)
+    assert len({row[-1] for row in rows}) == 1
 
 
 def test_two_phase(tmp_path):

@@ -89,6 +89,7 @@ Refined_mesh drfc_refine(const Mesh_arrays& mesh, const std::vector<double>& del
   Stage_timer timer(unused);
   const Thread_limit thread_limit(options.threads);
   Refined_mesh refined = std::move(refinement_stage(mesh, delta, options, timer).refined);
+  canonical_triangle_order(refined.mesh.points.size(), refined.mesh.triangles);
   // The input's labels, as a step carries them (finish_step): refinement only
   // adds points, so every input point is kept (its `required` flag with it), a
   // new segment lies on the input segment it split and a new triangle in the

@@ -12,6 +12,7 @@
 
 #include "evomesh/detail/insert_points.hpp"
 #include "evomesh/kernel.hpp"
+#include "evomesh/triangulation.hpp"
 
 namespace evomesh {
 
@@ -146,6 +147,10 @@ Moved_triangulation triangulate_moved(const std::vector<Vec2>& points, const std
   }
   for (std::size_t v = 0; v < points.size(); ++v)
     if (!used[v]) out.unused.push_back(static_cast<Index>(v));
+  const std::vector<Index> order = canonical_triangle_order(points.size(), out.triangles);
+  std::vector<std::int64_t> tags(order.size());
+  for (std::size_t k = 0; k < order.size(); ++k) tags[k] = out.triangle_tags[order[k]];
+  out.triangle_tags = std::move(tags);
   return out;
 }
 

@@ -589,6 +589,29 @@ Input_error crossing_pieces_error() {
       "angle of a few units of rounding)");
 }
 
+// The canonical order (triangulation.hpp): a counting sort on the first
+// index, O(n + m), then each bucket's few triangles.
+std::vector<Index> canonical_triangle_order(std::size_t n_points, std::vector<Triangle>& triangles) {
+  std::vector<std::size_t> start(n_points + 1, 0);
+  for (Triangle& t : triangles) {
+    while (t[0] > t[1] || t[0] > t[2]) t = {t[1], t[2], t[0]};
+    ++start[static_cast<std::size_t>(t[0]) + 1];
+  }
+  for (std::size_t v = 0; v < n_points; ++v) start[v + 1] += start[v];
+  std::vector<Index> order(triangles.size());
+  std::vector<std::size_t> next(start.begin(), start.end() - 1);
+  for (std::size_t k = 0; k < triangles.size(); ++k) order[next[static_cast<std::size_t>(triangles[k][0])]++] = static_cast<Index>(k);
+  for (std::size_t v = 0; v < n_points; ++v) {
+    if (start[v + 1] - start[v] < 2) continue;
+    std::sort(order.begin() + static_cast<std::ptrdiff_t>(start[v]), order.begin() + static_cast<std::ptrdiff_t>(start[v + 1]),
+              [&](Index a, Index b) { return triangles[a] < triangles[b]; });
+  }
+  std::vector<Triangle> sorted(triangles.size());
+  for (std::size_t k = 0; k < order.size(); ++k) sorted[k] = triangles[order[k]];
+  triangles = std::move(sorted);
+  return order;
+}
+
 std::vector<Triangle> constrained_delaunay(const std::vector<Vec2>& points,
                                            const std::vector<Constraint_piece>& pieces) {
   Cdt cdt;
@@ -604,6 +627,7 @@ std::vector<Triangle> constrained_delaunay(const std::vector<Vec2>& points,
   for (auto f = cdt.finite_faces_begin(); f != cdt.finite_faces_end(); ++f) {
     if (f->info() == detail::domain_inside) triangles.push_back({f->vertex(0)->info(), f->vertex(1)->info(), f->vertex(2)->info()});
   }
+  canonical_triangle_order(points.size(), triangles);
   return triangles;
 }
 

@@ -10,6 +10,19 @@ namespace evomesh {
 
 // A constraint between two output points. For a boundary piece the domain lies
 // to the left of a -> b; an interior piece has the domain on both sides.
+// The canonical order of triangles (issue 29): each rotated to start at its
+// least point index (orientation kept), then sorted by its three indices.
+// Every path that makes triangles ends with it (a step's finish_step,
+// constrained_delaunay, drfc_refine, the motion's remesh): a triangulation is
+// a function of its points and constraints (CGAL decides cocircular points by
+// a symbolic perturbation in (x, y) order; the quality pass reads no insertion
+// history, cpp/tests/test_quality_history.cpp), and with this order so are the
+// arrays, whichever path or thread count built them; a rank of a partitioned
+// step owns the contiguous range of triangles whose least point it owns.
+// O(n + m). Returns the order applied (new position -> old), for arrays
+// aligned with the triangles.
+std::vector<Index> canonical_triangle_order(std::size_t n_points, std::vector<Triangle>& triangles);
+
 struct Constraint_piece {
   Index a;
   Index b;
