@@ -17,6 +17,7 @@ from evomesh.evolution import (
     delaunay_refine,
     evolve,
 )
+from evomesh.distributed import DistributedMesh
 from evomesh.geometry import Arc, BoundaryGeometry, Circle, SignedDistance
 from evomesh.interface import INTERFACE_TAG, LevelSet
 from evomesh.mesh import Lineage, Mesh, PointKind
@@ -26,6 +27,7 @@ from evomesh.spacing_function import SpacingFunction, nn_spacing, spacing
 
 __all__ = [
     "Mesh",
+    "DistributedMesh",
     "PointKind",
     "BoundaryGeometry",
     "Circle",
