@@ -38,7 +38,8 @@ __all__ = ["DistributedMesh"]
 _POINT = np.dtype([("gid", "<i8"), ("xy", "<f8", (2,)), ("origin", "<i8"), ("owner", "<i4"), ("kind", "u1"),
                    ("required", "u1")])
 _TRIANGLE = np.dtype([("v", "<i8", (3,)), ("owners", "<i4", (3,)), ("gid", "<i8"), ("tag", "<i8")])
-_SEGMENT = np.dtype([("v", "<i8", (2,)), ("gid", "<i8"), ("tag", "<i8")])
+_SEGMENT = np.dtype([("v", "<i8", (2,)), ("owners", "<i4", (2,)), ("gid", "<i8"), ("tag", "<i8"),
+                     ("boundary", "u1")])
 _UNKNOWN_KIND = 255
 # Hilbert curve order of the partition: 2^21 cells a side (keys below 2^42).
 _HILBERT_ORDER = 21
@@ -233,28 +234,33 @@ def _assemble(comm: Any, points: np.ndarray, owned_triangles: np.ndarray, owned_
     points = _unique_by(points, points["gid"])
     points = points[np.argsort(points["gid"], kind="stable")]
     points = points[_contains(core, points["gid"])]
+
+    def fetch(points: np.ndarray, vertex: np.ndarray, owner: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The records of the points `vertex` not held yet, from their owners
+        (who hold their owned points); all held points, sorted by gid, and the new ones."""
+        missing = ~_contains(points["gid"], vertex)
+        vertex, first = np.unique(vertex[missing], return_index=True)
+
+        def answer(requester: np.ndarray, gids: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+            return requester, points[_index_of(points["gid"], gids)]
+
+        new = _ask(comm, owner[missing][first], vertex, answer)
+        held = np.concatenate([points, new])
+        return held[np.argsort(held["gid"], kind="stable")], new
+
     triangles = owned_triangles
     frontier = points
     for _ in range(halo_rings):
+        # Ring k: the stars of the points ring k - 1 added (ring 1: of the core).
         found = _ask(comm, frontier["owner"], frontier["gid"], directory.triangles_at)
         found = _unique_by(found, found["gid"])
         new = found[~np.isin(found["gid"], triangles["gid"])]
         triangles = np.concatenate([triangles, new])
-        # Points of the new triangles not held yet, fetched from their owners.
-        vertex, owner = new["v"].ravel(), new["owners"].ravel()
-        missing = ~_contains(points["gid"], vertex)
-        vertex, first = np.unique(vertex[missing], return_index=True)
-        owner = owner[missing][first]
-        point_gids = points["gid"]
-
-        def point_records(requester: np.ndarray, gids: np.ndarray, held: np.ndarray = points,
-                          held_gids: np.ndarray = point_gids) -> tuple[np.ndarray, np.ndarray]:
-            return requester, held[_index_of(held_gids, gids)]
-
-        frontier = _ask(comm, owner, vertex, point_records)
-        points = np.concatenate([points, frontier])
-        points = points[np.argsort(points["gid"], kind="stable")]
-    # Segments: those that are an edge of a held triangle, from the owners of their smaller ends.
+        points, frontier = fetch(points, new["v"].ravel(), new["owners"].ravel())
+    # With no halo, an owned segment's other end may not be held yet.
+    points, _ = fetch(points, owned_segments["v"].ravel(), owned_segments["owners"].ravel())
+    # Segments: the owned ones and those that are an edge of a held triangle,
+    # from the owners of their smaller ends.
     segments = _ask(comm, points["owner"], points["gid"], directory.segments_at)
     gid = points["gid"]
     n_held = len(gid)
@@ -264,7 +270,9 @@ def _assemble(comm: Any, points: np.ndarray, owned_triangles: np.ndarray, owned_
     ends_held = _contains(gid, segments["v"][:, 0]) & _contains(gid, segments["v"][:, 1])
     segments = segments[ends_held]
     ends = np.sort(_index_of(gid, segments["v"]), axis=1)
-    segments = segments[np.isin(ends[:, 0] * n_held + ends[:, 1], edge_key)]
+    owned_segment = segments["owners"][np.arange(len(segments)), np.argmin(segments["v"], axis=1)] == rank \
+        if len(segments) else np.empty(0, bool)
+    segments = segments[np.isin(ends[:, 0] * n_held + ends[:, 1], edge_key) | owned_segment]
 
     # Local order: owned points by gid, then halo points by gid.
     owned = points["owner"] == rank
@@ -293,6 +301,7 @@ def _assemble(comm: Any, points: np.ndarray, owned_triangles: np.ndarray, owned_
         parts[prefix + "segments"] = to_local(chosen["v"]).reshape(-1, 2)
         parts[prefix + "segment_global_ids"] = chosen["gid"]
         parts[prefix + "segment_tags"] = chosen["tag"]
+        parts[prefix + "segment_is_boundary"] = chosen["boundary"]
     # Halo exchange plan: each halo point asks its owner once; the owner keeps
     # which of its points to send to whom, in the order asked.
     n_owned = int(owned.sum())
@@ -498,7 +507,7 @@ class DistributedMesh:
                  "triangle_tags", "halo_triangles", "halo_triangle_global_ids", "halo_triangle_tags", "segments",
                  "segment_global_ids", "segment_tags", "halo_segments", "halo_segment_global_ids",
                  "halo_segment_tags", "required", "kind", "origin", "tag_names", "halo_rings", "_send_index",
-                 "_send_counts", "_recv_positions", "_recv_counts")
+                 "_send_counts", "_recv_positions", "_recv_counts", "_segment_is_boundary", "_trusted")
 
     comm: Any
     points: np.ndarray
@@ -526,6 +535,10 @@ class DistributedMesh:
     _send_counts: np.ndarray
     _recv_positions: np.ndarray  # halo positions the received values go to, grouped by source rank
     _recv_counts: np.ndarray
+    # Set by scatter: the pieces of a valid Mesh, gathered without re-validation
+    # (and with the Mesh's own segment order and boundary flags).
+    _segment_is_boundary: np.ndarray
+    _trusted: bool
 
     def __init__(self, *args: Any, **kwargs: Any):
         raise TypeError("make a DistributedMesh with DistributedMesh.scatter(mesh, comm) or "
@@ -533,7 +546,7 @@ class DistributedMesh:
 
     @classmethod
     def _build(cls, comm: Any, parts: dict[str, np.ndarray], tag_names: Mapping[tuple[int, int], str],
-               kind_known: bool, halo_rings: int) -> DistributedMesh:
+               kind_known: bool, halo_rings: int, trusted: bool = False) -> DistributedMesh:
         self = object.__new__(cls)
         set_ = object.__setattr__
         points = parts["points"]
@@ -551,6 +564,8 @@ class DistributedMesh:
             set_(self, name, _frozen(np.asarray(parts[name], dtype=np.int64)))
         set_(self, "tag_names", MappingProxyType(dict(tag_names)))
         set_(self, "halo_rings", int(halo_rings))
+        set_(self, "_segment_is_boundary", _frozen(parts["segment_is_boundary"].astype(bool)))
+        set_(self, "_trusted", bool(trusted))
         for name in ("send_index", "send_counts", "recv_positions", "recv_counts"):
             set_(self, "_" + name, _frozen(np.asarray(parts[name], dtype=np.int64)))
         return self
@@ -662,7 +677,7 @@ class DistributedMesh:
         triangles = _exchange(comm, tri_dest, tri_records)[0]
         segments = _exchange(comm, seg_dest, seg_records)[0]
         parts = _assemble(comm, points, triangles, segments, rings)
-        return cls._build(comm, parts, tag_names, True, rings)
+        return cls._build(comm, parts, tag_names, True, rings, trusted=True)
 
     # --------------------------------------------------------------- from_local
     @classmethod
@@ -757,7 +772,8 @@ class DistributedMesh:
         tri, _ = _exchange(comm, tri_owner, tri)
         sv = gids[local["segments"]]
         seg = np.empty(len(sv), _SEGMENT)
-        seg["v"], seg["tag"] = sv, local["segment_tags"]
+        seg["v"], seg["tag"], seg["boundary"] = sv, local["segment_tags"], 0
+        seg["owners"] = owner[local["segments"]]
         seg["gid"] = -1 if local["segment_global_ids"] is None else local["segment_global_ids"]
         seg_owner = owner[local["segments"]][np.arange(len(sv)), np.argmin(sv, axis=1)] if len(sv) \
             else np.empty(0, np.int32)
@@ -788,9 +804,11 @@ class DistributedMesh:
         Points are in global-id order (for a scattered mesh: exactly the input
         mesh's order), triangles and segments in the order of their global ids
         (a scattered mesh: the input's order and rotation, so the Mesh equals
-        the input array for array). The Mesh is built by the :class:`Mesh`
-        constructor, so a mesh assembled by :meth:`from_local` is validated
-        here; its ``origin`` is the per-point ``origin`` carried along.
+        the input array for array, without validating it again). A mesh
+        assembled by :meth:`from_local` is built by the :class:`Mesh`
+        constructor, so it is validated here (O(n log n) on the root) and gets
+        the constructor's segment order; its ``origin`` is the per-point
+        ``origin`` carried along (not renumbered).
 
         Raises
         ------
@@ -812,6 +830,8 @@ class DistributedMesh:
         tri["owners"] = comm.rank
         seg = np.empty(len(self.segments), _SEGMENT)
         seg["v"], seg["gid"], seg["tag"] = self.global_ids[self.segments], self.segment_global_ids, self.segment_tags
+        seg["boundary"] = self._segment_is_boundary
+        seg["owners"] = self.owners[self.segments]
         points = _exchange(comm, np.full(len(points), root_), points)[0]
         tri = _exchange(comm, np.full(len(tri), root_), tri)[0]
         seg = _exchange(comm, np.full(len(seg), root_), seg)[0]
@@ -824,6 +844,11 @@ class DistributedMesh:
             t = tri[np.argsort(tri["gid"], kind="stable")]
             s = seg[np.argsort(seg["gid"], kind="stable")]
             gids = pts["gid"]
+            if self._trusted:  # the pieces of a valid Mesh: its arrays exactly, no second validation
+                return Mesh._trusted(pts["xy"], _index_of(gids, t["v"]), _index_of(gids, s["v"]),
+                                     s["boundary"].astype(bool), pts["kind"], pts["origin"], segment_tags=s["tag"],
+                                     triangle_tags=t["tag"], required=pts["required"].astype(bool),
+                                     tag_names=self.tag_names)
             return Mesh(pts["xy"], _index_of(gids, t["v"]), _index_of(gids, s["v"]), segment_tags=s["tag"],
                         triangle_tags=t["tag"], required=pts["required"].astype(bool),
                         kind=pts["kind"] if kind_known else None, origin=pts["origin"], tag_names=self.tag_names)
@@ -942,6 +967,8 @@ def _root_records(mesh: Mesh, size: int, weights: np.ndarray) -> tuple[tuple[np.
     tri_owner = owner[triangles.min(axis=1)]
     seg = np.empty(len(mesh.segments), _SEGMENT)
     seg["v"], seg["gid"], seg["tag"] = mesh.segments, np.arange(len(mesh.segments)), mesh.segment_tags
+    seg["owners"] = owner[mesh.segments]
+    seg["boundary"] = mesh.segment_is_boundary
     seg_owner = owner[mesh.segments.min(axis=1)]
     # Each rank gets its owned points and the vertices of its owned triangles.
     dest = np.concatenate([owner.astype(np.int64), np.repeat(tri_owner, 3)])
