@@ -6,6 +6,7 @@ coarsens where delta > 1, keeping the mesh well shaped and as many old points
 as it can.
 """
 
+from evomesh.distributed import DistributedMesh
 from evomesh.evolution import (
     DRFC_DEFAULTS,
     FRFC_DEFAULTS,
@@ -17,7 +18,6 @@ from evomesh.evolution import (
     delaunay_refine,
     evolve,
 )
-from evomesh.distributed import DistributedMesh
 from evomesh.geometry import Arc, BoundaryGeometry, Circle, SignedDistance
 from evomesh.interface import INTERFACE_TAG, LevelSet
 from evomesh.mesh import Lineage, Mesh, PointKind
