@@ -19,11 +19,11 @@ import sys
 
 import numpy as np
 import pytest
-from strategies import grid_mesh
 
 import evomesh
 from evomesh.distributed import _hilbert_keys
 from evomesh.meshgen import disc_with_hole_mesh, polygon_mesh, unit_square_mesh
+from strategies import grid_mesh
 
 MPI = pytest.importorskip("mpi4py.MPI")
 COMM = MPI.COMM_WORLD

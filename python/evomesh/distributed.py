@@ -141,7 +141,7 @@ def _partition(mesh: Mesh, size: int, weights: np.ndarray) -> np.ndarray:
     key = _hilbert_keys(cells[:, 0], cells[:, 1], _HILBERT_ORDER)
     by_key = np.lexsort((np.arange(m), key))  # ties by triangle index: deterministic
     # A point's position: that of its first triangle along the curve.
-    _, first = np.unique(triangles[by_key].ravel(), return_index=True)
+    _, first = _first_of_each(triangles[by_key].ravel())
     point_position = first // 3
     # Each triangle's weight counts where its owner (the owner of its smallest
     # vertex) will be, so equal cuts of these weights are equal owned work.
@@ -163,6 +163,20 @@ def _contains(sorted_gids: np.ndarray, gids: np.ndarray) -> np.ndarray:
     return (sorted_gids[where] == gids) if len(sorted_gids) else np.zeros(len(gids), dtype=bool)
 
 
+def _unique(keys: np.ndarray) -> np.ndarray:
+    """Sorted distinct values (sort based: numpy's hash-based unique is slower on int64 keys here)."""
+    s = np.sort(keys)
+    return s[np.concatenate([[True], s[1:] != s[:-1]])] if len(s) else s
+
+
+def _first_of_each(keys: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Sorted distinct values and the index of the first occurrence of each."""
+    order = np.argsort(keys, kind="stable")
+    s = keys[order]
+    first = np.concatenate([[True], s[1:] != s[:-1]]) if len(s) else np.zeros(0, bool)
+    return s[first], order[first]
+
+
 def _ranges(starts: np.ndarray, counts: np.ndarray) -> np.ndarray:
     """Concatenation of arange(s, s + c) over (starts, counts), vectorised."""
     total = int(counts.sum())
@@ -180,8 +194,8 @@ class _Directory:
         # Every owned triangle goes to the owners of its vertices (once per rank).
         which = np.repeat(np.arange(len(owned_triangles), dtype=np.int64), 3)
         dest = owned_triangles["owners"].ravel().astype(np.int64)
-        pair = np.unique(np.stack([which, dest], axis=1), axis=0) if len(which) else np.empty((0, 2), np.int64)
-        star, _ = _exchange(comm, pair[:, 1], owned_triangles[pair[:, 0]])
+        pair = _unique(which * comm.size + dest)  # one int64 key per (triangle, rank)
+        star, _ = _exchange(comm, pair % comm.size, owned_triangles[pair // comm.size])
         mine = star["owners"] == rank
         vertex = star["v"][mine]
         triangle = np.repeat(np.arange(len(star), dtype=np.int64)[:, None], 3, axis=1)[mine]
@@ -198,8 +212,8 @@ class _Directory:
         hi = np.searchsorted(self.star_gid, gids, side="right")
         picks = self.star_triangle[_ranges(lo, hi - lo)]
         dest = np.repeat(requester, hi - lo)
-        pair = np.unique(np.stack([dest, picks], axis=1), axis=0) if len(picks) else np.empty((0, 2), np.int64)
-        return pair[:, 0], self.star[pair[:, 1]]
+        pair = _unique(dest * len(self.star) + picks)
+        return pair // max(len(self.star), 1), self.star[pair % max(len(self.star), 1)]
 
     def segments_at(self, requester: np.ndarray, gids: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         lo = np.searchsorted(self.segment_gid, gids, side="left")
@@ -217,7 +231,7 @@ def _ask(comm: Any, owners: np.ndarray, gids: np.ndarray,
 
 
 def _unique_by(records: np.ndarray, key: np.ndarray) -> np.ndarray:
-    _, first = np.unique(key, return_index=True)
+    _, first = _first_of_each(key)
     return records[np.sort(first)]
 
 
@@ -230,7 +244,7 @@ def _assemble(comm: Any, points: np.ndarray, owned_triangles: np.ndarray, owned_
     and the halo exchange plan. Collective; every rank makes the same calls."""
     rank = comm.rank
     directory = _Directory(comm, owned_triangles, owned_segments)
-    core = np.union1d(points["gid"][points["owner"] == rank], owned_triangles["v"].ravel())
+    core = _unique(np.concatenate([points["gid"][points["owner"] == rank], owned_triangles["v"].ravel()]))
     points = _unique_by(points, points["gid"])
     points = points[np.argsort(points["gid"], kind="stable")]
     points = points[_contains(core, points["gid"])]
@@ -239,7 +253,7 @@ def _assemble(comm: Any, points: np.ndarray, owned_triangles: np.ndarray, owned_
         """The records of the points `vertex` not held yet, from their owners
         (who hold their owned points); all held points, sorted by gid, and the new ones."""
         missing = ~_contains(points["gid"], vertex)
-        vertex, first = np.unique(vertex[missing], return_index=True)
+        vertex, first = _first_of_each(vertex[missing])
 
         def answer(requester: np.ndarray, gids: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
             return requester, points[_index_of(points["gid"], gids)]
@@ -254,7 +268,7 @@ def _assemble(comm: Any, points: np.ndarray, owned_triangles: np.ndarray, owned_
         # Ring k: the stars of the points ring k - 1 added (ring 1: of the core).
         found = _ask(comm, frontier["owner"], frontier["gid"], directory.triangles_at)
         found = _unique_by(found, found["gid"])
-        new = found[~np.isin(found["gid"], triangles["gid"])]
+        new = found[~_contains(np.sort(triangles["gid"]), found["gid"])]
         triangles = np.concatenate([triangles, new])
         points, frontier = fetch(points, new["v"].ravel(), new["owners"].ravel())
     # With no halo, an owned segment's other end may not be held yet.
@@ -272,7 +286,7 @@ def _assemble(comm: Any, points: np.ndarray, owned_triangles: np.ndarray, owned_
     ends = np.sort(_index_of(gid, segments["v"]), axis=1)
     owned_segment = segments["owners"][np.arange(len(segments)), np.argmin(segments["v"], axis=1)] == rank \
         if len(segments) else np.empty(0, bool)
-    segments = segments[np.isin(ends[:, 0] * n_held + ends[:, 1], edge_key) | owned_segment]
+    segments = segments[_contains(_unique(edge_key), ends[:, 0] * n_held + ends[:, 1]) | owned_segment]
 
     # Local order: owned points by gid, then halo points by gid.
     owned = points["owner"] == rank
@@ -784,7 +798,7 @@ class DistributedMesh:
         if local["segment_global_ids"] is None:
             seg = _numbered(seg, np.sort(seg["v"], axis=1), comm)
         # Point records of the vertices of owned triangles: asked from their owners.
-        tri_vertex, first = np.unique(tri["v"].ravel(), return_index=True)
+        tri_vertex, first = _first_of_each(tri["v"].ravel())
         sorted_gids = np.sort(gids)
         mine_sorted = records[np.argsort(gids)]
 
@@ -973,7 +987,7 @@ def _root_records(mesh: Mesh, size: int, weights: np.ndarray) -> tuple[tuple[np.
     # Each rank gets its owned points and the vertices of its owned triangles.
     dest = np.concatenate([owner.astype(np.int64), np.repeat(tri_owner, 3)])
     which = np.concatenate([np.arange(n), triangles.ravel()])
-    pair = np.unique(dest * n + which)
+    pair = _unique(dest * n + which)
     return (pair // n, points[pair % n]), (tri_owner, tri), (seg_owner, seg)
 
 
