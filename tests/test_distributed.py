@@ -407,6 +407,12 @@ def test_bad_scatter_arguments_raise_on_every_rank():
     raises_everywhere(ValueError, evomesh.DistributedMesh.scatter, mesh if RANK == 0 else None, COMM, root=SIZE)
     raises_everywhere(ValueError, evomesh.DistributedMesh.scatter, mesh if RANK == 0 else None, COMM,
                       halo_rings=-1 if RANK == BAD_RANK else 1)
+    if SIZE > 1:  # arguments that differ between ranks would make them call different collectives
+        message = raises_everywhere(ValueError, evomesh.DistributedMesh.scatter, mesh if RANK == 0 else None, COMM,
+                                    halo_rings=2 if RANK == BAD_RANK else 1)
+        assert "halo_rings must be the same on every rank" in message
+        d = evomesh.DistributedMesh.scatter(mesh if RANK == 0 else None, COMM)
+        raises_everywhere(ValueError, d.gather, root=1 if RANK == BAD_RANK else 0)
     with pytest.raises(TypeError, match="intracommunicator"):
         evomesh.DistributedMesh.scatter(mesh, comm=None)
 

@@ -454,6 +454,22 @@ def _check_root(comm: Any, root: Any) -> int:
     return int(root)
 
 
+def _same_everywhere(comm: Any, values: dict[str, Any]) -> None:
+    """Raise (on every rank) unless every rank passed the same `values`: a
+    different root or ring count on one rank would make the ranks call
+    different collectives and hang."""
+    every = comm.allgather(values)
+
+    def check() -> None:
+        for r, theirs in enumerate(every):
+            for name, value in theirs.items():
+                if value != every[0][name]:
+                    raise ValueError(f"{name} must be the same on every rank: {every[0][name]!r} on rank 0, "
+                                     f"{value!r} on rank {r}")
+
+    _collective(comm, check)
+
+
 def _numbered(records: np.ndarray, key: np.ndarray, comm: Any) -> np.ndarray:
     """Give records (this rank's owned ones) gids: by rank, then by `key` rows
     (lexicographic), from an exclusive scan of the counts."""
@@ -587,6 +603,12 @@ class DistributedMesh:
     def __setattr__(self, name: str, value: Any) -> None:
         raise AttributeError("DistributedMesh is immutable")
 
+    def __copy__(self) -> DistributedMesh:
+        return self  # immutable
+
+    def __deepcopy__(self, memo: dict) -> DistributedMesh:
+        return self
+
     def __reduce__(self):
         raise TypeError("a DistributedMesh belongs to its communicator and cannot be pickled; gather() it")
 
@@ -678,6 +700,7 @@ class DistributedMesh:
             return r, h, _root_records(mesh, size, w)
 
         root_, rings, records = _collective(comm, prepare)
+        _same_everywhere(comm, {"root": root_, "halo_rings": rings})
         if rank == root_:
             (point_dest, point_records), (tri_dest, tri_records), (seg_dest, seg_records) = records
             tag_names: Any = dict(mesh.tag_names)  # type: ignore[union-attr]
@@ -752,6 +775,7 @@ class DistributedMesh:
                             segment_tags, triangle_tags, required, kind, origin, tag_names, triangle_global_ids,
                             segment_global_ids)
         rings = _collective(comm, _check_halo_rings, halo_rings)
+        _same_everywhere(comm, {"halo_rings": rings})
         given = comm.allgather((local["given"], sorted(local["tag_names"].items())))
 
         def agree() -> None:
@@ -832,6 +856,7 @@ class DistributedMesh:
         """
         comm = self.comm
         root_ = _collective(comm, _check_root, comm, root)
+        _same_everywhere(comm, {"root": root_})
         owned = slice(0, self.n_owned)
         points = np.empty(self.n_owned, _POINT)
         points["gid"], points["xy"] = self.global_ids[owned], self.points[owned]
@@ -934,6 +959,7 @@ class DistributedMesh:
         """
         comm = self.comm
         root_ = _collective(comm, _check_root, comm, root)
+        _same_everywhere(comm, {"root": root_})
         array = self._field(values, "values")
         record = np.dtype([("gid", "<i8"), ("value", array.dtype, array.shape[1:])])
         rows = np.empty(len(array), record)
