@@ -191,11 +191,13 @@ class _Directory:
 
     def __init__(self, comm: Any, owned_triangles: np.ndarray, owned_segments: np.ndarray):
         rank = comm.rank
-        # Every owned triangle goes to the owners of its vertices (once per rank).
-        which = np.repeat(np.arange(len(owned_triangles), dtype=np.int64), 3)
-        dest = owned_triangles["owners"].ravel().astype(np.int64)
-        pair = _unique(which * comm.size + dest)  # one int64 key per (triangle, rank)
-        star, _ = _exchange(comm, pair % comm.size, owned_triangles[pair // comm.size])
+        # Every owned triangle goes to the owners of its vertices, once per rank.
+        owner = owned_triangles["owners"].astype(np.int64).reshape(-1, 3)
+        first_time = np.ones(owner.shape, dtype=bool)
+        first_time[:, 1] = owner[:, 1] != owner[:, 0]
+        first_time[:, 2] = (owner[:, 2] != owner[:, 0]) & (owner[:, 2] != owner[:, 1])
+        which, _ = np.nonzero(first_time)
+        star, _ = _exchange(comm, owner[first_time], owned_triangles[which])
         mine = star["owners"] == rank
         vertex = star["v"][mine]
         triangle = np.repeat(np.arange(len(star), dtype=np.int64)[:, None], 3, axis=1)[mine]
@@ -214,6 +216,14 @@ class _Directory:
         dest = np.repeat(requester, hi - lo)
         pair = _unique(dest * len(self.star) + picks)
         return pair // max(len(self.star), 1), self.star[pair % max(len(self.star), 1)]
+
+    def own_stars(self, gids: np.ndarray) -> np.ndarray:
+        """The triangles around owned points `gids` (no exchange), once each."""
+        lo = np.searchsorted(self.star_gid, gids, side="left")
+        hi = np.searchsorted(self.star_gid, gids, side="right")
+        chosen = np.zeros(len(self.star), dtype=bool)  # a mask, not a sort: most of the star is chosen
+        chosen[self.star_triangle[_ranges(lo, hi - lo)]] = True
+        return self.star[chosen]
 
     def segments_at(self, requester: np.ndarray, gids: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         lo = np.searchsorted(self.segment_gid, gids, side="left")
@@ -266,7 +276,10 @@ def _assemble(comm: Any, points: np.ndarray, owned_triangles: np.ndarray, owned_
     frontier = points
     for _ in range(halo_rings):
         # Ring k: the stars of the points ring k - 1 added (ring 1: of the core).
-        found = _ask(comm, frontier["owner"], frontier["gid"], directory.triangles_at)
+        # Stars of owned points are known here; the others are asked for.
+        own = frontier["owner"] == rank
+        found = np.concatenate([directory.own_stars(frontier["gid"][own]),
+                                _ask(comm, frontier["owner"][~own], frontier["gid"][~own], directory.triangles_at)])
         found = _unique_by(found, found["gid"])
         new = found[~_contains(np.sort(triangles["gid"]), found["gid"])]
         triangles = np.concatenate([triangles, new])
@@ -1010,11 +1023,13 @@ def _root_records(mesh: Mesh, size: int, weights: np.ndarray) -> tuple[tuple[np.
     seg["owners"] = owner[mesh.segments]
     seg["boundary"] = mesh.segment_is_boundary
     seg_owner = owner[mesh.segments.min(axis=1)]
-    # Each rank gets its owned points and the vertices of its owned triangles.
-    dest = np.concatenate([owner.astype(np.int64), np.repeat(tri_owner, 3)])
-    which = np.concatenate([np.arange(n), triangles.ravel()])
-    pair = _unique(dest * n + which)
-    return (pair // n, points[pair % n]), (tri_owner, tri), (seg_owner, seg)
+    # Each rank gets its owned points and the vertices of its owned triangles
+    # that other ranks own (few: along the cuts).
+    vertex, dest = triangles.ravel(), np.repeat(tri_owner.astype(np.int64), 3)
+    across = owner[vertex] != dest
+    pair = _unique(dest[across] * n + vertex[across])
+    dest = np.concatenate([owner.astype(np.int64), pair // n])
+    return (dest, points[np.concatenate([np.arange(n), pair % n])]), (tri_owner, tri), (seg_owner, seg)
 
 
 def _decide_owners(held: np.ndarray, holder: np.ndarray, owners_given: bool) -> np.ndarray:
