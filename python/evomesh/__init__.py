@@ -6,6 +6,7 @@ coarsens where delta > 1, keeping the mesh well shaped and as many old points
 as it can.
 """
 
+from evomesh.distributed import DistributedMesh
 from evomesh.evolution import (
     DRFC_DEFAULTS,
     FRFC_DEFAULTS,
@@ -26,6 +27,7 @@ from evomesh.spacing_function import SpacingFunction, nn_spacing, spacing
 
 __all__ = [
     "Mesh",
+    "DistributedMesh",
     "PointKind",
     "BoundaryGeometry",
     "Circle",
