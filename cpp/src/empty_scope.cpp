@@ -124,11 +124,19 @@ namespace evomesh {
 // cannot call an acute angle obtuse by more than rounding): no point removed,
 // no segment queued. The edge level's Gabriel test (CGAL's: the apex angle
 // ACUTE, exact) looks at the domain side of a boundary edge, and also at the
-// hidden side at an apex of a cluster of small angles (Gabriel in
-// delaunay_mesher.hpp); it holds on every side of every constraint edge: in M
-// (C12) and across dM, where the face of T is infinite (a hull edge, which
-// conforms) or has the apex of B's face there, acute (C6, exact): nothing
-// encroached, whatever the domain sides and clusters say. The face level's
+// hidden side when an end of the edge is the apex of a cluster (CGAL's,
+// Mesh_2/Clusters.h) with a wedge of the domain (Gabriel in
+// delaunay_mesher.hpp). It holds on every side of every constraint edge in M
+// (C12). Across an edge of dM the face of T is infinite (a hull edge, which
+// conforms) or has the apex of B's face there; where that apex is not acute,
+// neither end of the edge may be such a cluster apex (C6): an end with an
+// interior segment is taken for one; else its only constraint edges are its two
+// boundary edges u -> v -> w, whose one wedge below 180 degrees is the only one
+// that can be small (CGAL: acute, 4 cos^2 > 1 + 1e-9); it is the domain's when
+// u, v, w turn left, and it is taken for small unless exactly obtuse or right,
+// or 4 cos^2 <= 1 - 1e-6 in floating point (far beyond the rounding of both
+// tests). A wedge outside the domain (a notch, a spike of a hole) keeps the
+// test one-sided. Nothing is encroached. The face level's
 // Is_bad (rule 3 only: FRFC passes no spacing data; domain faces only) is
 // Refinement_criteria::angle_badness on the face's points scaled by
 // unit_scaling (the scaling both triangulations use, all points being in the
@@ -280,7 +288,7 @@ int boundary_certified(const Mesh_arrays& mesh, const std::vector<Index>& next, 
     local[v] = static_cast<Index>(at.size());
     at.push_back(mesh.points[v]);
   }
-  std::vector<Constraint_piece> pieces;
+  std::vector<Constraint_piece> pieces;  // pieces[k]: the boundary edge leaving local vertex k
   pieces.reserve(at.size());
   for (std::size_t v = 0; v < n; ++v) {
     if (next[v] >= 0) pieces.push_back(Constraint_piece{local[v], local[next[v]], true, 0});
@@ -308,12 +316,30 @@ int boundary_certified(const Mesh_arrays& mesh, const std::vector<Index>& next, 
     return 5;
   }
   // C6: the apex across each boundary edge (if finite) sees it under an acute
-  // angle; the full step's quality pass tests it at a small angle of the domain.
+  // angle, or the full step's quality pass does not look at it: neither end
+  // is the apex of a cluster with a wedge of the domain (see the top).
   if (options.quality) {
+    std::vector<std::uint8_t> has_interior_segment(at.size(), 0);
+    for (std::size_t s = 0; s < mesh.segments.size(); ++s) {
+      if (mesh.segment_is_boundary[s]) continue;
+      for (Index v : mesh.segments[s]) {
+        if (local[v] >= 0) has_interior_segment[local[v]] = 1;
+      }
+    }
+    std::vector<Index> previous(at.size(), -1);
+    for (const auto& piece : pieces) previous[piece.b] = piece.a;
+    auto may_be_domain_cluster_apex = [&](Index v) {
+      if (has_interior_segment[v]) return true;
+      const Point_2 u = to_cgal(at[previous[v]]), p = to_cgal(at[v]), w = to_cgal(at[pieces[v].b]);
+      if (CGAL::orientation(u, p, w) != CGAL::LEFT_TURN || CGAL::angle(u, p, w) != CGAL::ACUTE) return false;
+      const double ax = u.x() - p.x(), ay = u.y() - p.y(), bx = w.x() - p.x(), by = w.y() - p.y();
+      const double dot = ax * bx + ay * by;
+      return 4 * dot * dot > (1 - 1e-6) * (ax * ax + ay * ay) * (bx * bx + by * by);
+    };
     for (const auto& piece : pieces) {
       Cdt::Face_handle f;
-      int i;
-      cdt.is_edge(handles[piece.a], handles[piece.b], f, i);
+      int i = 0;
+      if (!cdt.is_edge(handles[piece.a], handles[piece.b], f, i)) return 5;  // (not reached: C5 above)
       if (f->vertex(Cdt::ccw(i)) == handles[piece.a]) {  // f on the left: take the face across
         const Cdt::Face_handle g = f->neighbor(i);
         i = g->index(f);
@@ -321,7 +347,8 @@ int boundary_certified(const Mesh_arrays& mesh, const std::vector<Index>& next, 
       }
       const Cdt::Vertex_handle apex = f->vertex(i);
       if (cdt.is_infinite(apex)) continue;
-      if (CGAL::angle(handles[piece.a]->point(), apex->point(), handles[piece.b]->point()) != CGAL::ACUTE) return 6;
+      if (CGAL::angle(handles[piece.a]->point(), apex->point(), handles[piece.b]->point()) == CGAL::ACUTE) continue;
+      if (may_be_domain_cluster_apex(piece.a) || may_be_domain_cluster_apex(piece.b)) return 6;
     }
   }
   return 0;
