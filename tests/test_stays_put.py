@@ -162,6 +162,29 @@ def test_delta_from_size_is_one_where_the_mesh_meets_the_request():
     assert np.array_equal(by_size.points, by_delta.points)
 
 
+def numpy_edge_over_size_around(points: np.ndarray, triangles: np.ndarray, h: np.ndarray) -> np.ndarray:
+    """delta_from_size's L(p) as its numpy form computed it (before the core's)."""
+    n = len(points)
+    following = triangles[:, [1, 2, 0]]
+    length = np.hypot(points[following, 0] - points[triangles, 0], points[following, 1] - points[triangles, 1])
+    ratio = length / (h[0] if (h == h[0]).all() else 0.5 * (h[triangles] + h[following]))
+    corners_at = np.bincount(triangles.ravel(), minlength=n)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        at_point = np.bincount(triangles.ravel(), (ratio + ratio[:, [2, 0, 1]]).ravel(), n) / (2 * corners_at)
+        total = np.bincount(triangles.ravel(), np.repeat(at_point[triangles].sum(axis=1), 3), n)
+        return total / (3 * corners_at)
+
+
+@settings(max_examples=15)
+@given(mesh_and_delta())
+def test_the_core_means_of_delta_from_size_have_the_numpy_bits(case):
+    mesh, delta = case
+    points, triangles = np.asarray(mesh.points), np.asarray(mesh.triangles, dtype=np.int64)
+    for h in (np.full(mesh.n_points, 0.03), np.asarray(delta, float) * mesh.nn_spacing):
+        assert np.array_equal(evomesh._core.edge_over_size_around(points, triangles, h),
+                              numpy_edge_over_size_around(points, triangles, h), equal_nan=True)
+
+
 def test_skip_settled_is_off_in_the_paper_preset():
     assert FrfcOptions.recommended().skip_settled and not FrfcOptions.paper().skip_settled
     assert evomesh.FRFC_DEFAULTS["skip_settled"] is True

@@ -18,6 +18,7 @@
 #include "evomesh/packing.hpp"
 #include "evomesh/parallel.hpp"
 #include "evomesh/quality_pass.hpp"
+#include "evomesh/size_request.hpp"
 #include "evomesh/spacing.hpp"
 #include "evomesh/step.hpp"
 #include "evomesh/triangulation.hpp"
@@ -520,6 +521,22 @@ PYBIND11_MODULE(_core, m) {
       "nn_M: the distance from every point to the nearest other point; with the triangles, within the domain "
       "(a point whose nearest point is no edge neighbour gets its shortest edge, local_feature_size.hpp). "
       "`euclidean`: the Euclidean distances if already known.");
+
+  m.def(
+      "edge_over_size_around",
+      [](const Float_array& points, const Int_array& triangles, const Float_array& h) {
+        auto [pts, tris] = to_points_and_triangles(points, triangles);
+        auto values = to_vector<double>(h);
+        if (values.size() != pts.size()) throw Input_error("h: one value per point");
+        std::vector<double> around;
+        {
+          py::gil_scoped_release release;
+          around = edge_over_size_around(pts, tris, values);
+        }
+        return vector_array(around);
+      },
+      py::arg("points"), py::arg("triangles"), py::arg("h"),
+      "L(p) of delta_from_size: the mean of edge length over the request h around each point (size_request.hpp).");
 
   m.def(
       "nn_within_domain",

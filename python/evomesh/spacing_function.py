@@ -101,14 +101,6 @@ def _size_values(mesh: Mesh, size: Any) -> NDArray[np.float64]:
     return h
 
 
-def _neighbourhood_mean(triangles: np.ndarray, corners_at: np.ndarray, values: np.ndarray) -> np.ndarray:
-    """The mean of `values` over p and the points that share a triangle with p
-    (each counted once per triangle shared); corners_at: triangles per point."""
-    total = np.bincount(triangles.ravel(), np.repeat(values[triangles].sum(axis=1), 3), len(values))
-    with np.errstate(invalid="ignore", divide="ignore"):
-        return total / (3 * corners_at)
-
-
 def _near(triangles: np.ndarray, seeds: np.ndarray, rings: int) -> np.ndarray:
     """The points within `rings` edges of a seed."""
     near = seeds.copy()
@@ -183,20 +175,12 @@ def delta_from_size(mesh: Mesh, size: ArrayLike | Callable[[np.ndarray], ArrayLi
     _require_mesh(mesh)
     points = np.asarray(mesh.points)
     triangles = np.asarray(mesh.triangles)
-    n = mesh.n_points
     h = _size_values(mesh, size)
-    following = triangles[:, [1, 2, 0]]  # edge k of a triangle: from corner k to corner k + 1
-    x, y = np.ascontiguousarray(points[:, 0]), np.ascontiguousarray(points[:, 1])  # (gathers of one column are fast)
-    length = np.hypot(x[following] - x[triangles], y[following] - y[triangles])
-    # each edge against the request at its midpoint (h taken as linear along it)
-    ratio = length / (h[0] if (h == h[0]).all() else 0.5 * (h[triangles] + h[following]))
-    # The mean over the edges at p, each counted once per triangle corner at p
-    # (corner k lies on edges k and k - 1; an interior edge counts twice), then
-    # over p and its neighbours: L(p).
-    corners_at = np.bincount(triangles.ravel(), minlength=n)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        edge_over_size = np.bincount(triangles.ravel(), (ratio + ratio[:, [2, 0, 1]]).ravel(), n) / (2 * corners_at)
-    local = _neighbourhood_mean(triangles, corners_at, edge_over_size)
+    # L(p): each edge against the request at its midpoint (h taken as linear
+    # along it), the mean over the edges at p (each counted once per triangle
+    # corner at p: an interior edge twice), then over p and its neighbours; in
+    # the core (size_request.hpp), with the bits of the numpy sums it replaced.
+    local = _core.edge_over_size_around(points, triangles, h)
     nn = mesh.nn_spacing
     with np.errstate(over="ignore"):
         refine = h / (_EDGE_OVER_NN_REFINED * nn)
