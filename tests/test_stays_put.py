@@ -326,10 +326,25 @@ def test_empty_scope_declines_where_a_certificate_fails():
             full = evomesh.evolve(mesh, d, seed=3, incremental=False, **options)
         assert fast.stats["empty_scope"] == 0 and fast.stats["empty_scope_declined_by"] == certificate, name
         assert_same_step(fast, full)
-    # curved boundaries are never certified (the step fits points to the curves)
+
+
+def test_empty_scope_on_curved_boundaries():
+    # the full step fits to the curves only the points it creates: on its own
+    # fixed point, none; the empty scope returns the same bits
     make, size, curves = CASES["curved"]
-    new = evomesh.evolve(make(), size=size, geometry=curves)
-    assert evomesh.evolve(new, 1.0, geometry=curves).stats["empty_scope"] == 0
+    new = evomesh.evolve(evomesh.evolve(make(), size=size, geometry=curves), size=size, geometry=curves)
+    fast = evomesh.evolve(new, 1.0, geometry=curves, seed=4)
+    full = evomesh.evolve(new, 1.0, geometry=curves, seed=4, incremental=False)
+    assert fast.stats["empty_scope"] == 1 and full.stats["unchanged"] == 1
+    assert_same_step(fast, full)
+    assert_same_step(evomesh.evolve(new, size=size, geometry=curves, seed=5),
+                     evomesh.evolve(new, size=size, geometry=curves, seed=5, incremental=False))
+    # a geometry the full step refuses (C14): left to it, which says why
+    for geometry in ({**curves, 99: Circle((0, 0), 2.0)},  # a tag no segment has
+                     {**curves, HOLE_TAG: lambda x: x[:0]}):  # a projection that loses points
+        for incremental in (True, False):
+            with pytest.raises(ValueError, match="geometry|curve"):
+                evomesh.evolve(new, 1.0, geometry=geometry, incremental=incremental)
 
 
 # Holes and non-convex domains: the certificate reads the domain from the

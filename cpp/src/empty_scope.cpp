@@ -6,6 +6,7 @@
 #include <stdexcept>
 #include <utility>
 
+#include "evomesh/boundary_geometry.hpp"
 #include "evomesh/candidates.hpp"
 #include "evomesh/kernel.hpp"
 #include "evomesh/local_feature_size.hpp"
@@ -24,8 +25,12 @@ namespace evomesh {
 // Why the full step (frfc.cpp, the stages in its order) returns the input when
 // every certificate below holds. Write M for the input, n its points.
 //
-// Dispatch. No curves (mesh.geometry null): the full step works on M itself,
-// not on with_curve_kinds(M), and fits nothing to curves.
+// Dispatch. Without curves the full step works on M itself; with curves
+// (mesh.geometry) on with_curve_kinds(M): the same points, triangles and
+// segments, the kinds of curved chains from the geometry, zero tags where M
+// has none. The certificates below read what the stages read (that mesh); the
+// output takes the points, triangles, segments and tags of M, the kinds of
+// that mesh (what the full step's selection gives them).
 //
 // Step 1 (step_spacing, F_at_points::lemma_3_1). The same step_weights call as
 // the full step gives nn and w = delta nn (capped by the local feature size
@@ -143,6 +148,18 @@ namespace evomesh {
 // first batch), in the face's rotation, which is one of the three tested
 // (C13): no bad face. The mesher inserts nothing; a CGAL failure falls back to
 // the same CDT.
+//
+// Curves (fit_to_curves, after the triangulation). project_segment_candidates
+// has no candidate on a segment, so nothing to project. fit_once projects the
+// points the step created on curved pieces (inserted by the quality pass or
+// new in the selection): none, every output point being an input point. It
+// also projects every point of a curved piece to find those on their curves,
+// for the moves' limits (distance_along_to_curve): the same call succeeds
+// (C14) and its answer bounds moves that do not happen. No point moves, so
+// no new triangulation and no refit (they need a move); drop_unused_points
+// finds every point in a triangle (C3). curve_reach (max(2 largest move,
+// longest curved piece)) only tells the old mesh's walker how far outside new
+// points may lie: every point is kept, so no point is walked to.
 //
 // finish_step. restore_origins: no new point, nothing restored.
 // adopt_input_order: same points in order, same triangle and segment sets
@@ -396,23 +413,61 @@ int triangles_certified(const Mesh_arrays& mesh, const Edge_table& table, const 
   return 0;
 }
 
+// C14: the geometry's projection of every point of a curved segment (once
+// per point and tag, as fit_to_curves' polygon keys) returns one point each
+// and throws nothing. Its result is not needed (no point moves).
+bool curves_project(const Mesh_arrays& mesh) {
+  const Boundary_geometry& geometry = *mesh.geometry;
+  std::vector<std::pair<std::int64_t, Index>> keys;
+  for (std::size_t s = 0; s < mesh.segments.size(); ++s) {
+    if (!geometry.is_curved(mesh.segment_tags[s])) continue;
+    for (Index v : mesh.segments[s]) keys.emplace_back(mesh.segment_tags[s], v);
+  }
+  std::sort(keys.begin(), keys.end());
+  keys.erase(std::unique(keys.begin(), keys.end()), keys.end());
+  if (keys.empty()) return true;
+  std::vector<Vec2> points(keys.size());
+  std::vector<std::int64_t> tags(keys.size());
+  for (std::size_t k = 0; k < keys.size(); ++k) {
+    tags[k] = keys[k].first;
+    points[k] = mesh.points[keys[k].second];
+  }
+  try {
+    geometry.project(points, tags);
+  } catch (const std::exception&) {
+    return false;
+  }
+  return points.size() == keys.size();
+}
+
 }  // namespace
 
-std::optional<Evolve_result> empty_scope_frfc(const Mesh_arrays& mesh, const std::vector<double>& delta,
+std::optional<Evolve_result> empty_scope_frfc(const Mesh_arrays& input, const std::vector<double>& delta,
                                               const Frfc_options& options, int* declined_by) {
-  const std::size_t n = mesh.points.size();
+  const std::size_t n = input.points.size();
   auto decline = [declined_by](int certificate) {
     if (declined_by != nullptr) *declined_by = certificate;
     return std::nullopt;
   };
-  // C0, C1, no curves: O(1) and one pass over delta.
-  if (mesh.geometry || !options_allow(options) || mesh.triangles.empty()) return decline(0);
+  // C0, C1: O(1) and one pass over delta.
+  if (!options_allow(options) || input.triangles.empty()) return decline(0);
   for (double d : delta) {
     if (d != 1) return decline(1);
   }
   Evolve_result result;
   Stage_timer timer(result.stats);
   const Thread_limit thread_limit(options.threads);  // (step_weights' trees, as in the full step)
+  // Curves: the full step's stages work on with_curve_kinds(input) (C14: a
+  // geometry it refuses is left to the full step, which says why).
+  std::optional<Mesh_arrays> with_curves;
+  if (input.geometry) {
+    try {
+      with_curves = with_curve_kinds(input);
+    } catch (const Input_error&) {
+      return decline(14);
+    }
+  }
+  const Mesh_arrays& mesh = with_curves ? *with_curves : input;
   // C2-C6, C11-C13: the triangulation is the step's triangulation, untouched
   // by the quality pass. O(n) over the directed edges, and O(b log b) for the
   // b boundary vertices (C5, C6).
@@ -458,19 +513,23 @@ std::optional<Evolve_result> empty_scope_frfc(const Mesh_arrays& mesh, const std
   const auto forced = forced_corners(mesh, chains, n_forced, mesh.required);
   const auto demoted = demoted_points(mesh.triangles, weights.nn, f, forced, options.demote_ratio);
   if (std::find(demoted.begin(), demoted.end(), 1) != demoted.end()) return decline(10);
+  // C14: fit_to_curves projects the points of its curved pieces (to find
+  // those on their curves); whatever that projection does not accept is left
+  // to the full step.
+  if (input.geometry && !curves_project(mesh)) return decline(14);
   timer.lap("empty_scope_spacing");
 
   // The full step's output, as finish_step's unchanged path returns it.
   Mesh_arrays& out = result.mesh;
-  out.points = mesh.points;
-  out.triangles = mesh.triangles;
-  out.segments = mesh.segments;
-  out.segment_is_boundary = mesh.segment_is_boundary;
+  out.points = input.points;
+  out.triangles = input.triangles;
+  out.segments = input.segments;
+  out.segment_is_boundary = input.segment_is_boundary;
   out.kind.resize(n);
   for (std::size_t i = 0; i < n; ++i) out.kind[i] = kept_point_kind(mesh.kind[i], forced[i] == kForcedCorner);
-  out.segment_tags = mesh.segment_tags;
-  out.triangle_tags = mesh.triangle_tags;
-  out.required = mesh.required;
+  out.segment_tags = input.segment_tags;
+  out.triangle_tags = input.triangle_tags;
+  out.required = input.required;
   result.origin.resize(n);
   for (std::size_t i = 0; i < n; ++i) result.origin[i] = static_cast<Index>(i);
   result.parents.triangle.assign(n, -1);
