@@ -185,6 +185,30 @@ def test_the_core_means_of_delta_from_size_have_the_numpy_bits(case):
                               numpy_edge_over_size_around(points, triangles, h), equal_nan=True)
 
 
+def numpy_near_only(triangles: np.ndarray, points: np.ndarray, seeds: np.ndarray, rings: int) -> np.ndarray:
+    """delta_from_size's settled clusters as its numpy form found them: of
+    `points`, those within `rings` edges of a seed."""
+    def near(tris: np.ndarray, start: np.ndarray, k: int) -> np.ndarray:
+        reached = start.copy()
+        for _ in range(k):
+            reached[tris[reached[tris].any(axis=1)].ravel()] = True
+        return reached
+
+    region = near(triangles, points, rings - 1) if rings > 0 else points
+    return points & near(triangles[region[triangles].any(axis=1)], seeds, rings)
+
+
+@settings(max_examples=15)
+@given(mesh_and_delta(), st.integers(0, 4), st.integers(0, 2**32 - 1))
+def test_the_core_clusters_of_delta_from_size_are_the_numpy_ones(case, rings, seed):
+    mesh, _ = case
+    rng = np.random.default_rng(seed)
+    triangles = np.asarray(mesh.triangles, dtype=np.int64)
+    points, seeds = rng.random(mesh.n_points) < 0.3, rng.random(mesh.n_points) < 0.05
+    assert np.array_equal(evomesh._core.near_seeds(triangles, points, seeds, rings).view(bool),
+                          numpy_near_only(triangles, points, seeds, rings))
+
+
 def test_skip_settled_is_off_in_the_paper_preset():
     assert FrfcOptions.recommended().skip_settled and not FrfcOptions.paper().skip_settled
     assert evomesh.FRFC_DEFAULTS["skip_settled"] is True

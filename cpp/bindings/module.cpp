@@ -539,6 +539,25 @@ PYBIND11_MODULE(_core, m) {
       "L(p) of delta_from_size: the mean of edge length over the request h around each point (size_request.hpp).");
 
   m.def(
+      "near_seeds",
+      [](const Int_array& triangles, const Byte_array& points, const Byte_array& seeds, int rings) {
+        auto tris = to_index_rows<3>(triangles, "triangles");
+        auto marked = to_vector<std::uint8_t>(points);
+        auto from = to_vector<std::uint8_t>(seeds);
+        if (marked.size() != from.size()) throw Input_error("points and seeds: one value per point each");
+        require_indices(tris, marked.size(), "triangles");
+        if (rings < 0) throw Input_error("rings must be >= 0");
+        std::vector<std::uint8_t> near;
+        {
+          py::gil_scoped_release release;
+          near = near_seeds(tris, marked, from, rings);
+        }
+        return vector_array(near);
+      },
+      py::arg("triangles"), py::arg("points"), py::arg("seeds"), py::arg("rings"),
+      "Of the marked points, those within `rings` edges of a seed (uint8 mask; size_request.hpp).");
+
+  m.def(
       "nn_within_domain",
       [](const Float_array& points, const Int_array& triangles, std::optional<Float_array> euclidean) {
         auto [pts, tris] = to_points_and_triangles(points, triangles);

@@ -476,12 +476,14 @@ std::optional<Evolve_result> empty_scope_frfc(const Mesh_arrays& input, const st
   const auto chains = segment_chains(mesh);
   std::vector<Index> next;
   if (!segments_certified(mesh, chains, table, next)) return decline(4);  // (C3, C4: reported as 4)
+  timer.lap("empty_scope_edges");
   int failed = triangles_certified(mesh, table, options);
   if (failed != 0) return decline(failed);
+  timer.lap("empty_scope_triangles");
   failed = boundary_certified(mesh, next, options);
   if (failed != 0) return decline(failed);
   table = Edge_table();
-  timer.lap("empty_scope_mesh");
+  timer.lap("empty_scope_boundary");
   // Step 1 as the full step computes it (C7).
   Step_weights weights = step_weights(mesh, delta, timer, options.within_domain ? &chains : nullptr);
   for (std::uint8_t e : weights.evaluate) {
@@ -501,6 +503,7 @@ std::optional<Evolve_result> empty_scope_frfc(const Mesh_arrays& input, const st
   }
   const std::vector<double>& f = weights.weight;  // Lemma 3.1 at delta = 1
   // C8: every point settled.
+  timer.lap("empty_scope_weights");
   const auto settled = settled_points(mesh, delta, f);
   if (std::find(settled.begin(), settled.end(), 0) != settled.end()) return decline(8);
   // C9: the sample budget.

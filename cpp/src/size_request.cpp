@@ -35,4 +35,19 @@ std::vector<double> edge_over_size_around(const std::vector<Vec2>& points, const
   return around;
 }
 
+std::vector<std::uint8_t> near_seeds(const std::vector<Triangle>& triangles, const std::vector<std::uint8_t>& points,
+                                     const std::vector<std::uint8_t>& seeds, int rings) {
+  std::vector<std::uint8_t> near(seeds.size());
+  for (std::size_t p = 0; p < seeds.size(); ++p) near[p] = seeds[p] != 0;
+  std::vector<std::uint8_t> reached = near;
+  for (int ring = 0; ring < rings; ++ring) {
+    for (const Triangle& t : triangles) {
+      if (near[t[0]] || near[t[1]] || near[t[2]]) reached[t[0]] = reached[t[1]] = reached[t[2]] = 1;
+    }
+    near = reached;
+  }
+  for (std::size_t p = 0; p < near.size(); ++p) near[p] = near[p] && points[p];
+  return near;
+}
+
 }  // namespace evomesh

@@ -101,22 +101,6 @@ def _size_values(mesh: Mesh, size: Any) -> NDArray[np.float64]:
     return h
 
 
-def _near(triangles: np.ndarray, seeds: np.ndarray, rings: int) -> np.ndarray:
-    """The points within `rings` edges of a seed."""
-    near = seeds.copy()
-    for _ in range(rings):
-        near[triangles[near[triangles].any(axis=1)].ravel()] = True
-    return near
-
-
-def _near_only(triangles: np.ndarray, points: np.ndarray, seeds: np.ndarray, rings: int) -> np.ndarray:
-    """Of `points`, those within `rings` edges of a seed; the search runs on the
-    triangles within `rings` edges of `points` only (few, where this is asked)."""
-    region = _near(triangles, points, rings - 1) if rings > 0 else points
-    around = triangles[region[triangles].any(axis=1)]
-    return points & _near(around, seeds, rings)
-
-
 def delta_from_size(mesh: Mesh, size: ArrayLike | Callable[[np.ndarray], ArrayLike], *,
                     keep_fine_clusters: bool = True) -> NDArray[np.float64]:
     """The relative factor delta(p) that :func:`evomesh.evolve` uses for ``size=h``.
@@ -188,7 +172,8 @@ def delta_from_size(mesh: Mesh, size: ArrayLike | Callable[[np.ndarray], ArrayLi
     too_coarse = (local > _COARSE_TOLERANCE) & (refine < _REFINE_BELOW)
     too_fine = local < 1 / _FINE_TOLERANCE
     if too_fine.any() and keep_fine_clusters:
-        too_fine &= ~_near_only(triangles, too_fine, local >= 1 / _MEETS, _CLEARANCE_RINGS)
+        # (near_seeds in the core: the points within the rings of a seed)
+        too_fine &= ~_core.near_seeds(triangles, too_fine, local >= 1 / _MEETS, _CLEARANCE_RINGS).view(bool)
     delta = np.where(too_coarse, refine, np.where(too_fine, coarsen, 1.0))
     bad = (delta < DELTA_MIN) | (delta > DELTA_MAX)
     if bad.any():

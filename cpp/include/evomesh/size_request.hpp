@@ -3,6 +3,7 @@
 // the decision from them (the hysteresis, the settled clusters) stays in Python.
 #pragma once
 
+#include <cstdint>
 #include <vector>
 
 #include "evomesh/types.hpp"
@@ -19,5 +20,12 @@ namespace evomesh {
 // in order. O(n + m). Preconditions: indices in range, h.size() == points.size().
 std::vector<double> edge_over_size_around(const std::vector<Vec2>& points, const std::vector<Triangle>& triangles,
                                           const std::vector<double>& h);
+
+// Of the points marked in `points`, those within `rings` edges (triangle
+// sides) of a point marked in `seeds`: delta_from_size's settled clusters.
+// Ring by ring, every triangle with a corner reached so far reaches its other
+// corners. O(rings m). Preconditions: indices in range, both masks one per point.
+std::vector<std::uint8_t> near_seeds(const std::vector<Triangle>& triangles, const std::vector<std::uint8_t>& points,
+                                     const std::vector<std::uint8_t>& seeds, int rings);
 
 }  // namespace evomesh
