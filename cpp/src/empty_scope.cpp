@@ -1,6 +1,7 @@
 #include "evomesh/empty_scope.hpp"
 
 #include <algorithm>
+#include <cmath>
 #include <cstdint>
 #include <limits>
 #include <stdexcept>
@@ -400,9 +401,28 @@ int triangles_certified(const Mesh_arrays& mesh, const Edge_table& table, const 
     }
     if (options.quality) {
       // C13: not bad for the angle rule, in each of the face's rotations.
+      // The rotations share the three lengths (the same operations on the same
+      // pairs) and differ in the rounding of twice the area (relative error a
+      // few units of rounding over the sine of the angle at the first corner,
+      // below 1e-13 for a triangle whose smallest angle is above 0.57 degrees,
+      // sin^2 >= 1e-4) and in the order of two divisions: by far less than
+      // 1e-6 of q, which is rounded to float (6e-8). So, at such a bound, the
+      // first rotation decides when its q clears the bound by 1e-6 and its
+      // area the resolution floor by a factor 2; else all three are evaluated.
       const Point_2 s[3] = {scaled(tri[0]), scaled(tri[1]), scaled(tri[2])};
-      for (int r = 0; r < 3; ++r) {
-        double q;
+      double q;
+      if (detail::Refinement_criteria::angle_badness(s[0], s[1], s[2], bound, q) != CGAL::Mesh_2::NOT_BAD) return 13;
+      const double twice_area =
+          (s[1].x() - s[0].x()) * (s[2].y() - s[0].y()) - (s[1].y() - s[0].y()) * (s[2].x() - s[0].x());
+      const double longest = std::sqrt(std::max({detail::squared_distance(s[1], s[2]),
+                                                 detail::squared_distance(s[2], s[0]),
+                                                 detail::squared_distance(s[0], s[1])}));
+      const double reach = std::max({std::abs(s[0].x()), std::abs(s[0].y()), std::abs(s[1].x()),
+                                     std::abs(s[1].y()), std::abs(s[2].x()), std::abs(s[2].y())});
+      const double floor = detail::Refinement_criteria::kAngleRuleFloorUlps *
+                           std::numeric_limits<double>::epsilon() * reach * longest;
+      if (bound >= 1e-4 && q >= bound * (1 + 1e-6) && twice_area >= 2 * floor) continue;
+      for (int r = 1; r < 3; ++r) {
         if (detail::Refinement_criteria::angle_badness(s[r], s[(r + 1) % 3], s[(r + 2) % 3], bound, q) !=
             CGAL::Mesh_2::NOT_BAD) {
           return 13;
