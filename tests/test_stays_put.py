@@ -12,11 +12,12 @@ import warnings
 import numpy as np
 import pytest
 from hypothesis import given, settings
+from hypothesis import strategies as st
 
 import evomesh
 from evomesh import FrfcOptions
 from evomesh.geometry import Circle
-from evomesh.meshgen import HOLE_TAG, OUTER_TAG, disc_with_hole_mesh, unit_square_mesh
+from evomesh.meshgen import HOLE_TAG, OUTER_TAG, disc_with_hole_mesh, polygon_mesh, unit_square_mesh
 from evomesh.spacing_function import delta_from_size
 from invariants import check_evolved, check_valid_mesh, edges_with_counts
 from strategies import grid_mesh, mesh_and_delta
@@ -161,6 +162,53 @@ def test_delta_from_size_is_one_where_the_mesh_meets_the_request():
     assert np.array_equal(by_size.points, by_delta.points)
 
 
+def numpy_edge_over_size_around(points: np.ndarray, triangles: np.ndarray, h: np.ndarray) -> np.ndarray:
+    """delta_from_size's L(p) as its numpy form computed it (before the core's)."""
+    n = len(points)
+    following = triangles[:, [1, 2, 0]]
+    length = np.hypot(points[following, 0] - points[triangles, 0], points[following, 1] - points[triangles, 1])
+    ratio = length / (h[0] if (h == h[0]).all() else 0.5 * (h[triangles] + h[following]))
+    corners_at = np.bincount(triangles.ravel(), minlength=n)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        at_point = np.bincount(triangles.ravel(), (ratio + ratio[:, [2, 0, 1]]).ravel(), n) / (2 * corners_at)
+        total = np.bincount(triangles.ravel(), np.repeat(at_point[triangles].sum(axis=1), 3), n)
+        return total / (3 * corners_at)
+
+
+@settings(max_examples=15)
+@given(mesh_and_delta())
+def test_the_core_means_of_delta_from_size_have_the_numpy_bits(case):
+    mesh, delta = case
+    points, triangles = np.asarray(mesh.points), np.asarray(mesh.triangles, dtype=np.int64)
+    for h in (np.full(mesh.n_points, 0.03), np.asarray(delta, float) * mesh.nn_spacing):
+        assert np.array_equal(evomesh._core.edge_over_size_around(points, triangles, h),
+                              numpy_edge_over_size_around(points, triangles, h), equal_nan=True)
+
+
+def numpy_near_only(triangles: np.ndarray, points: np.ndarray, seeds: np.ndarray, rings: int) -> np.ndarray:
+    """delta_from_size's settled clusters as its numpy form found them: of
+    `points`, those within `rings` edges of a seed."""
+    def near(tris: np.ndarray, start: np.ndarray, k: int) -> np.ndarray:
+        reached = start.copy()
+        for _ in range(k):
+            reached[tris[reached[tris].any(axis=1)].ravel()] = True
+        return reached
+
+    region = near(triangles, points, rings - 1) if rings > 0 else points
+    return points & near(triangles[region[triangles].any(axis=1)], seeds, rings)
+
+
+@settings(max_examples=15)
+@given(mesh_and_delta(), st.integers(0, 4), st.integers(0, 2**32 - 1))
+def test_the_core_clusters_of_delta_from_size_are_the_numpy_ones(case, rings, seed):
+    mesh, _ = case
+    rng = np.random.default_rng(seed)
+    triangles = np.asarray(mesh.triangles, dtype=np.int64)
+    points, seeds = rng.random(mesh.n_points) < 0.3, rng.random(mesh.n_points) < 0.05
+    assert np.array_equal(evomesh._core.near_seeds(triangles, points, seeds, rings).view(bool),
+                          numpy_near_only(triangles, points, seeds, rings))
+
+
 def test_skip_settled_is_off_in_the_paper_preset():
     assert FrfcOptions.recommended().skip_settled and not FrfcOptions.paper().skip_settled
     assert evomesh.FRFC_DEFAULTS["skip_settled"] is True
@@ -302,7 +350,126 @@ def test_empty_scope_declines_where_a_certificate_fails():
             full = evomesh.evolve(mesh, d, seed=3, incremental=False, **options)
         assert fast.stats["empty_scope"] == 0 and fast.stats["empty_scope_declined_by"] == certificate, name
         assert_same_step(fast, full)
-    # curved boundaries are never certified (the step fits points to the curves)
+
+
+def test_empty_scope_on_curved_boundaries():
+    # the full step fits to the curves only the points it creates: on its own
+    # fixed point, none; the empty scope returns the same bits
     make, size, curves = CASES["curved"]
-    new = evomesh.evolve(make(), size=size, geometry=curves)
-    assert evomesh.evolve(new, 1.0, geometry=curves).stats["empty_scope"] == 0
+    new = evomesh.evolve(evomesh.evolve(make(), size=size, geometry=curves), size=size, geometry=curves)
+    fast = evomesh.evolve(new, 1.0, geometry=curves, seed=4)
+    full = evomesh.evolve(new, 1.0, geometry=curves, seed=4, incremental=False)
+    assert fast.stats["empty_scope"] == 1 and full.stats["unchanged"] == 1
+    assert_same_step(fast, full)
+    assert_same_step(evomesh.evolve(new, size=size, geometry=curves, seed=5),
+                     evomesh.evolve(new, size=size, geometry=curves, seed=5, incremental=False))
+    # a geometry the full step refuses (C14): left to it, which says why
+    for geometry in ({**curves, 99: Circle((0, 0), 2.0)},  # a tag no segment has
+                     {**curves, HOLE_TAG: lambda x: x[:0]}):  # a projection that loses points
+        for incremental in (True, False):
+            with pytest.raises(ValueError, match="geometry|curve"):
+                evomesh.evolve(new, 1.0, geometry=geometry, incremental=incremental)
+
+
+# Holes and non-convex domains: the certificate reads the domain from the
+# input's boundary (empty_scope.cpp, C5 and C6), not from its convex hull.
+SQUARE = np.array([(0, 0), (1, 0), (1, 1), (0, 1)], float)
+
+
+def ring(centre, radius, k, phase=0.0):
+    angle = phase + np.linspace(0, 2 * np.pi, k, endpoint=False)
+    return np.asarray(centre, float) + radius * np.c_[np.cos(angle), np.sin(angle)]
+
+
+DOMAINS = {
+    "disc with a hole": lambda: disc_with_hole_mesh(0.05),
+    "square with two holes": lambda: polygon_mesh([SQUARE, ring((0.3, 0.3), 0.12, 24), ring((0.7, 0.65), 0.15, 5)],
+                                                  0.04),
+    "L-shape": lambda: polygon_mesh([np.array([(0, 0), (1, 0), (1, 0.5), (0.5, 0.5), (0.5, 1), (0, 1)], float)],
+                                    0.04),
+    "star with a triangular hole": lambda: polygon_mesh([ring((0, 0), 1.0, 10) * np.tile([1.0, 0.45], 5)[:, None],
+                                                         ring((0, 0), 0.2, 3)], 0.06),
+    "a notch": lambda: polygon_mesh([np.array([(0, 0), (1, 0), (1, 1), (0.52, 1), (0.5, 0.4), (0.48, 1), (0, 1)],
+                                              float)], 0.05),
+}
+
+
+def settled(mesh: evomesh.Mesh, size) -> evomesh.Mesh:
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", evomesh.QualityWarning)
+        return evomesh.evolve(evomesh.evolve(mesh, size=size), size=size)
+
+
+@pytest.mark.parametrize("domain", sorted(DOMAINS))
+def test_empty_scope_on_holes_and_non_convex_domains(domain):
+    size = 0.03 if domain != "a notch" else 0.05
+    new = settled(DOMAINS[domain](), size)
+    fast = evomesh.evolve(new, 1.0, seed=7)
+    full = evomesh.evolve(new, 1.0, seed=7, incremental=False)
+    assert_same_step(fast, full)
+    assert full.stats["unchanged"] == 1
+    if domain == "a notch":
+        # across a thin notch the nn spacing within the domain is not the
+        # plain one (C7): the full step runs, and returns the mesh all the same
+        assert fast.stats["empty_scope"] == 0 and fast.stats["empty_scope_declined_by"] == 7
+        return
+    assert fast.stats["empty_scope"] == 1
+    # the same size again, and a user's mesh with the same arrays
+    assert_same_step(evomesh.evolve(new, size=size, seed=8), evomesh.evolve(new, size=size, seed=8, incremental=False))
+    user = rebuilt(new)
+    fast, full = evomesh.evolve(user, 1.0), evomesh.evolve(user, 1.0, incremental=False)
+    assert fast.stats["empty_scope"] == 1
+    assert_same_step(fast, full)
+
+
+@st.composite
+def polygons_with_holes(draw):
+    """A star-shaped polygon (jittered angles, radii 0.4-1: reflex corners, small
+    angles) and, half the time, a regular hole of 3-8 corners around its centre."""
+    k = draw(st.integers(5, 12))
+    jitter = np.array(draw(st.lists(st.floats(-0.3, 0.3), min_size=k, max_size=k)))
+    radius = np.array(draw(st.lists(st.floats(0.4, 1.0), min_size=k, max_size=k)))
+    angle = (np.arange(k) + jitter) * 2 * np.pi / k
+    loops = [radius[:, None] * np.c_[np.cos(angle), np.sin(angle)]]
+    if draw(st.booleans()):
+        loops.append(ring((0, 0), 0.2, draw(st.integers(3, 8)), draw(st.floats(0, 1))))
+    return loops, draw(st.floats(0.03, 0.08))
+
+
+@settings(max_examples=12)
+@given(polygons_with_holes())
+def test_empty_scope_equals_the_full_step_on_random_domains(case):
+    loops, size = case
+    new = settled(polygon_mesh(loops, size), size)
+    fast = evomesh.evolve(new, 1.0)
+    full = evomesh.evolve(new, 1.0, incremental=False)
+    assert_same_step(fast, full)
+    if fast.stats["empty_scope"] == 0:  # (the boundary certificates hold on any valid Mesh)
+        assert fast.stats["empty_scope_declined_by"] not in (3, 4, 5)
+
+
+def test_empty_scope_declines_on_holes_where_a_certificate_fails():
+    new = settled(DOMAINS["square with two holes"](), 0.03)
+    delta = np.ones(new.n_points)
+    delta[new.n_points // 3] = 1.05
+    mutants = {
+        "a flipped edge (not Delaunay)": (rebuilt(new, triangles=flip_one_edge(new)), 1.0, 11),
+        "an angle below min_angle": (rebuilt(new, points=squeeze_one_angle(new)), 1.0, 13),
+        "one point asks for a change": (new, delta, 1),
+    }
+    for name, (mesh, d, certificate) in mutants.items():
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", evomesh.QualityWarning)
+            fast = evomesh.evolve(mesh, d, seed=3)
+            full = evomesh.evolve(mesh, d, seed=3, incremental=False)
+        assert fast.stats["empty_scope"] == 0 and fast.stats["empty_scope_declined_by"] == certificate, name
+        assert_same_step(fast, full)
+    # a hole's segments given backwards: Mesh() orients them (domain on the
+    # left), the same mesh, certified
+    s = np.array(new.segments)
+    hole = np.asarray(new.segment_tags) == 1
+    s[hole] = s[hole][:, ::-1]
+    backwards = evomesh.Mesh(new.points, new.triangles, s, segment_tags=new.segment_tags)
+    fast, full = evomesh.evolve(backwards, 1.0), evomesh.evolve(backwards, 1.0, incremental=False)
+    assert fast.stats["empty_scope"] == 1
+    assert_same_step(fast, full)

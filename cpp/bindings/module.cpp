@@ -18,6 +18,7 @@
 #include "evomesh/packing.hpp"
 #include "evomesh/parallel.hpp"
 #include "evomesh/quality_pass.hpp"
+#include "evomesh/size_request.hpp"
 #include "evomesh/spacing.hpp"
 #include "evomesh/step.hpp"
 #include "evomesh/triangulation.hpp"
@@ -520,6 +521,41 @@ PYBIND11_MODULE(_core, m) {
       "nn_M: the distance from every point to the nearest other point; with the triangles, within the domain "
       "(a point whose nearest point is no edge neighbour gets its shortest edge, local_feature_size.hpp). "
       "`euclidean`: the Euclidean distances if already known.");
+
+  m.def(
+      "edge_over_size_around",
+      [](const Float_array& points, const Int_array& triangles, const Float_array& h) {
+        auto [pts, tris] = to_points_and_triangles(points, triangles);
+        auto values = to_vector<double>(h);
+        if (values.size() != pts.size()) throw Input_error("h: one value per point");
+        std::vector<double> around;
+        {
+          py::gil_scoped_release release;
+          around = edge_over_size_around(pts, tris, values);
+        }
+        return vector_array(around);
+      },
+      py::arg("points"), py::arg("triangles"), py::arg("h"),
+      "L(p) of delta_from_size: the mean of edge length over the request h around each point (size_request.hpp).");
+
+  m.def(
+      "near_seeds",
+      [](const Int_array& triangles, const Byte_array& points, const Byte_array& seeds, int rings) {
+        auto tris = to_index_rows<3>(triangles, "triangles");
+        auto marked = to_vector<std::uint8_t>(points);
+        auto from = to_vector<std::uint8_t>(seeds);
+        if (marked.size() != from.size()) throw Input_error("points and seeds: one value per point each");
+        require_indices(tris, marked.size(), "triangles");
+        if (rings < 0) throw Input_error("rings must be >= 0");
+        std::vector<std::uint8_t> near;
+        {
+          py::gil_scoped_release release;
+          near = near_seeds(tris, marked, from, rings);
+        }
+        return vector_array(near);
+      },
+      py::arg("triangles"), py::arg("points"), py::arg("seeds"), py::arg("rings"),
+      "Of the marked points, those within `rings` edges of a seed (uint8 mask; size_request.hpp).");
 
   m.def(
       "nn_within_domain",

@@ -101,30 +101,6 @@ def _size_values(mesh: Mesh, size: Any) -> NDArray[np.float64]:
     return h
 
 
-def _neighbourhood_mean(triangles: np.ndarray, corners_at: np.ndarray, values: np.ndarray) -> np.ndarray:
-    """The mean of `values` over p and the points that share a triangle with p
-    (each counted once per triangle shared); corners_at: triangles per point."""
-    total = np.bincount(triangles.ravel(), np.repeat(values[triangles].sum(axis=1), 3), len(values))
-    with np.errstate(invalid="ignore", divide="ignore"):
-        return total / (3 * corners_at)
-
-
-def _near(triangles: np.ndarray, seeds: np.ndarray, rings: int) -> np.ndarray:
-    """The points within `rings` edges of a seed."""
-    near = seeds.copy()
-    for _ in range(rings):
-        near[triangles[near[triangles].any(axis=1)].ravel()] = True
-    return near
-
-
-def _near_only(triangles: np.ndarray, points: np.ndarray, seeds: np.ndarray, rings: int) -> np.ndarray:
-    """Of `points`, those within `rings` edges of a seed; the search runs on the
-    triangles within `rings` edges of `points` only (few, where this is asked)."""
-    region = _near(triangles, points, rings - 1) if rings > 0 else points
-    around = triangles[region[triangles].any(axis=1)]
-    return points & _near(around, seeds, rings)
-
-
 def delta_from_size(mesh: Mesh, size: ArrayLike | Callable[[np.ndarray], ArrayLike], *,
                     keep_fine_clusters: bool = True) -> NDArray[np.float64]:
     """The relative factor delta(p) that :func:`evomesh.evolve` uses for ``size=h``.
@@ -183,20 +159,12 @@ def delta_from_size(mesh: Mesh, size: ArrayLike | Callable[[np.ndarray], ArrayLi
     _require_mesh(mesh)
     points = np.asarray(mesh.points)
     triangles = np.asarray(mesh.triangles)
-    n = mesh.n_points
     h = _size_values(mesh, size)
-    following = triangles[:, [1, 2, 0]]  # edge k of a triangle: from corner k to corner k + 1
-    x, y = np.ascontiguousarray(points[:, 0]), np.ascontiguousarray(points[:, 1])  # (gathers of one column are fast)
-    length = np.hypot(x[following] - x[triangles], y[following] - y[triangles])
-    # each edge against the request at its midpoint (h taken as linear along it)
-    ratio = length / (h[0] if (h == h[0]).all() else 0.5 * (h[triangles] + h[following]))
-    # The mean over the edges at p, each counted once per triangle corner at p
-    # (corner k lies on edges k and k - 1; an interior edge counts twice), then
-    # over p and its neighbours: L(p).
-    corners_at = np.bincount(triangles.ravel(), minlength=n)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        edge_over_size = np.bincount(triangles.ravel(), (ratio + ratio[:, [2, 0, 1]]).ravel(), n) / (2 * corners_at)
-    local = _neighbourhood_mean(triangles, corners_at, edge_over_size)
+    # L(p): each edge against the request at its midpoint (h taken as linear
+    # along it), the mean over the edges at p (each counted once per triangle
+    # corner at p: an interior edge twice), then over p and its neighbours; in
+    # the core (size_request.hpp), with the bits of the numpy sums it replaced.
+    local = _core.edge_over_size_around(points, triangles, h)
     nn = mesh.nn_spacing
     with np.errstate(over="ignore"):
         refine = h / (_EDGE_OVER_NN_REFINED * nn)
@@ -204,7 +172,8 @@ def delta_from_size(mesh: Mesh, size: ArrayLike | Callable[[np.ndarray], ArrayLi
     too_coarse = (local > _COARSE_TOLERANCE) & (refine < _REFINE_BELOW)
     too_fine = local < 1 / _FINE_TOLERANCE
     if too_fine.any() and keep_fine_clusters:
-        too_fine &= ~_near_only(triangles, too_fine, local >= 1 / _MEETS, _CLEARANCE_RINGS)
+        # (near_seeds in the core: the points within the rings of a seed)
+        too_fine &= ~_core.near_seeds(triangles, too_fine, local >= 1 / _MEETS, _CLEARANCE_RINGS).view(bool)
     delta = np.where(too_coarse, refine, np.where(too_fine, coarsen, 1.0))
     bad = (delta < DELTA_MIN) | (delta > DELTA_MAX)
     if bad.any():

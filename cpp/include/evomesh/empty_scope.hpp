@@ -20,8 +20,12 @@ namespace evomesh {
 
 // frfc(mesh, delta, options) bit for bit (but the stats: "empty_scope" = 1),
 // or nullopt when the certificate does not hold; then `declined_by` (optional)
-// receives the number of the first certificate that failed (C0-C13 in
-// empty_scope.cpp; 0: the options, curves; 1: delta != 1 somewhere).
+// receives the number of the first certificate that failed (C0-C14 in
+// empty_scope.cpp; 0: the options; 1: delta != 1 somewhere; 4: the segments
+// against the triangles; 5: the boundary loops do not bound M alone; 6: a
+// hidden side of a boundary edge encroaches it; 14: the geometry (curves)
+// refused). Meshes with holes, non-convex domains and curved boundaries are
+// certified as convex uncurved ones are.
 // Preconditions: those of frfc (check_delta, options.validate()).
 std::optional<Evolve_result> empty_scope_frfc(const Mesh_arrays& mesh, const std::vector<double>& delta,
                                               const Frfc_options& options, int* declined_by = nullptr);
