@@ -458,3 +458,10 @@ def test_gather_of_an_invalid_mesh_raises_on_every_rank():
     e = evomesh.DistributedMesh.from_local(comm=COMM, owners=owners, **pieces)
     message = raises_everywhere(ValueError, e.gather)
     assert "not used by any triangle" in message
+
+
+def test_evolve_refuses_a_distributed_mesh_with_the_way_round():
+    mesh = unit_square_mesh(300)
+    d = evomesh.DistributedMesh.scatter(mesh if RANK == 0 else None, COMM)
+    with pytest.raises(TypeError, match="not available yet"):
+        evomesh.evolve(d, 1.0)

@@ -420,6 +420,11 @@ def evolve(mesh: Mesh, delta: Any = None, *, size: Any = None, method: str = "fr
         :func:`evomesh.motion.move` (NaN/inf values, points moved out of the
         domain, crossing boundaries). The input is never modified.
     """
+    if type(mesh).__name__ == "DistributedMesh":  # (not imported here: mpi4py is optional)
+        raise TypeError(
+            "evolve runs on one process: a step on an evomesh.DistributedMesh is not available yet; "
+            "gather() the mesh, evolve it on the root, and scatter() the result (docs/distributed-step.md)"
+        )
     _require_mesh(mesh)
     if (delta is None) == (size is None):
         raise TypeError(
