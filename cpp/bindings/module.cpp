@@ -7,6 +7,7 @@
 #include <algorithm>
 #include <cmath>
 #include <memory>
+#include <cstdlib>
 #include <cstring>
 #include <optional>
 
@@ -20,6 +21,7 @@
 #include "evomesh/quality_pass.hpp"
 #include "evomesh/spacing.hpp"
 #include "evomesh/step.hpp"
+#include "evomesh/step_context.hpp"
 #include "evomesh/triangulation.hpp"
 
 #include "numpy_arrays.hpp"
@@ -29,6 +31,22 @@ using namespace evomesh;
 using namespace evomesh::bindings;
 
 namespace {
+
+// The only place where a step's context meets the environment (step_context.hpp):
+// EVOMESH_STAGE_PROFILE (set, not "0": per-stage memory and CPU stats) and
+// EVOMESH_SITE_FILTER ("0": keep hidden sites, for benchmarks), read at every call.
+bool stage_profile_requested() {
+  const char* value = std::getenv("EVOMESH_STAGE_PROFILE");
+  return value != nullptr && std::string(value) != "0";
+}
+
+Step_context step_context_from_environment(int threads) {
+  Step_context context = Step_context::from_threads(threads);
+  context.profile = stage_profile_requested();
+  const char* filter = std::getenv("EVOMESH_SITE_FILTER");
+  context.filter_sites = filter == nullptr || std::string(filter) != "0";
+  return context;
+}
 
 
 void require_shape(const py::array& a, py::ssize_t cols, const char* name) {
@@ -339,7 +357,8 @@ void bind_options(py::module_& m) {
 // One step on a mesh given as arrays (frfc, drfc, drfc_refine): the GIL is
 // released while `run` works; `to_dict` turns its result into a dict.
 template <class Options, class Result, class To_dict>
-void bind_step(py::module_& m, const char* name, Result (*run)(const Mesh_arrays&, const std::vector<double>&, const Options&),
+void bind_step(py::module_& m, const char* name,
+               Result (*run)(const Mesh_arrays&, const std::vector<double>&, const Options&, const Step_context&),
                To_dict to_dict, const char* doc) {
   m.def(
       name,
@@ -354,10 +373,11 @@ void bind_step(py::module_& m, const char* name, Result (*run)(const Mesh_arrays
         add_known_nn(mesh, nn, nn_grew);
         mesh.geometry = to_geometry(curved_tags, corner_angle, project);
         auto d = to_vector<double>(delta);
+        const Step_context context = step_context_from_environment(options.threads);
         Result r;
         {
           py::gil_scoped_release release;
-          r = run(mesh, d, options);
+          r = run(mesh, d, options, context);
         }
         return to_dict(r);
       },
@@ -398,7 +418,7 @@ PYBIND11_MODULE(_core, m) {
         std::vector<std::pair<std::string, double>> seconds;
         {
           py::gil_scoped_release release;
-          detail::Stage_timer timer(seconds);
+          detail::Stage_timer timer(seconds, stage_profile_requested());
           flipped = orient_triangles(mesh.points, mesh.triangles);
           timer.lap("orient");
           build_segments(mesh, user);

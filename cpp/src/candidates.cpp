@@ -335,7 +335,7 @@ Candidates interior_candidates(const Mesh_arrays& mesh, const Triangle_fans& fan
   n_drawn = 0;
   // Grid samples, then ring candidates, in blocks joined once (join_samples).
   std::vector<Sample_set> blocks = sample_triangle_blocks(mesh, f, options.cell_factor, options.samples, options.seed,
-                                                          skip, cover, options.threads, &n_drawn,
+                                                          skip, cover, /*threads=*/0, &n_drawn,
                                                           options.adaptive_cells, queries);
   std::size_t n_grid = 0;
   for (const Sample_set& block : blocks) n_grid += block.points.size();
@@ -350,7 +350,7 @@ Candidates interior_candidates(const Mesh_arrays& mesh, const Triangle_fans& fan
                                      ? 0.5 * (near + ring_reach(options.radius_scale))
                                      : ring_reach(options.radius_scale);
     add_interior_ring_samples(mesh, fans, delta, f, ring_reach(options.radius_scale), demoted_reach, demoted,
-                              options.seed, cover, options.threads, blocks, ring_round);
+                              options.seed, cover, /*threads=*/0, blocks, ring_round);
   }
   Candidates inside;
   inside.samples = join_samples(blocks);
@@ -378,10 +378,10 @@ void candidate_radii(const Mesh_arrays& mesh, const Spacing_function& spacing, c
   detail::parallel_resize(candidates.radius, m);
   double* out = candidates.radius.data();
   if (options.radius != Radius_rule::cheap) {
-    spacing.evaluate(samples.points.data(), m, out, nullptr, options.threads, /*certified=*/false);
+    spacing.evaluate(samples.points.data(), m, out, nullptr, /*threads=*/0, /*certified=*/false);
     if (options.radius == Radius_rule::interpolated && !demoted.empty()) {
       constexpr std::size_t kBlock = 1 << 16;
-      parallel_for((m + kBlock - 1) / kBlock, options.threads, [&](std::size_t b) {
+      parallel_for((m + kBlock - 1) / kBlock, /*threads=*/0, [&](std::size_t b) {
         for (std::size_t j = b * kBlock; j < std::min(m, (b + 1) * kBlock); ++j) {
           const Vec2& x = samples.points[j];
           double linear;

@@ -279,7 +279,8 @@ int triangles_certified(const Mesh_arrays& mesh, const Edge_table& table, const 
 }  // namespace
 
 std::optional<Evolve_result> empty_scope_frfc(const Mesh_arrays& mesh, const std::vector<double>& delta,
-                                              const Frfc_options& options, int* declined_by) {
+                                              const Frfc_options& options, const Step_context& context,
+                                              int* declined_by) {
   const std::size_t n = mesh.points.size();
   auto decline = [declined_by](int certificate) {
     if (declined_by != nullptr) *declined_by = certificate;
@@ -291,8 +292,8 @@ std::optional<Evolve_result> empty_scope_frfc(const Mesh_arrays& mesh, const std
     if (d != 1) return decline(1);
   }
   Evolve_result result;
-  Stage_timer timer(result.stats);
-  const Thread_limit thread_limit(options.threads);  // (step_weights' trees, as in the full step)
+  Stage_timer timer(result.stats, context.profile);
+  const Thread_limit thread_limit(context.threads);  // (step_weights' trees, as in the full step)
   // C2-C6, C11-C13: the triangulation is the step's triangulation, untouched
   // by the quality pass. O(n) over the directed edges.
   Edge_table table;

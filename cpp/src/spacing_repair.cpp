@@ -150,7 +150,7 @@ std::vector<Vec2> repair_spacing(const Spacing_repair_input& input, const Frfc_o
   const std::uint64_t seed = options.seed;
   const double repair_ratio = options.ring_samples ? options.repair_ratio : 0.0;
   const double gap_repair_ratio = options.gap_repair_ratio;
-  const int threads = options.threads;
+  const int threads = 0;  // the step's Thread_limit (Step_context::threads)
   using Delaunay = CGAL::Delaunay_triangulation_2<Kernel>;
   const std::size_t n = mesh.points.size();
   n_added = 0;
