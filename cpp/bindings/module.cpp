@@ -14,6 +14,7 @@
 #include "evomesh/boundary_geometry.hpp"
 #include "evomesh/drfc.hpp"
 #include "evomesh/frfc.hpp"
+#include "evomesh/global_ids.hpp"
 #include "evomesh/local_feature_size.hpp"
 #include "evomesh/options.hpp"
 #include "evomesh/packing.hpp"
@@ -354,6 +355,18 @@ void bind_options(py::module_& m) {
 
 }  // namespace
 
+// Global ids of a step's input (Mesh_arrays::point_gids, ...; None: the
+// positions), for a caller that holds part of a larger mesh (issue 29).
+void add_global_ids(Mesh_arrays& mesh, const std::optional<Int_array>& point_gids,
+                    const std::optional<Int_array>& triangle_gids, const std::optional<Int_array>& segment_keys) {
+  if (point_gids) mesh.point_gids = to_vector<std::int64_t>(*point_gids);
+  if (triangle_gids) mesh.triangle_gids = to_vector<std::int64_t>(*triangle_gids);
+  if (segment_keys) mesh.segment_keys = to_vector<std::int64_t>(*segment_keys);
+  check_global_ids(mesh.point_gids, mesh.points.size(), "point_gids");
+  check_global_ids(mesh.triangle_gids, mesh.triangles.size(), "triangle_gids");
+  check_global_ids(mesh.segment_keys, mesh.segments.size(), "segment_keys");
+}
+
 // One step on a mesh given as arrays (frfc, drfc, drfc_refine): the GIL is
 // released while `run` works; `to_dict` turns its result into a dict.
 template <class Options, class Result, class To_dict>
@@ -367,10 +380,13 @@ void bind_step(py::module_& m, const char* name,
                      const Options& options, std::optional<Int_array> segment_tags,
                      std::optional<Int_array> triangle_tags, std::optional<Byte_array> required,
                      std::optional<Int_array> curved_tags, double corner_angle, std::optional<py::function> project,
-                     std::optional<Float_array> nn, std::optional<Int_array> nn_grew) {
+                     std::optional<Float_array> nn, std::optional<Int_array> nn_grew,
+                     std::optional<Int_array> point_gids, std::optional<Int_array> triangle_gids,
+                     std::optional<Int_array> segment_keys) {
         Mesh_arrays mesh = to_mesh(points, triangles, segments, segment_is_boundary, kind);
         add_labels(mesh, segment_tags, triangle_tags, required);
         add_known_nn(mesh, nn, nn_grew);
+        add_global_ids(mesh, point_gids, triangle_gids, segment_keys);
         mesh.geometry = to_geometry(curved_tags, corner_angle, project);
         auto d = to_vector<double>(delta);
         const Step_context context = step_context_from_environment(options.threads);
@@ -385,7 +401,9 @@ void bind_step(py::module_& m, const char* name,
       py::arg("kind"), py::arg("delta"), py::arg("options") = Options::recommended(),
       py::arg("segment_tags") = py::none(), py::arg("triangle_tags") = py::none(), py::arg("required") = py::none(),
       py::arg("curved_tags") = py::none(), py::arg("corner_angle") = kDefaultCornerAngle,
-      py::arg("project") = py::none(), py::arg("nn") = py::none(), py::arg("nn_grew") = py::none(), doc);
+      py::arg("project") = py::none(), py::arg("nn") = py::none(), py::arg("nn_grew") = py::none(),
+      py::arg("point_gids") = py::none(), py::arg("triangle_gids") = py::none(), py::arg("segment_keys") = py::none(),
+      doc);
 }
 
 PYBIND11_MODULE(_core, m) {

@@ -1,5 +1,7 @@
 #include "evomesh/candidates.hpp"
 
+#include "evomesh/global_ids.hpp"
+
 #include <algorithm>
 #include <cmath>
 #include <limits>
@@ -43,10 +45,12 @@ void add_interior_ring_samples(const Mesh_arrays& mesh, const Triangle_fans& fan
   const std::size_t first = blocks.size();
   blocks.resize(first + n_blocks);
   std::vector<std::vector<std::int8_t>> rounds(n_blocks);
+  const std::vector<Index> by_id = order_by_ids(mesh.point_gids);  // (points in the order of their ids)
   parallel_for(n_blocks, threads, [&](std::size_t b) {
     std::array<Ring_candidate, kRingDirections> ring;
     Sample_set& out = blocks[first + b];
-    for (std::size_t p = b * kBlock; p < std::min(n, (b + 1) * kBlock); ++p) {
+    for (std::size_t r = b * kBlock; r < std::min(n, (b + 1) * kBlock); ++r) {
+      const std::size_t p = visit(by_id, r);
       if (!(delta[p] < 1)) continue;
       const double d = !demoted.empty() && demoted[p] ? demoted_reach : reach;
       const int count = ring_candidates_of(mesh, fans, f, d, seed, p, ring);
@@ -123,8 +127,9 @@ void add_segment_ring_samples(const Mesh_arrays& mesh, const std::vector<double>
   }
   std::vector<std::size_t> order(all.size());
   for (std::size_t i = 0; i < order.size(); ++i) order[i] = i;
+  // (segments in the order of their keys, as sample_segments visits them)
   std::sort(order.begin(), order.end(), [&](std::size_t i, std::size_t j) {
-    if (all[i].first != all[j].first) return all[i].first < all[j].first;
+    if (all[i].first != all[j].first) return mesh.segment_key(all[i].first) < mesh.segment_key(all[j].first);
     if (all[i].second != all[j].second) return all[i].second < all[j].second;
     return i < j;
   });
@@ -212,7 +217,7 @@ int ring_candidates_of(const Mesh_arrays& mesh, const Triangle_fans& fans, const
   constexpr double kTwoPi = 6.283185307179586;
   const Vec2& c = mesh.points[p];
   const double d = reach * f[p];
-  Random_stream rng(seed, (std::uint64_t{3} << 61) + p);
+  Random_stream rng(seed, (std::uint64_t{3} << 61) + static_cast<std::uint64_t>(mesh.point_gid(p)));
   const double phase = rng.uniform() * kTwoPi / kRingDirections;
   int count = 0;
   for (int k = 0; k < kRingDirections; ++k) {

@@ -1,10 +1,12 @@
 #include "evomesh/frfc.hpp"
 
+#include <algorithm>
 #include <optional>
 #include <utility>
 
 #include "evomesh/candidates.hpp"
 #include "evomesh/empty_scope.hpp"
+#include "evomesh/global_ids.hpp"
 #include "evomesh/packing.hpp"
 #include "evomesh/parallel.hpp"
 #include "evomesh/sampling.hpp"
@@ -45,10 +47,22 @@ Packing first_packing_pass(const Mesh_arrays& mesh, const std::vector<double>& f
   }
   const auto segment_classes = on_segments.classes(/*on_segment=*/true);
   classes.insert(classes.end(), segment_classes.begin(), segment_classes.end());
-  packing.first_order = packing_order(classes, packing.radius);
+  // Ties in (class, radius): input points by global id, then the segment
+  // candidates, which come in the order of their segments' keys (sample_segments).
+  std::vector<Index> tie_order = order_by_ids(mesh.point_gids);
+  if (!tie_order.empty()) {
+    tie_order.reserve(packing.centers.size());
+    for (std::size_t j = mesh.points.size(); j < packing.centers.size(); ++j) tie_order.push_back(static_cast<Index>(j));
+  }
+  packing.first_order = packing_order(classes, packing.radius, tie_order);
   packing.kept = lexical_first_mis(packing.centers, packing.radius, packing.first_order, n_forced, &packing.blocker,
                                     /*threads=*/0);
   defer_demoted_points(classes, mesh.points.size(), packing);
+  if (!mesh.point_gids.empty()) {
+    // (the second pass breaks their ties by position in this list)
+    std::sort(packing.deferred.begin(), packing.deferred.end(),
+              [&](Index a, Index b) { return mesh.point_gids[a] < mesh.point_gids[b]; });
+  }
   return packing;
 }
 
@@ -167,6 +181,14 @@ std::vector<Constraint_piece> pieces_along_chains(const Mesh_arrays& mesh, const
   std::vector<Index> begin(mesh.segments.size() + 1, 0);
   for (Index parent : on_segments.samples.parent) ++begin[parent + 1];
   for (std::size_t s = 0; s < mesh.segments.size(); ++s) begin[s + 1] += begin[s];
+  if (!mesh.segment_keys.empty()) {
+    // The segments' runs of candidates come in key order (sample_segments): laid out by position here.
+    const std::size_t n = mesh.points.size();
+    std::vector<Index> by_position(on_segments.size());
+    std::vector<Index> next(begin.begin(), begin.end() - 1);
+    for (std::size_t j = 0; j < on_segments.size(); ++j) by_position[next[on_segments.samples.parent[j]]++] = out_index[n + j];
+    return constraint_pieces(chains, out_index, begin, by_position);
+  }
   for (Index& b : begin) b += static_cast<Index>(mesh.points.size());
   return constraint_pieces(chains, out_index, begin, out_index);
 }

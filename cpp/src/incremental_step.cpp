@@ -424,7 +424,8 @@ double coordinate_magnitude(const std::vector<Vec2>& points) {
 }  // namespace
 
 bool incremental_applies(const Mesh_arrays& mesh, const std::vector<double>& delta, const Frfc_options& options) {
-  if (mesh.geometry || !options.filter_samples) return false;
+  // (with global ids, the full step: the scope's passes do not key their ties by them yet)
+  if (mesh.geometry || !options.filter_samples || mesh.has_global_ids()) return false;
   std::size_t n_active = 0;
   for (double d : delta) n_active += d != 1;
   return static_cast<double>(n_active) <= kMaxActiveShare * static_cast<double>(mesh.points.size());

@@ -123,7 +123,8 @@ Step_spacing step_spacing(const Mesh_arrays& mesh, const std::vector<double>& de
   // Sites hidden by a mesh neighbour are left out of the Apollonius graph (issue
   // 13; f is the same). Step_context::filter_sites = false keeps them, for benchmarks only.
   spacing.function =
-      std::make_unique<Spacing_function>(mesh.points, weight, 0, filter_sites ? &mesh.triangles : nullptr);
+      std::make_unique<Spacing_function>(mesh.points, weight, 0, filter_sites ? &mesh.triangles : nullptr,
+                                         &mesh.point_gids);
   timer.lap("apollonius");
   auto& f = spacing.f;
   f.resize(n);
