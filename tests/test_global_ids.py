@@ -26,7 +26,7 @@ from strategies import grid_mesh
 
 def _constrained_mesh(nx: int, ny: int, shape: str, jitter: float, seed: int) -> evomesh.Mesh:
     """A grid mesh (square, with a hole, or L-shaped) with a few interior constraint
-    edges, segment tags and two triangle regions."""
+    edges, segment tags, two triangle regions and two required points."""
     base = grid_mesh(nx, ny, jitter=jitter, seed=seed, hole=shape == "hole", notch=shape == "notch")
     tris = base.triangles
     e = np.sort(np.concatenate([tris[:, [0, 1]], tris[:, [1, 2]], tris[:, [2, 0]]]), axis=1)
@@ -40,7 +40,10 @@ def _constrained_mesh(nx: int, ny: int, shape: str, jitter: float, seed: int) ->
     segment_tags = rng.integers(1, 4, len(segments))
     centroid_x = base.points[tris].mean(axis=1)[:, 0]
     triangle_tags = np.where(centroid_x < 0.5, 1, 2)
-    return evomesh.Mesh(base.points, tris, segments, segment_tags=segment_tags, triangle_tags=triangle_tags)
+    required = np.zeros(base.n_points, bool)
+    required[rng.choice(base.n_points, 2, replace=False)] = True
+    return evomesh.Mesh(base.points, tris, segments, segment_tags=segment_tags, triangle_tags=triangle_tags,
+                        required=required)
 
 
 def _arrays(mesh: evomesh.Mesh) -> dict[str, np.ndarray]:
@@ -52,13 +55,15 @@ def _arrays(mesh: evomesh.Mesh) -> dict[str, np.ndarray]:
         "kind": mesh.kind,
         "segment_tags": mesh.segment_tags,
         "triangle_tags": mesh.triangle_tags,
+        "required": mesh.required.astype(np.uint8),
     }
 
 
 def _step(arrays: dict[str, np.ndarray], delta: np.ndarray, options, **ids) -> dict:
     a = arrays
     return _core.frfc(a["points"], a["triangles"], a["segments"], a["segment_is_boundary"], a["kind"], delta,
-                      options, segment_tags=a["segment_tags"], triangle_tags=a["triangle_tags"], **ids)
+                      options, segment_tags=a["segment_tags"], triangle_tags=a["triangle_tags"],
+                      required=a["required"], **ids)
 
 
 def _permuted(arrays: dict[str, np.ndarray], rng: np.random.Generator):
@@ -79,6 +84,7 @@ def _permuted(arrays: dict[str, np.ndarray], rng: np.random.Generator):
         "kind": arrays["kind"][point_order],
         "segment_tags": arrays["segment_tags"][segment_order],
         "triangle_tags": arrays["triangle_tags"][triangle_order],
+        "required": arrays["required"][point_order],
     }
     ids = {"point_gids": point_order, "triangle_gids": triangle_order, "segment_keys": segment_order}
     return permuted, ids, point_order
