@@ -13,11 +13,11 @@
 
 namespace evomesh {
 
-// The positions 0 .. ids.size() - 1 sorted by id (ids distinct). Empty for
-// empty ids: the positions are the ids, and the identity is the order.
+// The positions 0 .. ids.size() - 1 sorted by id (ids distinct). Empty when
+// that is the identity (no ids, or increasing ones): visit() reads it so.
 inline std::vector<Index> order_by_ids(const std::vector<std::int64_t>& ids) {
   std::vector<Index> order;
-  if (ids.empty()) return order;
+  if (std::is_sorted(ids.begin(), ids.end())) return order;
   order.resize(ids.size());
   std::iota(order.begin(), order.end(), Index{0});
   std::sort(order.begin(), order.end(), [&](Index a, Index b) { return ids[a] < ids[b]; });
