@@ -171,6 +171,22 @@ def test_permuted_input_with_its_ids_gives_the_same_mesh(mesh, delta_kind, seed,
     assert len(reference["points"]) != mesh.n_points or not np.array_equal(reference["points"], mesh.points)
 
 
+def test_positions_as_ids_give_the_same_bits_in_drfc():
+    mesh = _constrained_mesh(10, 9, "hole", 0.0, 3)
+    a = _arrays(mesh)
+    delta = _delta(mesh, "front", 0)
+    ids = {"point_gids": np.arange(mesh.n_points), "triangle_gids": np.arange(mesh.n_triangles),
+           "segment_keys": np.arange(len(mesh.segments))}
+    results = [
+        _core.drfc(a["points"], a["triangles"], a["segments"], a["segment_is_boundary"], a["kind"], delta,
+                   evomesh.DrfcOptions(), segment_tags=a["segment_tags"], triangle_tags=a["triangle_tags"],
+                   required=a["required"], **extra)
+        for extra in ({}, ids)
+    ]
+    for name in ("points", "triangles", "segments", "kind", "origin"):
+        assert np.array_equal(results[0][name], results[1][name]), name
+
+
 def test_ids_change_the_draws():
     """The ids are what the streams read: other ids, other samples (the property above
     cannot hold by ignoring them)."""
