@@ -2,7 +2,8 @@
 
 The core keys by point, triangle and segment ids what it used to key by array
 position: the random streams of the samples, the packing's tie order, the spacing
-repair's order and phase, where chains start and the order of triangle fans. With the
+repair's order and phase, where chains start and the order of triangle fans (in the
+incremental step too). With the
 positions as ids the step gives exactly what it gave without them; and the same mesh
 stored in another array order, with the first order's positions as ids, gives the same
 output points, triangles, segments, tags and kinds. (Without the quality pass: its
@@ -169,6 +170,22 @@ def test_permuted_input_with_its_ids_gives_the_same_mesh(mesh, delta_kind, seed,
     assert _as_sets(result, ids["point_gids"]) == _as_sets(reference)
     # (and a real step: the reference refines or coarsens the mesh)
     assert len(reference["points"]) != mesh.n_points or not np.array_equal(reference["points"], mesh.points)
+
+
+@given(mesh=meshes_with_labels, seed=st.integers(0, 2**16), order_seed=st.integers(0, 2**16))
+def test_incremental_step_with_ids_matches_the_full_step(mesh, seed, order_seed):
+    """Where delta = 1 but near a few points the incremental step runs; with ids too,
+    its ties follow them, and it gives the full step's bits."""
+    permuted, ids, point_order = _permuted(_arrays(mesh), np.random.default_rng(order_seed))
+    delta = _delta(mesh, "local", seed)[point_order]
+    options = evomesh.FrfcOptions()
+    options.seed = seed
+    fast = _step(permuted, delta, options, **ids)
+    options.incremental = False
+    full = _step(permuted, delta, options, **ids)
+    assert fast["stats"]["incremental_step"] == 1 and full["stats"]["incremental_step"] == 0
+    for name in ("points", "triangles", "segments", "segment_tags", "triangle_tags", "kind", "origin"):
+        assert np.array_equal(fast[name], full[name]), name
 
 
 def test_positions_as_ids_give_the_same_bits_in_drfc():

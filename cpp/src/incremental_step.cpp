@@ -10,6 +10,7 @@
 
 #include "evomesh/candidates.hpp"
 #include "evomesh/detail/frfc_stages.hpp"
+#include "evomesh/global_ids.hpp"
 #include "evomesh/packing.hpp"
 #include "evomesh/parallel.hpp"
 #include "evomesh/sampling.hpp"
@@ -311,8 +312,15 @@ Packing first_pass_near(const Mesh_arrays& mesh, const std::vector<double>& f, c
     for (Index v : e) to_end = std::min(to_end, std::hypot(x[0] - mesh.points[v][0], x[1] - mesh.points[v][1]));
     add_near(x, to_end + 2 * on_segments.radius[j]);
   }
+  // Members in the full pass's tie order: input points by global id (index
+  // without ids), then the segment candidates (already in their keys' order).
   std::vector<Index> members;
-  for (std::size_t c = 0; c < n + n_seg; ++c) {
+  const std::vector<Index> by_id = order_by_ids(mesh.point_gids);
+  for (std::size_t r = 0; r < n; ++r) {
+    const std::size_t c = visit(by_id, r);
+    if (member[c]) members.push_back(static_cast<Index>(c));
+  }
+  for (std::size_t c = n; c < n + n_seg; ++c) {
     if (member[c]) members.push_back(static_cast<Index>(c));
   }
   n_packed = members.size();
@@ -334,8 +342,12 @@ Packing first_pass_near(const Mesh_arrays& mesh, const std::vector<double>& f, c
     packing.kept[members[k]] = kept[k];
     packing.blocker[members[k]] = blocker[k] < 0 ? -1 : members[blocker[k]];
   }
-  // As in first_packing_pass: demoted interior points go to the second pass.
+  // As in first_packing_pass: demoted interior points go to the second pass (by global id).
   defer_demoted_points(classes, n, packing);
+  if (!mesh.point_gids.empty()) {
+    std::sort(packing.deferred.begin(), packing.deferred.end(),
+              [&](Index a, Index b) { return mesh.point_gids[a] < mesh.point_gids[b]; });
+  }
   return packing;
 }
 
@@ -424,8 +436,7 @@ double coordinate_magnitude(const std::vector<Vec2>& points) {
 }  // namespace
 
 bool incremental_applies(const Mesh_arrays& mesh, const std::vector<double>& delta, const Frfc_options& options) {
-  // (with global ids, the full step: the scope's passes do not key their ties by them yet)
-  if (mesh.geometry || !options.filter_samples || mesh.has_global_ids()) return false;
+  if (mesh.geometry || !options.filter_samples) return false;
   std::size_t n_active = 0;
   for (double d : delta) n_active += d != 1;
   return static_cast<double>(n_active) <= kMaxActiveShare * static_cast<double>(mesh.points.size());
