@@ -7,12 +7,14 @@
 #include <algorithm>
 #include <cmath>
 #include <memory>
+#include <cstdlib>
 #include <cstring>
 #include <optional>
 
 #include "evomesh/boundary_geometry.hpp"
 #include "evomesh/drfc.hpp"
 #include "evomesh/frfc.hpp"
+#include "evomesh/global_ids.hpp"
 #include "evomesh/local_feature_size.hpp"
 #include "evomesh/options.hpp"
 #include "evomesh/packing.hpp"
@@ -21,6 +23,7 @@
 #include "evomesh/size_request.hpp"
 #include "evomesh/spacing.hpp"
 #include "evomesh/step.hpp"
+#include "evomesh/step_context.hpp"
 #include "evomesh/triangulation.hpp"
 
 #include "numpy_arrays.hpp"
@@ -30,6 +33,22 @@ using namespace evomesh;
 using namespace evomesh::bindings;
 
 namespace {
+
+// The only place where a step's context meets the environment (step_context.hpp):
+// EVOMESH_STAGE_PROFILE (set, not "0": per-stage memory and CPU stats) and
+// EVOMESH_SITE_FILTER ("0": keep hidden sites, for benchmarks), read at every call.
+bool stage_profile_requested() {
+  const char* value = std::getenv("EVOMESH_STAGE_PROFILE");
+  return value != nullptr && std::string(value) != "0";
+}
+
+Step_context step_context_from_environment(int threads) {
+  Step_context context = Step_context::from_threads(threads);
+  context.profile = stage_profile_requested();
+  const char* filter = std::getenv("EVOMESH_SITE_FILTER");
+  context.filter_sites = filter == nullptr || std::string(filter) != "0";
+  return context;
+}
 
 
 void require_shape(const py::array& a, py::ssize_t cols, const char* name) {
@@ -337,10 +356,23 @@ void bind_options(py::module_& m) {
 
 }  // namespace
 
+// Global ids of a step's input (Mesh_arrays::point_gids, ...; None: the
+// positions), for a caller that holds part of a larger mesh (issue 29).
+void add_global_ids(Mesh_arrays& mesh, const std::optional<Int_array>& point_gids,
+                    const std::optional<Int_array>& triangle_gids, const std::optional<Int_array>& segment_keys) {
+  if (point_gids) mesh.point_gids = to_vector<std::int64_t>(*point_gids);
+  if (triangle_gids) mesh.triangle_gids = to_vector<std::int64_t>(*triangle_gids);
+  if (segment_keys) mesh.segment_keys = to_vector<std::int64_t>(*segment_keys);
+  check_global_ids(mesh.point_gids, mesh.points.size(), "point_gids");
+  check_global_ids(mesh.triangle_gids, mesh.triangles.size(), "triangle_gids");
+  check_global_ids(mesh.segment_keys, mesh.segments.size(), "segment_keys");
+}
+
 // One step on a mesh given as arrays (frfc, drfc, drfc_refine): the GIL is
 // released while `run` works; `to_dict` turns its result into a dict.
 template <class Options, class Result, class To_dict>
-void bind_step(py::module_& m, const char* name, Result (*run)(const Mesh_arrays&, const std::vector<double>&, const Options&),
+void bind_step(py::module_& m, const char* name,
+               Result (*run)(const Mesh_arrays&, const std::vector<double>&, const Options&, const Step_context&),
                To_dict to_dict, const char* doc) {
   m.def(
       name,
@@ -349,16 +381,20 @@ void bind_step(py::module_& m, const char* name, Result (*run)(const Mesh_arrays
                      const Options& options, std::optional<Int_array> segment_tags,
                      std::optional<Int_array> triangle_tags, std::optional<Byte_array> required,
                      std::optional<Int_array> curved_tags, double corner_angle, std::optional<py::function> project,
-                     std::optional<Float_array> nn, std::optional<Int_array> nn_grew) {
+                     std::optional<Float_array> nn, std::optional<Int_array> nn_grew,
+                     std::optional<Int_array> point_gids, std::optional<Int_array> triangle_gids,
+                     std::optional<Int_array> segment_keys) {
         Mesh_arrays mesh = to_mesh(points, triangles, segments, segment_is_boundary, kind);
         add_labels(mesh, segment_tags, triangle_tags, required);
         add_known_nn(mesh, nn, nn_grew);
+        add_global_ids(mesh, point_gids, triangle_gids, segment_keys);
         mesh.geometry = to_geometry(curved_tags, corner_angle, project);
         auto d = to_vector<double>(delta);
+        const Step_context context = step_context_from_environment(options.threads);
         Result r;
         {
           py::gil_scoped_release release;
-          r = run(mesh, d, options);
+          r = run(mesh, d, options, context);
         }
         return to_dict(r);
       },
@@ -366,7 +402,9 @@ void bind_step(py::module_& m, const char* name, Result (*run)(const Mesh_arrays
       py::arg("kind"), py::arg("delta"), py::arg("options") = Options::recommended(),
       py::arg("segment_tags") = py::none(), py::arg("triangle_tags") = py::none(), py::arg("required") = py::none(),
       py::arg("curved_tags") = py::none(), py::arg("corner_angle") = kDefaultCornerAngle,
-      py::arg("project") = py::none(), py::arg("nn") = py::none(), py::arg("nn_grew") = py::none(), doc);
+      py::arg("project") = py::none(), py::arg("nn") = py::none(), py::arg("nn_grew") = py::none(),
+      py::arg("point_gids") = py::none(), py::arg("triangle_gids") = py::none(), py::arg("segment_keys") = py::none(),
+      doc);
 }
 
 PYBIND11_MODULE(_core, m) {
@@ -399,7 +437,7 @@ PYBIND11_MODULE(_core, m) {
         std::vector<std::pair<std::string, double>> seconds;
         {
           py::gil_scoped_release release;
-          detail::Stage_timer timer(seconds);
+          detail::Stage_timer timer(seconds, stage_profile_requested());
           flipped = orient_triangles(mesh.points, mesh.triangles);
           timer.lap("orient");
           build_segments(mesh, user);

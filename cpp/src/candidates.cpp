@@ -1,5 +1,7 @@
 #include "evomesh/candidates.hpp"
 
+#include "evomesh/global_ids.hpp"
+
 #include <algorithm>
 #include <cmath>
 #include <limits>
@@ -43,10 +45,12 @@ void add_interior_ring_samples(const Mesh_arrays& mesh, const Triangle_fans& fan
   const std::size_t first = blocks.size();
   blocks.resize(first + n_blocks);
   std::vector<std::vector<std::int8_t>> rounds(n_blocks);
+  const std::vector<Index> by_id = order_by_ids(mesh.point_gids);  // (points in the order of their ids)
   parallel_for(n_blocks, threads, [&](std::size_t b) {
     std::array<Ring_candidate, kRingDirections> ring;
     Sample_set& out = blocks[first + b];
-    for (std::size_t p = b * kBlock; p < std::min(n, (b + 1) * kBlock); ++p) {
+    for (std::size_t r = b * kBlock; r < std::min(n, (b + 1) * kBlock); ++r) {
+      const std::size_t p = visit(by_id, r);
       if (!(delta[p] < 1)) continue;
       const double d = !demoted.empty() && demoted[p] ? demoted_reach : reach;
       const int count = ring_candidates_of(mesh, fans, f, d, seed, p, ring);
@@ -123,8 +127,9 @@ void add_segment_ring_samples(const Mesh_arrays& mesh, const std::vector<double>
   }
   std::vector<std::size_t> order(all.size());
   for (std::size_t i = 0; i < order.size(); ++i) order[i] = i;
+  // (segments in the order of their keys, as sample_segments visits them)
   std::sort(order.begin(), order.end(), [&](std::size_t i, std::size_t j) {
-    if (all[i].first != all[j].first) return all[i].first < all[j].first;
+    if (all[i].first != all[j].first) return mesh.segment_key(all[i].first) < mesh.segment_key(all[j].first);
     if (all[i].second != all[j].second) return all[i].second < all[j].second;
     return i < j;
   });
@@ -212,7 +217,7 @@ int ring_candidates_of(const Mesh_arrays& mesh, const Triangle_fans& fans, const
   constexpr double kTwoPi = 6.283185307179586;
   const Vec2& c = mesh.points[p];
   const double d = reach * f[p];
-  Random_stream rng(seed, (std::uint64_t{3} << 61) + p);
+  Random_stream rng(seed, (std::uint64_t{3} << 61) + static_cast<std::uint64_t>(mesh.point_gid(p)));
   const double phase = rng.uniform() * kTwoPi / kRingDirections;
   int count = 0;
   for (int k = 0; k < kRingDirections; ++k) {
@@ -335,7 +340,7 @@ Candidates interior_candidates(const Mesh_arrays& mesh, const Triangle_fans& fan
   n_drawn = 0;
   // Grid samples, then ring candidates, in blocks joined once (join_samples).
   std::vector<Sample_set> blocks = sample_triangle_blocks(mesh, f, options.cell_factor, options.samples, options.seed,
-                                                          skip, cover, options.threads, &n_drawn,
+                                                          skip, cover, /*threads=*/0, &n_drawn,
                                                           options.adaptive_cells, queries);
   std::size_t n_grid = 0;
   for (const Sample_set& block : blocks) n_grid += block.points.size();
@@ -350,7 +355,7 @@ Candidates interior_candidates(const Mesh_arrays& mesh, const Triangle_fans& fan
                                      ? 0.5 * (near + ring_reach(options.radius_scale))
                                      : ring_reach(options.radius_scale);
     add_interior_ring_samples(mesh, fans, delta, f, ring_reach(options.radius_scale), demoted_reach, demoted,
-                              options.seed, cover, options.threads, blocks, ring_round);
+                              options.seed, cover, /*threads=*/0, blocks, ring_round);
   }
   Candidates inside;
   inside.samples = join_samples(blocks);
@@ -378,10 +383,10 @@ void candidate_radii(const Mesh_arrays& mesh, const Spacing_function& spacing, c
   detail::parallel_resize(candidates.radius, m);
   double* out = candidates.radius.data();
   if (options.radius != Radius_rule::cheap) {
-    spacing.evaluate(samples.points.data(), m, out, nullptr, options.threads, /*certified=*/false);
+    spacing.evaluate(samples.points.data(), m, out, nullptr, /*threads=*/0, /*certified=*/false);
     if (options.radius == Radius_rule::interpolated && !demoted.empty()) {
       constexpr std::size_t kBlock = 1 << 16;
-      parallel_for((m + kBlock - 1) / kBlock, options.threads, [&](std::size_t b) {
+      parallel_for((m + kBlock - 1) / kBlock, /*threads=*/0, [&](std::size_t b) {
         for (std::size_t j = b * kBlock; j < std::min(m, (b + 1) * kBlock); ++j) {
           const Vec2& x = samples.points[j];
           double linear;

@@ -25,21 +25,21 @@ struct Refinement_stage {
 
 // Step 1: f of Section 3.1, as in FRFC, then Delaunay refinement with rules 1-4 (Section 5).
 Refinement_stage refinement_stage(const Mesh_arrays& mesh, const std::vector<double>& delta,
-                                  const Drfc_options& options, Stage_timer& timer) {
+                                  const Drfc_options& options, const Step_context& context, Stage_timer& timer) {
   check_delta(mesh, delta);
   if (mesh.geometry) throw Input_error("a boundary geometry (curved boundaries) is supported by method 'frfc' only");
   options.validate();
   Refinement_stage stage;
   const auto chains = options.within_domain ? segment_chains(mesh) : std::vector<Segment_chain>{};
-  stage.spacing = step_spacing(mesh, delta, F_at_points::evaluate_all, options.threads, timer,
-                               options.within_domain ? &chains : nullptr);
+  stage.spacing = step_spacing(mesh, delta, F_at_points::evaluate_all, /*threads=*/0, timer,
+                               options.within_domain ? &chains : nullptr, context.filter_sites);
   // FRFC's sampling count bounds the points a packing for f needs (Lemma 3.5).
   const double estimate = estimate_sample_count(mesh, stage.spacing.f, 1.0, options.max_samples);
   check_sample_budget(estimate, options.max_samples, "refinement");
   const auto cap = static_cast<std::size_t>(2 * estimate + 1000);
   try {
     stage.refined =
-        spacing_refine(mesh, *stage.spacing.function, stage.spacing.f, options.min_angle, cap, options.threads);
+        spacing_refine(mesh, *stage.spacing.function, stage.spacing.f, options.min_angle, cap, /*threads=*/0);
   } catch (const CGAL::Failure_exception& error) {
     // CGAL's mesher broke an invariant on near-degenerate input (see CMakeLists.txt).
     throw Input_error(std::string("DRFC's Delaunay refinement failed on this mesh (") + error.what() +
@@ -84,11 +84,12 @@ Selection select_output(const Refined_mesh& refined, const std::vector<std::uint
 
 }  // namespace
 
-Refined_mesh drfc_refine(const Mesh_arrays& mesh, const std::vector<double>& delta, const Drfc_options& options) {
+Refined_mesh drfc_refine(const Mesh_arrays& mesh, const std::vector<double>& delta, const Drfc_options& options,
+                         const Step_context& context) {
   std::vector<std::pair<std::string, double>> unused;
   Stage_timer timer(unused);
-  const Thread_limit thread_limit(options.threads);
-  Refined_mesh refined = std::move(refinement_stage(mesh, delta, options, timer).refined);
+  const Thread_limit thread_limit(context.threads);  // (the stages' loops run under it)
+  Refined_mesh refined = std::move(refinement_stage(mesh, delta, options, context, timer).refined);
   canonical_triangle_order(refined.mesh.points.size(), refined.mesh.triangles);
   // The input's labels, as a step carries them (finish_step): refinement only
   // adds points, so every input point is kept (its `required` flag with it), a
@@ -102,11 +103,12 @@ Refined_mesh drfc_refine(const Mesh_arrays& mesh, const std::vector<double>& del
   return refined;
 }
 
-Evolve_result drfc(const Mesh_arrays& mesh, const std::vector<double>& delta, const Drfc_options& options) {
+Evolve_result drfc(const Mesh_arrays& mesh, const std::vector<double>& delta, const Drfc_options& options,
+                   const Step_context& context) {
   Evolve_result result;
-  Stage_timer timer(result.stats);
-  const Thread_limit thread_limit(options.threads);
-  Refinement_stage stage = refinement_stage(mesh, delta, options, timer);
+  Stage_timer timer(result.stats, context.profile);
+  const Thread_limit thread_limit(context.threads);  // (the stages' loops run under it)
+  Refinement_stage stage = refinement_stage(mesh, delta, options, context, timer);
   const Refined_mesh& refined = stage.refined;
 
   const auto chains = segment_chains(refined.mesh);

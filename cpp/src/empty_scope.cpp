@@ -463,7 +463,8 @@ bool curves_project(const Mesh_arrays& mesh) {
 }  // namespace
 
 std::optional<Evolve_result> empty_scope_frfc(const Mesh_arrays& input, const std::vector<double>& delta,
-                                              const Frfc_options& options, int* declined_by) {
+                                              const Frfc_options& options, const Step_context& context,
+                                              int* declined_by) {
   const std::size_t n = input.points.size();
   auto decline = [declined_by](int certificate) {
     if (declined_by != nullptr) *declined_by = certificate;
@@ -475,8 +476,8 @@ std::optional<Evolve_result> empty_scope_frfc(const Mesh_arrays& input, const st
     if (d != 1) return decline(1);
   }
   Evolve_result result;
-  Stage_timer timer(result.stats);
-  const Thread_limit thread_limit(options.threads);  // (step_weights' trees, as in the full step)
+  Stage_timer timer(result.stats, context.profile);
+  const Thread_limit thread_limit(context.threads);  // (step_weights' trees, as in the full step)
   // Curves: the full step's stages work on with_curve_kinds(input) (C14: a
   // geometry it refuses is left to the full step, which says why).
   std::optional<Mesh_arrays> with_curves;

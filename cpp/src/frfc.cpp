@@ -1,10 +1,12 @@
 #include "evomesh/frfc.hpp"
 
+#include <algorithm>
 #include <optional>
 #include <utility>
 
 #include "evomesh/candidates.hpp"
 #include "evomesh/empty_scope.hpp"
+#include "evomesh/global_ids.hpp"
 #include "evomesh/packing.hpp"
 #include "evomesh/parallel.hpp"
 #include "evomesh/sampling.hpp"
@@ -45,10 +47,22 @@ Packing first_packing_pass(const Mesh_arrays& mesh, const std::vector<double>& f
   }
   const auto segment_classes = on_segments.classes(/*on_segment=*/true);
   classes.insert(classes.end(), segment_classes.begin(), segment_classes.end());
-  packing.first_order = packing_order(classes, packing.radius);
+  // Ties in (class, radius): input points by global id, then the segment
+  // candidates, which come in the order of their segments' keys (sample_segments).
+  std::vector<Index> tie_order = order_by_ids(mesh.point_gids);
+  if (!tie_order.empty()) {
+    tie_order.reserve(packing.centers.size());
+    for (std::size_t j = mesh.points.size(); j < packing.centers.size(); ++j) tie_order.push_back(static_cast<Index>(j));
+  }
+  packing.first_order = packing_order(classes, packing.radius, tie_order);
   packing.kept = lexical_first_mis(packing.centers, packing.radius, packing.first_order, n_forced, &packing.blocker,
-                                    options.threads);
+                                    /*threads=*/0);
   defer_demoted_points(classes, mesh.points.size(), packing);
+  if (!mesh.point_gids.empty()) {
+    // (the second pass breaks their ties by position in this list)
+    std::sort(packing.deferred.begin(), packing.deferred.end(),
+              [&](Index a, Index b) { return mesh.point_gids[a] < mesh.point_gids[b]; });
+  }
   return packing;
 }
 
@@ -167,6 +181,14 @@ std::vector<Constraint_piece> pieces_along_chains(const Mesh_arrays& mesh, const
   std::vector<Index> begin(mesh.segments.size() + 1, 0);
   for (Index parent : on_segments.samples.parent) ++begin[parent + 1];
   for (std::size_t s = 0; s < mesh.segments.size(); ++s) begin[s + 1] += begin[s];
+  if (!mesh.segment_keys.empty()) {
+    // The segments' runs of candidates come in key order (sample_segments): laid out by position here.
+    const std::size_t n = mesh.points.size();
+    std::vector<Index> by_position(on_segments.size());
+    std::vector<Index> next(begin.begin(), begin.end() - 1);
+    for (std::size_t j = 0; j < on_segments.size(); ++j) by_position[next[on_segments.samples.parent[j]]++] = out_index[n + j];
+    return constraint_pieces(chains, out_index, begin, by_position);
+  }
   for (Index& b : begin) b += static_cast<Index>(mesh.points.size());
   return constraint_pieces(chains, out_index, begin, out_index);
 }
@@ -193,7 +215,8 @@ Candidates segment_stage(const Mesh_arrays& mesh, const std::vector<double>& del
 // the first pass certainly blocks) and their spheres.
 Candidates interior_stage(const Mesh_arrays& mesh, const Triangle_fans& fans, const std::vector<double>& delta,
                           const Step_spacing& spacing, const Packing& packing, const std::vector<std::uint8_t>& demoted,
-                          const Frfc_options& options, Stage_timer& timer, std::size_t& n_drawn) {
+                          const Frfc_options& options, const Step_context& context, Stage_timer& timer,
+                          std::size_t& n_drawn) {
   const std::vector<double>& f = spacing.f;
   Cover_discs cover;
   if (options.filter_samples) {
@@ -203,12 +226,12 @@ Candidates interior_stage(const Mesh_arrays& mesh, const Triangle_fans& fans, co
   const Spacing_queries queries = spacing_queries(*spacing.function);
   Candidates inside = interior_candidates(mesh, fans, delta, f, demoted, cover, options, n_drawn, nullptr, &queries);
   cover = Cover_discs();
-  detail::release_free_memory();  // the sampling threads' blocks
+  release_free_memory(context);  // the sampling threads' blocks
   timer.lap("sampling");
   candidate_radii(mesh, *spacing.function, f, demoted, options, /*on_segment=*/false, inside);
   timer.lap("sample_radii");
   if (options.filter_samples) {
-    drop_blocked_candidates(mesh, packing.centers, packing.radius, packing.kept, packing.blocker, options.threads,
+    drop_blocked_candidates(mesh, packing.centers, packing.radius, packing.kept, packing.blocker, /*threads=*/0,
                             inside);
     timer.lap("lfmis");
   }
@@ -231,7 +254,8 @@ std::vector<Vec2> spacing_repair_stage(const Mesh_arrays& mesh, const Triangle_f
 
 }  // namespace frfc_stages
 
-Evolve_result frfc(const Mesh_arrays& input, const std::vector<double>& delta, const Frfc_options& options) {
+Evolve_result frfc(const Mesh_arrays& input, const std::vector<double>& delta, const Frfc_options& options,
+                   const Step_context& context) {
   check_delta(input, delta);
   options.validate();
   using namespace frfc_stages;
@@ -242,9 +266,9 @@ Evolve_result frfc(const Mesh_arrays& input, const std::vector<double>& delta, c
   // First, with delta = 1 everywhere: a step that certainly returns its input
   // (empty_scope.hpp; the certificate, O(n), in empty_scope.cpp) returns it.
   int declined_by = 0;
-  if (auto unchanged = empty_scope_frfc(input, delta, options, &declined_by)) return std::move(*unchanged);
+  if (auto unchanged = empty_scope_frfc(input, delta, options, context, &declined_by)) return std::move(*unchanged);
   if (options.incremental && incremental_applies(input, delta, options)) {
-    Evolve_result result = incremental_frfc(input, delta, options);
+    Evolve_result result = incremental_frfc(input, delta, options, context);
     result.stats.emplace_back("empty_scope", 0.0);
     result.stats.emplace_back("empty_scope_declined_by", declined_by);
     return result;
@@ -253,14 +277,15 @@ Evolve_result frfc(const Mesh_arrays& input, const std::vector<double>& delta, c
   const Mesh_arrays with_curves = input.geometry ? with_curve_kinds(input) : Mesh_arrays{};
   const Mesh_arrays& mesh = input.geometry ? with_curves : input;
   Evolve_result result;
-  Stage_timer timer(result.stats);
-  const Thread_limit thread_limit(options.threads);  // also for the stages without a threads argument
+  Stage_timer timer(result.stats, context.profile);
+  // Every stage runs its loops under this limit (parallel_for(..., 0, ...)).
+  const Thread_limit thread_limit(context.threads);
 
   // Step 1: nn_M and the spacing function f (Section 3.1), within the domain.
   const auto chains = segment_chains(mesh);
-  Step_spacing spacing = step_spacing(mesh, delta, F_at_points::lemma_3_1, options.threads, timer,
-                                      options.within_domain ? &chains : nullptr);
-  detail::release_free_memory();  // what building the Apollonius graphs in parallel freed
+  Step_spacing spacing = step_spacing(mesh, delta, F_at_points::lemma_3_1, /*threads=*/0, timer,
+                                      options.within_domain ? &chains : nullptr, context.filter_sites);
+  release_free_memory(context);  // what building the Apollonius graphs in parallel freed
   // Steps 2-5: candidates on segments, first packing pass; interior candidates, second pass.
   // Old points whose neighbourhood the request refines lose their priority.
   std::size_t n_forced = 0;
@@ -271,13 +296,13 @@ Evolve_result frfc(const Mesh_arrays& input, const std::vector<double>& delta, c
   timer.lap("lfmis");
   std::optional<Triangle_fans> fans(mesh);
   std::size_t n_drawn = 0;
-  Candidates inside = interior_stage(mesh, *fans, delta, spacing, packing, demoted, options, timer, n_drawn);
+  Candidates inside = interior_stage(mesh, *fans, delta, spacing, packing, demoted, options, context, timer, n_drawn);
   const std::size_t n_interior = inside.size();
   // Memory (issue 13): what a stage leaves behind goes as soon as nothing reads it.
   const std::size_t n_hidden = spacing.function->n_hidden();
   const std::size_t n_filtered = spacing.function->n_filtered();
   spacing.function.reset();  // the Apollonius graph: the radii of the candidates were its last use
-  detail::release_free_memory();
+  release_free_memory(context);
   // The quality pass's triangulation of the first pass's points starts on the
   // second thread once the Apollonius graph is gone (beside the sampling, it
   // set the step's peak memory), beside the second pass when that is small,
@@ -287,12 +312,12 @@ Evolve_result frfc(const Mesh_arrays& input, const std::vector<double>& delta, c
   std::optional<Early_start> early;
   if (small_second_pass) early.emplace(packing, options, mesh.geometry != nullptr);
   second_packing_pass(inside, packing);
-  detail::release_free_memory();
+  release_free_memory(context);
   if (!early) early.emplace(packing, options, mesh.geometry != nullptr);
   early->insert_late(packing, mesh.points.size(), mesh.points.size() + on_segments.size());
   const std::size_t n_candidates = packing.centers.size();
   drop_rejected_candidates(mesh.points.size() + on_segments.size(), packing);
-  detail::release_free_memory();
+  release_free_memory(context);
   timer.lap("lfmis");
   std::size_t n_repairs = 0;
   const auto repair_points = spacing_repair_stage(mesh, *fans, delta, spacing, on_segments, demoted, options, packing,
@@ -318,13 +343,13 @@ Evolve_result frfc(const Mesh_arrays& input, const std::vector<double>& delta, c
   // The old mesh's walker (parent map) is built on another thread while the
   // early triangulation takes the repair's points: both before the quality
   // pass, which runs on this thread.
-  Old_mesh_start old_mesh(input, options.threads);
+  Old_mesh_start old_mesh(input, /*threads=*/0);
   early->wait();
-  detail::release_free_memory();
+  release_free_memory(context);
   const bool early_started = options.quality && !mesh.geometry;
   triangulate_selection(std::move(selection), pieces, options.quality ? &quality : nullptr, result,
                         early_started ? &early->triangulation : nullptr, mesh.geometry.get());
-  detail::release_free_memory();
+  release_free_memory(context);
   timer.lap(options.quality ? "quality" : "cdt");
   finish_step(input, result, timer, &old_mesh);
   add_step_counts(result, {{"n_input_points", mesh.points.size()},

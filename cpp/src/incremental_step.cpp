@@ -10,6 +10,7 @@
 
 #include "evomesh/candidates.hpp"
 #include "evomesh/detail/frfc_stages.hpp"
+#include "evomesh/global_ids.hpp"
 #include "evomesh/packing.hpp"
 #include "evomesh/parallel.hpp"
 #include "evomesh/sampling.hpp"
@@ -311,8 +312,15 @@ Packing first_pass_near(const Mesh_arrays& mesh, const std::vector<double>& f, c
     for (Index v : e) to_end = std::min(to_end, std::hypot(x[0] - mesh.points[v][0], x[1] - mesh.points[v][1]));
     add_near(x, to_end + 2 * on_segments.radius[j]);
   }
+  // Members in the full pass's tie order: input points by global id (index
+  // without ids), then the segment candidates (already in their keys' order).
   std::vector<Index> members;
-  for (std::size_t c = 0; c < n + n_seg; ++c) {
+  const std::vector<Index> by_id = order_by_ids(mesh.point_gids);
+  for (std::size_t r = 0; r < n; ++r) {
+    const std::size_t c = visit(by_id, r);
+    if (member[c]) members.push_back(static_cast<Index>(c));
+  }
+  for (std::size_t c = n; c < n + n_seg; ++c) {
     if (member[c]) members.push_back(static_cast<Index>(c));
   }
   n_packed = members.size();
@@ -326,7 +334,7 @@ Packing first_pass_near(const Mesh_arrays& mesh, const std::vector<double>& f, c
   }
   std::vector<Index> blocker;
   const auto kept =
-      lexical_first_mis(centers, radii, packing_order(member_classes, radii), n_forced, &blocker, options.threads);
+      lexical_first_mis(centers, radii, packing_order(member_classes, radii), n_forced, &blocker, /*threads=*/0);
   packing.kept.assign(n + n_seg, 0);
   packing.blocker.assign(n + n_seg, -1);
   for (std::size_t c = 0; c < n; ++c) packing.kept[c] = !member[c];  // safe and alone: kept
@@ -334,8 +342,12 @@ Packing first_pass_near(const Mesh_arrays& mesh, const std::vector<double>& f, c
     packing.kept[members[k]] = kept[k];
     packing.blocker[members[k]] = blocker[k] < 0 ? -1 : members[blocker[k]];
   }
-  // As in first_packing_pass: demoted interior points go to the second pass.
+  // As in first_packing_pass: demoted interior points go to the second pass (by global id).
   defer_demoted_points(classes, n, packing);
+  if (!mesh.point_gids.empty()) {
+    std::sort(packing.deferred.begin(), packing.deferred.end(),
+              [&](Index a, Index b) { return mesh.point_gids[a] < mesh.point_gids[b]; });
+  }
   return packing;
 }
 
@@ -431,15 +443,16 @@ bool incremental_applies(const Mesh_arrays& mesh, const std::vector<double>& del
 }
 
 Evolve_result incremental_frfc(const Mesh_arrays& mesh, const std::vector<double>& delta,
-                               const Frfc_options& options) {
+                               const Frfc_options& options, const Step_context& context) {
   if (!incremental_applies(mesh, delta, options)) {
     throw std::invalid_argument("incremental_frfc: the incremental step does not apply here (incremental_applies)");
   }
   const std::size_t n = mesh.points.size();
 
   Evolve_result result;
-  Stage_timer timer(result.stats);
-  const Thread_limit thread_limit(options.threads);
+  Stage_timer timer(result.stats, context.profile);
+  // Every stage runs its loops under this limit (parallel_for(..., 0, ...)).
+  const Thread_limit thread_limit(context.threads);
   const double magnitude = coordinate_magnitude(mesh.points);
   // Memory (issue 27): what a stage leaves behind goes as soon as nothing reads
   // it, as in the full step, so that the step's peak (the quality pass, the
@@ -480,7 +493,7 @@ Evolve_result incremental_frfc(const Mesh_arrays& mesh, const std::vector<double
     std::vector<Vec2> at;
     for (Index i : asked) at.push_back(mesh.points[i]);
     std::vector<double> value(at.size());
-    spacing_near_points->function().evaluate(at.data(), at.size(), value.data(), nullptr, options.threads);
+    spacing_near_points->function().evaluate(at.data(), at.size(), value.data(), nullptr, /*threads=*/0);
     for (std::size_t k = 0; k < asked.size(); ++k) f[asked[k]] = std::min(value[k], weight[asked[k]]);
   }
   timer.lap("spacing_at_points");
@@ -556,7 +569,7 @@ Evolve_result incremental_frfc(const Mesh_arrays& mesh, const std::vector<double
     const Cover_discs cover = cover_discs(mesh, f, packing.radius, packing.kept, packing.blocker,
                                          options.radius_scale, options.radius == Radius_rule::interpolated);
     const std::vector<std::uint8_t> quiet = quiet_triangles(mesh, *grid, weight, packing.radius, packing.kept,
-                                                            demoted, options.radius_scale, magnitude, options.threads);
+                                                            demoted, options.radius_scale, magnitude, /*threads=*/0);
     timer.lap("incremental_quiet");
     inside = interior_candidates(mesh, fans, delta, f, demoted, cover, options, n_drawn, &quiet, queries);
     std::vector<std::uint8_t> in_region(n, 0);
@@ -570,7 +583,7 @@ Evolve_result incremental_frfc(const Mesh_arrays& mesh, const std::vector<double
   }
   if (spacing_near_graded) n_sites += spacing_near_graded->n_sites();
   spacing_near_graded.reset();  // its last use
-  detail::release_free_memory();  // the sampling threads' blocks
+  release_free_memory(context);  // the sampling threads' blocks
   timer.lap("sampling");
   {
     // The interior candidates' graph: x in triangle t has f(x) <= f(v) + |x - v| at its vertices v.
@@ -590,13 +603,13 @@ Evolve_result incremental_frfc(const Mesh_arrays& mesh, const std::vector<double
     n_sites += spacing_near_samples.n_sites();
   }
   timer.lap("sample_radii");
-  drop_blocked_candidates(mesh, packing.centers, packing.radius, packing.kept, packing.blocker, options.threads, inside);
+  drop_blocked_candidates(mesh, packing.centers, packing.radius, packing.kept, packing.blocker, /*threads=*/0, inside);
   second_pass_near(mesh, inside, safe, *grid, magnitude, packing, n_packed_second);
   const std::size_t n_interior = inside.size();
   inside = Candidates();  // (second_pass_near copied them into the packing)
   safe = std::vector<std::uint8_t>();
   grid.reset();
-  detail::release_free_memory();
+  release_free_memory(context);
   early.insert_late(packing, n, n + on_segments.size());
   timer.lap("lfmis");
 
@@ -623,12 +636,12 @@ Evolve_result incremental_frfc(const Mesh_arrays& mesh, const std::vector<double
   packing = Packing();
   out_index = std::vector<Index>();
   const Quality_options quality = options.quality_settings();
-  Old_mesh_start old_mesh(mesh, options.threads, std::move(fans));  // beside the early triangulation (frfc.cpp)
+  Old_mesh_start old_mesh(mesh, /*threads=*/0, std::move(fans));  // beside the early triangulation (frfc.cpp)
   early.wait();
-  detail::release_free_memory();
+  release_free_memory(context);
   triangulate_selection(std::move(selection), pieces, options.quality ? &quality : nullptr, result,
                         options.quality ? &early.triangulation : nullptr, nullptr);
-  detail::release_free_memory();
+  release_free_memory(context);
   timer.lap(options.quality ? "quality" : "cdt");
   // The output's nn from the input's where nothing near changed: the input's
   // Euclidean nn is weights.nn except where it grew within the domain.

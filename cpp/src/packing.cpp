@@ -598,6 +598,21 @@ std::vector<Index> packing_order(const std::vector<std::uint8_t>& priority_class
   return sorted_order(order_items(priority_class, radii));
 }
 
+std::vector<Index> packing_order(const std::vector<std::uint8_t>& priority_class, const std::vector<double>& radii,
+                                 const std::vector<Index>& tie_order) {
+  std::vector<Order_item> items = order_items(priority_class, radii);
+  if (tie_order.empty()) return sorted_order(std::move(items));
+  if (tie_order.size() != items.size()) throw std::invalid_argument("packing_order: one tie position per sphere");
+  // The radix sort is stable: items laid out in tie order keep it among equal (class, radius).
+  std::vector<Order_item> in_tie_order;
+  detail::parallel_resize(in_tie_order, items.size());
+  for_order_chunks(items.size(), [&](std::size_t, std::size_t begin, std::size_t end) {
+    for (std::size_t r = begin; r < end; ++r) in_tie_order[r] = items[static_cast<std::size_t>(tie_order[r])];
+  });
+  items = std::vector<Order_item>();
+  return sorted_order(std::move(in_tie_order));
+}
+
 std::vector<Index> packing_order(std::vector<std::uint8_t>&& priority_class, std::vector<double>&& radii) {
   std::vector<Order_item> items = order_items(priority_class, radii);
   priority_class = std::vector<std::uint8_t>();

@@ -1,5 +1,7 @@
 #include "evomesh/sampling.hpp"
 
+#include "evomesh/global_ids.hpp"
+
 #include <algorithm>
 #include <array>
 #include <cmath>
@@ -450,17 +452,20 @@ void sample_one_triangle(const Mesh_arrays& mesh, std::size_t ti, const std::vec
     }
     if (mode == Sample_mode::midpoints || mode == Sample_mode::barycentre_midpoints) {
       // An interior edge is shared by two triangles with opposite directions;
-      // emit its midpoint from the triangle that has it as (low -> high).
+      // emit its midpoint from the triangle that has it as (low id -> high id).
       for (int k = 0; k < 3; ++k) {
         const Index u = t[k];
         const Index v = t[(k + 1) % 3];
-        if (u > v || segment_edges.count(edge_key(u, v, n))) continue;
+        if (mesh.point_gid(static_cast<std::size_t>(u)) > mesh.point_gid(static_cast<std::size_t>(v)) ||
+            segment_edges.count(edge_key(u, v, n))) {
+          continue;
+        }
         emit({0.5 * (P[u][0] + P[v][0]), 0.5 * (P[u][1] + P[v][1])});
       }
     }
     return;
   }
-  Random_stream rng(seed, ti);
+  Random_stream rng(seed, static_cast<std::uint64_t>(mesh.triangle_gid(ti)));  // (keyed by id, not position)
   const Triangle_grid g = triangle_grid(mesh, vertex_f, t, cell_factor);
   const double s = g.s, xmin = g.xmin, xmax = g.xmax, ymin = g.ymin, ymax = g.ymax;
   std::vector<Dyadic_cell> cells;
@@ -519,8 +524,12 @@ std::vector<Sample_set> sample_triangle_blocks(const Mesh_arrays& mesh, const st
   const std::size_t n_blocks = (n_triangles + kBlock - 1) / kBlock;
   std::vector<Sample_set> blocks(n_blocks);
   std::vector<std::size_t> drawn(n_blocks, 0);
+  // Triangles in the order of their global ids (positions without them), so
+  // that the samples come in the same order whatever array order holds them.
+  const std::vector<Index> by_id = order_by_ids(mesh.triangle_gids);
   parallel_for(n_blocks, threads, [&](std::size_t k) {
-    for (std::size_t ti = k * kBlock; ti < std::min(n_triangles, (k + 1) * kBlock); ++ti) {
+    for (std::size_t r = k * kBlock; r < std::min(n_triangles, (k + 1) * kBlock); ++r) {
+      const std::size_t ti = visit(by_id, r);
       if (!skip.empty() && skip[ti]) continue;
       sample_one_triangle(mesh, ti, vertex_f, cell_factor, mode, seed, segment_edges, cover, adaptive, queries,
                           blocks[k], drawn[k]);
@@ -572,7 +581,9 @@ Sample_set sample_segments(const Mesh_arrays& mesh, const std::vector<double>& v
   check_fits_4_bytes(mesh.segments.size(), "segments");
   Sample_set out;
   std::vector<std::array<std::int64_t, 2>> blocks;
-  for (std::size_t k = 0; k < mesh.segments.size(); ++k) {
+  const std::vector<Index> by_key = order_by_ids(mesh.segment_keys);  // (as the triangles')
+  for (std::size_t r = 0; r < mesh.segments.size(); ++r) {
+    const std::size_t k = visit(by_key, r);
     const Edge& e = mesh.segments[k];
     const Vec2& a = mesh.points[e[0]];
     const Vec2& b = mesh.points[e[1]];
@@ -585,7 +596,7 @@ Sample_set sample_segments(const Mesh_arrays& mesh, const std::vector<double>& v
     const auto cells = static_cast<std::int64_t>(g.cells);
     if (cells < 2) continue;
     // Stream ids for segments follow the triangles' so the two never share one.
-    Random_stream rng(seed, (std::uint64_t{1} << 62) + k);
+    Random_stream rng(seed, (std::uint64_t{1} << 62) + static_cast<std::uint64_t>(mesh.segment_key(k)));
     blocks.clear();
     adaptive_segment_cells(a, b, g.length, vertex_f[e[0]], vertex_f[e[1]], cell_factor, cells, adaptive, queries, blocks);
     for (const auto& [first, size] : blocks) {

@@ -1,5 +1,7 @@
 #include "evomesh/segment_chains.hpp"
 
+#include "evomesh/global_ids.hpp"
+
 #include <stdexcept>
 #include <utility>
 
@@ -17,7 +19,11 @@ std::vector<Segment_chain> segment_chains(const Mesh_arrays& mesh) {
   for (std::size_t v = 0; v < n; ++v) xadj[v + 1] += xadj[v];
   {
     std::vector<Index> fill(xadj.begin(), xadj.end() - 1);
-    for (std::size_t s = 0; s < k; ++s) {
+    // (in the order of the segments' keys, and below the corners in the order
+    // of their ids: every chain starts at the same end whatever the array order)
+    const std::vector<Index> by_key = order_by_ids(mesh.segment_keys);
+    for (std::size_t r = 0; r < k; ++r) {
+      const std::size_t s = visit(by_key, r);
       adj[fill[mesh.segments[s][0]]++] = static_cast<Index>(s);
       adj[fill[mesh.segments[s][1]]++] = static_cast<Index>(s);
     }
@@ -59,7 +65,9 @@ std::vector<Segment_chain> segment_chains(const Mesh_arrays& mesh) {
     }
     chains.push_back(std::move(chain));
   };
-  for (std::size_t v = 0; v < n; ++v) {
+  const std::vector<Index> by_id = order_by_ids(mesh.point_gids);
+  for (std::size_t r = 0; r < n; ++r) {
+    const std::size_t v = visit(by_id, r);
     if (!is_corner[v]) continue;
     for (Index a = xadj[v]; a < xadj[v + 1]; ++a) {
       if (!used[adj[a]]) walk(static_cast<Index>(v), adj[a]);

@@ -318,9 +318,10 @@ void build_graph(Apollonius_graph& graph, const std::vector<Vec2>& sites, const 
 // the triangles' edges (O(n)); a double-precision test with a margin of a
 // millionth (far above rounding) discards nearly all pairs before the exact one.
 // Only sound hiding matters here: a site this misses is simply inserted.
-// Of several neighbours hiding p, the lowest index (deterministic).
+// Of several neighbours hiding p, the lowest id (`ids`, global ids; null: the
+// lowest index): deterministic whatever the array order.
 std::vector<Index> dominated_sites(const std::vector<Vec2>& sites, const std::vector<double>& weights, double shift,
-                                   const std::vector<Triangle>& triangles) {
+                                   const std::vector<Triangle>& triangles, const std::vector<std::int64_t>* ids) {
   const std::size_t n = sites.size();
   const Ag_traits traits;
   const auto hides = traits.is_hidden_2_object();
@@ -349,7 +350,7 @@ std::vector<Index> dominated_sites(const std::vector<Vec2>& sites, const std::ve
   std::vector<Index> by(n, -1);
   for (const auto& block : found) {
     for (const auto& [p, q] : block) {
-      if (by[p] < 0 || q < by[p]) by[p] = q;
+      if (by[p] < 0 || (ids != nullptr ? (*ids)[q] < (*ids)[by[p]] : q < by[p])) by[p] = q;
     }
   }
   return by;
@@ -365,7 +366,8 @@ double median_of(std::vector<double> values) {
 }  // namespace
 
 Spacing_function::Spacing_function(const std::vector<Vec2>& sites, const std::vector<double>& weights,
-                                   std::size_t min_sites_per_part, const std::vector<Triangle>* triangles)
+                                   std::size_t min_sites_per_part, const std::vector<Triangle>* triangles,
+                                   const std::vector<std::int64_t>* site_ids)
     : impl_(std::make_unique<Impl>()) {
   if (min_sites_per_part == 0) min_sites_per_part = kMinSitesPerPart;
   if (sites.empty()) throw Input_error("spacing function needs at least one site");
@@ -444,7 +446,9 @@ Spacing_function::Spacing_function(const std::vector<Vec2>& sites, const std::ve
     std::iota(members[0].begin(), members[0].end(), 0);
   }
   std::vector<Index> dominator;
-  if (triangles != nullptr) dominator = dominated_sites(sites, weights, impl.shift, *triangles);
+  if (site_ids != nullptr && site_ids->empty()) site_ids = nullptr;
+  if (site_ids != nullptr && site_ids->size() != n) throw Input_error("one id per site is required");
+  if (triangles != nullptr) dominator = dominated_sites(sites, weights, impl.shift, *triangles, site_ids);
   impl.parts.resize(n_parts);
   parallel_for(static_cast<std::size_t>(n_parts), 0, [&](std::size_t k) {
     auto part = std::make_unique<Impl::Part>();

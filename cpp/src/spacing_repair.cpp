@@ -1,5 +1,7 @@
 #include "evomesh/spacing_repair.hpp"
 
+#include "evomesh/global_ids.hpp"
+
 #include <algorithm>
 #include <array>
 #include <cmath>
@@ -29,7 +31,8 @@ namespace {
 // away. Where the request refines and a fresh packing forms (p has delta(p) < 1
 // and was demoted or dropped), its spacing varies more and a bound of gap_ratio
 // adds points that compound over repeated steps: refine_ratio is used there.
-// Points are served in input order; each sees the points added before.
+// Points are served in the order of their global ids (input order without
+// them); each sees the points added before.
 constexpr double kGapClearance = 0.6;
 constexpr int kGapDirections = 16;
 
@@ -99,14 +102,17 @@ void repair_gaps(const Mesh_arrays& mesh, const Triangle_fans& fans, const std::
     }
   });
   const Mesh_walk walk(mesh, fans);
-  for (std::size_t p = 0; p < n; ++p) {
+  // Points are served in the order of their global ids (positions without them).
+  const std::vector<Index> by_id = order_by_ids(mesh.point_gids);
+  for (std::size_t r = 0; r < n; ++r) {
+    const std::size_t p = visit(by_id, r);
     if (!open[p]) continue;
     const Vec2& at = mesh.points[p];
     const auto around = two_nearest(at);
     const bool kept = around[0] == 0;
     if (!(around[1] > target2(p, kept))) continue;
     const double h = delta[p] * nn[p];
-    Random_stream rng(seed, (std::uint64_t{5} << 60) + static_cast<std::uint64_t>(p));
+    Random_stream rng(seed, (std::uint64_t{5} << 60) + static_cast<std::uint64_t>(mesh.point_gid(p)));
     const double phase = rng.uniform() * kTwoPi / kGapDirections;
     const double clearance2 = kGapClearance * kGapClearance * h * h;
     double best_d2 = -1;
@@ -150,7 +156,7 @@ std::vector<Vec2> repair_spacing(const Spacing_repair_input& input, const Frfc_o
   const std::uint64_t seed = options.seed;
   const double repair_ratio = options.ring_samples ? options.repair_ratio : 0.0;
   const double gap_repair_ratio = options.gap_repair_ratio;
-  const int threads = options.threads;
+  const int threads = 0;  // the step's Thread_limit (Step_context::threads)
   using Delaunay = CGAL::Delaunay_triangulation_2<Kernel>;
   const std::size_t n = mesh.points.size();
   n_added = 0;
@@ -180,9 +186,11 @@ std::vector<Vec2> repair_spacing(const Spacing_repair_input& input, const Frfc_o
       }
     });
   }
-  std::vector<Index> needy;
+  std::vector<Index> needy;  // (in the order of the points' global ids)
   std::vector<std::uint8_t> is_needy(n, 0);
-  for (std::size_t p = 0; p < n; ++p) {
+  const std::vector<Index> by_id = order_by_ids(mesh.point_gids);
+  for (std::size_t r = 0; r < n; ++r) {
+    const std::size_t p = visit(by_id, r);
     if (!(repair_ratio > 0) || position_of[p] < 0 || !(delta[p] < 1)) continue;
     const double target = repair_ratio * delta[p] * nn[p];
     if (nn2[p] > target * target) {

@@ -26,11 +26,6 @@ namespace evomesh {
 
 namespace detail {
 
-bool Stage_timer::memory_requested() {
-  const char* value = std::getenv("EVOMESH_STAGE_PROFILE");
-  return value != nullptr && std::string(value) != "0";
-}
-
 void release_free_memory() {
 #if defined(__GLIBC__)
   malloc_trim(0);
@@ -117,7 +112,8 @@ Step_weights step_weights(const Mesh_arrays& mesh, const std::vector<double>& de
 }
 
 Step_spacing step_spacing(const Mesh_arrays& mesh, const std::vector<double>& delta, F_at_points how, int threads,
-                          detail::Stage_timer& timer, const std::vector<Segment_chain>* within_domain) {
+                          detail::Stage_timer& timer, const std::vector<Segment_chain>* within_domain,
+                          bool filter_sites) {
   const std::size_t n = mesh.points.size();
   Step_spacing spacing;
   Step_weights weights = step_weights(mesh, delta, timer, within_domain);
@@ -125,11 +121,10 @@ Step_spacing step_spacing(const Mesh_arrays& mesh, const std::vector<double>& de
   const std::vector<std::uint8_t>& evaluate = weights.evaluate;
   const std::vector<double>& weight = weights.weight;
   // Sites hidden by a mesh neighbour are left out of the Apollonius graph (issue
-  // 13; f is the same). EVOMESH_SITE_FILTER=0 keeps them, for benchmarks only.
-  const char* filter = std::getenv("EVOMESH_SITE_FILTER");
-  const bool filter_sites = filter == nullptr || std::string(filter) != "0";
+  // 13; f is the same). Step_context::filter_sites = false keeps them, for benchmarks only.
   spacing.function =
-      std::make_unique<Spacing_function>(mesh.points, weight, 0, filter_sites ? &mesh.triangles : nullptr);
+      std::make_unique<Spacing_function>(mesh.points, weight, 0, filter_sites ? &mesh.triangles : nullptr,
+                                         &mesh.point_gids);
   timer.lap("apollonius");
   auto& f = spacing.f;
   f.resize(n);

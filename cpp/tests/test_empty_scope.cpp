@@ -73,7 +73,7 @@ bool same_step(const Evolve_result& a, const Evolve_result& b) {
 
 int declined_by(const Mesh_arrays& mesh) {
   int certificate = -1;
-  const auto result = empty_scope_frfc(mesh, std::vector<double>(mesh.points.size(), 1.0), Frfc_options{}, &certificate);
+  const auto result = empty_scope_frfc(mesh, std::vector<double>(mesh.points.size(), 1.0), Frfc_options{}, Step_context{}, &certificate);
   return result ? -1 : certificate;
 }
 
@@ -85,7 +85,7 @@ int main() {
     const std::vector<double> ones(mesh.points.size(), 1.0);
     // The settled mesh with a hole: certified, frfc's full step bit for bit.
     int certificate = -1;
-    const auto fast = empty_scope_frfc(mesh, ones, Frfc_options{}, &certificate);
+    const auto fast = empty_scope_frfc(mesh, ones, Frfc_options{}, Step_context{}, &certificate);
     CHECK(fast.has_value()) << "declined by " << certificate;
     Frfc_options full_options;
     full_options.incremental = false;
@@ -97,7 +97,7 @@ int main() {
     for (std::size_t s = 0; s < mesh.segments.size(); s += 7) {
       Mesh_arrays flipped = mesh;
       std::swap(flipped.segments[s][0], flipped.segments[s][1]);
-      const auto quick = empty_scope_frfc(flipped, ones, Frfc_options{});
+      const auto quick = empty_scope_frfc(flipped, ones, Frfc_options{}, Step_context{});
       if (!quick) continue;
       ++answered;
       CHECK(same_step(*quick, frfc(flipped, ones, full_options))) << "segment " << s;

@@ -225,6 +225,9 @@ def frfc(
     project: Callable[[NDArray[np.float64], NDArray[np.int64]], ArrayLike] | None = None,
     nn: ArrayLike | None = None,
     nn_grew: ArrayLike | None = None,
+    point_gids: ArrayLike | None = None,  # global ids (issue 29): None = the array positions
+    triangle_gids: ArrayLike | None = None,
+    segment_keys: ArrayLike | None = None,
 ) -> EvolveResult:
     """Functional-Refining-Functional-Coarsening (Section 3.2): one step; returns a dict of arrays and stats."""
 
@@ -244,6 +247,9 @@ def drfc(
     project: Callable[[NDArray[np.float64], NDArray[np.int64]], ArrayLike] | None = None,
     nn: ArrayLike | None = None,
     nn_grew: ArrayLike | None = None,
+    point_gids: ArrayLike | None = None,  # global ids (issue 29): None = the array positions
+    triangle_gids: ArrayLike | None = None,
+    segment_keys: ArrayLike | None = None,
 ) -> EvolveResult:
     """Delaunay-Refining-Functional-Coarsening (Section 5); returns the same dict as frfc."""
 

@@ -14,6 +14,7 @@
 
 #include "evomesh/options.hpp"
 #include "evomesh/step.hpp"
+#include "evomesh/step_context.hpp"
 #include "evomesh/types.hpp"
 
 namespace evomesh {
@@ -28,6 +29,7 @@ namespace evomesh {
 // certified as convex uncurved ones are.
 // Preconditions: those of frfc (check_delta, options.validate()).
 std::optional<Evolve_result> empty_scope_frfc(const Mesh_arrays& mesh, const std::vector<double>& delta,
-                                              const Frfc_options& options, int* declined_by = nullptr);
+                                              const Frfc_options& options, const Step_context& context,
+                                              int* declined_by = nullptr);
 
 }  // namespace evomesh

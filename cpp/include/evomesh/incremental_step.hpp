@@ -24,6 +24,7 @@
 
 #include "evomesh/options.hpp"
 #include "evomesh/step.hpp"
+#include "evomesh/step_context.hpp"
 #include "evomesh/types.hpp"
 
 namespace evomesh {
@@ -47,6 +48,10 @@ bool incremental_applies(const Mesh_arrays& mesh, const std::vector<double>& del
 // packed), "incremental_quiet_triangles" and "incremental_sites" (sites of the
 // Apollonius graphs).
 Evolve_result incremental_frfc(const Mesh_arrays& mesh, const std::vector<double>& delta,
-                               const Frfc_options& options);
+                               const Frfc_options& options, const Step_context& context);
+inline Evolve_result incremental_frfc(const Mesh_arrays& mesh, const std::vector<double>& delta,
+                                      const Frfc_options& options) {
+  return incremental_frfc(mesh, delta, options, Step_context::from_threads(options.threads));
+}
 
 }  // namespace evomesh

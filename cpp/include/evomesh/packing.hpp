@@ -52,6 +52,10 @@ std::vector<std::uint8_t> lexical_first_mis_in_blocks(const std::vector<Vec2>& c
 // (a radix sort on parallel_for's default threads).
 std::vector<Index> packing_order(const std::vector<std::uint8_t>& priority_class,
                                  const std::vector<double>& radii);
+// The same with ties in (class, radius) broken by the position in `tie_order`
+// (a permutation of the spheres; empty: by index), e.g. the spheres by global id.
+std::vector<Index> packing_order(const std::vector<std::uint8_t>& priority_class, const std::vector<double>& radii,
+                                 const std::vector<Index>& tie_order);
 // The same, freeing the classes and radii once read (the peak of a large sort).
 std::vector<Index> packing_order(std::vector<std::uint8_t>&& priority_class, std::vector<double>&& radii);
 

@@ -46,8 +46,12 @@ class Spacing_function {
   // insertion order (issue 13). The graphs are then exactly those built without
   // `triangles` (CGAL would find the site hidden and change nothing), so f, the
   // sites found and n_hidden() are bit for bit the same.
+  // `site_ids` (optional; global ids of the sites, Mesh_arrays::point_gids): of
+  // several neighbours hiding a site, the one of lowest id counts (else of
+  // lowest index); only n_filtered() can tell.
   Spacing_function(const std::vector<Vec2>& sites, const std::vector<double>& weights,
-                   std::size_t min_sites_per_part = 0, const std::vector<Triangle>* triangles = nullptr);
+                   std::size_t min_sites_per_part = 0, const std::vector<Triangle>* triangles = nullptr,
+                   const std::vector<std::int64_t>* site_ids = nullptr);
 
   // Number of Apollonius graphs the sites are split into (1, 2 or 4).
   int n_parts() const;

@@ -30,7 +30,9 @@ namespace detail {
 // Appends ("seconds_" + stage, elapsed seconds since the previous lap) to stats.
 class Stage_timer {
  public:
-  explicit Stage_timer(std::vector<std::pair<std::string, double>>& stats) : stats_(stats) {}
+  // `profile` (Step_context::profile): also the memory and CPU figures below.
+  explicit Stage_timer(std::vector<std::pair<std::string, double>>& stats, bool profile = false)
+      : memory_(profile), stats_(stats) {}
   // Adds the time since the last lap to the stage `name` (a stage may be timed in several laps).
   void lap(const std::string& name) {
     const auto now = std::chrono::steady_clock::now();
@@ -50,7 +52,7 @@ class Stage_timer {
     }
     stats_.emplace_back(key, value);
   }
-  // With EVOMESH_STAGE_PROFILE set (diagnostics, Linux): "memory_peak_mib_" + stage,
+  // With `profile` (diagnostics, Linux): "memory_peak_mib_" + stage,
   // the process's peak RSS during the stage (VmHWM, reset after every lap),
   // "memory_heap_mib_" + stage, the malloc heap in use at its end (largest over
   // its laps), "cpu_seconds_" + stage, the process's CPU time (all threads),
@@ -58,14 +60,13 @@ class Stage_timer {
   // the CPU time the kernel spent for it (first touches of fresh memory cost
   // about 1.5 µs a page on a virtual machine).
   void record_memory(const std::string& name);
-  static bool memory_requested();
   static double process_cpu_seconds();
   struct Kernel_usage {
     double page_faults = 0;
     double system_seconds = 0;
   };
   static Kernel_usage kernel_usage();
-  bool memory_ = memory_requested();
+  bool memory_;
   double last_cpu_ = memory_ ? process_cpu_seconds() : 0.0;
   Kernel_usage last_usage_ = memory_ ? kernel_usage() : Kernel_usage{};
 
@@ -128,8 +129,11 @@ enum class F_at_points { lemma_3_1, evaluate_all };
 // `within_domain` (the mesh's chains; null: the paper's nn and weights): nn
 // within the domain and weights capped by the local feature size
 // (local_feature_size.hpp).
+// `filter_sites` (Step_context::filter_sites): sites hidden by a mesh neighbour
+// are left out of the Apollonius graph (f is the same).
 Step_spacing step_spacing(const Mesh_arrays& mesh, const std::vector<double>& delta, F_at_points how, int threads,
-                          detail::Stage_timer& timer, const std::vector<Segment_chain>* within_domain = nullptr);
+                          detail::Stage_timer& timer, const std::vector<Segment_chain>* within_domain = nullptr,
+                          bool filter_sites = true);
 
 // Spacing_queries (sampling.hpp) answered by `function` (certified: CGAL's
 // exact nearest site), one thread per call (the sampling threads call it).

@@ -74,6 +74,31 @@ struct Mesh_arrays {
   // holds them. Used when the step measures nn within the domain.
   std::vector<double> nn_within_domain;
   std::vector<Index> nn_grew;
+  // Optional, a step's input only (empty: the array positions): global ids
+  // (issue 29, docs/distributed-step.md section 2.2), one per point, triangle
+  // and segment, distinct within each array. The step keys by them what it
+  // used to key by position: the random streams of the samples (a triangle's
+  // by its id, a segment's by its key, a point's ring and repair by its id),
+  // the tie order of the packing (class, radius, then the ids) and the order
+  // and phase of the spacing repair. So the same mesh in another array order,
+  // with the ids of the first, gives the same output points and triangles;
+  // with the positions as ids (or none) it gives exactly what it gave before.
+  // A segment is still drawn from e[0] to e[1], and a triangle from its
+  // vertex t[0]: reversing or rotating one changes its samples.
+  std::vector<std::int64_t> point_gids;
+  std::vector<std::int64_t> triangle_gids;
+  std::vector<std::int64_t> segment_keys;
+
+  std::int64_t point_gid(std::size_t i) const {
+    return point_gids.empty() ? static_cast<std::int64_t>(i) : point_gids[i];
+  }
+  std::int64_t triangle_gid(std::size_t t) const {
+    return triangle_gids.empty() ? static_cast<std::int64_t>(t) : triangle_gids[t];
+  }
+  std::int64_t segment_key(std::size_t k) const {
+    return segment_keys.empty() ? static_cast<std::int64_t>(k) : segment_keys[k];
+  }
+  bool has_global_ids() const { return !point_gids.empty() || !triangle_gids.empty() || !segment_keys.empty(); }
 };
 
 }  // namespace evomesh

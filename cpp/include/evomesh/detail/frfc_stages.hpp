@@ -11,9 +11,15 @@
 #include "evomesh/quality_pass.hpp"
 #include "evomesh/segment_chains.hpp"
 #include "evomesh/step.hpp"
+#include "evomesh/step_context.hpp"
 #include "evomesh/types.hpp"
 
 namespace evomesh::frfc_stages {
+
+// detail::release_free_memory() between stages, as the context's memory policy says.
+inline void release_free_memory(const Step_context& context) {
+  if (context.release_memory) detail::release_free_memory();
+}
 
 // The spheres of the packing in candidate order: input points [0, n), segment
 // candidates [n, n + n_seg), then interior candidates (after both passes, the
@@ -60,7 +66,7 @@ struct Early_start {
       if (packing.kept_first[c]) points.push_back(packing.centers[c]);
     }
     started = true;
-    on_thread = resolve_threads(options.threads) > 1;
+    on_thread = resolve_threads(0) > 1;  // (under the outline's Thread_limit)
     work.start([this]() { triangulation.insert_first(points); }, on_thread);
   }
   // `n_first_range`: input points and segment candidates (n + n_seg), whose
