@@ -410,6 +410,7 @@ void bind_step(py::module_& m, const char* name,
 PYBIND11_MODULE(_core, m) {
   void bind_supermesh(pybind11::module_&); bind_supermesh(m);  // cpp/bindings/bind_supermesh.cpp (issue 12)
   void bind_motion(pybind11::module_&); bind_motion(m);  // cpp/bindings/bind_motion.cpp (issue 28)
+  void bind_mis_rounds(pybind11::module_&); bind_mis_rounds(m);  // cpp/bindings/bind_mis_rounds.cpp (issue 29)
   m.doc() = "evomesh C++ core (CGAL): spacing functions, sampling, lexical-first MIS, FRFC";
 
   m.def(

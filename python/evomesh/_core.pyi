@@ -6,7 +6,7 @@ the dtypes given here; indices are int64, flags and point kinds uint8.
 """
 
 from collections.abc import Callable
-from typing import ClassVar, TypedDict
+from typing import Any, ClassVar, TypedDict
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -209,6 +209,9 @@ def lexical_first_mis(
     centers: ArrayLike, radii: ArrayLike, order: ArrayLike, n_forced: int = 0
 ) -> NDArray[np.uint8]: ...
 def packing_order(classes: ArrayLike, radii: ArrayLike) -> NDArray[np.int64]: ...
+def lexical_first_mis_in_rounds(
+    centers: ArrayLike, radii: ArrayLike, order: ArrayLike, n_forced: int, part: ArrayLike, n_parts: int
+) -> dict[str, Any]: ...
 def frfc(
     points: ArrayLike,
     triangles: ArrayLike,

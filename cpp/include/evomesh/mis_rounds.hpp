@@ -1,0 +1,41 @@
+// The lexical-first MIS in rounds over a partition (issue 29; the argument is
+// docs/distributed-step.md, section 3.4): the serial MIS of packing.hpp
+// computed by P parts that each see only their own spheres' current states and
+// the others' states as of the end of the previous round, the exchange a
+// distributed step makes between rounds. Here the parts run in one process
+// (the rounds are simulated), which proves the rule against the serial MIS on
+// any partition and measures what a distributed step would pay: rounds and
+// state messages, against mesh size and part count (benchmarks/mis_rounds.py).
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <vector>
+
+#include "evomesh/types.hpp"
+
+namespace evomesh {
+
+struct Mis_rounds {
+  std::vector<std::uint8_t> kept;       // equal to lexical_first_mis(centers, radii, order, n_forced)
+  int rounds = 0;                       // rounds until every sphere was decided
+  std::vector<std::int64_t> messages;   // per round: (sphere, other part) pairs told a decision
+  std::vector<std::int64_t> undecided;  // per round: spheres still undecided after it
+  std::int64_t halo = 0;                // (sphere, other part) pairs with a conflict across parts
+};
+
+// Each round, every part sweeps its undecided spheres in the order `order` (a
+// permutation of 0..n-1; the first n_forced are kept whatever they meet): a
+// sphere is rejected when an earlier sphere it conflicts with (|c1 - c2| <
+// r1 + r2, as lexical_first_mis) is kept, kept when every earlier sphere it
+// conflicts with is rejected, and left undecided otherwise. Its own part's
+// states are read as the sweep sets them, the other parts' as the previous
+// round left them. Every sphere decided gets its serial state (induction along
+// the order: its earlier conflicting spheres were decided with theirs), and
+// each round decides at least the earliest undecided sphere, so the rounds end.
+// part[i] in [0, n_parts). O(n log n + conflicts) time.
+Mis_rounds lexical_first_mis_in_rounds(const std::vector<Vec2>& centers, const std::vector<double>& radii,
+                                       const std::vector<Index>& order, std::size_t n_forced,
+                                       const std::vector<std::int32_t>& part, int n_parts);
+
+}  // namespace evomesh

@@ -1,0 +1,151 @@
+#include "evomesh/mis_rounds.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <stdexcept>
+#include <unordered_map>
+#include <utility>
+
+namespace evomesh {
+
+namespace {
+
+// Every sphere's earlier conflicting spheres (in `rank` order). The spheres go
+// to one uniform grid per octave of radius (cell side twice the octave's
+// largest radius), so a query of radius r in the grid of octave R meets cells
+// within r + R: O(1) cells per octave for spheres of bounded ply.
+std::vector<std::vector<Index>> earlier_conflicts(const std::vector<Vec2>& c, const std::vector<double>& r,
+                                                  const std::vector<std::size_t>& rank) {
+  const std::size_t n = c.size();
+  std::unordered_map<int, std::vector<Index>> by_octave;
+  for (std::size_t i = 0; i < n; ++i) by_octave[std::ilogb(r[i])].push_back(static_cast<Index>(i));
+  struct Grid {
+    double side;
+    double reach;  // the octave's largest radius
+    std::unordered_map<std::uint64_t, std::vector<Index>> cells;
+  };
+  auto key = [](std::int64_t ix, std::int64_t iy) {
+    return (static_cast<std::uint64_t>(ix) << 32) ^ static_cast<std::uint64_t>(iy & 0xffffffff);
+  };
+  std::vector<Grid> grids;
+  for (auto& [octave, members] : by_octave) {
+    Grid g;
+    g.reach = 0;
+    for (Index i : members) g.reach = std::max(g.reach, r[i]);
+    g.side = 2 * g.reach;
+    for (Index i : members) {
+      g.cells[key(static_cast<std::int64_t>(std::floor(c[i][0] / g.side)),
+                  static_cast<std::int64_t>(std::floor(c[i][1] / g.side)))]
+          .push_back(i);
+    }
+    grids.push_back(std::move(g));
+  }
+  std::vector<std::vector<Index>> earlier(n);
+  for (std::size_t s = 0; s < n; ++s) {
+    for (const Grid& g : grids) {
+      const double reach = r[s] + g.reach;
+      const auto x0 = static_cast<std::int64_t>(std::floor((c[s][0] - reach) / g.side));
+      const auto x1 = static_cast<std::int64_t>(std::floor((c[s][0] + reach) / g.side));
+      const auto y0 = static_cast<std::int64_t>(std::floor((c[s][1] - reach) / g.side));
+      const auto y1 = static_cast<std::int64_t>(std::floor((c[s][1] + reach) / g.side));
+      for (std::int64_t ix = x0; ix <= x1; ++ix) {
+        for (std::int64_t iy = y0; iy <= y1; ++iy) {
+          const auto it = g.cells.find(key(ix, iy));
+          if (it == g.cells.end()) continue;
+          for (Index t : it->second) {
+            if (rank[t] >= rank[s]) continue;
+            // (packing.cpp's leaf_conflicts, operation for operation)
+            const double ex = c[t][0] - c[s][0], ey = c[t][1] - c[s][1], sum = r[s] + r[t];
+            if (ex * ex + ey * ey < sum * sum) earlier[s].push_back(t);
+          }
+        }
+      }
+    }
+  }
+  return earlier;
+}
+
+}  // namespace
+
+Mis_rounds lexical_first_mis_in_rounds(const std::vector<Vec2>& centers, const std::vector<double>& radii,
+                                       const std::vector<Index>& order, std::size_t n_forced,
+                                       const std::vector<std::int32_t>& part, int n_parts) {
+  const std::size_t n = centers.size();
+  if (radii.size() != n || order.size() != n || part.size() != n) {
+    throw Input_error("lexical_first_mis_in_rounds: centers, radii, order and part must have one entry per sphere");
+  }
+  if (n_parts < 1 || n_forced > n) throw Input_error("lexical_first_mis_in_rounds: n_parts >= 1, n_forced <= n");
+  std::vector<std::size_t> rank(n, n);
+  for (std::size_t k = 0; k < n; ++k) {
+    const Index i = order[k];
+    if (i < 0 || static_cast<std::size_t>(i) >= n || rank[i] != n) {
+      throw Input_error("lexical_first_mis_in_rounds: order must be a permutation of the spheres");
+    }
+    rank[i] = k;
+  }
+  for (std::size_t i = 0; i < n; ++i) {
+    if (!(radii[i] > 0) || !std::isfinite(radii[i]) || !std::isfinite(centers[i][0]) || !std::isfinite(centers[i][1])) {
+      throw Input_error("lexical_first_mis_in_rounds: radii must be finite and positive, centres finite");
+    }
+    if (part[i] < 0 || part[i] >= n_parts) throw Input_error("lexical_first_mis_in_rounds: part out of range");
+  }
+  const auto earlier = earlier_conflicts(centers, radii, rank);
+  // For the messages: the other parts each sphere conflicts with (either way round).
+  std::vector<std::vector<std::int32_t>> told(n);
+  for (std::size_t s = 0; s < n; ++s) {
+    for (Index t : earlier[s]) {
+      if (part[t] == part[s]) continue;
+      told[s].push_back(part[t]);
+      told[t].push_back(part[s]);
+    }
+  }
+  Mis_rounds out;
+  for (auto& parts : told) {
+    std::sort(parts.begin(), parts.end());
+    parts.erase(std::unique(parts.begin(), parts.end()), parts.end());
+    out.halo += static_cast<std::int64_t>(parts.size());
+  }
+  enum : std::uint8_t { unknown = 0, in = 1, out_ = 2 };
+  std::vector<std::uint8_t> state(n, unknown);
+  for (std::size_t k = 0; k < n_forced; ++k) state[order[k]] = in;
+  // Each part's spheres in the order.
+  std::vector<std::vector<Index>> sweep(static_cast<std::size_t>(n_parts));
+  for (std::size_t k = n_forced; k < n; ++k) sweep[part[order[k]]].push_back(order[k]);
+  std::size_t left = n - n_forced;
+  std::vector<std::uint8_t> seen = state;  // the states as the previous round left them
+  while (left > 0) {
+    std::int64_t messages = 0;
+    for (auto& spheres : sweep) {
+      std::size_t kept_undecided = 0;
+      for (Index s : spheres) {
+        bool any_in = false, all_out = true;
+        for (Index t : earlier[s]) {
+          const std::uint8_t v = part[t] == part[s] ? state[t] : seen[t];
+          if (v == in) {
+            any_in = true;
+            break;
+          }
+          if (v != out_) all_out = false;
+        }
+        if (any_in || all_out) {
+          state[s] = any_in ? out_ : in;
+          messages += static_cast<std::int64_t>(told[s].size());
+          --left;
+        } else {
+          spheres[kept_undecided++] = s;
+        }
+      }
+      spheres.resize(kept_undecided);
+    }
+    seen = state;
+    ++out.rounds;
+    out.messages.push_back(messages);
+    out.undecided.push_back(static_cast<std::int64_t>(left));
+  }
+  out.kept.resize(n);
+  for (std::size_t i = 0; i < n; ++i) out.kept[i] = state[i] == in;
+  return out;
+}
+
+}  // namespace evomesh
