@@ -151,10 +151,10 @@ def evolve(mesh: Mesh, delta: Any = None, *, size: Any = None, method: str = "fr
         as MMG and Gmsh mean a size: a number, one value per point, or a
         function h(x) of an (n, 2) array of coordinates returning (n,) values.
         The output's median edge length over h is within about 10 % of 1.
-        Where the mesh already meets h (its edges within a factor 1.15 finer
+        Where the mesh already meets h (its edges within a factor 1.25 finer
         to 1.25 coarser of it) it is left as it is, so the same ``size`` step
-        after step changes next to nothing (at most 0.1 % of the points from
-        the third step on). The factor this stands for is
+        after step changes next to nothing (at most 0.1 % of the points at
+        the second step, none from the third on). The factor this stands for is
         :func:`~evomesh.spacing_function.delta_from_size` (which says how);
         one step still changes the spacing by at most the factors above.
     method : {"frfc", "drfc"}
