@@ -504,3 +504,28 @@ def test_a_lone_too_fine_point_asks_for_nothing(seeds):
     # a pair of neighbours asks, as before (a request 2x coarser, most points)
     coarser = delta_from_size(mesh, 2 * h)
     assert np.mean(coarser > 1) > 0.8
+
+
+def test_a_step_that_returns_its_input_shares_its_arrays():
+    # (evolution._wrap: the input Mesh's checked, immutable arrays, not checked again)
+    make, size, _ = CASES["tagged"]
+    new = evomesh.evolve(make(), size=size)
+    again = evomesh.evolve(new, 1.0)
+    assert again.stats["unchanged"] == 1
+    for name in ("points", "triangles", "segments", "segment_is_boundary", "segment_tags", "triangle_tags",
+                 "required"):
+        assert np.shares_memory(getattr(again, name), getattr(new, name)), name
+        with pytest.raises(ValueError):
+            getattr(again, name).flags.writeable = True
+    # (the step labels the points it sampled as Steiner points once it keeps them)
+    full = evomesh.evolve(new, 1.0, incremental=False)
+    assert np.array_equal(again.kind, full.kind) and not again.kind.flags.writeable
+    assert np.array_equal(again.origin, np.arange(new.n_points)) and again.tag_names == new.tag_names
+    assert np.array_equal(again.nn_spacing, new.nn_spacing)
+    assert again.lineage is not None and again.lineage.n_old_points == new.n_points
+    # a step that changes something still makes (and checks) its own
+    delta = np.ones(new.n_points)
+    delta[: new.n_points // 10] = 0.5
+    changed_step = evomesh.evolve(new, delta)
+    assert changed_step.stats["unchanged"] == 0 and changed_step.points is not new.points
+    check_evolved(new, changed_step)

@@ -11,7 +11,7 @@ import numpy as np
 
 from evomesh import _core
 from evomesh.geometry import as_geometry
-from evomesh.mesh import Lineage, Mesh, check_boundary_not_pinched, check_mesh_limits
+from evomesh.mesh import Lineage, Mesh, PointKind, check_boundary_not_pinched, check_mesh_limits
 from evomesh.motion import after_step, step_input
 from evomesh.spacing_function import _require_mesh, as_delta, delta_from_size
 
@@ -532,16 +532,21 @@ def _wrap(result: dict[str, Any], old: Mesh | None = None) -> Mesh:
     )
 
 
-_UNCHANGED_ARRAYS = ("points", "triangles", "segments", "segment_is_boundary", "kind", "segment_tags", "triangle_tags",
+_UNCHANGED_ARRAYS = ("points", "triangles", "segments", "segment_is_boundary", "segment_tags", "triangle_tags",
                      "required")
 
 
 def _is_the_input(result: dict[str, Any], old: Mesh) -> bool:
     """The step says its output is its input (stats unchanged == 1: the same
     points in the same order, the input's triangles and segments, cpp/src/step.cpp
-    adopt_input_order) and its arrays are the input's, bit for bit. O(n)
+    adopt_input_order) and its arrays are the input's, bit for bit, but for the
+    kinds (a step labels the points it sampled as Steiner points when it keeps
+    them), with the same corners (what the boundary check reads). O(n)
     comparisons, against the O(n log n) checks they spare."""
     if result["stats"].get("unchanged") != 1 or not np.array_equal(result["origin"], np.arange(old.n_points)):
+        return False
+    kind = np.asarray(result["kind"])
+    if kind.shape != old.kind.shape or not np.array_equal(kind == PointKind.CORNER, old.kind == PointKind.CORNER):
         return False
     for name in _UNCHANGED_ARRAYS:
         value = result.get(name)
@@ -556,8 +561,8 @@ def _is_the_input(result: dict[str, Any], old: Mesh) -> bool:
 
 def _wrap_unchanged(result: dict[str, Any], old: Mesh) -> Mesh:
     """The output Mesh of a step that returned its input (_is_the_input): the
-    input Mesh's arrays (immutable, so shared, not copied), its nn, its tag
-    names. The input passed the checks _wrap makes (Mesh() or _wrap made it);
+    input Mesh's arrays (immutable, so shared, not copied; the step's kinds),
+    its nn, its tag names. The input passed the checks _wrap makes (Mesh() or _wrap made it);
     the same arrays pass them again, so they are not made again (~10 ms at 5e4
     points: flat, inverted and pinched elements, point distances)."""
     lineage = None
@@ -568,7 +573,8 @@ def _wrap_unchanged(result: dict[str, Any], old: Mesh) -> Mesh:
     if nn is None and result.get("output_nn") is not None and len(result["output_nn"]) == old.n_points:
         nn, nn_grew = np.array(result["output_nn"]), result["output_nn_grew"]
         nn[nn_grew] = result["output_nn_grown"]
-    return Mesh._trusted(old.points, old.triangles, old.segments, old.segment_is_boundary, old.kind, result["origin"],
+    kind = old.kind if np.array_equal(result["kind"], old.kind) else result["kind"]
+    return Mesh._trusted(old.points, old.triangles, old.segments, old.segment_is_boundary, kind, result["origin"],
                          dict(result["stats"]), lineage, nn, old.segment_tags, old.triangle_tags, old.required, nn_grew,
                          tag_names=old.tag_names)
 
