@@ -154,7 +154,9 @@ def evolve(mesh: Mesh, delta: Any = None, *, size: Any = None, method: str = "fr
         Where the mesh already meets h (its edges within a factor 1.25 finer
         to 1.25 coarser of it) it is left as it is, so the same ``size`` step
         after step changes next to nothing (at most 0.1 % of the points at
-        the second step, none from the third on). The factor this stands for is
+        the second step, none from the third on, where the first step's input
+        was within about twice h; a step more per halving where it was
+        coarser). The factor this stands for is
         :func:`~evomesh.spacing_function.delta_from_size` (which says how);
         one step still changes the spacing by at most the factors above.
     method : {"frfc", "drfc"}
