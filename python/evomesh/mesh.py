@@ -39,8 +39,13 @@ Names and values come from the C++ core (evomesh::Point_kind).
 def _frozen(array: np.ndarray) -> np.ndarray:
     """A read-only array over an immutable ``bytes`` owner: numpy refuses to make
     it (or any view of it) writeable again, so a Mesh cannot be changed in place.
-    (A constant made by _frozen_constant already is one, and stays a view.)"""
+    (A constant made by _frozen_constant, or an array already frozen, already is
+    one, and is returned as it is.)"""
     if isinstance(array, np.ndarray) and array.ndim == 1 and array.strides == (0,) and _owned_by_bytes(array):
+        return array
+    # (already frozen: a Mesh's array, shared by a step that returns its input)
+    if isinstance(array, np.ndarray) and array.flags.c_contiguous and not array.flags.writeable \
+            and _owned_by_bytes(array):
         return array
     array = np.ascontiguousarray(array)
     return np.frombuffer(array.tobytes(), dtype=array.dtype).reshape(array.shape)
