@@ -65,3 +65,17 @@ def test_bad_input_is_refused():
         _core.lexical_first_mis_in_rounds(centers, radii, order, 0, np.full(10, 3), 2)
     with pytest.raises(ValueError, match="positive"):
         _core.lexical_first_mis_in_rounds(centers, -radii, order, 0, np.zeros(10, np.int64), 1)
+
+
+def test_radii_twelve_octaves_apart_and_far_out_centres():
+    """The conflict search does not scan the cells of a small octave around a large sphere (that took time
+    growing with the square of the radius ratio), and a grid cell index that cannot be represented is an error."""
+    centers = np.array([[0.0, 0.0], [100.0, 0.0], [0.5, 0.0], [1.0 + 1e-13, 0.0]])
+    radii = np.array([1.0, 1e-12, 1e-12, 1e-12])
+    order = np.array([0, 1, 2, 3])
+    out = _core.lexical_first_mis_in_rounds(centers, radii, order, 0, np.array([0, 1, 0, 1]), 2)
+    assert np.array_equal(out["kept"], _core.lexical_first_mis(centers, radii, order, 0))
+    assert out["kept"].tolist() == [1, 1, 0, 0]  # (the last two meet the large sphere, 12 octaves up)
+    with pytest.raises(ValueError, match="too far out"):
+        _core.lexical_first_mis_in_rounds(np.array([[1e19, 0.0], [0.0, 0.0]]), np.array([1.0, 1.0]),
+                                          np.array([0, 1]), 0, np.array([0, 0]), 1)

@@ -236,7 +236,7 @@ def test_twenty_moving_steps_chain_their_conservative_transfers():
     for step in range(20):
         new = evomesh.evolve(mesh, size=h, displacement=swirl(0.4 if step % 3 else 3.0), seed=step)
         check_valid_mesh(new)
-        # size= has a dead band (edges within [h / 1.25, 1.15 h] stay as they are) and the fold repair and the
+        # size= has a dead band (edges within [h / 1.25, 1.25 h] stay as they are) and the fold repair and the
         # quality pass add points where a swirl of three cells tangles the mesh: measured 924-1634 points,
         # median edge 0.88-0.94 h after the small swirls, 0.65-0.70 h after the folding ones (a plain step
         # keeps 795 points at 0.98 h)

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <map>
 #include <stdexcept>
 #include <unordered_map>
 #include <utility>
@@ -11,16 +12,30 @@ namespace evomesh {
 
 namespace {
 
+// The cell of coordinate x in a grid of side `side`; Input_error when it
+// leaves the 62-bit range (a centre too far out for its spheres' sizes).
+std::int64_t cell_of(double x, double side) {
+  const double c = std::floor(x / side);
+  if (!(std::abs(c) < 4.0e18)) {
+    throw Input_error("lexical_first_mis_in_rounds: a centre lies too far out for the spheres' radii");
+  }
+  return static_cast<std::int64_t>(c);
+}
+
 // Every sphere's earlier conflicting spheres (in `rank` order). The spheres go
 // to one uniform grid per octave of radius (cell side twice the octave's
-// largest radius), so a query of radius r in the grid of octave R meets cells
-// within r + R: O(1) cells per octave for spheres of bounded ply.
+// largest radius R). A pair is found from its smaller sphere, which queries
+// its own octave and the larger ones only: there its reach r + R is at most
+// 2R, one cell, so every query visits at most 3 x 3 cells per octave (a pair
+// within one octave is found from both ends and kept from the lower index).
+// O(n L) cell visits for L octaves, plus the pairs met.
 std::vector<std::vector<Index>> earlier_conflicts(const std::vector<Vec2>& c, const std::vector<double>& r,
                                                   const std::vector<std::size_t>& rank) {
   const std::size_t n = c.size();
-  std::unordered_map<int, std::vector<Index>> by_octave;
+  std::map<int, std::vector<Index>> by_octave;  // (ordered: the octaves at or above a sphere's)
   for (std::size_t i = 0; i < n; ++i) by_octave[std::ilogb(r[i])].push_back(static_cast<Index>(i));
   struct Grid {
+    int octave;
     double side;
     double reach;  // the octave's largest radius
     std::unordered_map<std::uint64_t, std::vector<Index>> cells;
@@ -28,40 +43,44 @@ std::vector<std::vector<Index>> earlier_conflicts(const std::vector<Vec2>& c, co
   auto key = [](std::int64_t ix, std::int64_t iy) {
     return (static_cast<std::uint64_t>(ix) << 32) ^ static_cast<std::uint64_t>(iy & 0xffffffff);
   };
-  std::vector<Grid> grids;
+  std::vector<Grid> grids;  // by increasing octave
   for (auto& [octave, members] : by_octave) {
     Grid g;
+    g.octave = octave;
     g.reach = 0;
     for (Index i : members) g.reach = std::max(g.reach, r[i]);
     g.side = 2 * g.reach;
-    for (Index i : members) {
-      g.cells[key(static_cast<std::int64_t>(std::floor(c[i][0] / g.side)),
-                  static_cast<std::int64_t>(std::floor(c[i][1] / g.side)))]
-          .push_back(i);
-    }
+    for (Index i : members) g.cells[key(cell_of(c[i][0], g.side), cell_of(c[i][1], g.side))].push_back(i);
     grids.push_back(std::move(g));
   }
   std::vector<std::vector<Index>> earlier(n);
   for (std::size_t s = 0; s < n; ++s) {
+    const int own = std::ilogb(r[s]);
     for (const Grid& g : grids) {
+      if (g.octave < own) continue;
       const double reach = r[s] + g.reach;
-      const auto x0 = static_cast<std::int64_t>(std::floor((c[s][0] - reach) / g.side));
-      const auto x1 = static_cast<std::int64_t>(std::floor((c[s][0] + reach) / g.side));
-      const auto y0 = static_cast<std::int64_t>(std::floor((c[s][1] - reach) / g.side));
-      const auto y1 = static_cast<std::int64_t>(std::floor((c[s][1] + reach) / g.side));
+      const std::int64_t x0 = cell_of(c[s][0] - reach, g.side), x1 = cell_of(c[s][0] + reach, g.side);
+      const std::int64_t y0 = cell_of(c[s][1] - reach, g.side), y1 = cell_of(c[s][1] + reach, g.side);
       for (std::int64_t ix = x0; ix <= x1; ++ix) {
         for (std::int64_t iy = y0; iy <= y1; ++iy) {
           const auto it = g.cells.find(key(ix, iy));
           if (it == g.cells.end()) continue;
           for (Index t : it->second) {
-            if (rank[t] >= rank[s]) continue;
-            // (packing.cpp's leaf_conflicts, operation for operation)
+            if (static_cast<std::size_t>(t) == s || (g.octave == own && static_cast<std::size_t>(t) < s)) continue;
+            // (packing.cpp's leaf_conflicts, operation for operation: symmetric in s and t)
             const double ex = c[t][0] - c[s][0], ey = c[t][1] - c[s][1], sum = r[s] + r[t];
-            if (ex * ex + ey * ey < sum * sum) earlier[s].push_back(t);
+            if (!(ex * ex + ey * ey < sum * sum)) continue;
+            if (rank[t] < rank[s]) earlier[s].push_back(t);
+            else earlier[t].push_back(static_cast<Index>(s));
           }
         }
       }
     }
+  }
+  // (two cells of one grid can share a key: a pair met twice is listed twice, harmlessly for the rule)
+  for (auto& list : earlier) {
+    std::sort(list.begin(), list.end());
+    list.erase(std::unique(list.begin(), list.end()), list.end());
   }
   return earlier;
 }

@@ -33,7 +33,9 @@ struct Mis_rounds {
 // round left them. Every sphere decided gets its serial state (induction along
 // the order: its earlier conflicting spheres were decided with theirs), and
 // each round decides at least the earliest undecided sphere, so the rounds end.
-// part[i] in [0, n_parts). O(n log n + conflicts) time.
+// part[i] in [0, n_parts). Finding the conflicts visits O(n L) grid cells, L
+// the number of octaves the radii span; then O(conflicts) a round. Input_error
+// for bad arrays and for centres too far out for their radii (grid overflow).
 Mis_rounds lexical_first_mis_in_rounds(const std::vector<Vec2>& centers, const std::vector<double>& radii,
                                        const std::vector<Index>& order, std::size_t n_forced,
                                        const std::vector<std::int32_t>& part, int n_parts);
