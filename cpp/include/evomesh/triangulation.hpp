@@ -17,8 +17,9 @@ namespace evomesh {
 // a function of its points and constraints (CGAL decides cocircular points by
 // a symbolic perturbation in (x, y) order; the quality pass reads no insertion
 // history, cpp/tests/test_quality_history.cpp), and with this order so are the
-// arrays, whichever path or thread count built them; a rank of a partitioned
-// step owns the contiguous range of triangles whose least point it owns.
+// arrays, whichever path or thread count built them; where a rank of a
+// partitioned step owns a contiguous range of point ids, the triangles whose
+// least point it owns are a contiguous range too.
 // O(n + m). Returns the order applied (new position -> old), for arrays
 // aligned with the triangles.
 std::vector<Index> canonical_triangle_order(std::size_t n_points, std::vector<Triangle>& triangles);
