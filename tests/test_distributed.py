@@ -465,3 +465,22 @@ def test_evolve_refuses_a_distributed_mesh_with_the_way_round():
     d = evomesh.DistributedMesh.scatter(mesh if RANK == 0 else None, COMM)
     with pytest.raises(TypeError, match="not available yet"):
         evomesh.evolve(d, 1.0)
+
+
+# A nearly flat triangle whose doubled area, in floating point, is positive read from its first point
+# and exactly zero read from the other two.
+_NEAR_FLAT = np.array([[14.04744410987757, 93.25137503871372], [14.252896770644508, 93.5558792717922],
+                       [14.663802092178335, 94.16488773794907]])
+
+
+def test_copies_of_a_triangle_in_any_rotation_get_one_orientation():
+    """Each rank gives the same triangle in its own rotation: every rank reads it from its least global id,
+    so all ranks decide alike (before, a rank whose rotation gave area 0 refused what the others took)."""
+    rotations = [[0, 1, 2], [1, 2, 0], [2, 0, 1]]
+    for first in range(3):
+        rows = np.array([rotations[(first + RANK) % 3]])
+        d = evomesh.DistributedMesh.from_local(_NEAR_FLAT, rows, np.arange(3), COMM)
+        owned = np.asarray(d.global_ids)[np.asarray(d.triangles)]
+        check_everywhere(len(owned) == 0 or sorted(owned[0].tolist()) == [0, 1, 2], "the triangle is kept")
+        cyclic = [owned[0].tolist()[k:] + owned[0].tolist()[:k] for k in range(3)] if len(owned) else [[0, 1, 2]]
+        check_everywhere([0, 1, 2] in cyclic, "it keeps the orientation its least global id gives")

@@ -405,8 +405,12 @@ def _check_local(points: Any, triangles: Any, global_ids: Any, size: int, owners
     if repeated.any():
         raise ValueError(f"triangle {int(np.argmax(repeated))} repeats a vertex (zero area)")
     # Counter-clockwise, as in Mesh (exact sign for these double products is not
-    # needed here: gather's Mesh checks areas and flatness exactly).
-    p = pts[tris]
+    # needed here: gather's Mesh checks areas and flatness exactly). Each row is
+    # read from its least global id on, so copies of a triangle on
+    # different ranks, in any rotation, compute the same products and take the
+    # same orientation (a reversed copy gets exactly the negated area).
+    start = np.argmin(gids[tris], axis=1)
+    p = pts[np.take_along_axis(tris, (start[:, None] + np.arange(3)[None, :]) % 3, axis=1)]
     twice_area = ((p[:, 1, 0] - p[:, 0, 0]) * (p[:, 2, 1] - p[:, 0, 1])
                   - (p[:, 1, 1] - p[:, 0, 1]) * (p[:, 2, 0] - p[:, 0, 0]))
     if (twice_area == 0).any():
