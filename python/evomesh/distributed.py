@@ -1048,7 +1048,7 @@ def _decide_owners(held: np.ndarray, holder: np.ndarray, owners_given: bool) -> 
     first = np.flatnonzero(start)
     for field in ("xy", "origin", "kind", "required"):
         a, b = h[field], h[field][first][group]
-        differ = (a != b).reshape(len(h), -1).any(axis=1)
+        differ = (a != b).reshape(len(h), int(np.prod((a != b).shape[1:]))).any(axis=1)  # (also with no rows)
         if differ.any():
             k = int(np.argmax(differ))
             raise ValueError(f"point with global id {int(h['gid'][k])} has different {field} on rank "
