@@ -293,19 +293,14 @@ bool adopt_input_order(const Mesh_arrays& input, Evolve_result& result) {
   for (std::size_t i = 0; i < result.origin.size(); ++i) {
     if (result.origin[i] != static_cast<Index>(i)) return false;
   }
-  // Triangles by their rotation that starts at the least index (orientation kept).
-  auto rotated = [](Triangle t) {
-    while (t[0] > t[1] || t[0] > t[2]) t = {t[1], t[2], t[0]};
-    return t;
-  };
   auto same_set = [](auto a, auto b) {
     std::sort(a.begin(), a.end());
     std::sort(b.begin(), b.end());
     return a == b;
   };
   std::vector<Triangle> a(input.triangles.size()), b(out.triangles.size());
-  for (std::size_t t = 0; t < a.size(); ++t) a[t] = rotated(input.triangles[t]);
-  for (std::size_t t = 0; t < b.size(); ++t) b[t] = rotated(out.triangles[t]);
+  for (std::size_t t = 0; t < a.size(); ++t) a[t] = least_index_first(input.triangles[t]);
+  for (std::size_t t = 0; t < b.size(); ++t) b[t] = least_index_first(out.triangles[t]);
   if (!same_set(std::move(a), std::move(b))) return false;
   std::vector<std::array<Index, 3>> sa(input.segments.size()), sb(out.segments.size());
   for (std::size_t s = 0; s < sa.size(); ++s) {

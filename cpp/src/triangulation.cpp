@@ -594,7 +594,7 @@ Input_error crossing_pieces_error() {
 std::vector<Index> canonical_triangle_order(std::size_t n_points, std::vector<Triangle>& triangles) {
   std::vector<std::size_t> start(n_points + 1, 0);
   for (Triangle& t : triangles) {
-    while (t[0] > t[1] || t[0] > t[2]) t = {t[1], t[2], t[0]};
+    t = least_index_first(t);
     ++start[static_cast<std::size_t>(t[0]) + 1];
   }
   for (std::size_t v = 0; v < n_points; ++v) start[v + 1] += start[v];

@@ -23,6 +23,11 @@ namespace evomesh {
 // O(n + m). Returns the order applied (new position -> old), for arrays
 // aligned with the triangles.
 std::vector<Index> canonical_triangle_order(std::size_t n_points, std::vector<Triangle>& triangles);
+// A triangle rotated to start at its least point index (orientation kept).
+inline Triangle least_index_first(Triangle t) {
+  while (t[0] > t[1] || t[0] > t[2]) t = {t[1], t[2], t[0]};
+  return t;
+}
 
 struct Constraint_piece {
   Index a;
