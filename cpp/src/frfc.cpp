@@ -1,7 +1,9 @@
 #include "evomesh/frfc.hpp"
 
 #include <algorithm>
+#include <memory>
 #include <optional>
+#include <string>
 #include <utility>
 
 #include "evomesh/candidates.hpp"
@@ -13,6 +15,7 @@
 #include "evomesh/spacing_repair.hpp"
 #include "evomesh/incremental_step.hpp"
 #include "evomesh/detail/frfc_stages.hpp"
+#include "evomesh/detail/step_scope.hpp"
 
 namespace evomesh {
 
@@ -193,147 +196,177 @@ std::vector<Constraint_piece> pieces_along_chains(const Mesh_arrays& mesh, const
   return constraint_pieces(chains, out_index, begin, out_index);
 }
 
-// Step 2a: candidates on segments (grid samples and ring candidates, snapped
-// to straight chains) and their spheres.
-Candidates segment_stage(const Mesh_arrays& mesh, const std::vector<double>& delta, const Step_spacing& spacing,
-                         const std::vector<Segment_chain>& chains, const std::vector<std::uint8_t>& demoted,
-                         const Frfc_options& options, Stage_timer& timer) {
-  const std::vector<double>& f = spacing.f;
-  const Spacing_queries queries = spacing_queries(*spacing.function);
-  check_sample_budget(
-      estimate_sample_count(mesh, f, options.cell_factor, options.max_samples, options.adaptive_cells, &queries),
-      options.max_samples, "sampling");
-  Candidates on_segments = segment_candidates(mesh, delta, f, chains, options, &queries);
-  timer.lap("sampling");
-  candidate_radii(mesh, *spacing.function, f, demoted, options, /*on_segment=*/true, on_segments);
-  timer.lap("sample_radii");
-  return on_segments;
-}
-
-
-// Step 2b: interior candidates (grid samples and ring candidates, less those
-// the first pass certainly blocks) and their spheres.
-Candidates interior_stage(const Mesh_arrays& mesh, const Triangle_fans& fans, const std::vector<double>& delta,
-                          const Step_spacing& spacing, const Packing& packing, const std::vector<std::uint8_t>& demoted,
-                          const Frfc_options& options, const Step_context& context, Stage_timer& timer,
-                          std::size_t& n_drawn) {
-  const std::vector<double>& f = spacing.f;
-  Cover_discs cover;
-  if (options.filter_samples) {
-    cover = cover_discs(mesh, f, packing.radius, packing.kept, packing.blocker, options.radius_scale,
-                        options.radius == Radius_rule::interpolated);
-  }
-  const Spacing_queries queries = spacing_queries(*spacing.function);
-  Candidates inside = interior_candidates(mesh, fans, delta, f, demoted, cover, options, n_drawn, nullptr, &queries);
-  cover = Cover_discs();
-  release_free_memory(context);  // the sampling threads' blocks
-  timer.lap("sampling");
-  candidate_radii(mesh, *spacing.function, f, demoted, options, /*on_segment=*/false, inside);
-  timer.lap("sample_radii");
-  if (options.filter_samples) {
-    drop_blocked_candidates(mesh, packing.centers, packing.radius, packing.kept, packing.blocker, /*threads=*/0,
-                            inside);
-    timer.lap("lfmis");
-  }
-  return inside;
-}
-
-// The spacing repair (spacing_repair.hpp), when asked for and ring candidates were offered.
-std::vector<Vec2> spacing_repair_stage(const Mesh_arrays& mesh, const Triangle_fans& fans,
-                                       const std::vector<double>& delta, const Step_spacing& spacing,
-                                       const Candidates& on_segments, const std::vector<std::uint8_t>& demoted,
-                                       const Frfc_options& options, Packing& packing, std::size_t& n_repairs) {
-  if (!(options.repair_ratio > 0 && options.ring_samples) && !(options.gap_repair_ratio > 0) &&
-      !(options.refine_gap_ratio > 0)) {
-    return {};
-  }
-  const Spacing_repair_input input{mesh, fans, delta, spacing.nn, spacing.f, packing.centers, on_segments.owner,
-                                   demoted};
-  return repair_spacing(input, options, packing.kept, n_repairs);
-}
-
 }  // namespace frfc_stages
 
-Evolve_result frfc(const Mesh_arrays& input, const std::vector<double>& delta, const Frfc_options& options,
-                   const Step_context& context) {
-  check_delta(input, delta);
-  options.validate();
-  using namespace frfc_stages;
-  // Where delta = 1 on most of the mesh, the same step at the cost of the
-  // change (incremental_step.hpp). The path is chosen here, before any work,
-  // from O(n) counts; what the incremental step throws propagates (a bug there
-  // must show, not cost a second step).
-  // First, with delta = 1 everywhere: a step that certainly returns its input
-  // (empty_scope.hpp; the certificate, O(n), in empty_scope.cpp) returns it.
-  int declined_by = 0;
-  if (auto unchanged = empty_scope_frfc(input, delta, options, context, &declined_by)) return std::move(*unchanged);
-  if (options.incremental && incremental_applies(input, delta, options)) {
-    Evolve_result result = incremental_frfc(input, delta, options, context);
-    result.stats.emplace_back("empty_scope", 0.0);
-    result.stats.emplace_back("empty_scope_declined_by", declined_by);
-    return result;
+
+namespace {
+
+using detail::Stage_timer;
+using frfc_stages::Packing;
+
+// The paper's step: every stage on the whole mesh, f from one Apollonius graph
+// of all sites (step_spacing).
+class Whole_mesh final : public Step_scope {
+ public:
+  Whole_mesh(const Frfc_options& options, const Step_context& context) : options_(options), context_(context) {}
+
+  Scope_spacing spacing(const Mesh_arrays& mesh, const std::vector<double>& delta,
+                        const std::vector<Segment_chain>& chains, Stage_timer& timer) override {
+    Step_spacing spacing = step_spacing(mesh, delta, F_at_points::lemma_3_1, /*threads=*/0, timer,
+                                        options_.within_domain ? &chains : nullptr, context_.filter_sites);
+    function_ = std::move(spacing.function);
+    queries_ = spacing_queries(*function_);
+    frfc_stages::release_free_memory(context_);  // what building the Apollonius graphs in parallel freed
+    return {std::move(spacing.nn), std::move(spacing.f), {}};
   }
-  // With curved boundaries, the corners of curved chains come from the geometry.
-  const Mesh_arrays with_curves = input.geometry ? with_curve_kinds(input) : Mesh_arrays{};
-  const Mesh_arrays& mesh = input.geometry ? with_curves : input;
+  const Spacing_queries* grid_queries(const Mesh_arrays&, const std::vector<double>&) override { return &queries_; }
+  const Spacing_function& segment_radii() override { return *function_; }
+  Packing first_pass(const Mesh_arrays& mesh, const Scope_spacing& spacing, const Candidates& on_segments,
+                     const std::vector<std::uint8_t>& forced, std::size_t n_forced,
+                     const std::vector<std::uint8_t>& demoted) override {
+    return frfc_stages::first_packing_pass(mesh, spacing.f, on_segments, forced, n_forced, demoted, options_);
+  }
+  // (alive with the Apollonius graph during the sampling, the triangulation set the step's peak memory)
+  bool starts_triangulation_early() const override { return false; }
+  std::vector<std::uint8_t> quiet_triangles(const Mesh_arrays&, const Packing&, const std::vector<std::uint8_t>&,
+                                            Stage_timer&) override {
+    return {};
+  }
+  void sampled(const Mesh_arrays&, const std::vector<std::uint8_t>&) override {}
+  const Spacing_function& interior_radii(const Mesh_arrays&, const std::vector<double>&, const Candidates&,
+                                         Stage_timer&) override {
+    return *function_;
+  }
+  void spacing_done() override {
+    n_hidden_ = function_->n_hidden();
+    n_filtered_ = function_->n_filtered();
+    queries_ = nullptr;
+    function_.reset();
+  }
+  void second_pass(const Mesh_arrays&, Candidates& inside, Packing& packing) override {
+    frfc_stages::second_packing_pass(inside, packing);
+  }
+  // (alive with the packing after the repair, they would add to the peak)
+  bool keeps_fans() const override { return false; }
+  const std::vector<double>* reusable_nn(const Scope_spacing&) override { return nullptr; }
+  void add_counts(std::vector<std::pair<std::string, double>>& stats) const override {
+    stats.emplace_back("n_hidden_sites", static_cast<double>(n_hidden_));
+    stats.emplace_back("n_filtered_sites", static_cast<double>(n_filtered_));
+    stats.emplace_back("incremental_step", 0);
+  }
+
+ private:
+  const Frfc_options& options_;
+  const Step_context& context_;
+  std::unique_ptr<Spacing_function> function_;
+  Spacing_queries queries_;
+  std::size_t n_hidden_ = 0, n_filtered_ = 0;
+};
+
+}  // namespace
+
+// The outline of one step (Section 3.2), the same for every scope; the numbers
+// are the paper's steps.
+Evolve_result frfc_over_scope(const Mesh_arrays& input, const Mesh_arrays& mesh, const std::vector<double>& delta,
+                              const Frfc_options& options, const Step_context& context, Step_scope& scope) {
+  using namespace frfc_stages;
+  const std::size_t n = mesh.points.size();
   Evolve_result result;
   Stage_timer timer(result.stats, context.profile);
   // Every stage runs its loops under this limit (parallel_for(..., 0, ...)).
   const Thread_limit thread_limit(context.threads);
+  // Memory (issue 13): what a stage leaves behind goes as soon as nothing reads it.
 
   // Step 1: nn_M and the spacing function f (Section 3.1), within the domain.
   const auto chains = segment_chains(mesh);
-  Step_spacing spacing = step_spacing(mesh, delta, F_at_points::lemma_3_1, /*threads=*/0, timer,
-                                      options.within_domain ? &chains : nullptr, context.filter_sites);
-  release_free_memory(context);  // what building the Apollonius graphs in parallel freed
+  Scope_spacing spacing = scope.spacing(mesh, delta, chains, timer);
+  const std::vector<double>& f = spacing.f;
+
   // Steps 2-5: candidates on segments, first packing pass; interior candidates, second pass.
   // Old points whose neighbourhood the request refines lose their priority.
   std::size_t n_forced = 0;
   const auto forced = forced_corners(mesh, chains, n_forced, mesh.required);
-  const auto demoted = demoted_points(mesh.triangles, spacing.nn, spacing.f, forced, options.demote_ratio);
-  const Candidates on_segments = segment_stage(mesh, delta, spacing, chains, demoted, options, timer);
-  Packing packing = first_packing_pass(mesh, spacing.f, on_segments, forced, n_forced, demoted, options);
+  auto demoted = demoted_points(mesh.triangles, spacing.nn, f, forced, options.demote_ratio);
+  // Step 2a: candidates on segments (grid samples and ring candidates, snapped
+  // to straight chains) and their spheres.
+  const Spacing_queries* queries = scope.grid_queries(mesh, f);
+  check_sample_budget(
+      estimate_sample_count(mesh, f, options.cell_factor, options.max_samples, options.adaptive_cells, queries),
+      options.max_samples, "sampling");
+  Candidates on_segments = segment_candidates(mesh, delta, f, chains, options, queries);
+  const std::size_t n_seg = on_segments.size();
+  timer.lap("sampling");
+  candidate_radii(mesh, scope.segment_radii(), f, demoted, options, /*on_segment=*/true, on_segments);
+  scope.segment_radii_done();
+  timer.lap("sample_radii");
+  Packing packing = scope.first_pass(mesh, spacing, on_segments, forced, n_forced, demoted);
+  std::optional<Early_start> early;
+  if (scope.starts_triangulation_early()) early.emplace(packing, options, mesh.geometry != nullptr);
   timer.lap("lfmis");
+
+  // Step 2b: interior candidates (grid samples and ring candidates, less those
+  // the first pass certainly blocks) and their spheres.
   std::optional<Triangle_fans> fans(mesh);
   std::size_t n_drawn = 0;
-  Candidates inside = interior_stage(mesh, *fans, delta, spacing, packing, demoted, options, context, timer, n_drawn);
+  Candidates inside;
+  {
+    Cover_discs cover;
+    if (options.filter_samples) {
+      cover = cover_discs(mesh, f, packing.radius, packing.kept, packing.blocker, options.radius_scale,
+                          options.radius == Radius_rule::interpolated);
+    }
+    const std::vector<std::uint8_t> quiet = scope.quiet_triangles(mesh, packing, demoted, timer);
+    inside = interior_candidates(mesh, *fans, delta, f, demoted, cover, options, n_drawn,
+                                 quiet.empty() ? nullptr : &quiet, queries);
+    scope.sampled(mesh, quiet);
+  }
+  release_free_memory(context);  // the sampling threads' blocks
+  timer.lap("sampling");
+  candidate_radii(mesh, scope.interior_radii(mesh, f, inside, timer), f, demoted, options, /*on_segment=*/false,
+                  inside);
+  timer.lap("sample_radii");
+  if (options.filter_samples) {
+    drop_blocked_candidates(mesh, packing.centers, packing.radius, packing.kept, packing.blocker, /*threads=*/0,
+                            inside);
+  }
   const std::size_t n_interior = inside.size();
-  // Memory (issue 13): what a stage leaves behind goes as soon as nothing reads it.
-  const std::size_t n_hidden = spacing.function->n_hidden();
-  const std::size_t n_filtered = spacing.function->n_filtered();
-  spacing.function.reset();  // the Apollonius graph: the radii of the candidates were its last use
+  scope.spacing_done();  // the candidates' radii were the graphs' last use
   release_free_memory(context);
   // The quality pass's triangulation of the first pass's points starts on the
-  // second thread once the Apollonius graph is gone (beside the sampling, it
-  // set the step's peak memory), beside the second pass when that is small,
-  // else after it: its tree of every candidate (about 36 bytes each) is the
-  // peak of a step with several candidates per input point.
-  const bool small_second_pass = inside.size() + packing.deferred.size() <= mesh.points.size();
-  std::optional<Early_start> early;
-  if (small_second_pass) early.emplace(packing, options, mesh.geometry != nullptr);
-  second_packing_pass(inside, packing);
+  // second thread (unless the scope started it already) beside the second pass
+  // when that is small, else after it: its tree of every candidate (about 36
+  // bytes each) is the peak of a step with several candidates per input point.
+  if (!early && inside.size() + packing.deferred.size() <= n) early.emplace(packing, options, mesh.geometry != nullptr);
+  scope.second_pass(mesh, inside, packing);
+  inside = Candidates();
   release_free_memory(context);
   if (!early) early.emplace(packing, options, mesh.geometry != nullptr);
-  early->insert_late(packing, mesh.points.size(), mesh.points.size() + on_segments.size());
+  early->insert_late(packing, n, n + n_seg);
   const std::size_t n_candidates = packing.centers.size();
-  drop_rejected_candidates(mesh.points.size() + on_segments.size(), packing);
+  drop_rejected_candidates(n + n_seg, packing);
   release_free_memory(context);
   timer.lap("lfmis");
+
+  // The spacing repair (spacing_repair.hpp), when asked for and ring candidates were offered.
   std::size_t n_repairs = 0;
-  const auto repair_points = spacing_repair_stage(mesh, *fans, delta, spacing, on_segments, demoted, options, packing,
-                                                    n_repairs);
-  early->insert_rest(packing, mesh.points.size(), mesh.points.size() + on_segments.size(), repair_points);
+  std::vector<Vec2> repair_points;
+  if ((options.repair_ratio > 0 && options.ring_samples) || options.gap_repair_ratio > 0 ||
+      options.refine_gap_ratio > 0) {
+    const Spacing_repair_input repair{mesh, *fans, delta, spacing.nn, f, packing.centers, on_segments.owner, demoted};
+    repair_points = repair_spacing(repair, options, packing.kept, n_repairs);
+  }
+  demoted = std::vector<std::uint8_t>();
+  early->insert_rest(packing, n, n + n_seg, repair_points);
   timer.lap("spacing_repair");
-  fans.reset();  // (not kept for the walker: alive with the packing here, they would add to the peak)
+  if (!scope.keeps_fans()) fans.reset();
 
   // Step 6: the kept points (on curves, moved onto them), the constraint pieces
   // between them, their triangulation.
   if (mesh.geometry) {
-    project_segment_candidates(mesh, on_segments.samples.parent, mesh.points.size(), packing.kept, packing.radius,
-                               packing.centers);
+    project_segment_candidates(mesh, on_segments.samples.parent, n, packing.kept, packing.radius, packing.centers);
   }
   std::vector<Index> out_index;
-  Selection selection = select_output(mesh, forced, packing, on_segments.size(), repair_points, out_index);
+  Selection selection = select_output(mesh, forced, packing, n_seg, repair_points, out_index);
   selection.pin(mesh.required);
   const auto pieces = pieces_along_chains(mesh, chains, on_segments, out_index);
   const std::size_t n_demoted = packing.n_demoted;
@@ -343,7 +376,9 @@ Evolve_result frfc(const Mesh_arrays& input, const std::vector<double>& delta, c
   // The old mesh's walker (parent map) is built on another thread while the
   // early triangulation takes the repair's points: both before the quality
   // pass, which runs on this thread.
-  Old_mesh_start old_mesh(input, /*threads=*/0);
+  std::optional<Old_mesh_start> old_mesh;
+  if (fans) old_mesh.emplace(input, /*threads=*/0, std::move(fans));
+  else old_mesh.emplace(input, /*threads=*/0);
   early->wait();
   release_free_memory(context);
   const bool early_started = options.quality && !mesh.geometry;
@@ -351,21 +386,43 @@ Evolve_result frfc(const Mesh_arrays& input, const std::vector<double>& delta, c
                         early_started ? &early->triangulation : nullptr, mesh.geometry.get());
   release_free_memory(context);
   timer.lap(options.quality ? "quality" : "cdt");
-  finish_step(input, result, timer, &old_mesh);
-  add_step_counts(result, {{"n_input_points", mesh.points.size()},
-                           {"n_segment_samples", on_segments.size()},
+  finish_step(input, result, timer, &*old_mesh, scope.reusable_nn(spacing));
+  scope.add_counts(result.stats);
+  add_step_counts(result, {{"n_input_points", n},
+                           {"n_segment_samples", n_seg},
                            {"n_interior_samples", n_interior},
                            {"n_interior_samples_drawn", n_drawn},
                            {"n_candidates", n_candidates},
                            {"n_demoted_points", n_demoted},
-                           {"n_spacing_repairs", n_repairs},
-                           {"n_hidden_sites", n_hidden},
-                           {"n_filtered_sites", n_filtered},
-                           {"incremental_step", 0},
-                           {"empty_scope", 0},
-                           {"empty_scope_declined_by", declined_by}});
+                           {"n_spacing_repairs", n_repairs}});
   result.input_nn = std::move(spacing.nn);
   result.input_f = std::move(spacing.f);
+  return result;
+}
+
+Evolve_result frfc(const Mesh_arrays& input, const std::vector<double>& delta, const Frfc_options& options,
+                   const Step_context& context) {
+  check_delta(input, delta);
+  options.validate();
+  // The scope is chosen here, before any work, from O(n) counts; what a scope
+  // throws propagates (a bug there must show, not cost a second step).
+  // First, with delta = 1 everywhere: a step that certainly returns its input
+  // (empty_scope.hpp; the certificate, O(n), in empty_scope.cpp) returns it.
+  int declined_by = 0;
+  if (auto unchanged = empty_scope_frfc(input, delta, options, context, &declined_by)) return std::move(*unchanged);
+  Evolve_result result;
+  if (options.incremental && incremental_applies(input, delta, options)) {
+    // Where delta = 1 on most of the mesh: the same step at the cost of the change (incremental_step.hpp).
+    result = incremental_frfc(input, delta, options, context);
+  } else {
+    // With curved boundaries, the corners of curved chains come from the geometry.
+    const Mesh_arrays with_curves = input.geometry ? with_curve_kinds(input) : Mesh_arrays{};
+    const Mesh_arrays& mesh = input.geometry ? with_curves : input;
+    Whole_mesh scope(options, context);
+    result = frfc_over_scope(input, mesh, delta, options, context, scope);
+  }
+  result.stats.emplace_back("empty_scope", 0.0);
+  result.stats.emplace_back("empty_scope_declined_by", declined_by);
   return result;
 }
 

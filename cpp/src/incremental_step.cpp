@@ -5,11 +5,13 @@
 #include <limits>
 #include <memory>
 #include <optional>
+#include <string>
 #include <stdexcept>
 #include <utility>
 
 #include "evomesh/candidates.hpp"
 #include "evomesh/detail/frfc_stages.hpp"
+#include "evomesh/detail/step_scope.hpp"
 #include "evomesh/global_ids.hpp"
 #include "evomesh/packing.hpp"
 #include "evomesh/parallel.hpp"
@@ -433,6 +435,192 @@ double coordinate_magnitude(const std::vector<Vec2>& points) {
   return m;
 }
 
+// The changed region (incremental_step.hpp): the sites, triangles and spheres
+// whose outcome can differ from the input's, each set by the certificate
+// written at the helper that computes it (above).
+class Changed_region final : public Step_scope {
+ public:
+  Changed_region(const Mesh_arrays& mesh, const Frfc_options& options)
+      : options_(options), magnitude_(coordinate_magnitude(mesh.points)) {}
+
+  // f at the points by Lemma 3.1, from a graph of the sites near the points that need it.
+  Scope_spacing spacing(const Mesh_arrays& mesh, const std::vector<double>& delta,
+                        const std::vector<Segment_chain>& chains, Stage_timer& timer) override {
+    const std::size_t n = mesh.points.size();
+    Step_weights weights = step_weights(mesh, delta, timer, options_.within_domain ? &chains : nullptr);
+    weight_ = std::move(weights.weight);
+    grid_.emplace(mesh.points);
+    grid_->set_weights(weight_);
+    std::vector<double> f = weight_;
+    std::vector<Index> asked;
+    for (std::size_t i = 0; i < n; ++i) {
+      if (delta[i] > 1 || (!weights.evaluate.empty() && weights.evaluate[i])) asked.push_back(static_cast<Index>(i));
+    }
+    // One graph for f at the points and the radii of the segment candidates.
+    // f(p) <= u(p), the least cone of p and its mesh neighbours at p
+    // (spacing_upper_bounds), so the site attaining f(p) lies within u(p) of
+    // p; a candidate x on segment ab has f(x) <= u(e) + |x - e| for its end e
+    // of smaller u, so its sites lie within 2 |ab| + u(e) of e. (u, not w: the
+    // weight of a point that coarsens reaches far, its cone does not win there.)
+    const std::vector<double> u = spacing_upper_bounds(mesh, weight_);
+    Mark_sites near_points(*grid_, n, magnitude_);
+    for (Index i : asked) near_points.near(mesh.points[i], u[i]);
+    for (const Edge& e : mesh.segments) {
+      const Index end = u[e[0]] <= u[e[1]] ? e[0] : e[1];
+      const Vec2& a = mesh.points[e[0]];
+      const Vec2& b = mesh.points[e[1]];
+      near_points.near(mesh.points[end], 2 * std::hypot(b[0] - a[0], b[1] - a[1]) + u[end]);
+    }
+    timer.lap("nn");
+    near_points_.emplace(mesh.points, weight_, near_points.marked);
+    timer.lap("apollonius");
+    std::vector<Vec2> at;
+    for (Index i : asked) at.push_back(mesh.points[i]);
+    std::vector<double> value(at.size());
+    near_points_->function().evaluate(at.data(), at.size(), value.data(), nullptr, /*threads=*/0);
+    for (std::size_t k = 0; k < asked.size(); ++k) f[asked[k]] = std::min(value[k], weight_[asked[k]]);
+    timer.lap("spacing_at_points");
+    return {std::move(weights.nn), std::move(f), std::move(weights.evaluate)};
+  }
+
+  // The adaptive grids of strongly graded triangles and of segments far longer
+  // than f at their ends (asks_spacing) ask f itself (sampling.hpp), in the
+  // sample budget's estimate and in the sampling; the whole-mesh scope asks the
+  // graph of all sites, certified. Here a graph of the sites near them answers
+  // the same: every query x lies in the bounding box B of its triangle (or on
+  // its segment ab), f is 1-Lipschitz, so the site c attaining f(x) has |x - c|
+  // <= f(x) <= f(v) + |x - v| for any vertex v: c lies within f(v) + 1.5
+  // diag(B) of B's centre (within 2 |ab| + f(e) of an end e). Triangles that do
+  // not ask never query (their grid has at most kQueryCells fine cells), so the
+  // estimate is the whole mesh's, and so is a refused budget's error.
+  const Spacing_queries* grid_queries(const Mesh_arrays& mesh, const std::vector<double>& f) override {
+    if (!options_.adaptive_cells) return nullptr;
+    Mark_sites near_graded(*grid_, mesh.points.size(), magnitude_);
+    bool any = false;
+    for (const Triangle& t : mesh.triangles) {
+      if (!asks_spacing(mesh, f, t, options_.cell_factor)) continue;
+      any = true;
+      Vec2 lo = mesh.points[t[0]], hi = lo;
+      double f_min = f[t[0]];
+      for (Index v : t) {
+        lo = {std::min(lo[0], mesh.points[v][0]), std::min(lo[1], mesh.points[v][1])};
+        hi = {std::max(hi[0], mesh.points[v][0]), std::max(hi[1], mesh.points[v][1])};
+        f_min = std::min(f_min, f[v]);
+      }
+      near_graded.near({0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1])},
+                       f_min + 1.5 * std::hypot(hi[0] - lo[0], hi[1] - lo[1]));
+    }
+    for (const Edge& e : mesh.segments) {
+      if (!asks_spacing(mesh, f, e, options_.cell_factor)) continue;
+      any = true;
+      const Index end = f[e[0]] <= f[e[1]] ? e[0] : e[1];
+      const Vec2& a = mesh.points[e[0]];
+      const Vec2& b = mesh.points[e[1]];
+      near_graded.near(mesh.points[end], 2 * std::hypot(b[0] - a[0], b[1] - a[1]) + f[end]);
+    }
+    if (!any) return nullptr;
+    near_graded_.emplace(mesh.points, weight_, near_graded.marked);
+    graded_queries_ = spacing_queries(near_graded_->function());
+    return &graded_queries_;
+  }
+
+  const Spacing_function& segment_radii() override { return near_points_->function(); }
+  void segment_radii_done() override {
+    n_sites_ += near_points_->n_sites();
+    n_hidden_ = near_points_->function().n_hidden();
+    n_filtered_ = near_points_->function().n_filtered();
+    near_points_.reset();
+  }
+
+  Packing first_pass(const Mesh_arrays& mesh, const Scope_spacing& spacing, const Candidates& on_segments,
+                     const std::vector<std::uint8_t>& forced, std::size_t n_forced,
+                     const std::vector<std::uint8_t>& demoted) override {
+    return first_pass_near(mesh, spacing.f, spacing.nn, spacing.evaluate, on_segments, forced, n_forced, demoted,
+                           options_, *grid_, magnitude_, safe_, n_packed_first_);
+  }
+  // (the scope's graphs are small)
+  bool starts_triangulation_early() const override { return true; }
+
+  std::vector<std::uint8_t> quiet_triangles(const Mesh_arrays& mesh, const Packing& packing,
+                                            const std::vector<std::uint8_t>& demoted, Stage_timer& timer) override {
+    auto quiet = evomesh::quiet_triangles(mesh, *grid_, weight_, packing.radius, packing.kept, demoted,
+                                          options_.radius_scale, magnitude_, /*threads=*/0);
+    timer.lap("incremental_quiet");
+    return quiet;
+  }
+  void sampled(const Mesh_arrays& mesh, const std::vector<std::uint8_t>& quiet) override {
+    std::vector<std::uint8_t> in_region(mesh.points.size(), 0);
+    for (std::size_t t = 0; t < quiet.size(); ++t) {
+      n_quiet_ += quiet[t];
+      if (!quiet[t]) {
+        for (Index v : mesh.triangles[t]) in_region[v] = 1;
+      }
+    }
+    for (std::uint8_t r : in_region) n_region_ += r;
+    if (near_graded_) n_sites_ += near_graded_->n_sites();
+    graded_queries_ = nullptr;
+    near_graded_.reset();  // its last use
+  }
+
+  // The interior candidates' graph: x in triangle t has f(x) <= f(v) + |x - v| at its vertices v.
+  const Spacing_function& interior_radii(const Mesh_arrays& mesh, const std::vector<double>& f,
+                                         const Candidates& inside, Stage_timer& timer) override {
+    Mark_sites near_samples(*grid_, mesh.points.size(), magnitude_);
+    for (std::size_t j = 0; j < inside.size(); ++j) {
+      const Vec2& x = inside.samples.points[j];
+      double u = std::numeric_limits<double>::infinity();
+      for (Index v : mesh.triangles[inside.samples.parent[j]]) {
+        u = std::min(u, f[v] + std::hypot(x[0] - mesh.points[v][0], x[1] - mesh.points[v][1]));
+      }
+      near_samples.near(x, u);
+    }
+    near_samples_.emplace(mesh.points, weight_, near_samples.marked);
+    weight_ = std::vector<double>();  // the sites' weights: the graphs were their last use
+    n_sites_ += near_samples_->n_sites();
+    timer.lap("apollonius");
+    return near_samples_->function();
+  }
+  void spacing_done() override { near_samples_.reset(); }
+
+  void second_pass(const Mesh_arrays& mesh, Candidates& inside, Packing& packing) override {
+    second_pass_near(mesh, inside, safe_, *grid_, magnitude_, packing, n_packed_second_);
+    safe_ = std::vector<std::uint8_t>();
+    grid_.reset();
+  }
+  // (the walker takes them: the step's peak is the quality pass, the same in both scopes)
+  bool keeps_fans() const override { return true; }
+  // The input's Euclidean nn is the step's nn except where it grew within the domain.
+  const std::vector<double>* reusable_nn(const Scope_spacing& spacing) override {
+    euclidean_nn_ = spacing.nn;
+    for (std::size_t i = 0; i < spacing.evaluate.size(); ++i) {
+      if (spacing.evaluate[i]) euclidean_nn_[i] = std::numeric_limits<double>::quiet_NaN();
+    }
+    return &euclidean_nn_;
+  }
+  void add_counts(std::vector<std::pair<std::string, double>>& stats) const override {
+    stats.emplace_back("n_hidden_sites", static_cast<double>(n_hidden_));
+    stats.emplace_back("n_filtered_sites", static_cast<double>(n_filtered_));
+    stats.emplace_back("incremental_region_points", static_cast<double>(n_region_));
+    stats.emplace_back("incremental_quiet_triangles", static_cast<double>(n_quiet_));
+    stats.emplace_back("incremental_packed_first", static_cast<double>(n_packed_first_));
+    stats.emplace_back("incremental_packed_second", static_cast<double>(n_packed_second_));
+    stats.emplace_back("incremental_sites", static_cast<double>(n_sites_));
+    stats.emplace_back("incremental_step", 1);
+  }
+
+ private:
+  const Frfc_options& options_;
+  const double magnitude_;
+  std::vector<double> weight_;  // of the sites (Step_weights)
+  std::optional<Point_grid> grid_;
+  std::optional<Restricted_spacing> near_points_, near_graded_, near_samples_;
+  Spacing_queries graded_queries_;
+  std::vector<std::uint8_t> safe_;  // old points no earlier sphere can reject (safe_old_points)
+  std::vector<double> euclidean_nn_;
+  std::size_t n_sites_ = 0, n_hidden_ = 0, n_filtered_ = 0, n_quiet_ = 0, n_region_ = 0;
+  std::size_t n_packed_first_ = 0, n_packed_second_ = 0;
+};
+
 }  // namespace
 
 bool incremental_applies(const Mesh_arrays& mesh, const std::vector<double>& delta, const Frfc_options& options) {
@@ -447,227 +635,8 @@ Evolve_result incremental_frfc(const Mesh_arrays& mesh, const std::vector<double
   if (!incremental_applies(mesh, delta, options)) {
     throw std::invalid_argument("incremental_frfc: the incremental step does not apply here (incremental_applies)");
   }
-  const std::size_t n = mesh.points.size();
-
-  Evolve_result result;
-  Stage_timer timer(result.stats, context.profile);
-  // Every stage runs its loops under this limit (parallel_for(..., 0, ...)).
-  const Thread_limit thread_limit(context.threads);
-  const double magnitude = coordinate_magnitude(mesh.points);
-  // Memory (issue 27): what a stage leaves behind goes as soon as nothing reads
-  // it, as in the full step, so that the step's peak (the quality pass, the
-  // same in both) does not carry the grid, the graphs and the packing.
-
-  // Step 1: nn_M and the weights as in the full step; f at the points by Lemma
-  // 3.1, from a graph of the sites near the points that need it.
-  const auto chains = segment_chains(mesh);
-  Step_weights weights = step_weights(mesh, delta, timer, options.within_domain ? &chains : nullptr);
-  std::vector<double>& weight = weights.weight;
-  std::optional<Point_grid> grid(std::in_place, mesh.points);
-  grid->set_weights(weight);
-  std::vector<double> f = weight;
-  std::optional<Restricted_spacing> spacing_near_points;
-  {
-    std::vector<Index> asked;
-    for (std::size_t i = 0; i < n; ++i) {
-      if (delta[i] > 1 || (!weights.evaluate.empty() && weights.evaluate[i])) asked.push_back(static_cast<Index>(i));
-    }
-    // One graph for f at the points and the radii of the segment candidates.
-    // f(p) <= u(p), the least cone of p and its mesh neighbours at p
-    // (spacing_upper_bounds), so the site attaining f(p) lies within u(p) of
-    // p; a candidate x on segment ab has f(x) <= u(e) + |x - e| for its end e
-    // of smaller u, so its sites lie within 2 |ab| + u(e) of e. (u, not w: the
-    // weight of a point that coarsens reaches far, its cone does not win there.)
-    const std::vector<double> u = spacing_upper_bounds(mesh, weight);
-    Mark_sites near_points(*grid, n, magnitude);
-    for (Index i : asked) near_points.near(mesh.points[i], u[i]);
-    for (const Edge& e : mesh.segments) {
-      const Index end = u[e[0]] <= u[e[1]] ? e[0] : e[1];
-      const Vec2& a = mesh.points[e[0]];
-      const Vec2& b = mesh.points[e[1]];
-      near_points.near(mesh.points[end], 2 * std::hypot(b[0] - a[0], b[1] - a[1]) + u[end]);
-    }
-    timer.lap("nn");
-    spacing_near_points.emplace(mesh.points, weight, near_points.marked);
-    timer.lap("apollonius");
-    std::vector<Vec2> at;
-    for (Index i : asked) at.push_back(mesh.points[i]);
-    std::vector<double> value(at.size());
-    spacing_near_points->function().evaluate(at.data(), at.size(), value.data(), nullptr, /*threads=*/0);
-    for (std::size_t k = 0; k < asked.size(); ++k) f[asked[k]] = std::min(value[k], weight[asked[k]]);
-  }
-  timer.lap("spacing_at_points");
-
-  // Steps 2-5 as in frfc.cpp.
-  std::size_t n_forced = 0;
-  const auto forced = forced_corners(mesh, chains, n_forced, mesh.required);
-  std::vector<std::uint8_t> demoted = demoted_points(mesh.triangles, weights.nn, f, forced, options.demote_ratio);
-  // The adaptive grids of strongly graded triangles and of segments far longer
-  // than f at their ends (asks_spacing) ask f itself (sampling.hpp), in the
-  // sample budget's estimate and in the sampling; the full step asks the graph
-  // of all sites, certified. Here a graph of the sites near them answers the
-  // same: every query x lies in the bounding box B of its triangle (or on its
-  // segment ab), f is 1-Lipschitz, so the site c attaining f(x) has |x - c| <=
-  // f(x) <= f(v) + |x - v| for any vertex v: c lies within f(v) + 1.5 diag(B)
-  // of B's centre (within 2 |ab| + f(e) of an end e). Triangles that do not
-  // ask never query (their grid has at most kQueryCells fine cells), so the
-  // estimate is the full step's, and so is a refused budget's error.
-  std::optional<Restricted_spacing> spacing_near_graded;
-  if (options.adaptive_cells) {
-    Mark_sites near_graded(*grid, n, magnitude);
-    bool any = false;
-    for (const Triangle& t : mesh.triangles) {
-      if (!asks_spacing(mesh, f, t, options.cell_factor)) continue;
-      any = true;
-      Vec2 lo = mesh.points[t[0]], hi = lo;
-      double f_min = f[t[0]];
-      for (Index v : t) {
-        lo = {std::min(lo[0], mesh.points[v][0]), std::min(lo[1], mesh.points[v][1])};
-        hi = {std::max(hi[0], mesh.points[v][0]), std::max(hi[1], mesh.points[v][1])};
-        f_min = std::min(f_min, f[v]);
-      }
-      near_graded.near({0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1])},
-                       f_min + 1.5 * std::hypot(hi[0] - lo[0], hi[1] - lo[1]));
-    }
-    for (const Edge& e : mesh.segments) {
-      if (!asks_spacing(mesh, f, e, options.cell_factor)) continue;
-      any = true;
-      const Index end = f[e[0]] <= f[e[1]] ? e[0] : e[1];
-      const Vec2& a = mesh.points[e[0]];
-      const Vec2& b = mesh.points[e[1]];
-      near_graded.near(mesh.points[end], 2 * std::hypot(b[0] - a[0], b[1] - a[1]) + f[end]);
-    }
-    if (any) spacing_near_graded.emplace(mesh.points, weight, near_graded.marked);
-  }
-  const Spacing_queries graded_queries =
-      spacing_near_graded ? spacing_queries(spacing_near_graded->function()) : Spacing_queries();
-  const Spacing_queries* queries = spacing_near_graded ? &graded_queries : nullptr;
-  check_sample_budget(
-      estimate_sample_count(mesh, f, options.cell_factor, options.max_samples, options.adaptive_cells, queries),
-      options.max_samples, "sampling");
-  timer.lap("incremental_budget");
-  Candidates on_segments = segment_candidates(mesh, delta, f, chains, options, queries);
-  timer.lap("sampling");
-  candidate_radii(mesh, spacing_near_points->function(), f, demoted, options, /*on_segment=*/true, on_segments);
-  std::size_t n_sites = spacing_near_points->n_sites();
-  const std::size_t n_hidden = spacing_near_points->function().n_hidden();
-  const std::size_t n_filtered = spacing_near_points->function().n_filtered();
-  spacing_near_points.reset();  // its last use
-  timer.lap("sample_radii");
-  std::vector<std::uint8_t> safe;
-  std::size_t n_packed_first = 0, n_packed_second = 0;
-  Packing packing = first_pass_near(mesh, f, weights.nn, weights.evaluate, on_segments, forced, n_forced, demoted,
-                                    options, *grid, magnitude, safe, n_packed_first);
-  Early_start early(packing, options, false);
-  timer.lap("lfmis");
-
-  Triangle_fans fans(mesh);
-  timer.lap("incremental_fans");
-  std::size_t n_quiet = 0, n_region = 0, n_drawn = 0;
-  Candidates inside;
-  {
-    const Cover_discs cover = cover_discs(mesh, f, packing.radius, packing.kept, packing.blocker,
-                                         options.radius_scale, options.radius == Radius_rule::interpolated);
-    const std::vector<std::uint8_t> quiet = quiet_triangles(mesh, *grid, weight, packing.radius, packing.kept,
-                                                            demoted, options.radius_scale, magnitude, /*threads=*/0);
-    timer.lap("incremental_quiet");
-    inside = interior_candidates(mesh, fans, delta, f, demoted, cover, options, n_drawn, &quiet, queries);
-    std::vector<std::uint8_t> in_region(n, 0);
-    for (std::size_t t = 0; t < quiet.size(); ++t) {
-      n_quiet += quiet[t];
-      if (!quiet[t]) {
-        for (Index v : mesh.triangles[t]) in_region[v] = 1;
-      }
-    }
-    for (std::uint8_t r : in_region) n_region += r;
-  }
-  if (spacing_near_graded) n_sites += spacing_near_graded->n_sites();
-  spacing_near_graded.reset();  // its last use
-  release_free_memory(context);  // the sampling threads' blocks
-  timer.lap("sampling");
-  {
-    // The interior candidates' graph: x in triangle t has f(x) <= f(v) + |x - v| at its vertices v.
-    Mark_sites near_samples(*grid, n, magnitude);
-    for (std::size_t j = 0; j < inside.size(); ++j) {
-      const Vec2& x = inside.samples.points[j];
-      double u = std::numeric_limits<double>::infinity();
-      for (Index v : mesh.triangles[inside.samples.parent[j]]) {
-        u = std::min(u, f[v] + std::hypot(x[0] - mesh.points[v][0], x[1] - mesh.points[v][1]));
-      }
-      near_samples.near(x, u);
-    }
-    const Restricted_spacing spacing_near_samples(mesh.points, weight, near_samples.marked);
-    weight = std::vector<double>();  // the sites' weights: the graphs were their last use
-    timer.lap("apollonius");
-    candidate_radii(mesh, spacing_near_samples.function(), f, demoted, options, /*on_segment=*/false, inside);
-    n_sites += spacing_near_samples.n_sites();
-  }
-  timer.lap("sample_radii");
-  drop_blocked_candidates(mesh, packing.centers, packing.radius, packing.kept, packing.blocker, /*threads=*/0, inside);
-  second_pass_near(mesh, inside, safe, *grid, magnitude, packing, n_packed_second);
-  const std::size_t n_interior = inside.size();
-  inside = Candidates();  // (second_pass_near copied them into the packing)
-  safe = std::vector<std::uint8_t>();
-  grid.reset();
-  release_free_memory(context);
-  early.insert_late(packing, n, n + on_segments.size());
-  timer.lap("lfmis");
-
-  // The spacing repair as in the full step: its gap repair visits every input
-  // point (its second nearest output point against delta nn), so it stays global.
-  std::size_t n_repairs = 0;
-  std::vector<Vec2> repair_points;
-  if ((options.repair_ratio > 0 && options.ring_samples) || options.gap_repair_ratio > 0 ||
-      options.refine_gap_ratio > 0) {
-    const Spacing_repair_input input{mesh, fans, delta, weights.nn, f, packing.centers, on_segments.owner, demoted};
-    repair_points = repair_spacing(input, options, packing.kept, n_repairs);
-  }
-  demoted = std::vector<std::uint8_t>();
-  early.insert_rest(packing, n, n + on_segments.size(), repair_points);
-  timer.lap("spacing_repair");
-
-  // Step 6 as in frfc.cpp: the same selection, so the same triangulation.
-  std::vector<Index> out_index;
-  Selection selection = select_output(mesh, forced, packing, on_segments.size(), repair_points, out_index);
-  selection.pin(mesh.required);
-  const auto pieces = pieces_along_chains(mesh, chains, on_segments, out_index);
-  const std::size_t n_candidates = packing.centers.size();
-  const std::size_t n_demoted = packing.n_demoted;
-  packing = Packing();
-  out_index = std::vector<Index>();
-  const Quality_options quality = options.quality_settings();
-  Old_mesh_start old_mesh(mesh, /*threads=*/0, std::move(fans));  // beside the early triangulation (frfc.cpp)
-  early.wait();
-  release_free_memory(context);
-  triangulate_selection(std::move(selection), pieces, options.quality ? &quality : nullptr, result,
-                        options.quality ? &early.triangulation : nullptr, nullptr);
-  release_free_memory(context);
-  timer.lap(options.quality ? "quality" : "cdt");
-  // The output's nn from the input's where nothing near changed: the input's
-  // Euclidean nn is weights.nn except where it grew within the domain.
-  std::vector<double> euclidean_nn = weights.nn;
-  for (std::size_t i = 0; i < weights.evaluate.size(); ++i) {
-    if (weights.evaluate[i]) euclidean_nn[i] = std::numeric_limits<double>::quiet_NaN();
-  }
-  finish_step(mesh, result, timer, &old_mesh, &euclidean_nn);
-  add_step_counts(result, {{"n_input_points", n},
-                           {"n_segment_samples", on_segments.size()},
-                           {"n_interior_samples", n_interior},
-                           {"n_interior_samples_drawn", n_drawn},
-                           {"n_candidates", n_candidates},
-                           {"n_demoted_points", n_demoted},
-                           {"n_spacing_repairs", n_repairs},
-                           {"n_hidden_sites", n_hidden},
-                           {"n_filtered_sites", n_filtered},
-                           {"incremental_region_points", n_region},
-                           {"incremental_quiet_triangles", n_quiet},
-                           {"incremental_packed_first", n_packed_first},
-                           {"incremental_packed_second", n_packed_second},
-                           {"incremental_sites", n_sites},
-                           {"incremental_step", 1}});
-  result.input_nn = std::move(weights.nn);
-  result.input_f = std::move(f);
-  return result;
+  Changed_region scope(mesh, options);
+  return frfc_over_scope(mesh, mesh, delta, options, context, scope);
 }
 
 }  // namespace evomesh

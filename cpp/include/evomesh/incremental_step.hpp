@@ -1,10 +1,11 @@
 // Issue 13 goal 2, "cost follows the change": FRFC where delta = 1 on most of
 // the mesh, with the output of the full algorithm (frfc.hpp), bit for bit.
 //
-// The step is frfc() stage for stage; what changes is that work which certainly
-// changes nothing is not done (the certificates are in incremental_step.cpp):
+// The step is the one outline, frfc_over_scope (frfc.cpp), over the scope
+// Changed_region (incremental_step.cpp; detail/step_scope.hpp): work that
+// certainly changes nothing is not done, each restriction with its certificate:
 //
-// - the Apollonius graph holds only the sites that can attain f at a point where
+// - the Apollonius graphs hold only the sites that can attain f at a point where
 //   f is asked (Eq. 3: a site c matters at x only if |x - c| <= f(x));
 // - a triangle whose every grid sample lies in a cover disc of a kept vertex is
 //   not sampled (those samples are dropped by the sample filter anyway);
@@ -13,11 +14,10 @@
 //   earlier sphere can reject (Lemma 3.1: f(p) = delta(p) nn(p) = nn(p) at
 //   delta = 1, and two such spheres are disjoint).
 //
-// What stays global is what fixes the bits of the output: the triangulation and
-// quality pass of all selected points (the triangle array is CGAL's face order,
-// a function of the whole insertion history), the parent map, nn_M (returned
-// in the lineage), the spacing repair (its gap repair visits every input
-// point), and O(n) loops.
+// What stays global: the triangulation and quality pass of all selected points,
+// the parent map, nn_M (returned in the lineage), the spacing repair (its gap
+// repair visits every input point), and O(n) loops (docs/distributed-step.md
+// §2.5: a local triangulation is the next restriction).
 #pragma once
 
 #include <vector>
