@@ -28,7 +28,8 @@ from evomesh import _core
 from evomesh.distributed import _hilbert_keys
 
 
-def spheres(n: int, seed: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def spheres(n: int, seed: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Centres, radii, their packing order and classes."""
     mesh = evomesh.evolve(evomesh.unit_square_mesh(n), 1.0, seed=seed)
     p = mesh.points
     r = np.hypot(p[:, 0] - 0.5, p[:, 1] - 0.5)
@@ -48,7 +49,7 @@ def spheres(n: int, seed: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     radii = 0.75 * np.asarray(f(centers)) / 2
     classes = np.concatenate([np.full(len(p), 2), np.full(len(candidates), 4)]).astype(np.uint8)
     order = _core.packing_order(classes, radii)
-    return centers, radii, order
+    return centers, radii, order, classes
 
 
 def hilbert_parts(centers: np.ndarray, n_parts: int) -> np.ndarray:
@@ -69,7 +70,7 @@ def main() -> None:
           "| undecided after round 1 | seconds |")
     print("|---:|---:|---:|---|---:|---:|---:|---:|---:|---:|")
     for size in args.sizes.split(","):
-        centers, radii, order = spheres(int(float(size)))
+        centers, radii, order, _ = spheres(int(float(size)))
         serial = _core.lexical_first_mis(centers, radii, order, 0)
         for n_parts in (int(x) for x in args.parts.split(",")):
             layouts = {"hilbert": hilbert_parts(centers, n_parts),

@@ -1,9 +1,11 @@
 // Binding of the lexical-first MIS in rounds over a partition (issue 29):
-// evomesh._core.lexical_first_mis_in_rounds. Registered by module.cpp through bind_mis_rounds().
+// evomesh._core.lexical_first_mis_in_rounds and evomesh._core.MisPart (one
+// MPI rank's sweeps: python/evomesh/distributed_packing.py). Registered by module.cpp through bind_mis_rounds().
 #include <pybind11/numpy.h>
 #include <pybind11/pybind11.h>
 
 #include <cstring>
+#include <memory>
 #include <vector>
 
 #include "evomesh/mis_rounds.hpp"
@@ -52,4 +54,43 @@ void bind_mis_rounds(py::module_& m) {
       py::arg("n_parts"),
       "The lexical-first MIS computed in rounds by n_parts parts (issue 29, simulated in one process): "
       "{'kept', 'rounds', 'messages' (per round), 'undecided' (per round), 'halo'}.");
+
+  py::class_<Mis_part>(m, "MisPart",
+                       "One rank's share of the lexical-first MIS in rounds: its own spheres and copies of the "
+                       "others that can conflict with them (issue 29, docs/distributed-step.md 3.4).")
+      .def(py::init([](const Float_array& centers, const Float_array& radii, const Int_array& order,
+                       const Byte_array& owned) {
+             if (centers.ndim() != 2 || centers.shape(1) != 2) throw Input_error("centers must have shape (n, 2)");
+             const auto n = static_cast<std::size_t>(centers.shape(0));
+             if (radii.ndim() != 1 || order.ndim() != 1 || owned.ndim() != 1 ||
+                 static_cast<std::size_t>(radii.shape(0)) != n || static_cast<std::size_t>(order.shape(0)) != n ||
+                 static_cast<std::size_t>(owned.shape(0)) != n) {
+               throw Input_error("radii, order and owned must have one entry per centre");
+             }
+             std::vector<Vec2> c(n);
+             if (n > 0) std::memcpy(c.data(), centers.data(), n * sizeof(Vec2));
+             std::vector<double> r(radii.data(), radii.data() + n);
+             std::vector<Index> o(order.data(), order.data() + n);
+             std::vector<std::uint8_t> w(owned.data(), owned.data() + n);
+             py::gil_scoped_release release;
+             return std::make_unique<Mis_part>(c, r, o, w);
+           }),
+           py::arg("centers"), py::arg("radii"), py::arg("order"), py::arg("owned"))
+      .def(
+          "sweep",
+          [](Mis_part& part, const Byte_array& state) {
+            std::vector<std::uint8_t> s(state.data(), state.data() + state.size());
+            for (std::uint8_t v : s) {
+              if (v > Mis_part::out) throw Input_error("states are 0 (unknown), 1 (in) or 2 (out)");
+            }
+            std::vector<Index> decided;
+            {
+              py::gil_scoped_release release;
+              decided = part.sweep(s);
+            }
+            return py::make_tuple(to_array(std::move(s)), to_array(std::move(decided)));
+          },
+          py::arg("state"), "One round's sweep: (the new states, the own spheres it decided, in the order).")
+      .def_property_readonly("undecided", &Mis_part::undecided)
+      .def_property_readonly("conflicts_with_copies", &Mis_part::conflicts_with_copies);
 }

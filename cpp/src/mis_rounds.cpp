@@ -4,6 +4,7 @@
 #include <cmath>
 #include <limits>
 #include <map>
+#include <string>
 #include <stdexcept>
 #include <unordered_map>
 #include <utility>
@@ -85,7 +86,76 @@ std::vector<std::vector<Index>> earlier_conflicts(const std::vector<Vec2>& c, co
   return earlier;
 }
 
+// The rule of a round for one sphere, given its earlier conflicting spheres
+// and the states it may read: out if one of them is in, in if all are out,
+// else undecided (unknown).
+template <class State_of>
+std::uint8_t decide(const std::vector<Index>& earlier, State_of state_of) {
+  bool all_out = true;
+  for (Index t : earlier) {
+    const std::uint8_t v = state_of(t);
+    if (v == Mis_part::in) return Mis_part::out;
+    if (v != Mis_part::out) all_out = false;
+  }
+  return all_out ? Mis_part::in : Mis_part::unknown;
+}
+
+// The ranks of the spheres in `order`, checked to be a permutation.
+std::vector<std::size_t> ranks_of(const std::vector<Index>& order, const char* what) {
+  const std::size_t n = order.size();
+  std::vector<std::size_t> rank(n, n);
+  for (std::size_t k = 0; k < n; ++k) {
+    const Index i = order[k];
+    if (i < 0 || static_cast<std::size_t>(i) >= n || rank[i] != n) {
+      throw Input_error(std::string(what) + ": order must be a permutation of the spheres");
+    }
+    rank[i] = k;
+  }
+  return rank;
+}
+
+void check_spheres(const std::vector<Vec2>& centers, const std::vector<double>& radii, const char* what) {
+  for (std::size_t i = 0; i < centers.size(); ++i) {
+    if (!(radii[i] > 0) || !std::isfinite(radii[i]) || !std::isfinite(centers[i][0]) || !std::isfinite(centers[i][1])) {
+      throw Input_error(std::string(what) + ": radii must be finite and positive, centres finite");
+    }
+  }
+}
+
 }  // namespace
+
+Mis_part::Mis_part(const std::vector<Vec2>& centers, const std::vector<double>& radii, const std::vector<Index>& order,
+                   const std::vector<std::uint8_t>& owned) {
+  const std::size_t n = centers.size();
+  if (radii.size() != n || order.size() != n || owned.size() != n) {
+    throw Input_error("Mis_part: centers, radii, order and owned must have one entry per sphere");
+  }
+  const auto rank = ranks_of(order, "Mis_part");
+  check_spheres(centers, radii, "Mis_part");
+  earlier_ = earlier_conflicts(centers, radii, rank);
+  for (std::size_t s = 0; s < n; ++s) {
+    for (Index t : earlier_[s]) conflicts_with_copies_ += owned[s] != owned[t];
+  }
+  for (std::size_t s = 0; s < n; ++s) {
+    if (!owned[s]) earlier_[s] = std::vector<Index>();  // (a copy's conflicts are its owner's to read)
+  }
+  for (Index i : order) {
+    if (owned[i]) pending_.push_back(i);
+  }
+}
+
+std::vector<Index> Mis_part::sweep(std::vector<std::uint8_t>& state) {
+  if (state.size() != earlier_.size()) throw Input_error("Mis_part::sweep: one state per sphere");
+  std::vector<Index> decided;
+  std::size_t left = 0;
+  for (Index s : pending_) {
+    if (state[s] == unknown) state[s] = decide(earlier_[s], [&](Index t) { return state[t]; });
+    if (state[s] == unknown) pending_[left++] = s;
+    else decided.push_back(s);
+  }
+  pending_.resize(left);
+  return decided;
+}
 
 Mis_rounds lexical_first_mis_in_rounds(const std::vector<Vec2>& centers, const std::vector<double>& radii,
                                        const std::vector<Index>& order, std::size_t n_forced,
@@ -95,18 +165,9 @@ Mis_rounds lexical_first_mis_in_rounds(const std::vector<Vec2>& centers, const s
     throw Input_error("lexical_first_mis_in_rounds: centers, radii, order and part must have one entry per sphere");
   }
   if (n_parts < 1 || n_forced > n) throw Input_error("lexical_first_mis_in_rounds: n_parts >= 1, n_forced <= n");
-  std::vector<std::size_t> rank(n, n);
-  for (std::size_t k = 0; k < n; ++k) {
-    const Index i = order[k];
-    if (i < 0 || static_cast<std::size_t>(i) >= n || rank[i] != n) {
-      throw Input_error("lexical_first_mis_in_rounds: order must be a permutation of the spheres");
-    }
-    rank[i] = k;
-  }
+  const auto rank = ranks_of(order, "lexical_first_mis_in_rounds");
+  check_spheres(centers, radii, "lexical_first_mis_in_rounds");
   for (std::size_t i = 0; i < n; ++i) {
-    if (!(radii[i] > 0) || !std::isfinite(radii[i]) || !std::isfinite(centers[i][0]) || !std::isfinite(centers[i][1])) {
-      throw Input_error("lexical_first_mis_in_rounds: radii must be finite and positive, centres finite");
-    }
     if (part[i] < 0 || part[i] >= n_parts) throw Input_error("lexical_first_mis_in_rounds: part out of range");
   }
   const auto earlier = earlier_conflicts(centers, radii, rank);
@@ -125,7 +186,7 @@ Mis_rounds lexical_first_mis_in_rounds(const std::vector<Vec2>& centers, const s
     parts.erase(std::unique(parts.begin(), parts.end()), parts.end());
     out.halo += static_cast<std::int64_t>(parts.size());
   }
-  enum : std::uint8_t { unknown = 0, in = 1, out_ = 2 };
+  constexpr std::uint8_t unknown = Mis_part::unknown, in = Mis_part::in;
   std::vector<std::uint8_t> state(n, unknown);
   for (std::size_t k = 0; k < n_forced; ++k) state[order[k]] = in;
   // Each part's spheres in the order.
@@ -138,17 +199,9 @@ Mis_rounds lexical_first_mis_in_rounds(const std::vector<Vec2>& centers, const s
     for (auto& spheres : sweep) {
       std::size_t kept_undecided = 0;
       for (Index s : spheres) {
-        bool any_in = false, all_out = true;
-        for (Index t : earlier[s]) {
-          const std::uint8_t v = part[t] == part[s] ? state[t] : seen[t];
-          if (v == in) {
-            any_in = true;
-            break;
-          }
-          if (v != out_) all_out = false;
-        }
-        if (any_in || all_out) {
-          state[s] = any_in ? out_ : in;
+        const std::uint8_t v = decide(earlier[s], [&](Index t) { return part[t] == part[s] ? state[t] : seen[t]; });
+        if (v != unknown) {
+          state[s] = v;
           messages += static_cast<std::int64_t>(told[s].size());
           --left;
         } else {

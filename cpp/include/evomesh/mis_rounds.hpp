@@ -40,4 +40,31 @@ Mis_rounds lexical_first_mis_in_rounds(const std::vector<Vec2>& centers, const s
                                        const std::vector<Index>& order, std::size_t n_forced,
                                        const std::vector<std::int32_t>& part, int n_parts);
 
+// One rank's share of the same rounds when the parts are MPI ranks
+// (python/evomesh/distributed_packing.py does the exchanges): the rank holds its
+// own spheres and copies of every other sphere that can conflict with one of
+// them (its halo), `order` lists them all in the global order, and sweep()
+// applies the rule of a round to its own undecided spheres, reading its own
+// states as it sets them and the copies' as the last exchange left them.
+class Mis_part {
+ public:
+  enum : std::uint8_t { unknown = 0, in = 1, out = 2 };
+  // `owned[i]`: sphere i is this rank's to decide. Input_error as
+  // lexical_first_mis_in_rounds for bad arrays.
+  Mis_part(const std::vector<Vec2>& centers, const std::vector<double>& radii, const std::vector<Index>& order,
+           const std::vector<std::uint8_t>& owned);
+  // One round's sweep over the undecided own spheres; `state` (one per sphere:
+  // unknown, in or out; forced ones in) is updated. Returns the spheres it
+  // decided, in the order.
+  std::vector<Index> sweep(std::vector<std::uint8_t>& state);
+  std::size_t undecided() const { return pending_.size(); }
+  // (own sphere, copy) pairs that conflict: what the halo had to hold.
+  std::size_t conflicts_with_copies() const { return conflicts_with_copies_; }
+
+ private:
+  std::vector<std::vector<Index>> earlier_;
+  std::vector<Index> pending_;
+  std::size_t conflicts_with_copies_ = 0;
+};
+
 }  // namespace evomesh
