@@ -722,6 +722,32 @@ PYBIND11_MODULE(_core, m) {
       py::arg("points"), py::arg("pieces"), py::arg("boundary"));
 
   m.def(
+      "local_constrained_delaunay",
+      [](const Float_array& points, const Int_array& pieces, const Byte_array& boundary) {
+        auto pts = to_points(points);
+        auto p = to_index_rows<2>(pieces, "pieces");
+        auto b = to_vector<std::uint8_t>(boundary);
+        if (b.size() != p.size()) throw Input_error("one boundary flag per piece");
+        for (const auto& e : p) {
+          for (Index v : e) {
+            if (v < 0 || static_cast<std::size_t>(v) >= pts.size()) throw Input_error("piece index out of range");
+          }
+        }
+        std::vector<Constraint_piece> cp(p.size());
+        for (std::size_t i = 0; i < p.size(); ++i) cp[i] = {p[i][0], p[i][1], b[i] != 0};
+        Local_triangulation local;
+        {
+          py::gil_scoped_release release;
+          local = local_constrained_delaunay(pts, cp);
+        }
+        return py::make_tuple(rows_array<3>(local.triangles), rows_array<3>(local.neighbour),
+                              to_array(std::move(local.constrained)), to_array(std::move(local.seed)));
+      },
+      py::arg("points"), py::arg("pieces"), py::arg("boundary"),
+      "Every finite face of the CDT, unlabelled (distributed triangulation): (triangles, neighbour, constrained "
+      "bits, piece seeds).");
+
+  m.def(
       "locate_points",
       [](const Float_array& points, const Int_array& triangles, const Float_array& queries) {
         auto [pts, tris] = to_points_and_triangles(points, triangles);

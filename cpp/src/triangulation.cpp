@@ -631,6 +631,77 @@ std::vector<Triangle> constrained_delaunay(const std::vector<Vec2>& points,
   return triangles;
 }
 
+Local_triangulation local_constrained_delaunay(const std::vector<Vec2>& points,
+                                               const std::vector<Constraint_piece>& pieces) {
+  Cdt cdt;
+  auto handles = insert_points(cdt, points);
+  try {
+    for (const auto& piece : pieces) cdt.insert_constraint(handles[piece.a], handles[piece.b]);
+  } catch (const Cdt::Intersection_of_constraints_exception&) {
+    throw crossing_pieces_error();
+  }
+  Local_triangulation out;
+  if (cdt.dimension() < 2) return out;
+  Index m = 0;
+  for (auto f = cdt.all_faces_begin(); f != cdt.all_faces_end(); ++f) f->info() = -1;
+  for (auto f = cdt.finite_faces_begin(); f != cdt.finite_faces_end(); ++f) {
+    f->info() = m++;
+    out.triangles.push_back({f->vertex(0)->info(), f->vertex(1)->info(), f->vertex(2)->info()});
+  }
+  out.neighbour.resize(out.triangles.size());
+  out.constrained.assign(out.triangles.size(), 0);
+  out.seed.assign(out.triangles.size(), 0);
+  for (auto f = cdt.finite_faces_begin(); f != cdt.finite_faces_end(); ++f) {
+    for (int k = 0; k < 3; ++k) {
+      out.neighbour[f->info()][k] = f->neighbor(k)->info();
+      if (f->is_constrained(k)) out.constrained[f->info()] |= static_cast<std::uint8_t>(1u << k);
+    }
+  }
+  // (label_domain's seeds, detail/domain.hpp; a piece through a point on it is skipped there too)
+  for (const auto& piece : pieces) {
+    Cdt::Face_handle f;
+    int i;
+    if (!cdt.is_edge(handles[piece.a], handles[piece.b], f, i)) continue;
+    Cdt::Face_handle left = f, right = f->neighbor(i);
+    if (f->vertex(Cdt::ccw(i)) != handles[piece.a]) std::swap(left, right);
+    if (left->info() >= 0) out.seed[left->info()] |= 1;
+    if (right->info() >= 0) out.seed[right->info()] |= piece.boundary ? 2 : 1;
+  }
+  // Canonical order: each face rotated to its least index (its per-corner
+  // arrays with it), then canonical_triangle_order's sort.
+  const std::size_t n_faces = out.triangles.size();
+  for (std::size_t t = 0; t < n_faces; ++t) {
+    const Triangle tri = out.triangles[t];
+    const int r = tri[1] < tri[0] && tri[1] < tri[2] ? 1 : (tri[2] < tri[0] && tri[2] < tri[1] ? 2 : 0);
+    const std::array<Index, 3> nb = out.neighbour[t];
+    const std::uint8_t bits = out.constrained[t];
+    out.constrained[t] = 0;
+    for (int k = 0; k < 3; ++k) {
+      out.triangles[t][k] = tri[(k + r) % 3];
+      out.neighbour[t][k] = nb[(k + r) % 3];
+      out.constrained[t] |= static_cast<std::uint8_t>(((bits >> ((k + r) % 3)) & 1u) << k);
+    }
+  }
+  const std::vector<Index> order = canonical_triangle_order(points.size(), out.triangles);
+  std::vector<Index> position(n_faces);
+  for (std::size_t k = 0; k < n_faces; ++k) position[order[k]] = static_cast<Index>(k);
+  Local_triangulation sorted;
+  sorted.triangles = std::move(out.triangles);
+  sorted.neighbour.resize(n_faces);
+  sorted.constrained.resize(n_faces);
+  sorted.seed.resize(n_faces);
+  for (std::size_t k = 0; k < n_faces; ++k) {
+    const Index t = order[k];
+    sorted.constrained[k] = out.constrained[t];
+    sorted.seed[k] = out.seed[t];
+    for (int c = 0; c < 3; ++c) {
+      const Index g = out.neighbour[t][c];
+      sorted.neighbour[k][c] = g < 0 ? -1 : position[g];
+    }
+  }
+  return sorted;
+}
+
 double distance_to_segment(const Vec2& q, const Vec2& a, const Vec2& b) {
   const double dx = b[0] - a[0], dy = b[1] - a[1];
   const double along = std::clamp(((q[0] - a[0]) * dx + (q[1] - a[1]) * dy) / (dx * dx + dy * dy), 0.0, 1.0);

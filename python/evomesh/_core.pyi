@@ -283,6 +283,9 @@ def drfc_refine(
     """DRFC step 1 alone: Delaunay refinement with Ruppert's rules and rule 4 (Section 5)."""
 
 def constrained_delaunay(points: ArrayLike, pieces: ArrayLike, boundary: ArrayLike) -> NDArray[np.int64]: ...
+def local_constrained_delaunay(
+    points: ArrayLike, pieces: ArrayLike, boundary: ArrayLike
+) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.uint8], NDArray[np.uint8]]: ...
 class SupermeshResult(TypedDict):
     """What :func:`supermesh` returns (a plain dict at run time)."""
 

@@ -14,10 +14,8 @@ decided gets its serial state (induction along the order), and each round
 decides at least the globally earliest undecided sphere, so the rounds end and
 the kept set is the serial one on any number of ranks.
 
-The halo is exact by construction, not by a width guess: a rank cuts its
-spheres, sorted along a Hilbert curve, into chunks and publishes each chunk's
-bounding box and largest radius (one allgather of a few numbers per chunk). A
-sphere t of rank q can conflict with a sphere s of chunk c only if the distance
+The halo is exact by construction, not by a width guess (_halo.py): a sphere t
+of rank q can conflict with a sphere of rank r's chunk c only if the distance
 from t's centre to c's box is below r_max(c) + r_t, so q sends r exactly the
 spheres that pass that test (one exchange), whatever the partition, holes or
 gaps between the spheres.
@@ -29,14 +27,10 @@ from typing import Any
 
 import numpy as np
 
-from . import _core
-from .distributed import _HILBERT_ORDER, _check_comm, _collective, _exchange, _hilbert_keys, _mpi, _ranges
+from . import _core, _halo
+from .distributed import _check_comm, _collective, _exchange, _mpi
 
 __all__ = ["lexical_first_mis"]
-
-# Spheres per chunk of the halo search: boxes of a few hundred Hilbert-ordered
-# spheres are tight, and P x (n / 256) boxes are cheap to share.
-_CHUNK = 256
 
 # A sphere's record: its tie key (a global id), class, forced flag, radius and centre.
 _SPHERE = np.dtype([("tie", "<i8"), ("cls", "u1"), ("forced", "u1"), ("r", "<f8"), ("x", "<f8"), ("y", "<f8")])
@@ -65,66 +59,6 @@ def _check(centers: Any, radii: Any, classes: Any, ties: Any, forced: Any) -> tu
     if f.shape != (n,) or f.dtype != bool:
         raise ValueError(f"forced must be a boolean array with one value per centre (shape ({n},))")
     return c, r, k.astype(np.uint8), t.astype(np.int64), f
-
-
-def _chunk_boxes(records: np.ndarray, lo: np.ndarray,
-                 span: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Sorts the records along a Hilbert curve over the global box; returns the
-    permutation, the records sorted, the chunk starts and the chunk table (xmin,
-    xmax, ymin, ymax, r_max) of consecutive runs of _CHUNK records."""
-    cells = (1 << _HILBERT_ORDER) - 1
-    scale = cells / span if span > 0 else 0.0
-    ix = np.clip(((records["x"] - lo[0]) * scale).astype(np.int64), 0, cells)
-    iy = np.clip(((records["y"] - lo[1]) * scale).astype(np.int64), 0, cells)
-    perm = np.argsort(_hilbert_keys(ix, iy, _HILBERT_ORDER), kind="stable")
-    records = records[perm]
-    starts = np.arange(0, len(records), _CHUNK, dtype=np.int64)
-    table = np.empty((len(starts), 5))
-    if len(starts):
-        for k, field in enumerate(("x", "y")):
-            table[:, 2 * k] = np.minimum.reduceat(records[field], starts)
-            table[:, 2 * k + 1] = np.maximum.reduceat(records[field], starts)
-        table[:, 4] = np.maximum.reduceat(records["r"], starts)
-    return perm, records, starts, table
-
-
-def _box_distance(x: np.ndarray, y: np.ndarray, box: np.ndarray) -> np.ndarray:
-    """Distance from points (x, y) to boxes (rows xmin, xmax, ymin, ymax), elementwise."""
-    dx = np.maximum(np.maximum(box[:, 0] - x, x - box[:, 1]), 0.0)
-    dy = np.maximum(np.maximum(box[:, 2] - y, y - box[:, 3]), 0.0)
-    return np.hypot(dx, dy)
-
-
-def _halo_sends(records: np.ndarray, starts: np.ndarray, table: np.ndarray, tables: list[np.ndarray], rank: int,
-                magnitude: float) -> tuple[np.ndarray, np.ndarray]:
-    """(index into records, destination rank) of every copy this rank sends: to
-    each rank q, its spheres t with dist(c_t, box) < r_max + r_t for one of q's
-    chunks (with a margin far above rounding, so no conflicting pair is missed:
-    more copies are harmless)."""
-    n = len(records)
-    counts = np.diff(np.append(starts, n))
-    margin = 1e-12 * magnitude
-    send_index, send_dest = [], []
-    for q, other in enumerate(tables):
-        if q == rank or not len(other) or not n:
-            continue
-        # Chunk pairs whose boxes come within both chunks' largest radii.
-        gap_x = np.maximum(np.maximum(other[None, :, 0] - table[:, None, 1], table[:, None, 0] - other[None, :, 1]), 0)
-        gap_y = np.maximum(np.maximum(other[None, :, 2] - table[:, None, 3], table[:, None, 2] - other[None, :, 3]), 0)
-        reach = (table[:, None, 4] + other[None, :, 4]) * (1 + 1e-9) + margin
-        mine, theirs = np.nonzero(np.hypot(gap_x, gap_y) < reach)
-        if not len(mine):
-            continue
-        index = _ranges(starts[mine], counts[mine])
-        box = np.repeat(theirs, counts[mine])
-        near = (_box_distance(records["x"][index], records["y"][index], other[box])
-                < (other[box, 4] + records["r"][index]) * (1 + 1e-9) + margin)
-        index = np.unique(index[near])
-        send_index.append(index)
-        send_dest.append(np.full(len(index), q, dtype=np.int64))
-    if not send_index:
-        return np.zeros(0, np.int64), np.zeros(0, np.int64)
-    return np.concatenate(send_index), np.concatenate(send_dest)
 
 
 def lexical_first_mis(comm: Any, centers: Any, radii: Any, classes: Any, ties: Any, forced: Any = None,
@@ -195,10 +129,14 @@ def lexical_first_mis(comm: Any, centers: Any, radii: Any, classes: Any, ties: A
     span = float(max(hi - lo)) if (hi >= lo).all() else 0.0
     magnitude = float(max(np.abs(lo).max(), np.abs(hi).max())) if (hi >= lo).all() else 0.0
 
-    # The halo: every other rank's spheres that can conflict with one of ours.
-    perm, mine, starts, table = _chunk_boxes(records, lo, span)
-    tables = comm.allgather(table)
-    send_index, send_dest = _halo_sends(mine, starts, table, tables, comm.rank, magnitude)
+    # The halo (_halo.py): every other rank's spheres that can conflict with one
+    # of ours, a sphere's reach being its radius on both sides.
+    perm, starts = _halo.hilbert_chunks(records["x"], records["y"], lo, span)
+    mine = records[perm]
+    box = _halo.chunk_boxes(mine["x"], mine["y"], starts)
+    r_max = np.maximum.reduceat(mine["r"], starts) if n else np.zeros(0)
+    tables = comm.allgather(np.column_stack([box, r_max]))
+    send_index, send_dest = _halo.sends(mine["x"], mine["y"], mine["r"], starts, box, tables, comm.rank, magnitude)
     copies, _ = _exchange(comm, send_dest, mine[send_index])
     bytes_halo = int(send_index.size) * _SPHERE.itemsize
 

@@ -2,6 +2,7 @@
 #pragma once
 
 #include <array>
+#include <cstdint>
 #include <vector>
 
 #include "evomesh/types.hpp"
@@ -47,6 +48,25 @@ Input_error crossing_pieces_error();
 // Throws crossing_pieces_error() when two pieces cross.
 std::vector<Triangle> constrained_delaunay(const std::vector<Vec2>& points,
                                            const std::vector<Constraint_piece>& pieces);
+
+// The constrained Delaunay triangulation of one MPI rank's points, for the
+// distributed triangulation (python/evomesh/distributed_triangulation.py;
+// docs/distributed-step.md 3.5): every finite face, unlabelled, with what the
+// caller needs to certify faces and label the domain across ranks.
+// neighbour[t][k]: the face across the edge opposite corner k (-1: infinite);
+// constrained[t] bit k: that edge is a piece; seed[t]: the labels the pieces
+// give the face (bit 0 inside: the left of a boundary piece, either side of an
+// interior one; bit 1 outside: the right of a boundary piece). The faces come
+// in canonical order (canonical_triangle_order). crossing_pieces_error() when
+// two pieces cross.
+struct Local_triangulation {
+  std::vector<Triangle> triangles;
+  std::vector<std::array<Index, 3>> neighbour;
+  std::vector<std::uint8_t> constrained;
+  std::vector<std::uint8_t> seed;
+};
+Local_triangulation local_constrained_delaunay(const std::vector<Vec2>& points,
+                                               const std::vector<Constraint_piece>& pieces);
 
 // Checks that a mesh is planar: its triangles cover no point of the plane twice
 // and touch only in shared edges and points; throws Input_error naming the
