@@ -35,7 +35,7 @@ bash tools/lint.sh
 .venv/bin/python -m pytest -p no:cacheprovider "$@"
 
 # DistributedMesh and the distributed packing on several MPI ranks
-# (tests/test_distributed.py, tests/test_distributed_packing.py; the plain run
+# (tests/test_distributed*.py; the plain run
 # above covers one rank). MPI and its bindings come from the package index:
 # the mpich wheel brings the library and mpiexec, mpi4py the bindings
 # (evomesh[mpi]). Two and four ranks, oversubscribed on small machines
@@ -48,8 +48,8 @@ if [ "${EVOMESH_SKIP_MPI_TESTS:-0}" != 1 ]; then
     .venv/bin/python -m pip install -q mpich "mpi4py>=3.1"
   fi
   for ranks in 2 4; do
-    echo "== mpiexec -n $ranks: tests/test_distributed.py tests/test_distributed_packing.py"
+    echo "== mpiexec -n $ranks: tests/test_distributed*.py"
     .venv/bin/mpiexec -n "$ranks" .venv/bin/python -m pytest -q -p no:cacheprovider tests/test_distributed.py \
-      tests/test_distributed_packing.py
+      tests/test_distributed_packing.py tests/test_distributed_triangulation.py
   done
 fi

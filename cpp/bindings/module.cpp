@@ -722,6 +722,35 @@ PYBIND11_MODULE(_core, m) {
       py::arg("points"), py::arg("pieces"), py::arg("boundary"));
 
   m.def(
+      "convex_hull_vertices",
+      [](const Float_array& points) {
+        auto pts = to_points(points);
+        std::vector<Index> hull;
+        {
+          py::gil_scoped_release release;
+          hull = convex_hull_vertices(pts);
+        }
+        return vector_array(hull);
+      },
+      py::arg("points"), "Indices of the extreme points, counter-clockwise (exact).");
+  m.def(
+      "supports_on_left",
+      [](const Float_array& a, const Float_array& b, const Float_array& points) {
+        auto pa = to_points(a, "a");
+        auto pb = to_points(b, "b");
+        auto q = to_points(points);
+        if (pa.size() != pb.size()) throw Input_error("a and b must have the same length");
+        std::vector<std::uint8_t> ok;
+        {
+          py::gil_scoped_release release;
+          ok = supports_on_left(pa, pb, q);
+        }
+        return to_array(std::move(ok));
+      },
+      py::arg("a"), py::arg("b"), py::arg("points"),
+      "Per edge (a[k], b[k]): no point strictly to its right (exact).");
+
+  m.def(
       "local_constrained_delaunay",
       [](const Float_array& points, const Int_array& pieces, const Byte_array& boundary) {
         auto pts = to_points(points);

@@ -1,6 +1,9 @@
 #include "evomesh/triangulation.hpp"
 
 #include <CGAL/Constrained_Delaunay_triangulation_2.h>
+#include <CGAL/Convex_hull_traits_adapter_2.h>
+#include <CGAL/convex_hull_2.h>
+#include <CGAL/property_map.h>
 #include <CGAL/Triangulation_face_base_with_info_2.h>
 #include <CGAL/Triangulation_vertex_base_with_info_2.h>
 
@@ -700,6 +703,34 @@ Local_triangulation local_constrained_delaunay(const std::vector<Vec2>& points,
     }
   }
   return sorted;
+}
+
+std::vector<Index> convex_hull_vertices(const std::vector<Vec2>& points) {
+  std::vector<Index> all(points.size());
+  for (std::size_t i = 0; i < points.size(); ++i) all[i] = static_cast<Index>(i);
+  // (CGAL's traits adapted to indices: the points compared through the exact kernel)
+  using Traits = CGAL::Convex_hull_traits_adapter_2<Kernel, CGAL::Pointer_property_map<Kernel::Point_2>::type>;
+  std::vector<Kernel::Point_2> cgal(points.size());
+  for (std::size_t i = 0; i < points.size(); ++i) cgal[i] = to_cgal(points[i]);
+  std::vector<std::size_t> in(points.size()), out;
+  for (std::size_t i = 0; i < points.size(); ++i) in[i] = i;
+  CGAL::convex_hull_2(in.begin(), in.end(), std::back_inserter(out), Traits(CGAL::make_property_map(cgal)));
+  std::vector<Index> hull(out.begin(), out.end());
+  return hull;
+}
+
+std::vector<std::uint8_t> supports_on_left(const std::vector<Vec2>& a, const std::vector<Vec2>& b,
+                                           const std::vector<Vec2>& points) {
+  std::vector<std::uint8_t> ok(a.size(), 1);
+  for (std::size_t k = 0; k < a.size(); ++k) {
+    for (const Vec2& q : points) {
+      if (orientation(a[k], b[k], q) < 0) {
+        ok[k] = 0;
+        break;
+      }
+    }
+  }
+  return ok;
 }
 
 double distance_to_segment(const Vec2& q, const Vec2& a, const Vec2& b) {

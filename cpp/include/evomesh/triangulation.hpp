@@ -68,6 +68,14 @@ struct Local_triangulation {
 Local_triangulation local_constrained_delaunay(const std::vector<Vec2>& points,
                                                const std::vector<Constraint_piece>& pieces);
 
+// The extreme points of `points` (vertices of their convex hull, collinear
+// points left out), counter-clockwise; exact predicates. O(n log n).
+std::vector<Index> convex_hull_vertices(const std::vector<Vec2>& points);
+// For each edge (a[k], b[k]): whether no point of `points` lies strictly to its
+// right (exact), i.e. whether the line supports them all on its left. O(#edges x #points).
+std::vector<std::uint8_t> supports_on_left(const std::vector<Vec2>& a, const std::vector<Vec2>& b,
+                                           const std::vector<Vec2>& points);
+
 // Checks that a mesh is planar: its triangles cover no point of the plane twice
 // and touch only in shared edges and points; throws Input_error naming the
 // problem. Preconditions: `triangles` counter-clockwise (orient_triangles), edge
