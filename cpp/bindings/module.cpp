@@ -578,6 +578,24 @@ PYBIND11_MODULE(_core, m) {
       "L(p) of delta_from_size: the mean of edge length over the request h around each point (size_request.hpp).");
 
   m.def(
+      "edge_over_size_classes",
+      [](const Float_array& points, const Int_array& triangles, const Float_array& h, double above, double below,
+         double at_least) {
+        auto [pts, tris] = to_points_and_triangles(points, triangles);
+        auto values = to_vector<double>(h);
+        if (values.size() != pts.size()) throw Input_error("h: one value per point");
+        std::vector<std::uint8_t> classes;
+        {
+          py::gil_scoped_release release;
+          classes = edge_over_size_classes(pts, tris, values, above, below, at_least);
+        }
+        return vector_array(classes);
+      },
+      py::arg("points"), py::arg("triangles"), py::arg("h"), py::arg("above"), py::arg("below"), py::arg("at_least"),
+      "Bits per point (uint8): 1 where L > above, 2 where L < below, 4 where L >= at_least, exactly as "
+      "edge_over_size_around's L compares, without most of its hypot calls (size_request.hpp).");
+
+  m.def(
       "near_seeds",
       [](const Int_array& triangles, const Byte_array& points, const Byte_array& seeds, int rings) {
         auto tris = to_index_rows<3>(triangles, "triangles");
@@ -595,6 +613,22 @@ PYBIND11_MODULE(_core, m) {
       },
       py::arg("triangles"), py::arg("points"), py::arg("seeds"), py::arg("rings"),
       "Of the marked points, those within `rings` edges of a seed (uint8 mask; size_request.hpp).");
+
+  m.def(
+      "sharing_a_triangle",
+      [](const Int_array& triangles, const Byte_array& marked) {
+        auto tris = to_index_rows<3>(triangles, "triangles");
+        auto mask = to_vector<std::uint8_t>(marked);
+        require_indices(tris, mask.size(), "triangles");
+        std::vector<std::uint8_t> sharing;
+        {
+          py::gil_scoped_release release;
+          sharing = sharing_a_triangle(tris, mask);
+        }
+        return vector_array(sharing);
+      },
+      py::arg("triangles"), py::arg("marked"),
+      "Of the marked points, those sharing a triangle with another marked point (uint8 mask; size_request.hpp).");
 
   m.def(
       "nn_within_domain",

@@ -93,6 +93,8 @@ _REFINE_BELOW = 0.8
 _FINE_TOLERANCE = 1.25
 _MEETS = 1.1
 _CLEARANCE_RINGS = 3
+# The bits of _core.edge_over_size_classes (size_request.hpp).
+_ABOVE, _BELOW, _AT_LEAST = 1, 2, 4
 
 
 def _size_values(mesh: Mesh, size: Any) -> NDArray[np.float64]:
@@ -182,16 +184,19 @@ def delta_from_size(mesh: Mesh, size: ArrayLike | Callable[[np.ndarray], ArrayLi
     # along it), the mean over the edges at p (each counted once per triangle
     # corner at p: an interior edge twice), then over p and its neighbours; in
     # the core (size_request.hpp), with the bits of the numpy sums it replaced.
-    local = _core.edge_over_size_around(points, triangles, h)
+    # Only how L compares with the band's ends is read, and the core says
+    # that exactly (edge_over_size_classes) without computing every L exactly.
+    classes = _core.edge_over_size_classes(points, triangles, h, _COARSE_TOLERANCE, 1 / _FINE_TOLERANCE, 1 / _MEETS)
     nn = mesh.nn_spacing
     with np.errstate(over="ignore"):
         refine = h / (_EDGE_OVER_NN_REFINED * nn)
         coarsen = np.maximum(1.0, h / (_EDGE_OVER_NN_COARSENED * nn))
-    too_coarse = (local > _COARSE_TOLERANCE) & (refine < _REFINE_BELOW)
-    too_fine = local < 1 / _FINE_TOLERANCE
+    too_coarse = (classes & _ABOVE).astype(bool) & (refine < _REFINE_BELOW)  # L > 1.25
+    too_fine = (classes & _BELOW).astype(bool)  # L < 1 / 1.25
     if too_fine.any() and keep_fine_clusters:
-        # (near_seeds in the core: the points within the rings of a seed)
-        too_fine &= ~_core.near_seeds(triangles, too_fine, local >= 1 / _MEETS, _CLEARANCE_RINGS).view(bool)
+        # (near_seeds in the core: the points within the rings of a seed, L >= 1 / 1.1)
+        meets = (classes & _AT_LEAST).astype(bool)
+        too_fine &= ~_core.near_seeds(triangles, too_fine, meets, _CLEARANCE_RINGS).view(bool)
         # A too-fine point with no too-fine neighbour left: coarsening acts on
         # a neighbourhood (f near p is capped by its neighbours' cones, nn(q)
         # + |p - q|, about 2 nn(p)), and on its own it is a point the step
@@ -201,10 +206,7 @@ def delta_from_size(mesh: Mesh, size: ArrayLike | Callable[[np.ndarray], ArrayLi
         # on benchmarks/stays_put.py's L-shape), the end of a settled cluster
         # just beyond its rings. Asked step after step, it only kept the step
         # off its empty scope (empty_scope.cpp, C1: delta == 1).
-        with_another = too_fine[triangles].sum(axis=1) >= 2
-        paired = np.zeros(len(too_fine), bool)
-        paired[triangles[with_another].ravel()] = True
-        too_fine &= paired
+        too_fine = _core.sharing_a_triangle(triangles, too_fine).view(bool)
     delta = np.where(too_coarse, refine, np.where(too_fine, coarsen, 1.0))
     bad = (delta < DELTA_MIN) | (delta > DELTA_MAX)
     if bad.any():

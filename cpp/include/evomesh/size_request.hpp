@@ -21,11 +21,34 @@ namespace evomesh {
 std::vector<double> edge_over_size_around(const std::vector<Vec2>& points, const std::vector<Triangle>& triangles,
                                           const std::vector<double>& h);
 
+// The bits of edge_over_size_classes: L(p) > above, L(p) < below, L(p) >= at_least.
+constexpr std::uint8_t Edge_over_size_above = 1;
+constexpr std::uint8_t Edge_over_size_below = 2;
+constexpr std::uint8_t Edge_over_size_at_least = 4;
+
+// What delta_from_size asks of L, for each point: the bits above, each exactly
+// as edge_over_size_around's L compares (0 where L is NaN). L is computed with
+// sqrt(dx^2 + dy^2) for hypot (hypot is most of edge_over_size_around's time),
+// within a bound on its relative error; where that bound leaves a comparison
+// undecided, L is computed again with hypot over the triangles around the
+// point, with edge_over_size_around's bits. O(n + m). Preconditions as
+// edge_over_size_around's.
+std::vector<std::uint8_t> edge_over_size_classes(const std::vector<Vec2>& points,
+                                                 const std::vector<Triangle>& triangles, const std::vector<double>& h,
+                                                 double above, double below, double at_least);
+
 // Of the points marked in `points`, those within `rings` edges (triangle
 // sides) of a point marked in `seeds`: delta_from_size's settled clusters.
 // Ring by ring, every triangle with a corner reached so far reaches its other
-// corners. O(rings m). Preconditions: indices in range, both masks one per point.
+// corners. O(rings m); it stops at the ring that has reached every marked
+// point, or nothing new. Preconditions: indices in range, both masks one per point.
 std::vector<std::uint8_t> near_seeds(const std::vector<Triangle>& triangles, const std::vector<std::uint8_t>& points,
                                      const std::vector<std::uint8_t>& seeds, int rings);
+
+// Of the points marked in `marked`, those that share a triangle with another
+// marked point (uint8 mask): delta_from_size's too-fine points that are not
+// alone. O(m). Preconditions: indices in range.
+std::vector<std::uint8_t> sharing_a_triangle(const std::vector<Triangle>& triangles,
+                                             const std::vector<std::uint8_t>& marked);
 
 }  // namespace evomesh
