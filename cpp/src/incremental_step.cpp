@@ -123,9 +123,9 @@ class Point_grid {
 
 // The Apollonius graph of the sites `marked` (with their weights), for queries
 // at which every site that can attain f is marked. Eq. 3: f(x) = min_c (w_c +
-// |x - c|) with w_c >= 0, so a site c with w_c + |x - c| <= f(x) has |x - c| <=
-// f(x) <= u(x) for any upper bound u; marking every site within u(x) of every
-// query x (Mark_sites) keeps the minimising site of every query, so the exact
+// |x - c|) with w_c >= 0, so the site c attaining f(x) has w_c + |x - c| = f(x)
+// <= u(x) for any upper bound u; marking every site with w_c + |x - c| <= u(x)
+// for every query x (Mark_sites) keeps the minimising site of every query, so the exact
 // (certified) answers are those of the graph of all sites. The sample radii use
 // a walk in floating point (Spacing_function::evaluate, certified = false) that
 // ends at that same site unless two cones tie up to rounding at the query.
@@ -155,15 +155,26 @@ class Restricted_spacing {
   std::size_t n_sites_ = 0;
 };
 
-// Marks the sites within u of query points (Restricted_spacing).
+// Marks the sites whose cone can attain f at query points (Restricted_spacing):
+// near(x, u) for a bound u with w_c + |x - c| <= u for the site c attaining f at
+// every query it stands for (at x itself: u >= f(x)) marks the sites c with w_c
+// + |x - c| <= u, which keeps c. (Not every site within u of x: a heavy one
+// within reach is no minimum there; about a ninth of them, on an even mesh.)
+// The slack keeps every site whose cone ties with c's up to rounding, where the
+// full step's walk may end (Spacing_function::evaluate, certified = false).
 struct Mark_sites {
   const Point_grid& grid;
+  const std::vector<Vec2>& points;
+  const std::vector<double>& weight;
   std::vector<std::uint8_t> marked;
   double absolute;  // rounding of the coordinates' magnitude
-  Mark_sites(const Point_grid& g, std::size_t n, double magnitude)
-      : grid(g), marked(n, 0), absolute(1e-12 * magnitude) {}
+  Mark_sites(const Point_grid& g, const std::vector<Vec2>& p, const std::vector<double>& w, double magnitude)
+      : grid(g), points(p), weight(w), marked(p.size(), 0), absolute(1e-12 * magnitude) {}
   void near(const Vec2& x, double u) {
-    grid.visit_within(x, u * (1 + kSlack) + absolute, [&](Index i) { marked[i] = 1; });
+    const double reach = u * (1 + kSlack) + absolute;
+    grid.visit_within(x, reach, [&](Index i) {
+      if (weight[i] + std::sqrt(squared_distance(x, points[i])) * (1 - kSlack) <= reach) marked[i] = 1;
+    });
   }
 };
 
@@ -495,7 +506,7 @@ class Changed_region final : public Step_scope {
     // come from another graph (segment_radii), of the sites near the candidates
     // there are: most segments get none.
     const std::vector<double> u = spacing_upper_bounds(mesh, weight_, is_asked);
-    Mark_sites near_points(*grid_, n, magnitude_);
+    Mark_sites near_points(*grid_, mesh.points, weight_, magnitude_);
     for (Index i : asked) near_points.near(mesh.points[i], u[i]);
     timer.lap("nn");
     near_points_.emplace(mesh.points, weight_, near_points.marked);
@@ -521,7 +532,7 @@ class Changed_region final : public Step_scope {
   // estimate is the whole mesh's, and so is a refused budget's error.
   const Spacing_queries* grid_queries(const Mesh_arrays& mesh, const std::vector<double>& f) override {
     if (!options_.adaptive_cells) return nullptr;
-    Mark_sites near_graded(*grid_, mesh.points.size(), magnitude_);
+    Mark_sites near_graded(*grid_, mesh.points, weight_, magnitude_);
     bool any = false;
     for (const Triangle& t : mesh.triangles) {
       if (!asks_spacing(mesh, f, t, options_.cell_factor)) continue;
@@ -558,7 +569,7 @@ class Changed_region final : public Step_scope {
     n_hidden_ = near_points_->function().n_hidden();
     n_filtered_ = near_points_->function().n_filtered();
     near_points_.reset();  // f at the points was its only use
-    Mark_sites near_candidates(*grid_, mesh.points.size(), magnitude_);
+    Mark_sites near_candidates(*grid_, mesh.points, weight_, magnitude_);
     for (std::size_t j = 0; j < on_segments.size(); ++j) {
       const Vec2& x = on_segments.samples.points[j];
       double u = std::numeric_limits<double>::infinity();
@@ -611,7 +622,7 @@ class Changed_region final : public Step_scope {
   // The interior candidates' graph: x in triangle t has f(x) <= f(v) + |x - v| at its vertices v.
   const Spacing_function& interior_radii(const Mesh_arrays& mesh, const std::vector<double>& f,
                                          const Candidates& inside, Stage_timer& timer) override {
-    Mark_sites near_samples(*grid_, mesh.points.size(), magnitude_);
+    Mark_sites near_samples(*grid_, mesh.points, weight_, magnitude_);
     for (std::size_t j = 0; j < inside.size(); ++j) {
       const Vec2& x = inside.samples.points[j];
       double u = std::numeric_limits<double>::infinity();
