@@ -119,14 +119,14 @@ def assert_same(full: evomesh.Mesh, fast: evomesh.Mesh) -> None:
     assert np.array_equal(full.nn_spacing, fast.nn_spacing), "nn_spacing"
 
 
-def run(n: int, repeats: int, evidence: bool) -> list[dict]:
+def run(n: int, repeats: int, evidence: bool, fractions: tuple[float, ...] = FRACTIONS) -> list[dict]:
     t0 = time.perf_counter()
     mesh = stepped_mesh(n)
     print(f"# n = {n}: stepped mesh of {mesh.n_points} points in {time.perf_counter() - t0:.1f} s", flush=True)
     if evidence:
         print("# triangle order far from a 1 % band:", order_evidence(mesh), flush=True)
     rows = []
-    for fraction in FRACTIONS:
+    for fraction in fractions:
         delta, band = front_delta(mesh, fraction)
         samples = []
         for r in range(repeats):
@@ -161,6 +161,8 @@ def run(n: int, repeats: int, evidence: bool) -> list[dict]:
               f"{med['cdt']:5.2f} s ({med['cdt_ratio']:.2f}) | same bits, "
               f"{'incremental' if taken else 'full (declined)'}", flush=True)
         print("   incremental stages:", {k: round(v, 3) for k, v in stages.items()}, flush=True)
+        # (the first run's stages over the median full step: where the incremental step's time goes)
+        print("   stage / full step:", {k: round(v / med["full"], 3) for k, v in stages.items() if k != "total"}, flush=True)
     return rows
 
 
@@ -250,6 +252,8 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--sizes", default="1e5,1e6")
     parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--fractions", default=",".join(str(f) for f in FRACTIONS),
+                        help="band widths as fractions of the square (default: %(default)s)")
     parser.add_argument("--order-evidence", action="store_true")
     parser.add_argument("--one-point", action="store_true", help="the one-point table (issue 27) instead")
     parser.add_argument("--one-point-worker", help=argparse.SUPPRESS)
@@ -263,7 +267,8 @@ def main() -> None:
         return
     rows = []
     for size in args.sizes.split(","):
-        rows += run(int(float(size)), args.repeats, args.order_evidence)
+        rows += run(int(float(size)), args.repeats, args.order_evidence,
+                    tuple(float(f) for f in args.fractions.split(",")))
     print()
     print(markdown(rows))
 
