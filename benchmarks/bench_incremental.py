@@ -131,12 +131,13 @@ def run(n: int, repeats: int, evidence: bool, fractions: tuple[float, ...] = FRA
         samples = []
         for r in range(repeats):
             # alternate the two paths; the ratio of each pair is measured in the same run
-            t = time.perf_counter()
+            # (CPU: the process's, both threads; steadier than wall time on a shared machine)
+            t, c = time.perf_counter(), time.process_time()
             full = evomesh.evolve(mesh, delta, seed=1, incremental=False)
-            wall_full = time.perf_counter() - t
-            t = time.perf_counter()
+            wall_full, cpu_full = time.perf_counter() - t, time.process_time() - c
+            t, c = time.perf_counter(), time.process_time()
             fast = evomesh.evolve(mesh, delta, seed=1, incremental=True)
-            wall_fast = time.perf_counter() - t
+            wall_fast, cpu_fast = time.perf_counter() - t, time.process_time() - c
             assert_same(full, fast)
             s = fast.stats
             t = time.perf_counter()
@@ -145,6 +146,7 @@ def run(n: int, repeats: int, evidence: bool, fractions: tuple[float, ...] = FRA
             # the whole-mesh stages of the incremental run (the same code as the full step's)
             floor = s.get("seconds_quality", 0.0) + s.get("seconds_parent_map", 0.0) + (wall_fast - s["seconds_total"])
             samples.append({"full": wall_full, "incremental": wall_fast, "ratio": wall_fast / wall_full,
+                            "cpu_ratio": cpu_fast / cpu_full,
                             "floor": floor, "floor_ratio": floor / wall_full, "cdt": cdt, "cdt_ratio": cdt / wall_full})
             if r == 0:
                 changed = 1.0 - len({tuple(p) for p in mesh.points} & {tuple(p) for p in full.points}) / mesh.n_points
@@ -157,7 +159,7 @@ def run(n: int, repeats: int, evidence: bool, fractions: tuple[float, ...] = FRA
         rows.append(row)
         print(f"{mesh.n_points:>9} {100 * fraction:>5.0f}% band {row['band_points']:>8} changed {100 * changed:6.2f}% "
               f"region {100 * region:6.2f}% | full {med['full']:7.2f} s  incremental {med['incremental']:7.2f} s  "
-              f"ratio {med['ratio']:.3f} | floor {med['floor']:6.2f} s ({med['floor_ratio']:.2f}), cdt "
+              f"ratio {med['ratio']:.3f} (CPU {med['cpu_ratio']:.3f}) | floor {med['floor']:6.2f} s ({med['floor_ratio']:.2f}), cdt "
               f"{med['cdt']:5.2f} s ({med['cdt_ratio']:.2f}) | same bits, "
               f"{'incremental' if taken else 'full (declined)'}", flush=True)
         print("   incremental stages:", {k: round(v, 3) for k, v in stages.items()}, flush=True)
