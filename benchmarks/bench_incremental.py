@@ -119,24 +119,25 @@ def assert_same(full: evomesh.Mesh, fast: evomesh.Mesh) -> None:
     assert np.array_equal(full.nn_spacing, fast.nn_spacing), "nn_spacing"
 
 
-def run(n: int, repeats: int, evidence: bool) -> list[dict]:
+def run(n: int, repeats: int, evidence: bool, fractions: tuple[float, ...] = FRACTIONS) -> list[dict]:
     t0 = time.perf_counter()
     mesh = stepped_mesh(n)
     print(f"# n = {n}: stepped mesh of {mesh.n_points} points in {time.perf_counter() - t0:.1f} s", flush=True)
     if evidence:
         print("# triangle order far from a 1 % band:", order_evidence(mesh), flush=True)
     rows = []
-    for fraction in FRACTIONS:
+    for fraction in fractions:
         delta, band = front_delta(mesh, fraction)
         samples = []
         for r in range(repeats):
             # alternate the two paths; the ratio of each pair is measured in the same run
-            t = time.perf_counter()
+            # (CPU: the process's, both threads; steadier than wall time on a shared machine)
+            t, c = time.perf_counter(), time.process_time()
             full = evomesh.evolve(mesh, delta, seed=1, incremental=False)
-            wall_full = time.perf_counter() - t
-            t = time.perf_counter()
+            wall_full, cpu_full = time.perf_counter() - t, time.process_time() - c
+            t, c = time.perf_counter(), time.process_time()
             fast = evomesh.evolve(mesh, delta, seed=1, incremental=True)
-            wall_fast = time.perf_counter() - t
+            wall_fast, cpu_fast = time.perf_counter() - t, time.process_time() - c
             assert_same(full, fast)
             s = fast.stats
             t = time.perf_counter()
@@ -145,6 +146,7 @@ def run(n: int, repeats: int, evidence: bool) -> list[dict]:
             # the whole-mesh stages of the incremental run (the same code as the full step's)
             floor = s.get("seconds_quality", 0.0) + s.get("seconds_parent_map", 0.0) + (wall_fast - s["seconds_total"])
             samples.append({"full": wall_full, "incremental": wall_fast, "ratio": wall_fast / wall_full,
+                            "cpu_ratio": cpu_fast / cpu_full,
                             "floor": floor, "floor_ratio": floor / wall_full, "cdt": cdt, "cdt_ratio": cdt / wall_full})
             if r == 0:
                 changed = 1.0 - len({tuple(p) for p in mesh.points} & {tuple(p) for p in full.points}) / mesh.n_points
@@ -157,10 +159,12 @@ def run(n: int, repeats: int, evidence: bool) -> list[dict]:
         rows.append(row)
         print(f"{mesh.n_points:>9} {100 * fraction:>5.0f}% band {row['band_points']:>8} changed {100 * changed:6.2f}% "
               f"region {100 * region:6.2f}% | full {med['full']:7.2f} s  incremental {med['incremental']:7.2f} s  "
-              f"ratio {med['ratio']:.3f} | floor {med['floor']:6.2f} s ({med['floor_ratio']:.2f}), cdt "
+              f"ratio {med['ratio']:.3f} (CPU {med['cpu_ratio']:.3f}) | floor {med['floor']:6.2f} s ({med['floor_ratio']:.2f}), cdt "
               f"{med['cdt']:5.2f} s ({med['cdt_ratio']:.2f}) | same bits, "
               f"{'incremental' if taken else 'full (declined)'}", flush=True)
         print("   incremental stages:", {k: round(v, 3) for k, v in stages.items()}, flush=True)
+        # (the first run's stages over the median full step: where the incremental step's time goes)
+        print("   stage / full step:", {k: round(v / med["full"], 3) for k, v in stages.items() if k != "total"}, flush=True)
     return rows
 
 
@@ -250,6 +254,8 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--sizes", default="1e5,1e6")
     parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--fractions", default=",".join(str(f) for f in FRACTIONS),
+                        help="band widths as fractions of the square (default: %(default)s)")
     parser.add_argument("--order-evidence", action="store_true")
     parser.add_argument("--one-point", action="store_true", help="the one-point table (issue 27) instead")
     parser.add_argument("--one-point-worker", help=argparse.SUPPRESS)
@@ -263,7 +269,8 @@ def main() -> None:
         return
     rows = []
     for size in args.sizes.split(","):
-        rows += run(int(float(size)), args.repeats, args.order_evidence)
+        rows += run(int(float(size)), args.repeats, args.order_evidence,
+                    tuple(float(f) for f in args.fractions.split(",")))
     print()
     print(markdown(rows))
 

@@ -220,7 +220,10 @@ class Whole_mesh final : public Step_scope {
     return {std::move(spacing.nn), std::move(spacing.f), {}};
   }
   const Spacing_queries* grid_queries(const Mesh_arrays&, const std::vector<double>&) override { return &queries_; }
-  const Spacing_function& segment_radii() override { return *function_; }
+  const Spacing_function& segment_radii(const Mesh_arrays&, const std::vector<double>&, const Candidates&,
+                                        Stage_timer&) override {
+    return *function_;
+  }
   Packing first_pass(const Mesh_arrays& mesh, const Scope_spacing& spacing, const Candidates& on_segments,
                      const std::vector<std::uint8_t>& forced, std::size_t n_forced,
                      const std::vector<std::uint8_t>& demoted) override {
@@ -296,7 +299,8 @@ Evolve_result frfc_over_scope(const Mesh_arrays& input, const Mesh_arrays& mesh,
   Candidates on_segments = segment_candidates(mesh, delta, f, chains, options, queries);
   const std::size_t n_seg = on_segments.size();
   timer.lap("sampling");
-  candidate_radii(mesh, scope.segment_radii(), f, demoted, options, /*on_segment=*/true, on_segments);
+  candidate_radii(mesh, scope.segment_radii(mesh, f, on_segments, timer), f, demoted, options, /*on_segment=*/true,
+                  on_segments);
   scope.segment_radii_done();
   timer.lap("sample_radii");
   Packing packing = scope.first_pass(mesh, spacing, on_segments, forced, n_forced, demoted);

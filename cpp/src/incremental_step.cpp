@@ -34,6 +34,11 @@ constexpr double kMaxActiveShare = 0.5;
 // computed in floating point still holds for the exact value it stands for.
 constexpr double kSlack = 1e-7;
 
+double squared_distance(const Vec2& a, const Vec2& b) {
+  const double dx = a[0] - b[0], dy = a[1] - b[1];
+  return dx * dx + dy * dy;
+}
+
 // Points bucketed in a uniform grid (about two per cell) for range queries.
 class Point_grid {
  public:
@@ -118,9 +123,9 @@ class Point_grid {
 
 // The Apollonius graph of the sites `marked` (with their weights), for queries
 // at which every site that can attain f is marked. Eq. 3: f(x) = min_c (w_c +
-// |x - c|) with w_c >= 0, so a site c with w_c + |x - c| <= f(x) has |x - c| <=
-// f(x) <= u(x) for any upper bound u; marking every site within u(x) of every
-// query x (Mark_sites) keeps the minimising site of every query, so the exact
+// |x - c|) with w_c >= 0, so the site c attaining f(x) has w_c + |x - c| = f(x)
+// <= u(x) for any upper bound u; marking every site with w_c + |x - c| <= u(x)
+// for every query x (Mark_sites) keeps the minimising site of every query, so the exact
 // (certified) answers are those of the graph of all sites. The sample radii use
 // a walk in floating point (Spacing_function::evaluate, certified = false) that
 // ends at that same site unless two cones tie up to rounding at the query.
@@ -150,15 +155,26 @@ class Restricted_spacing {
   std::size_t n_sites_ = 0;
 };
 
-// Marks the sites within u of query points (Restricted_spacing).
+// Marks the sites whose cone can attain f at query points (Restricted_spacing):
+// near(x, u) for a bound u with w_c + |x - c| <= u for the site c attaining f at
+// every query it stands for (at x itself: u >= f(x)) marks the sites c with w_c
+// + |x - c| <= u, which keeps c. (Not every site within u of x: a heavy one
+// within reach is no minimum there; about a ninth of them, on an even mesh.)
+// The slack keeps every site whose cone ties with c's up to rounding, where the
+// full step's walk may end (Spacing_function::evaluate, certified = false).
 struct Mark_sites {
   const Point_grid& grid;
+  const std::vector<Vec2>& points;
+  const std::vector<double>& weight;
   std::vector<std::uint8_t> marked;
   double absolute;  // rounding of the coordinates' magnitude
-  Mark_sites(const Point_grid& g, std::size_t n, double magnitude)
-      : grid(g), marked(n, 0), absolute(1e-12 * magnitude) {}
+  Mark_sites(const Point_grid& g, const std::vector<Vec2>& p, const std::vector<double>& w, double magnitude)
+      : grid(g), points(p), weight(w), marked(p.size(), 0), absolute(1e-12 * magnitude) {}
   void near(const Vec2& x, double u) {
-    grid.visit_within(x, u * (1 + kSlack) + absolute, [&](Index i) { marked[i] = 1; });
+    const double reach = u * (1 + kSlack) + absolute;
+    grid.visit_within(x, reach, [&](Index i) {
+      if (weight[i] + std::sqrt(squared_distance(x, points[i])) * (1 - kSlack) <= reach) marked[i] = 1;
+    });
   }
 };
 
@@ -184,17 +200,29 @@ std::vector<std::uint8_t> quiet_triangles(const Mesh_arrays& mesh, const Point_g
                                           const std::vector<std::uint8_t>& demoted, double radius_scale,
                                           double magnitude, int threads) {
   const std::size_t m = mesh.triangles.size();
+  const std::size_t n = mesh.points.size();
   std::vector<std::uint8_t> quiet(m, 0);
   const double absolute = 64 * std::numeric_limits<double>::epsilon() * magnitude;
-  const auto& P = mesh.points;
+  // What a triangle reads of its vertices, in one place (the triangles visit
+  // the points in no spatial order: one cache line a vertex, not four);
+  // radius -1: not kept by the first pass, or demoted.
+  struct Vertex {
+    Vec2 p;
+    double radius, weight;
+  };
+  std::vector<Vertex> V(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    const bool sphere = kept[i] && (demoted.empty() || !demoted[i]);
+    V[i] = {mesh.points[i], sphere ? radius[i] : -1.0, weight[i]};
+  }
   constexpr std::size_t kBlock = 1 << 14;
   parallel_for((m + kBlock - 1) / kBlock, threads, [&](std::size_t b) {
     for (std::size_t t = b * kBlock; t < std::min(m, (b + 1) * kBlock); ++t) {
       const Triangle& tri = mesh.triangles[t];
-      bool ok = true;
-      for (Index v : tri) ok = ok && kept[v] && (demoted.empty() || !demoted[v]);
-      if (!ok) continue;
-      const Vec2 &a = P[tri[0]], &b2 = P[tri[1]], &c = P[tri[2]];
+      const Vertex &va = V[tri[0]], &vb = V[tri[1]], &vc = V[tri[2]];
+      const double r_min = std::min({va.radius, vb.radius, vc.radius});
+      if (!(r_min >= 0)) continue;
+      const Vec2 &a = va.p, &b2 = vb.p, &c = vc.p;
       const std::array<const Vec2*, 3> v{&a, &b2, &c};
       // Every point of T is within the circumradius of a vertex (T is covered by
       // the kites v - edge midpoints - circumcentre, or for an obtuse T by their
@@ -205,8 +233,7 @@ std::vector<std::uint8_t> quiet_triangles(const Mesh_arrays& mesh, const Point_g
       if (!(std::abs(cross) > 1e-3 * std::sqrt(la * lb))) continue;  // near-degenerate: not certified
       const double ox = (la * by - lb * ay) / (2 * cross), oy = (ax * lb - bx * la) / (2 * cross);
       double far = std::sqrt(ox * ox + oy * oy);
-      const double r_min = std::min({radius[tri[0]], radius[tri[1]], radius[tri[2]]});
-      const double w_min = std::min({weight[tri[0]], weight[tri[1]], weight[tri[2]]});
+      const double w_min = std::min({va.weight, vb.weight, vc.weight});
       far = far * (1 + kSlack) + absolute;
       const double h = far - r_min * (1 - kSlack);
       if (h <= 0) {
@@ -219,18 +246,25 @@ std::vector<std::uint8_t> quiet_triangles(const Mesh_arrays& mesh, const Point_g
       if (!((1 - radius_scale / 2) * far < (r_min + radius_scale / 2 * w_min) * (1 - kSlack))) continue;
       const double need = 2 * h / radius_scale * (1 + kSlack) + absolute;  // the other cones must exceed this on T
       const double gx = (a[0] + b2[0] + c[0]) / 3, gy = (a[1] + b2[1] + c[1]) / 3;
-      double reach = 0;
-      for (const Vec2* p : v) reach = std::max(reach, std::hypot((*p)[0] - gx, (*p)[1] - gy));
+      // (lengths as square roots of sums of squares: the input's limits, |x| <=
+      // 1e75 and no two points within 1e-75 (mesh.py), keep the squares normal,
+      // and their rounding is far below kSlack)
+      double reach2 = 0;
+      for (const Vec2* p : v) reach2 = std::max(reach2, squared_distance(*p, {gx, gy}));
+      const double reach = std::sqrt(reach2) * (1 + kSlack);
       // Most often every weight near T is above `need` already.
       if (grid.min_weight_near({gx, gy}, reach + need) > need) {
         quiet[t] = 1;
         continue;
       }
+      bool ok = true;
       grid.visit_within({gx, gy}, reach + need, [&](Index site) {
         if (!ok || site == tri[0] || site == tri[1] || site == tri[2]) return;
-        const Vec2& x = P[site];
+        // (the distance below is >= 0: a heavy site passes without it)
+        if (V[site].weight - absolute > need) return;
+        const Vec2& x = V[site].p;
         // Distance from the site to T (0 inside), from below.
-        double d = std::numeric_limits<double>::infinity();
+        double d2 = std::numeric_limits<double>::infinity();
         bool inside = true;
         for (int e = 0; e < 3; ++e) {
           const Vec2& p = *v[e];
@@ -239,10 +273,11 @@ std::vector<std::uint8_t> quiet_triangles(const Mesh_arrays& mesh, const Point_g
           const double wx = x[0] - p[0], wy = x[1] - p[1];
           inside = inside && dx * wy - dy * wx > 0;
           const double tt = std::clamp((wx * dx + wy * dy) / (dx * dx + dy * dy), 0.0, 1.0);
-          d = std::min(d, std::hypot(wx - tt * dx, wy - tt * dy));
+          const double ex = wx - tt * dx, ey = wy - tt * dy;
+          d2 = std::min(d2, ex * ex + ey * ey);
         }
-        if (inside) d = 0;
-        ok = weight[site] + d * (1 - kSlack) - absolute > need;
+        const double d = inside ? 0.0 : std::sqrt(d2);
+        ok = V[site].weight + d * (1 - kSlack) - absolute > need;
       });
       quiet[t] = ok;
     }
@@ -311,7 +346,7 @@ Packing first_pass_near(const Mesh_arrays& mesh, const std::vector<double>& f, c
     const Edge& e = mesh.segments[on_segments.samples.parent[j]];
     const Vec2& x = on_segments.samples.points[j];
     double to_end = std::numeric_limits<double>::infinity();
-    for (Index v : e) to_end = std::min(to_end, std::hypot(x[0] - mesh.points[v][0], x[1] - mesh.points[v][1]));
+    for (Index v : e) to_end = std::min(to_end, std::sqrt(squared_distance(x, mesh.points[v])));
     add_near(x, to_end + 2 * on_segments.radius[j]);
   }
   // Members in the full pass's tie order: input points by global id (index
@@ -387,7 +422,7 @@ void second_pass_near(const Mesh_arrays& mesh, const Candidates& inside, const s
     const Vec2& x = inside.samples.points[j];
     double to_vertex = std::numeric_limits<double>::infinity();
     for (Index v : mesh.triangles[inside.samples.parent[j]]) {
-      to_vertex = std::min(to_vertex, std::hypot(x[0] - mesh.points[v][0], x[1] - mesh.points[v][1]));
+      to_vertex = std::min(to_vertex, std::sqrt(squared_distance(x, mesh.points[v])));
     }
     add_near(x, 2 * inside.radius[j] + to_vertex);
   }
@@ -413,15 +448,19 @@ void second_pass_near(const Mesh_arrays& mesh, const Candidates& inside, const s
   packing.radius.insert(packing.radius.end(), inside.radius.begin(), inside.radius.end());
 }
 
-// An upper bound of f at every point: f(p) = min_c (w_c + |p - c|) over all
-// sites (Eq. 3), so f(p) <= w_q + |p - q| for p itself and its mesh neighbours q.
-std::vector<double> spacing_upper_bounds(const Mesh_arrays& mesh, const std::vector<double>& weight) {
+// An upper bound of f at the points `asked` (elsewhere the weight): f(p) =
+// min_c (w_c + |p - c|) over all sites (Eq. 3), so f(p) <= w_q + |p - q| for p
+// itself and its mesh neighbours q. (Only the edges at an asked point are
+// measured: most points are not asked.)
+std::vector<double> spacing_upper_bounds(const Mesh_arrays& mesh, const std::vector<double>& weight,
+                                         const std::vector<std::uint8_t>& asked) {
   std::vector<double> u = weight;
   const auto& P = mesh.points;
   for (const Triangle& t : mesh.triangles) {
+    if (!asked[t[0]] && !asked[t[1]] && !asked[t[2]]) continue;
     for (int k = 0; k < 3; ++k) {
       const Index p = t[k], q = t[(k + 1) % 3];
-      const double d = std::hypot(P[p][0] - P[q][0], P[p][1] - P[q][1]);
+      const double d = std::sqrt(squared_distance(P[p], P[q]));
       u[p] = std::min(u[p], weight[q] + d);
       u[q] = std::min(u[q], weight[p] + d);
     }
@@ -453,24 +492,22 @@ class Changed_region final : public Step_scope {
     grid_->set_weights(weight_);
     std::vector<double> f = weight_;
     std::vector<Index> asked;
+    std::vector<std::uint8_t> is_asked(n, 0);
     for (std::size_t i = 0; i < n; ++i) {
-      if (delta[i] > 1 || (!weights.evaluate.empty() && weights.evaluate[i])) asked.push_back(static_cast<Index>(i));
+      if (delta[i] > 1 || (!weights.evaluate.empty() && weights.evaluate[i])) {
+        asked.push_back(static_cast<Index>(i));
+        is_asked[i] = 1;
+      }
     }
-    // One graph for f at the points and the radii of the segment candidates.
-    // f(p) <= u(p), the least cone of p and its mesh neighbours at p
-    // (spacing_upper_bounds), so the site attaining f(p) lies within u(p) of
-    // p; a candidate x on segment ab has f(x) <= u(e) + |x - e| for its end e
-    // of smaller u, so its sites lie within 2 |ab| + u(e) of e. (u, not w: the
-    // weight of a point that coarsens reaches far, its cone does not win there.)
-    const std::vector<double> u = spacing_upper_bounds(mesh, weight_);
-    Mark_sites near_points(*grid_, n, magnitude_);
+    // The graph for f at the points: f(p) <= u(p), the least cone of p and its
+    // mesh neighbours at p (spacing_upper_bounds), so the site attaining f(p)
+    // lies within u(p) of p. (u, not w: the weight of a point that coarsens
+    // reaches far, its cone does not win there.) The segment candidates' radii
+    // come from another graph (segment_radii), of the sites near the candidates
+    // there are: most segments get none.
+    const std::vector<double> u = spacing_upper_bounds(mesh, weight_, is_asked);
+    Mark_sites near_points(*grid_, mesh.points, weight_, magnitude_);
     for (Index i : asked) near_points.near(mesh.points[i], u[i]);
-    for (const Edge& e : mesh.segments) {
-      const Index end = u[e[0]] <= u[e[1]] ? e[0] : e[1];
-      const Vec2& a = mesh.points[e[0]];
-      const Vec2& b = mesh.points[e[1]];
-      near_points.near(mesh.points[end], 2 * std::hypot(b[0] - a[0], b[1] - a[1]) + u[end]);
-    }
     timer.lap("nn");
     near_points_.emplace(mesh.points, weight_, near_points.marked);
     timer.lap("apollonius");
@@ -495,7 +532,7 @@ class Changed_region final : public Step_scope {
   // estimate is the whole mesh's, and so is a refused budget's error.
   const Spacing_queries* grid_queries(const Mesh_arrays& mesh, const std::vector<double>& f) override {
     if (!options_.adaptive_cells) return nullptr;
-    Mark_sites near_graded(*grid_, mesh.points.size(), magnitude_);
+    Mark_sites near_graded(*grid_, mesh.points, weight_, magnitude_);
     bool any = false;
     for (const Triangle& t : mesh.triangles) {
       if (!asks_spacing(mesh, f, t, options_.cell_factor)) continue;
@@ -524,12 +561,32 @@ class Changed_region final : public Step_scope {
     return &graded_queries_;
   }
 
-  const Spacing_function& segment_radii() override { return near_points_->function(); }
-  void segment_radii_done() override {
+  // The segment candidates' graph: x on segment e has f(x) <= f(v) + |x - v| at its
+  // ends v (f is 1-Lipschitz), so the site attaining f(x) lies within that of x.
+  const Spacing_function& segment_radii(const Mesh_arrays& mesh, const std::vector<double>& f,
+                                        const Candidates& on_segments, Stage_timer& timer) override {
     n_sites_ += near_points_->n_sites();
     n_hidden_ = near_points_->function().n_hidden();
     n_filtered_ = near_points_->function().n_filtered();
-    near_points_.reset();
+    near_points_.reset();  // f at the points was its only use
+    Mark_sites near_candidates(*grid_, mesh.points, weight_, magnitude_);
+    for (std::size_t j = 0; j < on_segments.size(); ++j) {
+      const Vec2& x = on_segments.samples.points[j];
+      double u = std::numeric_limits<double>::infinity();
+      for (Index v : mesh.segments[on_segments.samples.parent[j]]) {
+        u = std::min(u, f[v] + std::sqrt(squared_distance(x, mesh.points[v])));
+      }
+      near_candidates.near(x, u);
+    }
+    near_segments_.emplace(mesh.points, weight_, near_candidates.marked);
+    timer.lap("apollonius");
+    return near_segments_->function();
+  }
+  void segment_radii_done() override {
+    n_sites_ += near_segments_->n_sites();
+    n_hidden_ += near_segments_->function().n_hidden();
+    n_filtered_ += near_segments_->function().n_filtered();
+    near_segments_.reset();
   }
 
   Packing first_pass(const Mesh_arrays& mesh, const Scope_spacing& spacing, const Candidates& on_segments,
@@ -565,12 +622,12 @@ class Changed_region final : public Step_scope {
   // The interior candidates' graph: x in triangle t has f(x) <= f(v) + |x - v| at its vertices v.
   const Spacing_function& interior_radii(const Mesh_arrays& mesh, const std::vector<double>& f,
                                          const Candidates& inside, Stage_timer& timer) override {
-    Mark_sites near_samples(*grid_, mesh.points.size(), magnitude_);
+    Mark_sites near_samples(*grid_, mesh.points, weight_, magnitude_);
     for (std::size_t j = 0; j < inside.size(); ++j) {
       const Vec2& x = inside.samples.points[j];
       double u = std::numeric_limits<double>::infinity();
       for (Index v : mesh.triangles[inside.samples.parent[j]]) {
-        u = std::min(u, f[v] + std::hypot(x[0] - mesh.points[v][0], x[1] - mesh.points[v][1]));
+        u = std::min(u, f[v] + std::sqrt(squared_distance(x, mesh.points[v])));
       }
       near_samples.near(x, u);
     }
@@ -613,7 +670,7 @@ class Changed_region final : public Step_scope {
   const double magnitude_;
   std::vector<double> weight_;  // of the sites (Step_weights)
   std::optional<Point_grid> grid_;
-  std::optional<Restricted_spacing> near_points_, near_graded_, near_samples_;
+  std::optional<Restricted_spacing> near_points_, near_segments_, near_graded_, near_samples_;
   Spacing_queries graded_queries_;
   std::vector<std::uint8_t> safe_;  // old points no earlier sphere can reject (safe_old_points)
   std::vector<double> euclidean_nn_;

@@ -57,27 +57,21 @@ Old_mesh_walker::Old_mesh_walker(const Mesh_arrays& old_mesh, Triangle_fans fans
   if (fans_.xadj.size() != P_.size() + 1 || fans_.adj.size() != 3 * T_.size()) {
     throw std::logic_error("Old_mesh_walker: the fans are not the old mesh's");
   }
-  // The neighbour across edge k (a -> b): the other triangle around a that has
-  // b (a mesh is an oriented manifold: at most one), in parallel blocks.
-  // (triangle numbers fit in 4 bytes: Triangle_fans refuses 3 m >= 2^32)
-  neighbour_.assign(T_.size(), {-1, -1, -1});
-  constexpr std::size_t kBlock = 1 << 14;
-  parallel_for((T_.size() + kBlock - 1) / kBlock, 0, [&](std::size_t block) {
-    for (std::size_t t = block * kBlock; t < std::min(T_.size(), (block + 1) * kBlock); ++t) {
-      for (int k = 0; k < 3; ++k) {
-        const Index a = T_[t][k], b = T_[t][(k + 1) % 3];
-        for (Index f = fans_.xadj[a]; f < fans_.xadj[a + 1]; ++f) {
-          const Index u = fans_.adj[f];
-          if (static_cast<std::size_t>(u) == t) continue;
-          const Triangle& other = T_[u];
-          if (other[0] == b || other[1] == b || other[2] == b) {
-            neighbour_[t][k] = static_cast<std::int32_t>(u);
-            break;
-          }
-        }
-      }
-    }
-  });
+}
+
+// The other triangle around a that has b (a mesh is an oriented manifold: at
+// most one), looked up when a walk crosses the edge: the walks of a step cross
+// a few triangles per new point, far fewer than the 3 m edges a table would
+// cost to fill (the whole old mesh, also where nothing changed).
+Index Old_mesh_walker::across(Index t, int k) const {
+  const Index a = T_[t][k], b = T_[t][(k + 1) % 3];
+  for (Index f = fans_.xadj[a]; f < fans_.xadj[a + 1]; ++f) {
+    const Index u = fans_.adj[f];
+    if (u == t) continue;
+    const Triangle& other = T_[u];
+    if (other[0] == b || other[1] == b || other[2] == b) return u;
+  }
+  return -1;
 }
 
 Index Old_mesh_walker::walk(Index t, const Vec2& q, std::size_t salt, std::size_t& steps) const {
@@ -88,10 +82,8 @@ Index Old_mesh_walker::walk(Index t, const Vec2& q, std::size_t salt, std::size_
     for (int j = 0; j < 3; ++j) {
       const int k = static_cast<int>((salt + step + j) % 3);
       if (orientation(P_[tri[k]], P_[tri[(k + 1) % 3]], q) < 0) {
-        if (neighbour_[t][k] >= 0) {
-          next = neighbour_[t][k];
-          break;
-        }
+        next = across(t, k);
+        if (next >= 0) break;
         boundary_side = k;
       }
     }

@@ -6,6 +6,8 @@
 #include <array>
 #include <cmath>
 #include <limits>
+#include <mutex>
+#include <optional>
 
 #include <CGAL/Delaunay_triangulation_2.h>
 
@@ -18,6 +20,122 @@
 namespace evomesh {
 
 namespace {
+
+// The kept centres' nearest distances (squared_nearest, squared_two_nearest),
+// as detail::Point_tree answers them, without building the tree for queries
+// where the centres are spread evenly (most of them): the centres are bucketed
+// in a uniform grid (about two a cell, O(n)) and a query searches rings of
+// cells around its own until every cell not searched lies farther than the
+// second distance found; it takes the tree (built once, when first needed)
+// after kMaxRings rings. The answers are the tree's, bit for bit: each distance
+// is the same expression of the same two points (Point_tree: the shape of the
+// search does not matter), and a centre outside the searched box is at least
+// its gap from the query, less the rounding of the cell assignment and of the
+// gap (margins of kMargin cells, 64 ulps of the coordinates and a relative 1e-9
+// of the squared distance, far above it). O(n) cells: cell^2 >= 2 w^2 / n^2
+// for the box's width w.
+class Kept_centres {
+ public:
+  explicit Kept_centres(const std::vector<Vec2>& points) : points_(points) {
+    const std::size_t n = points.size();
+    Vec2 hi{-std::numeric_limits<double>::infinity(), -std::numeric_limits<double>::infinity()};
+    lo_ = {-hi[0], -hi[1]};
+    for (const Vec2& p : points) {
+      lo_ = {std::min(lo_[0], p[0]), std::min(lo_[1], p[1])};
+      hi = {std::max(hi[0], p[0]), std::max(hi[1], p[1])};
+      magnitude_ = std::max({magnitude_, std::abs(p[0]), std::abs(p[1])});
+    }
+    // square cells of about two centres each over the bounding box
+    const double width = std::max(hi[0] - lo_[0], hi[1] - lo_[1]);
+    const double area = std::max((hi[0] - lo_[0]) * (hi[1] - lo_[1]), width * width / static_cast<double>(n));
+    cell_ = std::sqrt(2 * area / static_cast<double>(std::max<std::size_t>(n, 1)));
+    if (!(cell_ > 0) || !std::isfinite(cell_)) cell_ = 1;
+    for (int k = 0; k < 2; ++k) {
+      side_[k] = std::clamp<std::int64_t>(static_cast<std::int64_t>((hi[k] - lo_[k]) / cell_) + 1, 1, kMaxSide);
+    }
+    start_.assign(static_cast<std::size_t>(side_[0] * side_[1]) + 1, 0);
+    std::vector<std::int64_t> cell_of(n);
+    for (std::size_t i = 0; i < n; ++i) {
+      cell_of[i] = cell(points[i][0], 0) + side_[0] * cell(points[i][1], 1);
+      ++start_[static_cast<std::size_t>(cell_of[i]) + 1];
+    }
+    for (std::size_t c = 0; c + 1 < start_.size(); ++c) start_[c + 1] += start_[c];
+    members_.resize(n);
+    std::vector<std::int64_t> fill(start_.begin(), start_.end() - 1);
+    for (std::size_t i = 0; i < n; ++i) members_[static_cast<std::size_t>(fill[cell_of[i]]++)] = points[i];
+  }
+
+  double squared_nearest(const Vec2& x) const {
+    std::array<double, 2> best;
+    if (search(x, /*two=*/false, best)) return best[0];
+    return tree().squared_nearest(x);
+  }
+  std::array<double, 2> squared_two_nearest(const Vec2& x) const {
+    std::array<double, 2> best;
+    if (search(x, /*two=*/true, best)) return best;
+    return tree().squared_two_nearest(x);
+  }
+
+ private:
+  static constexpr int kMaxRings = 3;
+  static constexpr double kMargin = 1e-6;  // of a cell
+  static constexpr std::int64_t kMaxSide = std::int64_t{1} << 15;
+
+  std::int64_t cell(double v, int axis) const {
+    const double c = std::floor((v - lo_[axis]) / cell_);
+    if (!(c > 0)) return 0;
+    return c >= static_cast<double>(side_[axis] - 1) ? side_[axis] - 1 : static_cast<std::int64_t>(c);
+  }
+  // Whether the rings of cells around x certify `best` (the nearest, or the two nearest, squared distances).
+  bool search(const Vec2& x, bool two, std::array<double, 2>& best) const {
+    best = {std::numeric_limits<double>::infinity(), std::numeric_limits<double>::infinity()};
+    const std::int64_t cx = cell(x[0], 0), cy = cell(x[1], 1);
+    for (std::int64_t r = 0; r <= kMaxRings; ++r) {
+      for (std::int64_t y = cy - r; y <= cy + r; ++y) {
+        if (y < 0 || y >= side_[1]) continue;
+        const bool edge_row = y == cy - r || y == cy + r;
+        for (std::int64_t xx = cx - r; xx <= cx + r; xx += edge_row ? 1 : 2 * std::max<std::int64_t>(r, 1)) {
+          if (xx < 0 || xx >= side_[0]) continue;
+          const std::size_t c = static_cast<std::size_t>(xx + side_[0] * y);
+          for (std::int64_t k = start_[c]; k < start_[c + 1]; ++k) {
+            const Vec2& p = members_[static_cast<std::size_t>(k)];
+            const double dx = x[0] - p[0];
+            const double dy = x[1] - p[1];
+            const double d = dx * dx + dy * dy;
+            if (d < best[0]) best = {d, best[0]};
+            else if (d < best[1]) best[1] = d;
+          }
+        }
+      }
+      // The gap from x to the cells beyond ring r (none beyond the grid's edge).
+      double gap = std::numeric_limits<double>::infinity();
+      const std::int64_t c[2] = {cx, cy};
+      for (int k = 0; k < 2; ++k) {
+        if (c[k] - r > 0) gap = std::min(gap, x[k] - (lo_[k] + static_cast<double>(c[k] - r) * cell_));
+        if (c[k] + r < side_[k] - 1) gap = std::min(gap, lo_[k] + static_cast<double>(c[k] + r + 1) * cell_ - x[k]);
+      }
+      gap -= kMargin * cell_ + 64 * std::numeric_limits<double>::epsilon() *
+                                    std::max({magnitude_, std::abs(x[0]), std::abs(x[1])});
+      const double found = two ? best[1] : best[0];
+      if (gap == std::numeric_limits<double>::infinity() || (gap > 0 && found * (1 + 1e-9) < gap * gap)) return true;
+    }
+    return false;
+  }
+  const detail::Point_tree& tree() const {
+    std::call_once(tree_built_, [&]() { tree_.emplace(points_); });
+    return *tree_;
+  }
+
+  const std::vector<Vec2>& points_;
+  Vec2 lo_{0, 0};
+  double magnitude_ = 0;  // of the coordinates
+  double cell_ = 1;
+  std::int64_t side_[2] = {1, 1};
+  std::vector<std::int64_t> start_;
+  std::vector<Vec2> members_;
+  mutable std::once_flag tree_built_;
+  mutable std::optional<detail::Point_tree> tree_;
+};
 
 // The gap repair (issue 11): the paper's nn_M'(p) of an input point is the
 // distance from p to its second nearest output point (its nearest other one
@@ -40,7 +158,7 @@ template <class Delaunay>
 void repair_gaps(const Mesh_arrays& mesh, const Triangle_fans& fans, const std::vector<double>& delta,
                  const std::vector<double>& nn, double gap_ratio, double refine_ratio, std::uint64_t seed,
                  const std::vector<std::uint8_t>& demoted, const std::vector<std::uint8_t>& kept_centre,
-                 const detail::Point_tree& tree, int threads, Delaunay& added_dt, std::vector<Vec2>& added,
+                 const Kept_centres& tree, int threads, Delaunay& added_dt, std::vector<Vec2>& added,
                  std::size_t& n_added) {
   constexpr double kTwoPi = 6.283185307179586;
   if (!(gap_ratio > 0) && !(refine_ratio > 0)) return;
@@ -173,7 +291,7 @@ std::vector<Vec2> repair_spacing(const Spacing_repair_input& input, const Frfc_o
     kept_points[k++] = centers[c];
   }
   if (kept_points.size() < 2) return {};
-  const detail::Point_tree tree(kept_points);
+  const Kept_centres tree(kept_points);
   // nn2 of the kept R-points (delta < 1): the second nearest kept centre, the
   // nearest being the point itself (kept centres are distinct).
   std::vector<double> nn2;

@@ -62,12 +62,14 @@ class Old_mesh_walker {
   Index search(Index t, const Vec2& q) const;
 
  private:
+  // The triangle across edge k (t[k] -> t[k + 1]) of t, -1 on the boundary.
+  Index across(Index t, int k) const;
+
   double outside_;
   const Mesh_arrays& mesh_;
   const std::vector<Vec2>& P_;
   const std::vector<Triangle>& T_;
   Triangle_fans fans_;                                   // the triangles around each old point
-  std::vector<std::array<std::int32_t, 3>> neighbour_;  // across edge k (t[k] -> t[k+1]), -1 on the boundary
   std::size_t limit_;                                    // of a walk's steps
 };
 

@@ -53,8 +53,10 @@ class Step_scope {
   // f for the adaptive grids that ask it (sampling.hpp, asks_spacing), in the
   // sample budget's estimate and the sampling; null if none asks.
   virtual const Spacing_queries* grid_queries(const Mesh_arrays& mesh, const std::vector<double>& f) = 0;
-  // The graph that answers the segment candidates' radii; not asked again after segment_radii_done().
-  virtual const Spacing_function& segment_radii() = 0;
+  // The graph that answers the segment candidates' radii (f: step 1's, at the
+  // input points); not asked again after segment_radii_done().
+  virtual const Spacing_function& segment_radii(const Mesh_arrays& mesh, const std::vector<double>& f,
+                                                const Candidates& on_segments, detail::Stage_timer& timer) = 0;
   virtual void segment_radii_done() {}
   // Steps 3-5, first pass: input points and segment candidates (frfc_stages::first_packing_pass).
   virtual frfc_stages::Packing first_pass(const Mesh_arrays& mesh, const Scope_spacing& spacing,
