@@ -74,6 +74,7 @@ void bind_quality(py::module_& m) {
         py::dict stats;
         stats["points_added"] = static_cast<double>(r.report.n_inserted);
         stats["points_removed"] = static_cast<double>(r.report.n_removed);
+        stats["points_outside"] = static_cast<double>(r.report.n_inserted_outside);
         stats["rounds"] = static_cast<double>(r.report.rounds);
         stats["capped"] = r.report.capped ? 1.0 : 0.0;
         stats["stalled"] = r.report.stalled ? 1.0 : 0.0;

@@ -74,6 +74,15 @@ bool constrained_edge(const Cdt& tr, Vertex_handle a, Vertex_handle b, Edge& e) 
   return true;
 }
 
+// Whether the face located for a point (fh; on edge i of it when an EDGE) is
+// one of its cavity's faces: then the point is inside the cavity.
+template <class Faces>
+bool inside_cavity(const Faces& cavity, const Face_handle& fh, Cdt::Locate_type type, int i) {
+  const bool in = std::find(cavity.begin(), cavity.end(), fh) != cavity.end();
+  if (in || type != Cdt::EDGE) return in;
+  return std::find(cavity.begin(), cavity.end(), fh->neighbor(i)) != cavity.end();
+}
+
 bool same_face(const Face_handle& f, const std::array<Vertex_handle, 3>& v) {
   return f->has_vertex(v[0]) && f->has_vertex(v[1]) && f->has_vertex(v[2]);
 }
@@ -89,6 +98,7 @@ Rounds_report Mesher::run_in_rounds(std::size_t budget, std::size_t max_rounds) 
   while (true) {
     candidates.clear();
     std::size_t dropped = 0;
+    std::size_t waiting = 0;  // bad faces whose point lies behind a constraint
     // 1. The bad faces (Bad_face_queue holds exactly the bad faces of the
     // domain not dropped by the cluster rule: the scan's, and those around
     // every new point).
@@ -112,6 +122,15 @@ Rounds_report Mesher::run_in_rounds(std::size_t budget, std::size_t max_rounds) 
         continue;
       }
       if (status != CGAL::NO_CONFLICT) continue;
+      // Ruppert's lemma puts the point in the domain once no sub-segment is
+      // encroached; the serial pass refines faces only then. A round refines
+      // faces while sub-segments elsewhere wait, so a point must show it is
+      // inside its own cavity (not behind a constraint the cavity stops at)
+      // and in the domain; otherwise the face waits for the splits.
+      if (!inside_cavity(zone.faces, zone.fh, zone.locate_type, zone.i) || !zone.fh->is_in_domain()) {
+        ++waiting;
+        continue;
+      }
       Candidate c;
       c.quality = q;
       c.face = f;
@@ -146,7 +165,8 @@ Rounds_report Mesher::run_in_rounds(std::size_t budget, std::size_t max_rounds) 
     }
     if (candidates.empty()) {
       if (dropped > 0) continue;  // (faces left the queue: look again)
-      break;                      // nothing bad is left
+      report.stalled = waiting > 0;
+      break;  // nothing bad is left, or only faces no split will free
     }
     const std::size_t left = budget - report.n_inserted;
     if (left == 0) {
