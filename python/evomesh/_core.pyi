@@ -82,6 +82,7 @@ class FrfcOptions:
     quality_max_fraction: float
     quality_max_extra: float
     incremental: bool
+    quality_rounds: bool
     def __init__(self) -> None: ...
     @staticmethod
     def paper() -> FrfcOptions: ...
@@ -107,6 +108,7 @@ class DrfcOptions:
     crowding_angle: float
     quality_max_fraction: float
     quality_max_extra: float
+    quality_rounds: bool
     def __init__(self) -> None: ...
     @staticmethod
     def paper() -> DrfcOptions: ...
@@ -274,6 +276,18 @@ def drfc_refine(
     """DRFC step 1 alone: Delaunay refinement with Ruppert's rules and rule 4 (Section 5)."""
 
 def constrained_delaunay(points: ArrayLike, pieces: ArrayLike, boundary: ArrayLike) -> NDArray[np.int64]: ...
+def quality_triangulate(
+    points: ArrayLike,
+    pieces: ArrayLike,
+    boundary: ArrayLike,
+    min_angle: float = ...,
+    crowding_angle: float = ...,
+    max_fraction: float = ...,
+    max_extra: float = ...,
+    quality_rounds: bool = ...,
+) -> dict[str, Any]:
+    """The quality pass alone (Section 6; in rounds with quality_rounds=True, issue 29)."""
+
 class SupermeshResult(TypedDict):
     """What :func:`supermesh` returns (a plain dict at run time)."""
 
