@@ -101,15 +101,14 @@ Rounds_report Mesher::run_in_rounds(std::size_t budget, std::size_t max_rounds) 
     std::size_t waiting = 0;  // bad faces whose point lies behind a constraint
     // 1. The bad faces (Bad_face_queue holds exactly the bad faces of the
     // domain not dropped by the cluster rule: the scan's, and those around
-    // every new point).
+    // every new point), in no particular order: what this step does for one
+    // face (its candidate, the edges it queues, its drop) does not depend on
+    // the others. (Each round recomputes the candidates it did not choose;
+    // keeping them while their cavity and its ring stay untouched saves
+    // nearly nothing: a candidate is left out because its cavity touches a
+    // chosen one, whose insertion then destroys that ring.)
     std::vector<std::pair<Face_handle, Refinement_criteria::Quality>> bad;
     faces_.for_each_bad_face([&](const Face_handle& f, Refinement_criteria::Quality q) { bad.emplace_back(f, q); });
-    std::sort(bad.begin(), bad.end(), [](const auto& a, const auto& b) {
-      if (a.second != b.second) return a.second < b.second;
-      const Point_2 *pa[3] = {&a.first->vertex(0)->point(), &a.first->vertex(1)->point(), &a.first->vertex(2)->point()};
-      const Point_2 *pb[3] = {&b.first->vertex(0)->point(), &b.first->vertex(1)->point(), &b.first->vertex(2)->point()};
-      return sorted_points(*pa[0], *pa[1], *pa[2]) < sorted_points(*pb[0], *pb[1], *pb[2]);
-    });
     for (const auto& [f, q] : bad) {
       const Point_2 p = faces_.refinement_point(f);
       auto zone = faces_.conflicts_zone(p, f);
@@ -180,6 +179,7 @@ Rounds_report Mesher::run_in_rounds(std::size_t budget, std::size_t max_rounds) 
     // 3. The lexical-first maximal independent set under the order.
     std::sort(candidates.begin(), candidates.end(), precedes);
     blocked.clear();
+    blocked.reserve(8 * candidates.size());
     std::vector<const Candidate*> chosen;
     for (const Candidate& c : candidates) {
       const bool free = std::none_of(c.cavity.begin(), c.cavity.end(),
