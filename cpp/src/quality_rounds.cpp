@@ -98,7 +98,7 @@ Rounds_report Mesher::run_in_rounds(std::size_t budget, std::size_t max_rounds) 
   while (true) {
     candidates.clear();
     std::size_t dropped = 0;
-    std::size_t waiting = 0;  // bad faces whose point lies behind a constraint
+    std::size_t waiting = 0;  // bad faces whose point cannot go in now (behind a constraint)
     // 1. The bad faces (Bad_face_queue holds exactly the bad faces of the
     // domain not dropped by the cluster rule: the scan's, and those around
     // every new point), in no particular order: what this step does for one
@@ -112,7 +112,10 @@ Rounds_report Mesher::run_in_rounds(std::size_t budget, std::size_t max_rounds) 
     for (const auto& [f, q] : bad) {
       const Point_2 p = faces_.refinement_point(f);
       auto zone = faces_.conflicts_zone(p, f);
-      if (zone.locate_type == Cdt::VERTEX) continue;  // (never: the point of a bad face is inside its empty disc)
+      if (zone.locate_type == Cdt::VERTEX) {  // (never: the point of a bad face is inside its empty disc)
+        ++waiting;
+        continue;
+      }
       edges_.set_imperative_refinement(false);
       const auto status = edges_.test_point_conflict_from_superior(p, zone);  // queues the edges p encroaches
       if (status == CGAL::CONFLICT_AND_ELEMENT_SHOULD_BE_DROPPED) {
