@@ -262,10 +262,10 @@ py::dict evolve_result_dict(const Evolve_result& r) {
   X(cell_factor) X(radius) X(radius_scale) X(boundary_scale) X(ring_samples) X(repair_ratio)                   \
   X(gap_repair_ratio) X(refine_gap_ratio) X(demote_ratio) X(samples) X(adaptive_cells) X(skip_coarse) X(skip_settled) X(filter_samples)            \
   X(max_samples) X(threads) X(seed) X(quality) X(within_domain) X(min_angle) X(crowding_angle)                 \
-  X(quality_max_fraction) X(quality_max_extra) X(incremental)
+  X(quality_max_fraction) X(quality_max_extra) X(incremental) X(quality_rounds)
 #define EVOMESH_DRFC_FIELDS(X)                                                                                  \
   X(min_angle) X(radius_scale) X(threads) X(max_samples) X(quality) X(crowding_angle) X(quality_max_fraction)    \
-  X(quality_max_extra) X(within_domain)
+  X(quality_max_extra) X(within_domain) X(quality_rounds)
 
 template <class Options>
 void bind_option_type(py::class_<Options>& cls, const py::tuple& fields, const char* doc) {
@@ -411,6 +411,7 @@ PYBIND11_MODULE(_core, m) {
   void bind_supermesh(pybind11::module_&); bind_supermesh(m);  // cpp/bindings/bind_supermesh.cpp (issue 12)
   void bind_motion(pybind11::module_&); bind_motion(m);  // cpp/bindings/bind_motion.cpp (issue 28)
   void bind_mis_rounds(pybind11::module_&); bind_mis_rounds(m);  // cpp/bindings/bind_mis_rounds.cpp (issue 29)
+  void bind_quality(pybind11::module_&); bind_quality(m);  // cpp/bindings/bind_quality.cpp (issue 29)
   m.doc() = "evomesh C++ core (CGAL): spacing functions, sampling, lexical-first MIS, FRFC";
 
   m.def(

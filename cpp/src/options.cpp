@@ -51,7 +51,7 @@ Frfc_options Frfc_options::paper() {
 }
 
 Quality_options Frfc_options::quality_settings() const {
-  return {min_angle, crowding_angle, quality_max_fraction, quality_max_extra};
+  return {min_angle, crowding_angle, quality_max_fraction, quality_max_extra, quality_rounds};
 }
 
 void Frfc_options::validate() const {
@@ -80,7 +80,7 @@ Drfc_options Drfc_options::paper() {
 }
 
 Quality_options Drfc_options::quality_settings() const {
-  return {min_angle, crowding_angle, quality_max_fraction, quality_max_extra};
+  return {min_angle, crowding_angle, quality_max_fraction, quality_max_extra, quality_rounds};
 }
 
 void Drfc_options::validate() const {

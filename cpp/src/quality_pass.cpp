@@ -67,10 +67,13 @@ std::vector<std::pair<Vertex_handle, Vertex_handle>> drop_crowding_points(
 // channel's wall, whose triangles reach across the channel) the rules put
 // about |e| / h points on e. Measured: 1.5-4 times the points the pass inserts
 // on a 1e-3 channel from coarse meshes, 4-40 times on graded and rough steps.
-double feature_points(Cdt& cdt) {
+// With `canonical`, the terms are summed in sorted order, not in the face
+// container's: the same sum whatever the triangulation's history (the rounds).
+double feature_points(Cdt& cdt, bool canonical) {
   if (cdt.dimension() < 2) return 0;
   auto& faces = cdt.tds().faces();
   std::vector<double> in_chunk(sweep_chunks(faces), 0.0);
+  std::vector<std::vector<double>> terms(canonical ? in_chunk.size() : 0);
   parallel_sweep(faces, [&](std::size_t c, Face_handle f) {
     if (cdt.is_infinite(f) || !f->is_in_domain()) return;
     const Point_2 &a = f->vertex(0)->point(), &b = f->vertex(1)->point(), &d = f->vertex(2)->point();
@@ -83,9 +86,16 @@ double feature_points(Cdt& cdt) {
       // |e| / h = |e|^2 / (2 area)
       points += squared_distance(f->vertex(Cdt::ccw(i))->point(), f->vertex(Cdt::cw(i))->point()) / twice_area;
     }
-    in_chunk[c] += points;
+    if (canonical) terms[c].push_back(points);
+    else in_chunk[c] += points;
   });
   double sum = 0;
+  if (canonical) {
+    std::vector<double> all = joined(terms);
+    std::sort(all.begin(), all.end());
+    for (double t : all) sum += t;
+    return sum;
+  }
   for (double s : in_chunk) sum += s;  // (in chunk order: the same sum on any thread count)
   return sum;
 }
@@ -99,8 +109,26 @@ double feature_points(Cdt& cdt) {
 // neighbours, 0.57 n). Twice the estimate, at most 64 n + 1e6 (a safeguard,
 // should some input not let the rules end: one step never grows a mesh
 // without bound).
-double feature_allowance(Cdt& cdt, std::size_t n) {
-  return std::min(2 * feature_points(cdt), 64 * static_cast<double>(n) + 1e6);
+double feature_allowance(Cdt& cdt, std::size_t n, bool canonical) {
+  return std::min(2 * feature_points(cdt, canonical), 64 * static_cast<double>(n) + 1e6);
+}
+
+// The cap on the rounds of quality_rounds (a safeguard: each round inserts a
+// point or drops a face, so the budget bounds them too).
+constexpr std::size_t kMaxQualityRounds = 100000;
+
+// The pieces in an order of their points (lowest end, then the other), for a
+// pass that must not depend on the order they were handed in.
+std::vector<Constraint_piece> pieces_by_points(const std::vector<Constraint_piece>& pieces,
+                                               const std::vector<Vec2>& points) {
+  std::vector<Constraint_piece> sorted = pieces;
+  auto key = [&](const Constraint_piece& p) {
+    const Vec2 &a = points[p.a], &b = points[p.b];
+    return a < b ? std::make_pair(a, b) : std::make_pair(b, a);
+  };
+  std::stable_sort(sorted.begin(), sorted.end(),
+                   [&](const Constraint_piece& x, const Constraint_piece& y) { return key(x) < key(y); });
+  return sorted;
 }
 
 // The quality pass on `cdt`, which holds all points (handles by point index).
@@ -116,17 +144,31 @@ Refined_mesh quality_pass(Cdt& cdt, const std::vector<Vertex_handle>& handles, c
   Refinement_report report;
   std::vector<std::uint8_t> removed(points.size(), 0);
   std::vector<std::pair<Vertex_handle, Vertex_handle>> crowded;
+  const bool rounds = options.quality_rounds;
   if (options.crowding_angle > 0) {
-    crowded = drop_crowding_points(cdt, handles, pieces, options.crowding_angle, pinned, removed, report);
+    // (In rounds, pieces in an order of their points: which apex goes first
+    // must not follow the order they were handed in.)
+    crowded = drop_crowding_points(cdt, handles, rounds ? pieces_by_points(pieces, points) : pieces,
+                                   options.crowding_angle, pinned, removed, report);
   }
   mark_domain(cdt, handles, pieces);
-  Mesher mesher(cdt, Refinement_criteria(options.min_angle, cdt, nullptr, /*off_centres=*/true));
+  Mesher mesher(cdt, Refinement_criteria(options.min_angle, cdt, nullptr, /*off_centres=*/true, /*canonical=*/rounds));
   mesher.init();
   for (const auto& e : crowded) mesher.queue_split(e.first, e.second);
   double budget = options.max_inserted_fraction * static_cast<double>(points.size()) + options.max_inserted_extra;
-  if (!mesher.has_small_angles()) budget += feature_allowance(cdt, points.size());
-  run_mesher(mesher, static_cast<std::size_t>(std::max(0.0, budget)), report);
-  report.rounds = 1;
+  if (!mesher.has_small_angles()) budget += feature_allowance(cdt, points.size(), rounds);
+  const auto limit = static_cast<std::size_t>(std::max(0.0, budget));
+  if (rounds) {
+    const Rounds_report r = mesher.run_in_rounds(limit, kMaxQualityRounds);
+    report.n_inserted = r.n_inserted;
+    report.rounds = r.rounds;
+    report.capped = r.capped;
+    report.stalled = r.stalled;
+    report.round_limit = r.round_limit;
+  } else {
+    run_mesher(mesher, limit, report);
+    report.rounds = 1;
+  }
   Refined_mesh result = extract(cdt, handles, points, kind, removed, scaling);
   result.f.clear();
   result.report.n_inserted = report.n_inserted;
@@ -134,6 +176,8 @@ Refined_mesh quality_pass(Cdt& cdt, const std::vector<Vertex_handle>& handles, c
   result.report.n_crowded_segments = report.n_crowded_segments;
   result.report.rounds = report.rounds;
   result.report.capped = report.capped;
+  result.report.stalled = report.stalled;
+  result.report.round_limit = report.round_limit;
   return result;
 }
 

@@ -82,6 +82,7 @@ class FrfcOptions:
     quality_max_fraction: float
     quality_max_extra: float
     incremental: bool
+    quality_rounds: bool
     def __init__(self) -> None: ...
     @staticmethod
     def paper() -> FrfcOptions: ...
@@ -107,6 +108,7 @@ class DrfcOptions:
     crowding_angle: float
     quality_max_fraction: float
     quality_max_extra: float
+    quality_rounds: bool
     def __init__(self) -> None: ...
     @staticmethod
     def paper() -> DrfcOptions: ...
@@ -292,6 +294,18 @@ def supports_on_left(a: ArrayLike, b: ArrayLike, points: ArrayLike) -> NDArray[n
 def local_constrained_delaunay(
     points: ArrayLike, pieces: ArrayLike, boundary: ArrayLike
 ) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.uint8], NDArray[np.uint8]]: ...
+def quality_triangulate(
+    points: ArrayLike,
+    pieces: ArrayLike,
+    boundary: ArrayLike,
+    min_angle: float = ...,
+    crowding_angle: float = ...,
+    max_fraction: float = ...,
+    max_extra: float = ...,
+    quality_rounds: bool = ...,
+) -> dict[str, Any]:
+    """The quality pass alone (Section 6; in rounds with quality_rounds=True, issue 29)."""
+
 class SupermeshResult(TypedDict):
     """What :func:`supermesh` returns (a plain dict at run time)."""
 

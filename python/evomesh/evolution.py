@@ -306,6 +306,18 @@ def evolve(mesh: Mesh, delta: Any = None, *, size: Any = None, method: str = "fr
             stops it; CGAL's off-centres end in practice up to 30). FRFC's
             default 30 (issue 11; was 20) costs a few % more points on smooth
             size maps and up to about half more on rough ones.
+        quality_rounds : bool, default False
+            The quality pass in rounds of independent insertions (issue 29,
+            docs/distributed-step.md section 3.6): each round splits the
+            lexical-first maximal independent set (sub-segments first, then the
+            worst triangles; two conflict when their cavities share a triangle
+            or an edge) of the bad triangles and encroached sub-segments of the
+            mesh at the round's start. Its output is a function of the selected
+            points and pieces as sets (their order does not matter), which a
+            partitioned step needs; the same rules, bound and budget as the
+            serial pass, about as many points, a different output.
+            ``stats`` adds ``quality_rounds``, ``quality_stalled`` (a round could
+            insert nothing with bad triangles left) and ``quality_round_limit``.
 
         incremental : bool, default True
             Where delta = 1 on most of the mesh (at least half of the points),
@@ -320,7 +332,7 @@ def evolve(mesh: Mesh, delta: Any = None, *, size: Any = None, method: str = "fr
             full algorithm.
 
         For "drfc" (defaults in :data:`DRFC_DEFAULTS`): ``min_angle`` (also the
-        shape criterion of the refinement stage), ``quality``, ``within_domain``, ``max_samples``
+        shape criterion of the refinement stage), ``quality``, ``quality_rounds``, ``within_domain``, ``max_samples``
         (refuse a step whose refinement needs more points), ``threads`` as
         above, and
 

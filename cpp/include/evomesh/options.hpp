@@ -43,6 +43,13 @@ struct Quality_options {
   // (n: points handed in), so small input angles cannot make it run long.
   double max_inserted_fraction = 0.5;
   double max_inserted_extra = 1000;
+  // Refine in rounds of independent insertions (issue 29, docs/distributed-step.md
+  // section 3.6): every round splits a lexical-first maximal independent set of
+  // the bad triangles and encroached sub-segments of the mesh at its start, so
+  // the output is a function of the input sets (any order of points and pieces)
+  // and a partitioned step can reproduce it. false: one point at a time from the
+  // worst triangle (the serial pass).
+  bool quality_rounds = false;
 
   // Throws Input_error naming the first field out of range.
   void validate() const;
@@ -107,6 +114,7 @@ struct Frfc_options {
   double crowding_angle = 120.0;
   double quality_max_fraction = 0.5;
   double quality_max_extra = 1000;
+  bool quality_rounds = false;  // Quality_options::quality_rounds
 
   // The paper's FRFC exactly: spheres B(x, f(x)/2) everywhere, cells of side
   // f(q)/(2 sqrt 2) (c5 = 1), exact radii, no ring candidates, no repair, no
@@ -134,6 +142,7 @@ struct Drfc_options {
   double crowding_angle = 120.0;
   double quality_max_fraction = 0.5;
   double quality_max_extra = 1000;
+  bool quality_rounds = false;  // Quality_options::quality_rounds
 
   // Section 5's DRFC exactly: Miller-Talmor-Teng spheres, no quality pass.
   static Drfc_options paper();

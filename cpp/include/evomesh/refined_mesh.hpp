@@ -16,6 +16,8 @@ struct Refinement_report {
   std::size_t n_crowded_segments = 0;      // pieces split because points crowded them
   std::size_t rounds = 0;                  // spacing_refine: passes with exact f
   bool capped = false;                     // stopped by the bound on inserted points
+  bool stalled = false;                    // quality_rounds: a round inserted nothing with work left
+  bool round_limit = false;                // quality_rounds: stopped by the cap on rounds with work left
 };
 
 // Points of a refined triangulation: the input points that remain, in input order,

@@ -208,6 +208,22 @@ inline double target_spacing(const Cdt& tr, Vertex_handle v, const Spacing_data&
   return info.f;
 }
 
+// A face's three points in its canonical rotation: counter-clockwise as given,
+// starting at the lexicographically least (x, then y). In the quality pass's
+// rounds (quality_rounds.cpp) every floating-point quantity derived from a face
+// (its quality, its off-centre) is computed in this rotation, so it does not
+// depend on the rotation the triangulation's history gave the face (issue 29:
+// the pass is a function of its input sets). The serial pass keeps the face's
+// stored rotation (its pinned outputs).
+inline std::array<Point_2, 3> canonical_rotation(const Point_2& a, const Point_2& b, const Point_2& c) {
+  if (b < a && b < c) return {b, c, a};
+  if (c < a && c < b) return {c, a, b};
+  return {a, b, c};
+}
+inline std::array<Point_2, 3> canonical_rotation(const Face_handle& f) {
+  return canonical_rotation(f->vertex(0)->point(), f->vertex(1)->point(), f->vertex(2)->point());
+}
+
 // Face criteria for CGAL's Delaunay mesher. Quality: for a triangle that breaks
 // rule 4, minus (circumradius / f)^2 of its worst vertex, so the largest such
 // triangles are split first; otherwise the squared sine of its smallest angle (as
@@ -223,12 +239,19 @@ class Refinement_criteria {
 
   using Quality = double;
 
-  Refinement_criteria(double min_angle_degrees, const Cdt& tr, const Spacing_data* spacing, bool off_centres)
+  // canonical: qualities and refinement points computed in each face's
+  // canonical rotation (the rounds of quality_rounds.cpp); false: in the face's
+  // stored rotation (the serial pass, as its pinned outputs were made).
+  Refinement_criteria(double min_angle_degrees, const Cdt& tr, const Spacing_data* spacing, bool off_centres,
+                      bool canonical = false)
       : bound_(angle_bound(min_angle_degrees)),
         min_angle_(min_angle_degrees),
         off_centres_(off_centres),
+        canonical_(canonical),
         tr_(&tr),
         spacing_(spacing) {}
+
+  bool is_canonical() const { return canonical_; }
 
   // The bound of rule 3 on the squared sine of the smallest angle.
   static double angle_bound(double min_angle_degrees) { return std::pow(std::sin(min_angle_degrees * kPi / 180.0), 2); }
@@ -282,16 +305,24 @@ class Refinement_criteria {
 
   class Is_bad {
    public:
-    Is_bad(double bound, const Cdt* tr, const Spacing_data* spacing) : bound_(bound), tr_(tr), spacing_(spacing) {}
+    Is_bad(double bound, const Cdt* tr, const Spacing_data* spacing, bool canonical)
+        : bound_(bound), tr_(tr), spacing_(spacing), canonical_(canonical) {}
 
     CGAL::Mesh_2::Face_badness operator()(Quality q) const {
       return q < bound_ ? CGAL::Mesh_2::BAD : CGAL::Mesh_2::NOT_BAD;
     }
 
     CGAL::Mesh_2::Face_badness operator()(const Face_handle& fh, Quality& q) const {
-      const Point_2& pa = fh->vertex(0)->point();
-      const Point_2& pb = fh->vertex(1)->point();
-      const Point_2& pc = fh->vertex(2)->point();
+      if (canonical_) {
+        const std::array<Point_2, 3> p = canonical_rotation(fh);
+        return badness(fh, p[0], p[1], p[2], q);
+      }
+      return badness(fh, fh->vertex(0)->point(), fh->vertex(1)->point(), fh->vertex(2)->point(), q);
+    }
+
+   private:
+    CGAL::Mesh_2::Face_badness badness(const Face_handle& fh, const Point_2& pa, const Point_2& pb,
+                                       const Point_2& pc, Quality& q) const {
       if (spacing_ != nullptr) {
         // Rule 4: a vertex whose neighbour spacing exceeds f there.
         double worst = 0;
@@ -316,18 +347,19 @@ class Refinement_criteria {
       return angle_badness(pa, pb, pc, bound_, q);
     }
 
-   private:
     double bound_;
     const Cdt* tr_;
     const Spacing_data* spacing_;
+    bool canonical_;
   };
 
-  Is_bad is_bad_object() const { return Is_bad(bound_, tr_, spacing_); }
+  Is_bad is_bad_object() const { return Is_bad(bound_, tr_, spacing_, canonical_); }
 
  private:
   double bound_;
   double min_angle_;
   bool off_centres_;
+  bool canonical_;
   const Cdt* tr_;
   const Spacing_data* spacing_;
 };
@@ -600,6 +632,13 @@ class Bad_face_queue {
     first_current_ = next_;
     n_current_ = 0;
   }
+  // Calls visit(face, quality) for every queued face, in no particular order.
+  template <class Visit>
+  void for_each_queued(Visit&& visit) const {
+    for (const Entry& e : heap_) {
+      if (current(e)) visit(e.face, e.quality);
+    }
+  }
 
  private:
   struct Entry {
@@ -649,24 +688,30 @@ struct Faces_base : Faces_base_cgal {
   Faces_base(Cdt& tr, Refinement_criteria& criteria, Edges_level& edges)
       : Faces_base_cgal(tr, criteria, edges),
         half_angle_cotangent_(criteria.off_centre_half_angle_cotangent()),
-        parallel_scan_(!criteria.has_spacing()) {}
+        parallel_scan_(!criteria.has_spacing()),
+        canonical_(criteria.is_canonical()) {}
 
   Point_2 refinement_point_impl(const Cdt::Face_handle& f) const {
-    const Point_2 c = this->triangulation_ref_impl().circumcenter(f);
+    // (With canonical_, in the face's canonical rotation: the same point
+    // whatever rotation the triangulation gave the face.)
+    const std::array<Point_2, 3> v =
+        canonical_ ? canonical_rotation(f)
+                   : std::array<Point_2, 3>{f->vertex(0)->point(), f->vertex(1)->point(), f->vertex(2)->point()};
+    const Point_2 c = canonical_ ? CGAL::circumcenter(v[0], v[1], v[2]) : this->triangulation_ref_impl().circumcenter(f);
     Refinement_criteria::Quality q;
     this->is_bad(f, q);
     if (q < 0) return c;  // rule 4 (size): the circumcentre
-    int k = 0;  // the shortest edge is opposite vertex k
+    int k = 0;  // the shortest edge is opposite point k (the first of equal ones)
     double shortest = std::numeric_limits<double>::infinity();
     for (int i = 0; i < 3; ++i) {
-      const double l = squared_distance(f->vertex(Cdt::ccw(i))->point(), f->vertex(Cdt::cw(i))->point());
+      const double l = squared_distance(v[Cdt::ccw(i)], v[Cdt::cw(i)]);
       if (l < shortest) {
         shortest = l;
         k = i;
       }
     }
-    const Point_2& p = f->vertex(Cdt::ccw(k))->point();
-    const Point_2& r = f->vertex(Cdt::cw(k))->point();
+    const Point_2& p = v[Cdt::ccw(k)];
+    const Point_2& r = v[Cdt::cw(k)];
     const double mx = 0.5 * (p.x() + r.x()), my = 0.5 * (p.y() + r.y());
     const double dx = c.x() - mx, dy = c.y() - my;
     const double to_centre = std::hypot(dx, dy);
@@ -749,13 +794,34 @@ struct Faces_base : Faces_base_cgal {
   // (CGAL's public counterpart would work on its own, unused map.)
   void remove_bad_face(const Cdt::Face_handle& f) { queue_.erase(f); }
 
+  // For the rounds (quality_rounds.cpp): the queued faces, whether a face is
+  // queued, and the badness CGAL's face level reads when a face is refined
+  // outside its queue order (get_next_element_impl sets it otherwise).
+  template <class Visit>
+  void for_each_bad_face(Visit&& visit) const {
+    queue_.for_each_queued(visit);
+  }
+  bool is_queued(const Cdt::Face_handle& f) const { return queue_.contains(f); }
+  void refine_outside_queue_order() { this->current_badness = CGAL::Mesh_2::BAD; }
+
  private:
   double half_angle_cotangent_;
   bool parallel_scan_;
+  bool canonical_;
   Bad_face_queue queue_;
 };
 using Faces_level = CGAL::Mesh_2::Refine_faces<Cdt, Refinement_criteria, Edges_level, Faces_base>;
 using Visitor = CGAL::Mesh_2::Refine_edges_visitor_from_faces<Faces_level>;
+
+// What run_in_rounds did.
+struct Rounds_report {
+  std::size_t n_inserted = 0;
+  std::size_t rounds = 0;          // rounds that inserted at least one point
+  std::size_t largest_round = 0;   // the most points one round inserted
+  bool capped = false;             // stopped by the budget with work left
+  bool stalled = false;            // a round inserted nothing while bad faces or encroached edges remained
+  bool round_limit = false;        // stopped by max_rounds with work left
+};
 
 // CGAL's Delaunay_mesher_2, wired with the levels above, driven one point at a
 // time so the number of insertions can be bounded. The domain is marked by the
@@ -783,6 +849,11 @@ class Mesher {
   // After init(): whether two constraint edges meet under less than 60 degrees
   // (CGAL's clusters, Clusters::is_small_angle above), either side of the domain.
   bool has_small_angles() const { return clusters_.size() > 0; }
+
+  // Refinement in rounds of independent insertions (quality_rounds.cpp, design
+  // in docs/distributed-step.md section 3.6), instead of one point at a time
+  // from the worst face. Requires criteria built with canonical = true.
+  Rounds_report run_in_rounds(std::size_t budget, std::size_t max_rounds);
 
  private:
   Refinement_criteria criteria_;
