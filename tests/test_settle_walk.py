@@ -67,9 +67,8 @@ def exact_answer(sites, weights, ids, x):
 def tie_cases(draw):
     """(sites, weights, queries): sites and queries where cones tie exactly or within an ulp."""
     rng = np.random.default_rng(draw(st.integers(0, 2**32 - 1)))
-    kind = draw(
-        st.sampled_from(["square", "pythagorean", "weighted-pythagorean", "lattice", "lattice-ulp", "lattice-weight-ulp"])
-    )
+    kinds = ["square", "pythagorean", "weighted-pythagorean", "lattice", "lattice-ulp", "lattice-weight-ulp"]
+    kind = draw(st.sampled_from(kinds))
     if kind.startswith("lattice"):
         k = draw(st.integers(4, 11))
         h = draw(st.sampled_from([0.1, 1 / 3, 0.7, 1.0]))
