@@ -608,8 +608,7 @@ void Spacing_function::evaluate(const Vec2* queries, std::size_t n, double* f_ou
     // with the cone values in double; values strictly decrease, so it ends.
     double best = cone(hint, x);
     for (;;) {
-      const double bound = near_bound(best);
-      bool near = false;
+      double least = std::numeric_limits<double>::infinity();  // of the neighbours not below best
       auto c = graph.incident_vertices(hint), done = c;
       Vertex next;
       do {
@@ -620,9 +619,9 @@ void Spacing_function::evaluate(const Vec2* queries, std::size_t n, double* f_ou
           next = c;
           break;
         }
-        near = near || value <= bound;
+        least = std::min(least, value);
       } while (++c != done);
-      if (next == Vertex()) return {hint, near};
+      if (next == Vertex()) return {hint, least <= near_bound(best)};
       hint = next;
     }
   };
