@@ -657,7 +657,7 @@ PYBIND11_MODULE(_core, m) {
 
   py::class_<Spacing_function>(m, "SpacingFunction")
       .def(py::init([](const Float_array& sites, const Float_array& weights, std::size_t min_sites_per_part,
-                       std::optional<Int_array> triangles) {
+                       std::optional<Int_array> triangles, std::optional<Int_array> site_ids) {
              auto s = to_points(sites, "sites");
              auto w = to_vector<double>(weights);
              std::vector<Triangle> t;
@@ -665,10 +665,24 @@ PYBIND11_MODULE(_core, m) {
                t = to_index_rows<3>(*triangles, "triangles");
                require_indices(t, s.size(), "triangles");
              }
+             std::vector<std::int64_t> ids;
+             if (site_ids) {
+               ids = to_vector<std::int64_t>(*site_ids);
+               if (ids.size() != s.size()) throw py::value_error("site_ids: one id per site is required");
+               auto sorted_ids = ids;
+               std::sort(sorted_ids.begin(), sorted_ids.end());
+               if (std::adjacent_find(sorted_ids.begin(), sorted_ids.end()) != sorted_ids.end()) {
+                 throw py::value_error("site_ids must be distinct");
+               }
+             }
              py::gil_scoped_release release;
-             return std::make_unique<Spacing_function>(s, w, min_sites_per_part, triangles ? &t : nullptr);
+             return std::make_unique<Spacing_function>(s, w, min_sites_per_part, triangles ? &t : nullptr,
+                                                       site_ids ? &ids : nullptr);
            }),
-           py::arg("sites"), py::arg("weights"), py::arg("min_sites_per_part") = 0, py::arg("triangles") = py::none())
+           py::arg("sites"), py::arg("weights"), py::arg("min_sites_per_part") = 0, py::arg("triangles") = py::none(),
+           py::arg("site_ids") = py::none(),
+           "site_ids (optional, int64, distinct): global ids of the sites; exact ties of f go to the site of lowest "
+           "id (else of lowest index).")
       .def(
           "evaluate",
           [](const Spacing_function& self, const Float_array& queries, int threads, bool certified) {

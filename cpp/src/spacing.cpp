@@ -223,6 +223,44 @@ using Ag_point = Ag_traits::Point_2;
 // starting without a hint, so results are independent of the thread count.
 constexpr std::size_t kQueryChunk = 8192;
 
+// sign((wa + |x - a|) - (wb + |x - b|)), the comparison of two cones of f at x
+// (Eq. 3) on the weights themselves, not on the graph's shifted ones: ring
+// operations only, exact in Mpzf; in Flagged_interval an undecided comparison
+// sets the flag. With A = |x - a|^2, B = |x - b|^2, d = wa - wb, e = sqrt(A) -
+// sqrt(B): sign(e) = sign(A - B); where d and e have opposite signs, the sign
+// is sign(e) times sign(e^2 - d^2), and e^2 - d^2 = (A + B - d^2) - 2 sqrt(AB).
+template <class NT>
+CGAL::Sign cone_difference_sign(const Vec2& a, double wa, const Vec2& b, double wb, const Vec2& x) {
+  const NT ax = NT(x[0]) - NT(a[0]), ay = NT(x[1]) - NT(a[1]);
+  const NT bx = NT(x[0]) - NT(b[0]), by = NT(x[1]) - NT(b[1]);
+  const NT A = ax * ax + ay * ay, B = bx * bx + by * by;
+  const NT d = NT(wa) - NT(wb);
+  const int se = static_cast<int>(CGAL::sign(A - B));
+  const int sd = static_cast<int>(CGAL::sign(d));
+  if (se == 0) return static_cast<CGAL::Sign>(sd);
+  if (sd == 0 || sd == se) return static_cast<CGAL::Sign>(se);
+  const NT m = A + B - d * d;
+  int magnitude;  // sign(|e| - |d|)
+  const int sm = static_cast<int>(CGAL::sign(m));
+  if (sm > 0) magnitude = static_cast<int>(CGAL::sign(m * m - NT(4) * A * B));
+  else magnitude = sm == 0 && CGAL::sign(A * B) == CGAL::ZERO ? 0 : -1;
+  return static_cast<CGAL::Sign>(se * magnitude);
+}
+
+// cone_difference_sign, exact: the interval filter of the graph's predicates
+// (detail/apollonius_filter.hpp), then Mpzf where it cannot decide.
+CGAL::Sign compare_cones(const Vec2& a, double wa, const Vec2& b, double wb, const Vec2& x) {
+  {
+    CGAL::Protect_FPU_rounding<true> protect;
+    bool& undecided = detail::interval_undecided;
+    undecided = false;
+    const CGAL::Sign s = cone_difference_sign<detail::Flagged_interval>(a, wa, b, wb, x);
+    if (!undecided) return s;
+  }
+  ++detail::exact_evaluations;
+  return cone_difference_sign<CGAL::Mpzf>(a, wa, b, wb, x);
+}
+
 }  // namespace
 
 // Large site sets are split into up to four parts: the cells of a kd split of
@@ -239,6 +277,7 @@ constexpr std::size_t kQueryChunk = 8192;
 struct Spacing_function::Impl {
   std::vector<Vec2> sites;
   std::vector<double> weights;
+  std::vector<std::int64_t> ids;  // global ids of the sites (empty: their indices)
   double shift = 0.0;
   double halo = 0.0;
   // Cell of x: part (x < split_x ? 0 : 1) * (y splits) ...
@@ -449,6 +488,7 @@ Spacing_function::Spacing_function(const std::vector<Vec2>& sites, const std::ve
   if (site_ids != nullptr && site_ids->empty()) site_ids = nullptr;
   if (site_ids != nullptr && site_ids->size() != n) throw Input_error("one id per site is required");
   if (triangles != nullptr) dominator = dominated_sites(sites, weights, impl.shift, *triangles, site_ids);
+  if (site_ids != nullptr) impl.ids = *site_ids;
   impl.parts.resize(n_parts);
   parallel_for(static_cast<std::size_t>(n_parts), 0, [&](std::size_t k) {
     auto part = std::make_unique<Impl::Part>();
@@ -534,71 +574,123 @@ void Spacing_function::evaluate(const Vec2* queries, std::size_t n, double* f_ou
   const auto& weights = impl.weights;
   const std::size_t n_chunks = (n + kQueryChunk - 1) / kQueryChunk;
   using Vertex = Apollonius_graph::Vertex_handle;
+  // The one formula for f at x given its site, on every path.
   auto cone = [&](Vertex v, const Vec2& x) {
     const Index s = v->index;
     const double dx = x[0] - sites[s][0];
     const double dy = x[1] - sites[s][1];
     return weights[s] + std::sqrt(dx * dx + dy * dy);
   };
-  // Nearest site of x in one graph, from `hint` (may be null).
-  auto nearest = [&](const Apollonius_graph& graph, const Vec2& x, Vertex hint) {
+  auto id = [&](Vertex v) -> std::int64_t { return impl.ids.empty() ? v->index : impl.ids[v->index]; };
+  // Of two sites, whether w is the answer rather than v: its cone is lower at x,
+  // exactly, or ties with the lower id.
+  auto better = [&](Vertex w, Vertex v, const Vec2& x) {
+    const CGAL::Sign s =
+        compare_cones(sites[w->index], weights[w->index], sites[v->index], weights[v->index], x);
+    return s == CGAL::NEGATIVE || (s == CGAL::ZERO && id(w) < id(v));
+  };
+  // A bound above the cone of every site the settle step must see from a walk
+  // that ended at value `value`: the double cones are within 4 units of
+  // rounding of the exact ones, and the graph decides on the shifted weights
+  // shift - w, rounded by at most half a unit of `shift` (2^-48 is 32 units).
+  auto near_bound = [&](double value) { return value + 0x1p-48 * (value + impl.shift); };
+  // The walk: a vertex of the graph near the minimum of x, from `hint` (may be
+  // null), and whether some neighbour's cone came within near_bound of its own
+  // (false: it is the one exact minimum, see `settle`).
+  auto walk = [&](const Apollonius_graph& graph, const Vec2& x, Vertex hint) -> std::pair<Vertex, bool> {
     const Ag_point point(x[0], x[1]);
-    if (hint == Vertex()) return graph.nearest_neighbor(point);
     // Below three vertices the graph has no faces to walk on; CGAL scans them.
-    if (certified || graph.number_of_vertices() < 3) return graph.nearest_neighbor(point, hint);
+    if (certified || graph.number_of_vertices() < 3) {
+      return {hint == Vertex() ? graph.nearest_neighbor(point) : graph.nearest_neighbor(point, hint), true};
+    }
+    if (hint == Vertex()) hint = graph.nearest_neighbor(point);
     // Greedy descent over Apollonius-graph neighbours, as CGAL's walk does,
     // with the cone values in double; values strictly decrease, so it ends.
     double best = cone(hint, x);
-    for (bool moved = true; moved;) {
-      moved = false;
+    for (;;) {
+      double least = std::numeric_limits<double>::infinity();  // of the neighbours not below best
       auto c = graph.incident_vertices(hint), done = c;
+      Vertex next;
       do {
         if (graph.is_infinite(c)) continue;
         const double value = cone(c, x);
         if (value < best) {
           best = value;
-          hint = c;
-          moved = true;
+          next = c;
           break;
         }
+        least = std::min(least, value);
       } while (++c != done);
+      if (next == Vertex()) return {hint, least <= near_bound(best)};
+      hint = next;
     }
-    return hint;
+  };
+  // The settle step (docs/distributed-step.md, section 3.2): from the walk's
+  // end v, the site of f(x) as a function of x and the site set alone, not of
+  // the hint or of which other sites the graph holds. Lemma: the segment from
+  // a visible site s to x meets cells of the additively weighted Voronoi
+  // diagram that follow one another along graph edges (cells that meet only at
+  // a vertex are joined by the graph through the sites of that vertex), and
+  // every site t met at a point y has w_t + |x - t| <= w_t + |x - y| + |y - t|
+  // <= w_s + |x - y| + |y - s| = w_s + |x - s|. So every site whose cone at x is
+  // at most v's is joined to v by graph edges through sites whose cones are at
+  // most v's: collecting the vertices reachable from v through sites below
+  // near_bound finds every site that ties or beats v, up to the rounding the
+  // bound covers, and the exact comparison picks the least cone, ties by the
+  // least id. Nearly always v's neighbours are all above the bound (the walk
+  // saw it) and v is the answer; otherwise the set is a handful of tied sites.
+  auto settle = [&](const Apollonius_graph& graph, const Vec2& x, Vertex v, std::vector<Vertex>& reached) {
+    const double bound = near_bound(cone(v, x));
+    reached.assign(1, v);
+    if (graph.number_of_vertices() < 3) {
+      for (auto u = graph.finite_vertices_begin(); u != graph.finite_vertices_end(); ++u) {
+        if (Vertex(u) != v && cone(u, x) <= bound) reached.push_back(u);
+      }
+    } else {
+      for (std::size_t k = 0; k < reached.size(); ++k) {
+        auto c = graph.incident_vertices(reached[k]), done = c;
+        do {
+          if (graph.is_infinite(c) || cone(c, x) > bound) continue;
+          if (std::find(reached.begin(), reached.end(), Vertex(c)) == reached.end()) reached.push_back(c);
+        } while (++c != done);
+      }
+    }
+    for (std::size_t k = 1; k < reached.size(); ++k) {
+      if (better(reached[k], v, x)) v = reached[k];
+    }
+    return v;
   };
   parallel_for(n_chunks, threads, [&](std::size_t chunk) {
     const std::size_t begin = chunk * kQueryChunk;
     const std::size_t end = std::min(n, begin + kQueryChunk);
     Vertex hints[4];
+    std::vector<Vertex> reached;
+    auto nearest = [&](int part, const Vec2& x) {
+      const Apollonius_graph& graph = impl.parts[part]->graph;
+      const auto [v, near] = walk(graph, x, hints[part]);
+      hints[part] = v;
+      return near ? settle(graph, x, v, reached) : v;
+    };
     for (std::size_t k = begin; k < end; ++k) {
       const std::size_t q = certified ? sorted[k].index : grid_order[k];
       const Vec2 x = certified ? Vec2{sorted[k].x, sorted[k].y} : queries[q];
       const int part = impl.part_of(x[0], x[1]);
-      Vertex v = hints[part] = nearest(impl.parts[part]->graph, x, hints[part]);
+      Vertex v = nearest(part, x);
       double value = cone(v, x);
       if (!(value <= impl.halo)) {
-        // Not certified by the part: ask every part, keep the best (exact
-        // comparison when certified; ties go to the lowest part).
-        int best_part = part;
+        // Not certified by the part: ask every part, keep the best (the same
+        // exact comparison and ids as the settle step, so the answer is the one
+        // of a single graph).
         for (int other = 0; other < impl.n_parts; ++other) {
           const Impl::Part& cell = *impl.parts[other];
           // The best site is an own site of a cell within `value` of x.
           const double dx = std::max({cell.lo_x - x[0], 0.0, x[0] - cell.hi_x});
           const double dy = std::max({cell.lo_y - x[1], 0.0, x[1] - cell.hi_y});
           if (other == part || std::sqrt(dx * dx + dy * dy) > value * (1 + 1e-9)) continue;
-          const Vertex w = hints[other] = nearest(cell.graph, x, hints[other]);
-          const double w_value = cone(w, x);
-          bool better;
-          if (certified) {
-            const auto side = cell.graph.geom_traits().oriented_side_of_bisector_2_object()(
-                v->site(), w->site(), Ag_point(x[0], x[1]));
-            better = side == CGAL::ON_NEGATIVE_SIDE || (side == CGAL::ON_ORIENTED_BOUNDARY && other < best_part);
-          } else {
-            better = w_value < value || (w_value == value && other < best_part);
-          }
-          if (better) {
+          const Vertex w = nearest(other, x);
+          if (w->index != v->index && better(w, v, x)) {
             v = w;
-            value = w_value;
-            best_part = other;
+            value = cone(w, x);
           }
         }
       }

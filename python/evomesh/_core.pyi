@@ -156,7 +156,12 @@ class RefineResult(TypedDict):
 
 class SpacingFunction:
     def __init__(
-        self, sites: ArrayLike, weights: ArrayLike, min_sites_per_part: int = 0, triangles: ArrayLike | None = None
+        self,
+        sites: ArrayLike,
+        weights: ArrayLike,
+        min_sites_per_part: int = 0,
+        triangles: ArrayLike | None = None,
+        site_ids: ArrayLike | None = None,
     ) -> None: ...
     def evaluate(
         self, x: ArrayLike, threads: int = 0, certified: bool = True

@@ -46,9 +46,9 @@ class Spacing_function {
   // insertion order (issue 13). The graphs are then exactly those built without
   // `triangles` (CGAL would find the site hidden and change nothing), so f, the
   // sites found and n_hidden() are bit for bit the same.
-  // `site_ids` (optional; global ids of the sites, Mesh_arrays::point_gids): of
-  // several neighbours hiding a site, the one of lowest id counts (else of
-  // lowest index); only n_filtered() can tell.
+  // `site_ids` (optional; global ids of the sites, Mesh_arrays::point_gids):
+  // exact ties of f go to the site of lowest id (else of lowest index), and of
+  // several neighbours hiding a site, the one of lowest id counts.
   Spacing_function(const std::vector<Vec2>& sites, const std::vector<double>& weights,
                    std::size_t min_sites_per_part = 0, const std::vector<Triangle>* triangles = nullptr,
                    const std::vector<std::int64_t>* site_ids = nullptr);
@@ -59,13 +59,16 @@ class Spacing_function {
   Spacing_function(const Spacing_function&) = delete;
   Spacing_function& operator=(const Spacing_function&) = delete;
 
-  // f at n query points. Queries are answered in Hilbert order with the
-  // previous answer as hint, in fixed chunks so the result does not depend on
-  // the number of threads. `site_out` (optional) receives the minimising site.
-  // certified: the site is CGAL's exact Apollonius nearest neighbour. Otherwise
-  // a greedy walk on the Apollonius graph in floating point finds it, which can
-  // differ only where two cones tie up to rounding (same f up to rounding) and is
-  // several times faster: FRFC uses it for the radii of sampled spheres.
+  // f at n query points. `site_out` (optional) receives the minimising site.
+  // The answer at x is the site c of least w_c + |x - c| (exact comparison; exact
+  // ties: lowest id) among the visible sites, and f = w_c + sqrt(dx*dx + dy*dy)
+  // in double: a function of x and of the sites near x only, the same bits
+  // whatever the hint, the thread count, the kd parts, `certified`, or which other
+  // sites the graph holds (any superset of the sites within f(x) of x answers
+  // alike; docs/distributed-step.md 3.2). `certified` picks the walk to the graph
+  // vertex the settle step starts from: CGAL's exact nearest neighbour, or
+  // (false) a greedy walk in floating point, several times faster (FRFC's sample
+  // radii). Queries are answered in Hilbert order with the previous answer as hint.
   void evaluate(const Vec2* queries, std::size_t n, double* f_out, Index* site_out = nullptr,
                 int threads = 0, bool certified = true) const;
 
