@@ -13,7 +13,6 @@ rank that hangs, so a hang fails CI instead of stalling it.
 
 from __future__ import annotations
 
-import faulthandler
 import subprocess
 import sys
 
@@ -30,23 +29,7 @@ from strategies import any_meshes, grid_mesh
 MPI = pytest.importorskip("mpi4py.MPI")
 COMM = MPI.COMM_WORLD
 RANK, SIZE = COMM.rank, COMM.size
-# Seconds a single test may take on any rank before the watchdog ends the process.
-WATCHDOG_SECONDS = 120
-
-
-@pytest.fixture(autouse=True)
-def watchdog():
-    faulthandler.dump_traceback_later(WATCHDOG_SECONDS, exit=True)
-    yield
-    faulthandler.cancel_dump_traceback_later()
-    COMM.Barrier()  # the next test starts together on every rank
-
-
-def check_everywhere(ok: bool, what: str) -> None:
-    """Assert `ok` on every rank, failing on all ranks if it fails on any."""
-    flags = COMM.allgather(bool(ok))
-    failed = [rank for rank, flag in enumerate(flags) if not flag]
-    assert not failed, f"{what} fails on ranks {failed}"
+from mpi_support import check_everywhere, watchdog  # noqa: E402,F401 (watchdog: an autouse fixture)
 
 
 def raises_everywhere(exception: type[Exception], call, *args, **kwargs) -> str:

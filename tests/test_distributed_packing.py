@@ -12,8 +12,6 @@ same seed, keeps its share, and compares the gathered result with the serial
 
 from __future__ import annotations
 
-import faulthandler
-
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -23,22 +21,12 @@ from evomesh import _core
 
 MPI = pytest.importorskip("mpi4py.MPI")
 from evomesh.distributed_packing import lexical_first_mis  # noqa: E402
+from mpi_support import check_everywhere, watchdog  # noqa: E402,F401 (watchdog: an autouse fixture)
 
 COMM = MPI.COMM_WORLD
 RANK, SIZE = COMM.rank, COMM.size
 
 
-@pytest.fixture(autouse=True)
-def watchdog():
-    faulthandler.dump_traceback_later(120, exit=True)
-    yield
-    faulthandler.cancel_dump_traceback_later()
-    COMM.Barrier()
-
-
-def _agree(ok: bool, what: str) -> None:
-    failed = [r for r, flag in enumerate(COMM.allgather(bool(ok))) if not flag]
-    assert not failed, f"{what} fails on ranks {failed}"
 
 
 def _system(n: int, seed: int, kind: str):
@@ -101,10 +89,11 @@ def test_kept_set_is_the_serial_one_on_any_partition(n, seed, kind, layout):
     stats: dict = {}
     kept = _distributed(centers, radii, classes, ties, forced, _owner(centers, ties, radii, classes, layout, seed),
                         stats)
-    _agree(np.array_equal(kept, _serial(centers, radii, classes, ties, forced)), "the serial kept set")
-    _agree(stats["undecided"][-1] == 0 and stats["rounds"] == len(stats["undecided"]), "the rounds end decided")
+    check_everywhere(np.array_equal(kept, _serial(centers, radii, classes, ties, forced)), "the serial kept set")
+    check_everywhere(stats["undecided"][-1] == 0 and stats["rounds"] == len(stats["undecided"]),
+                     "the rounds end decided")
     if SIZE == 1:
-        _agree(stats["rounds"] == 1 and stats["copies"] == 0, "one rank: one sweep, no copies")
+        check_everywhere(stats["rounds"] == 1 and stats["copies"] == 0, "one rank: one sweep, no copies")
 
 
 def test_conflicts_across_a_gap_reach_the_other_rank():
@@ -118,7 +107,7 @@ def test_conflicts_across_a_gap_reach_the_other_rank():
     owner = np.zeros(len(centers), np.int64)
     owner[1] = SIZE - 1  # the earlier sphere (class 1) on the last rank
     kept = _distributed(centers, radii, classes, ties, forced, owner)
-    _agree(not kept[0] and kept[1], "the later sphere is rejected by the earlier one on another rank")
+    check_everywhere(not kept[0] and kept[1], "the later sphere is rejected by the earlier one on another rank")
 
 
 def test_rounds_follow_an_ordered_chain_across_ranks():
@@ -132,8 +121,8 @@ def test_rounds_follow_an_ordered_chain_across_ranks():
     owner = np.arange(n) * SIZE // n
     stats: dict = {}
     kept = _distributed(centers, radii, classes, ties, forced, owner, stats)
-    _agree(np.array_equal(kept, np.arange(n) % 2 == 0), "alternate spheres kept")
-    _agree(stats["rounds"] == SIZE, f"{SIZE} rounds")
+    check_everywhere(np.array_equal(kept, np.arange(n) % 2 == 0), "alternate spheres kept")
+    check_everywhere(stats["rounds"] == SIZE, f"{SIZE} rounds")
 
 
 def test_bad_input_on_one_rank_raises_everywhere():

@@ -11,8 +11,6 @@ Plain ``pytest`` runs these on one rank; CI runs them under ``mpiexec -n 2`` and
 
 from __future__ import annotations
 
-import faulthandler
-
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -24,6 +22,7 @@ from strategies import grid_mesh
 
 MPI = pytest.importorskip("mpi4py.MPI")
 from evomesh.distributed_triangulation import constrained_delaunay  # noqa: E402
+from mpi_support import check_everywhere, watchdog  # noqa: E402,F401 (watchdog: an autouse fixture)
 
 COMM = MPI.COMM_WORLD
 RANK, SIZE = COMM.rank, COMM.size
@@ -39,17 +38,6 @@ def first_reach(request, monkeypatch):
     return request.param
 
 
-@pytest.fixture(autouse=True)
-def watchdog():
-    faulthandler.dump_traceback_later(120, exit=True)
-    yield
-    faulthandler.cancel_dump_traceback_later()
-    COMM.Barrier()
-
-
-def _agree(ok: bool, what: str) -> None:
-    failed = [r for r, flag in enumerate(COMM.allgather(bool(ok))) if not flag]
-    assert not failed, f"{what} fails on ranks {failed}"
 
 
 def _least_first(t: np.ndarray) -> np.ndarray:
@@ -115,9 +103,9 @@ def test_union_of_ranks_is_the_serial_cdt(name, layout, seed):
     serial = _least_first(_core.constrained_delaunay(mesh.points, mesh.segments, boundary.astype(np.uint8)))
     stats: dict = {}
     got = _run(mesh.points, mesh.segments, boundary, layout, seed, stats)
-    _agree(got.shape == serial.shape and np.array_equal(got, serial), f"{name}, {layout}: the serial CDT")
+    check_everywhere(got.shape == serial.shape and np.array_equal(got, serial), f"{name}, {layout}: the serial CDT")
     if SIZE == 1:
-        _agree(stats["halo_points"] == 0 and stats["widenings"] == 0, "one rank: no halo, no widening")
+        check_everywhere(stats["halo_points"] == 0 and stats["widenings"] == 0, "one rank: no halo, no widening")
 
 
 @pytest.mark.parametrize("layout", ["hilbert-like rows", "stripes", "random"])
@@ -142,7 +130,7 @@ def test_clouds_without_pieces(cloud, layout):
     serial = _least_first(_core.constrained_delaunay(points, empty, np.zeros(0, np.uint8)))
     stats: dict = {}
     got = _run(points, empty, np.zeros(0, bool), layout, 3, stats)
-    _agree(np.array_equal(got, serial), f"the Delaunay triangulation of a {cloud} cloud")
+    check_everywhere(np.array_equal(got, serial), f"the Delaunay triangulation of a {cloud} cloud")
 
 
 def test_bad_input_on_one_rank_raises_everywhere():

@@ -124,6 +124,23 @@ py::array_t<T> vector_array(const std::vector<T>& v) {
   return out;
 }
 
+// Pieces (k, 2) of point indices and their boundary flags, checked against n points.
+std::vector<Constraint_piece> to_constraint_pieces(const Int_array& pieces, const Byte_array& boundary,
+                                                   std::size_t n) {
+  auto p = to_index_rows<2>(pieces, "pieces");
+  auto b = to_vector<std::uint8_t>(boundary);
+  if (b.size() != p.size()) throw Input_error("one boundary flag per piece");
+  for (const auto& e : p) {
+    for (Index v : e) {
+      if (v < 0 || static_cast<std::size_t>(v) >= n) throw Input_error("piece index out of range");
+    }
+  }
+  std::vector<Constraint_piece> cp(p.size());
+  for (std::size_t i = 0; i < p.size(); ++i) cp[i] = {p[i][0], p[i][1], b[i] != 0};
+  return cp;
+}
+
+
 Byte_array kinds_array(const std::vector<Point_kind>& kind) {
   Byte_array out(static_cast<py::ssize_t>(kind.size()));
   for (std::size_t i = 0; i < kind.size(); ++i) out.mutable_data()[i] = static_cast<std::uint8_t>(kind[i]);
@@ -751,16 +768,7 @@ PYBIND11_MODULE(_core, m) {
       "constrained_delaunay",
       [](const Float_array& points, const Int_array& pieces, const Byte_array& boundary) {
         auto pts = to_points(points);
-        auto p = to_index_rows<2>(pieces, "pieces");
-        auto b = to_vector<std::uint8_t>(boundary);
-        if (b.size() != p.size()) throw Input_error("one boundary flag per piece");
-        for (const auto& e : p) {
-          for (Index v : e) {
-            if (v < 0 || static_cast<std::size_t>(v) >= pts.size()) throw Input_error("piece index out of range");
-          }
-        }
-        std::vector<Constraint_piece> cp(p.size());
-        for (std::size_t i = 0; i < p.size(); ++i) cp[i] = {p[i][0], p[i][1], b[i] != 0};
+        const auto cp = to_constraint_pieces(pieces, boundary, pts.size());
         std::vector<Triangle> tris;
         {
           py::gil_scoped_release release;
@@ -803,16 +811,7 @@ PYBIND11_MODULE(_core, m) {
       "local_constrained_delaunay",
       [](const Float_array& points, const Int_array& pieces, const Byte_array& boundary) {
         auto pts = to_points(points);
-        auto p = to_index_rows<2>(pieces, "pieces");
-        auto b = to_vector<std::uint8_t>(boundary);
-        if (b.size() != p.size()) throw Input_error("one boundary flag per piece");
-        for (const auto& e : p) {
-          for (Index v : e) {
-            if (v < 0 || static_cast<std::size_t>(v) >= pts.size()) throw Input_error("piece index out of range");
-          }
-        }
-        std::vector<Constraint_piece> cp(p.size());
-        for (std::size_t i = 0; i < p.size(); ++i) cp[i] = {p[i][0], p[i][1], b[i] != 0};
+        const auto cp = to_constraint_pieces(pieces, boundary, pts.size());
         Local_triangulation local;
         {
           py::gil_scoped_release release;

@@ -615,15 +615,26 @@ std::vector<Index> canonical_triangle_order(std::size_t n_points, std::vector<Tr
   return order;
 }
 
-std::vector<Triangle> constrained_delaunay(const std::vector<Vec2>& points,
-                                           const std::vector<Constraint_piece>& pieces) {
-  Cdt cdt;
+namespace {
+
+// The points, then the pieces as constraints (crossing_pieces_error() when two cross); the vertex of every point.
+std::vector<Cdt::Vertex_handle> insert_points_and_pieces(Cdt& cdt, const std::vector<Vec2>& points,
+                                                         const std::vector<Constraint_piece>& pieces) {
   auto handles = insert_points(cdt, points);
   try {
     for (const auto& piece : pieces) cdt.insert_constraint(handles[piece.a], handles[piece.b]);
   } catch (const Cdt::Intersection_of_constraints_exception&) {
     throw crossing_pieces_error();
   }
+  return handles;
+}
+
+}  // namespace
+
+std::vector<Triangle> constrained_delaunay(const std::vector<Vec2>& points,
+                                           const std::vector<Constraint_piece>& pieces) {
+  Cdt cdt;
+  const auto handles = insert_points_and_pieces(cdt, points, pieces);
   detail::label_domain(cdt, handles, pieces, "constrained_delaunay");
   std::vector<Triangle> triangles;
   triangles.reserve(cdt.number_of_faces());
@@ -637,12 +648,7 @@ std::vector<Triangle> constrained_delaunay(const std::vector<Vec2>& points,
 Local_triangulation local_constrained_delaunay(const std::vector<Vec2>& points,
                                                const std::vector<Constraint_piece>& pieces) {
   Cdt cdt;
-  auto handles = insert_points(cdt, points);
-  try {
-    for (const auto& piece : pieces) cdt.insert_constraint(handles[piece.a], handles[piece.b]);
-  } catch (const Cdt::Intersection_of_constraints_exception&) {
-    throw crossing_pieces_error();
-  }
+  const auto handles = insert_points_and_pieces(cdt, points, pieces);
   Local_triangulation out;
   if (cdt.dimension() < 2) return out;
   Index m = 0;
