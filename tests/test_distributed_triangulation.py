@@ -78,11 +78,11 @@ def _owner(points: np.ndarray, layout: str, seed: int) -> np.ndarray:
     return owner
 
 
-def _run(points, segments, boundary, layout, seed, stats=None):
+def _run(points, segments, boundary, layout, seed, stats=None, owner=None):
     n = len(points)
     rng = np.random.default_rng(seed)
     gids = rng.permutation(n).astype(np.int64) * 3 + 7
-    owner = _owner(points, layout, seed)
+    owner = _owner(points, layout, seed) if owner is None else owner
     mine = owner == RANK
     pieces_here = np.arange(len(segments)) % SIZE == (RANK + seed) % SIZE  # pieces given by any rank
     out = constrained_delaunay(COMM, points[mine], gids[mine], gids[segments[pieces_here]], boundary[pieces_here],
@@ -108,29 +108,41 @@ def test_union_of_ranks_is_the_serial_cdt(name, layout, seed):
         check_everywhere(stats["halo_points"] == 0 and stats["widenings"] == 0, "one rank: no halo, no widening")
 
 
-@pytest.mark.parametrize("layout", ["hilbert-like rows", "stripes", "random"])
+@pytest.mark.parametrize("layout", ["hilbert-like rows", "stripes", "random", "by cluster"])
 @pytest.mark.parametrize("cloud", ["uniform", "clusters", "line and arc"])
-def test_clouds_without_pieces(cloud, layout):
-    """No pieces: the Delaunay triangulation of the convex hull. Clusters far
-    apart make triangles whose circumdiscs are far larger than the spacing of
-    the chunk that owns them (the reach must widen); points along a line and an
-    arc put owned points on a rank's local hull that are not on the global one
-    (the hull check must catch them)."""
+def test_clouds_bounded_by_their_hull(cloud, layout):
+    """Clouds whose only pieces are their convex hull's edges: the Delaunay
+    triangulation of the hull. Clusters far apart, each on its own rank
+    ("by cluster"), make triangles whose circumdiscs are far larger than the
+    spacing of the chunks that own them, and put owned points on a rank's local
+    hull that are not on the global one (the reach must widen and the hull
+    check must catch them); points along a line and an arc give a hull piece
+    through collinear points."""
     rng = np.random.default_rng(5)
+    group = None
     if cloud == "uniform":
         points = rng.random((300, 2))
     elif cloud == "clusters":
-        centres = np.array([[0.0, 0.0], [1.0, 0.1], [0.3, 1.0], [2.0, 2.0]])
-        points = np.concatenate([c + 0.02 * rng.random((60, 2)) for c in centres] + [rng.random((8, 2)) * 2])
+        centres = np.array([[0.0, 0.0], [1.0, 0.2], [0.4, 1.1], [2.0, 2.0]])
+        points = np.concatenate([c + 0.05 * rng.random((40, 2)) for c in centres])
+        group = np.repeat(np.arange(len(centres)), 40)
     else:
         t = np.linspace(0, np.pi, 80)
         points = np.concatenate([np.stack([np.linspace(-1, 1, 81), np.zeros(81)], axis=1)[1:-1],
                                  np.stack([np.cos(t), 0.3 * np.sin(t) + 0.001], axis=1)])
-    empty = np.zeros((0, 2), np.int64)
-    serial = _least_first(_core.constrained_delaunay(points, empty, np.zeros(0, np.uint8)))
-    stats: dict = {}
-    got = _run(points, empty, np.zeros(0, bool), layout, 3, stats)
-    check_everywhere(np.array_equal(got, serial), f"the Delaunay triangulation of a {cloud} cloud")
+    hull = _core.convex_hull_vertices(points)
+    pieces = np.stack([hull, np.roll(hull, -1)], axis=1)
+    boundary = np.ones(len(pieces), bool)
+    serial = _least_first(_core.constrained_delaunay(points, pieces, boundary.astype(np.uint8)))
+    assert len(serial) >= len(points) - 2  # (a triangulation, not an empty set)
+    if layout == "by cluster":
+        if group is None:
+            return
+        owner = group % SIZE
+    else:
+        owner = None
+    got = _run(points, pieces, boundary, layout, 3, owner=owner)
+    check_everywhere(np.array_equal(got, serial), f"the triangulation of a {cloud} cloud")
 
 
 def test_bad_input_on_one_rank_raises_everywhere():
