@@ -30,18 +30,12 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_evolve import graded_case  # noqa: E402
 
 import evomesh  # noqa: E402
+from evomesh.mesh_quality import triangle_angles  # noqa: E402
 
 
 def smallest_angles(points: np.ndarray, triangles: np.ndarray) -> np.ndarray:
     """The smallest angle (degrees) of every triangle."""
-    p = points[triangles]
-    worst = np.full(len(triangles), 180.0)
-    for k in range(3):
-        u = p[:, (k + 1) % 3] - p[:, k]
-        v = p[:, (k + 2) % 3] - p[:, k]
-        cross = np.abs(u[:, 0] * v[:, 1] - u[:, 1] * v[:, 0])
-        worst = np.minimum(worst, np.degrees(np.arctan2(cross, (u * v).sum(axis=1))))
-    return worst
+    return triangle_angles(points, triangles).min(axis=1)
 
 
 def run_pass(graded: evomesh.Mesh, delta: np.ndarray, rounds: bool, min_angle: float, repeats: int) -> dict[str, Any]:

@@ -569,16 +569,7 @@ class Changed_region final : public Step_scope {
     n_hidden_ = near_points_->function().n_hidden();
     n_filtered_ = near_points_->function().n_filtered();
     near_points_.reset();  // f at the points was its only use
-    Mark_sites near_candidates(*grid_, mesh.points, weight_, magnitude_);
-    for (std::size_t j = 0; j < on_segments.size(); ++j) {
-      const Vec2& x = on_segments.samples.points[j];
-      double u = std::numeric_limits<double>::infinity();
-      for (Index v : mesh.segments[on_segments.samples.parent[j]]) {
-        u = std::min(u, f[v] + std::sqrt(squared_distance(x, mesh.points[v])));
-      }
-      near_candidates.near(x, u);
-    }
-    near_segments_.emplace(mesh.points, weight_, near_candidates.marked);
+    near_segments_.emplace(near_candidates(mesh, f, on_segments, mesh.segments));
     timer.lap("apollonius");
     return near_segments_->function();
   }
@@ -622,16 +613,7 @@ class Changed_region final : public Step_scope {
   // The interior candidates' graph: x in triangle t has f(x) <= f(v) + |x - v| at its vertices v.
   const Spacing_function& interior_radii(const Mesh_arrays& mesh, const std::vector<double>& f,
                                          const Candidates& inside, Stage_timer& timer) override {
-    Mark_sites near_samples(*grid_, mesh.points, weight_, magnitude_);
-    for (std::size_t j = 0; j < inside.size(); ++j) {
-      const Vec2& x = inside.samples.points[j];
-      double u = std::numeric_limits<double>::infinity();
-      for (Index v : mesh.triangles[inside.samples.parent[j]]) {
-        u = std::min(u, f[v] + std::sqrt(squared_distance(x, mesh.points[v])));
-      }
-      near_samples.near(x, u);
-    }
-    near_samples_.emplace(mesh.points, weight_, near_samples.marked);
+    near_samples_.emplace(near_candidates(mesh, f, inside, mesh.triangles));
     weight_ = std::vector<double>();  // the sites' weights: the graphs were their last use
     n_sites_ += near_samples_->n_sites();
     timer.lap("apollonius");
@@ -666,6 +648,23 @@ class Changed_region final : public Step_scope {
   }
 
  private:
+  // The graph of the sites that can attain f at the candidates: x drawn on its
+  // parent (a segment or a triangle) has f(x) <= f(v) + |x - v| at the parent's vertices v.
+  template <class Parents>
+  Restricted_spacing near_candidates(const Mesh_arrays& mesh, const std::vector<double>& f,
+                                     const Candidates& candidates, const std::vector<Parents>& parents) const {
+    Mark_sites marks(*grid_, mesh.points, weight_, magnitude_);
+    for (std::size_t j = 0; j < candidates.size(); ++j) {
+      const Vec2& x = candidates.samples.points[j];
+      double u = std::numeric_limits<double>::infinity();
+      for (Index v : parents[candidates.samples.parent[j]]) {
+        u = std::min(u, f[v] + std::sqrt(squared_distance(x, mesh.points[v])));
+      }
+      marks.near(x, u);
+    }
+    return Restricted_spacing(mesh.points, weight_, marks.marked);
+  }
+
   const Frfc_options& options_;
   const double magnitude_;
   std::vector<double> weight_;  // of the sites (Step_weights)
