@@ -10,6 +10,7 @@
 #include <cstdlib>
 #include <cstring>
 #include <optional>
+#include <unordered_map>
 
 #include "evomesh/boundary_geometry.hpp"
 #include "evomesh/drfc.hpp"
@@ -20,6 +21,7 @@
 #include "evomesh/packing.hpp"
 #include "evomesh/parallel.hpp"
 #include "evomesh/quality_pass.hpp"
+#include "evomesh/segment_chains.hpp"
 #include "evomesh/size_request.hpp"
 #include "evomesh/spacing.hpp"
 #include "evomesh/step.hpp"
@@ -674,7 +676,7 @@ PYBIND11_MODULE(_core, m) {
 
   py::class_<Spacing_function>(m, "SpacingFunction")
       .def(py::init([](const Float_array& sites, const Float_array& weights, std::size_t min_sites_per_part,
-                       std::optional<Int_array> triangles, std::optional<Int_array> site_ids) {
+                       std::optional<Int_array> triangles, std::optional<Int_array> site_ids, double shift) {
              auto s = to_points(sites, "sites");
              auto w = to_vector<double>(weights);
              std::vector<Triangle> t;
@@ -694,12 +696,13 @@ PYBIND11_MODULE(_core, m) {
              }
              py::gil_scoped_release release;
              return std::make_unique<Spacing_function>(s, w, min_sites_per_part, triangles ? &t : nullptr,
-                                                       site_ids ? &ids : nullptr);
+                                                       site_ids ? &ids : nullptr, shift);
            }),
            py::arg("sites"), py::arg("weights"), py::arg("min_sites_per_part") = 0, py::arg("triangles") = py::none(),
-           py::arg("site_ids") = py::none(),
+           py::arg("site_ids") = py::none(), py::arg("shift") = 0.0,
            "site_ids (optional, int64, distinct): global ids of the sites; exact ties of f go to the site of lowest "
-           "id (else of lowest index).")
+           "id (else of lowest index). shift (optional, >= every weight; 0: the largest weight): graphs over "
+           "different site sets that must agree bit for bit pass the same one (a distributed mesh's largest weight).")
       .def(
           "evaluate",
           [](const Spacing_function& self, const Float_array& queries, int threads, bool certified) {
@@ -739,6 +742,156 @@ PYBIND11_MODULE(_core, m) {
         return vector_array(packing_order(to_vector<std::uint8_t>(classes), to_vector<double>(radii)));
       },
       py::arg("classes"), py::arg("radii"));
+
+  // Step 1 of FRFC as the serial step computes it (step_weights, step_spacing
+  // with Lemma 3.1): the reference the distributed step 1 must equal.
+  m.def(
+      "step_spacing",
+      [](const Float_array& points, const Int_array& triangles, const Int_array& segments,
+         const Byte_array& segment_is_boundary, const Byte_array& kind, const Float_array& delta, bool within_domain,
+         std::optional<Int_array> segment_tags, std::optional<Byte_array> required, std::optional<Float_array> nn,
+         std::optional<Int_array> nn_grew, std::optional<Int_array> point_gids, std::optional<Int_array> triangle_gids,
+         std::optional<Int_array> segment_keys) {
+        Mesh_arrays mesh = to_mesh(points, triangles, segments, segment_is_boundary, kind);
+        add_labels(mesh, segment_tags, std::nullopt, required);
+        add_known_nn(mesh, nn, nn_grew);
+        add_global_ids(mesh, point_gids, triangle_gids, segment_keys);
+        auto d = to_vector<double>(delta);
+        if (d.size() != mesh.points.size()) throw Input_error("delta: one value per point");
+        Step_weights weights;
+        Step_spacing spacing;
+        {
+          py::gil_scoped_release release;
+          std::vector<std::pair<std::string, double>> seconds;
+          detail::Stage_timer timer(seconds, false);
+          const auto chains = segment_chains(mesh);
+          weights = step_weights(mesh, d, timer, within_domain ? &chains : nullptr);
+          spacing = step_spacing(mesh, d, F_at_points::lemma_3_1, 0, timer, within_domain ? &chains : nullptr, true);
+        }
+        py::dict out;
+        out["nn"] = vector_array(spacing.nn);
+        out["weight"] = vector_array(weights.weight);
+        out["f"] = vector_array(spacing.f);
+        return out;
+      },
+      py::arg("points"), py::arg("triangles"), py::arg("segments"), py::arg("segment_is_boundary"), py::arg("kind"),
+      py::arg("delta"), py::arg("within_domain") = true, py::arg("segment_tags") = py::none(),
+      py::arg("required") = py::none(), py::arg("nn") = py::none(), py::arg("nn_grew") = py::none(),
+      py::arg("point_gids") = py::none(), py::arg("triangle_gids") = py::none(), py::arg("segment_keys") = py::none(),
+      "FRFC's step 1 (nn, weights w = delta nn capped by the local feature size, f at the points by Lemma 3.1), "
+      "as the serial step computes it.");
+
+  // The chains of segments of a mesh's segment skeleton (its points on segments
+  // and its segments, in global-id order), what a rank needs of them.
+  m.def(
+      "chain_table",
+      [](const Float_array& points, const Int_array& segments, const Byte_array& segment_is_boundary,
+         const Byte_array& kind, std::optional<Int_array> segment_tags, std::optional<Byte_array> required,
+         std::optional<Int_array> point_gids, std::optional<Int_array> segment_keys) {
+        Mesh_arrays mesh;
+        mesh.points = to_points(points);
+        mesh.segments = to_index_rows<2>(segments, "segments");
+        require_indices(mesh.segments, mesh.points.size(), "segments");
+        mesh.segment_is_boundary = to_vector<std::uint8_t>(segment_is_boundary);
+        if (mesh.segment_is_boundary.size() != mesh.segments.size()) throw Input_error("one boundary flag per segment");
+        mesh.kind = to_kinds(kind);
+        if (mesh.kind.size() != mesh.points.size()) throw Input_error("kind must have one value per point");
+        add_labels(mesh, segment_tags, std::nullopt, required);
+        add_global_ids(mesh, point_gids, std::nullopt, segment_keys);
+        std::vector<Segment_chain> chains;
+        {
+          py::gil_scoped_release release;
+          chains = segment_chains(mesh);
+        }
+        const std::size_t k = mesh.segments.size(), n = mesh.points.size();
+        std::vector<std::int64_t> chain_of(k, -1);
+        std::vector<std::int64_t> ends(2 * chains.size());
+        std::vector<std::uint8_t> closed(chains.size());
+        std::vector<Index> v, u, w;
+        std::vector<std::uint8_t> along, two_sided;
+        std::vector<std::int64_t> chain_of_point;
+        std::vector<double> corner(n, std::numeric_limits<double>::infinity());
+        for (std::size_t c = 0; c < chains.size(); ++c) {
+          const auto& chain = chains[c];
+          for (Index s : chain.segments) chain_of[s] = static_cast<std::int64_t>(c);
+          ends[2 * c] = chain.vertices.front();
+          ends[2 * c + 1] = chain.vertices.back();
+          closed[c] = chain.closed;
+          // as local_feature_size lists them
+          for (std::size_t i = 1; i < chain.segments.size(); ++i) {
+            v.push_back(chain.vertices[i]);
+            u.push_back(chain.vertices[i - 1]);
+            w.push_back(chain.closed && i + 1 == chain.vertices.size() ? chain.vertices[0] : chain.vertices[i + 1]);
+            along.push_back(chain.forward[i]);
+            two_sided.push_back(!chain.boundary);
+            chain_of_point.push_back(static_cast<std::int64_t>(c));
+          }
+          if (!chain.closed) {  // the corners' rule of local_feature_size (no geometry here)
+            const Index a = chain.vertices.front(), b = chain.vertices.back();
+            const double d = std::hypot(mesh.points[b][0] - mesh.points[a][0], mesh.points[b][1] - mesh.points[a][1]);
+            corner[a] = std::min(corner[a], d);
+            corner[b] = std::min(corner[b], d);
+          }
+        }
+        py::dict out;
+        out["segment_chain"] = vector_array(chain_of);
+        out["chain_ends"] = vector_array(ends);
+        out["chain_closed"] = vector_array(closed);
+        out["point"] = vector_array(v);
+        out["before"] = vector_array(u);
+        out["after"] = vector_array(w);
+        out["along"] = vector_array(along);
+        out["two_sided"] = vector_array(two_sided);
+        out["point_chain"] = vector_array(chain_of_point);
+        out["corner_feature_size"] = vector_array(corner);
+        return out;
+      },
+      py::arg("points"), py::arg("segments"), py::arg("segment_is_boundary"), py::arg("kind"),
+      py::arg("segment_tags") = py::none(), py::arg("required") = py::none(), py::arg("point_gids") = py::none(),
+      py::arg("segment_keys") = py::none(),
+      "segment_chains of a segment skeleton: the chain of each segment, each chain's end points (2 per chain, "
+      "local indices) and closed flag, the points inside chains with their neighbours as local_feature_size walks "
+      "from them, and the corners' feature size (+inf elsewhere).");
+
+  m.def(
+      "chain_feature_sizes",
+      [](const Float_array& points, const Int_array& triangles, const Int_array& triangle_gids,
+         const Int_array& segments, const Int_array& segment_chain, const Int_array& chain_ids,
+         const Int_array& chain_ends, const Int_array& point, const Int_array& before, const Int_array& after,
+         const Byte_array& along, const Byte_array& two_sided, const Int_array& point_chain, const Float_array& limit) {
+        Mesh_arrays part;
+        part.points = to_points(points);
+        part.triangles = to_index_rows<3>(triangles, "triangles");
+        part.segments = to_index_rows<2>(segments, "segments");
+        require_indices(part.triangles, part.points.size(), "triangles");
+        require_indices(part.segments, part.points.size(), "segments");
+        add_global_ids(part, std::nullopt, triangle_gids, std::nullopt);
+        const auto ids = to_vector<std::int64_t>(chain_ids);
+        const auto end_rows = to_index_rows<2>(chain_ends, "chain_ends");
+        if (end_rows.size() != ids.size()) throw Input_error("chain_ends: one row per chain id");
+        std::unordered_map<std::int64_t, std::array<std::int64_t, 2>> ends;
+        for (std::size_t c = 0; c < ids.size(); ++c) ends[ids[c]] = {end_rows[c][0], end_rows[c][1]};
+        const auto v = to_vector<Index>(point), u = to_vector<Index>(before), w = to_vector<Index>(after);
+        const auto a = to_vector<std::uint8_t>(along), t = to_vector<std::uint8_t>(two_sided);
+        if (u.size() != v.size() || w.size() != v.size() || a.size() != v.size() || t.size() != v.size()) {
+          throw Input_error("chain_feature_sizes: point, before, after, along and two_sided must have one row each");
+        }
+        std::vector<Chain_point> queries(v.size());
+        for (std::size_t k = 0; k < v.size(); ++k) queries[k] = Chain_point{v[k], u[k], w[k], a[k] != 0, t[k] != 0};
+        std::vector<double> lfs;
+        std::vector<std::uint8_t> certified;
+        {
+          py::gil_scoped_release release;
+          lfs = chain_feature_sizes(part, queries, to_vector<std::int64_t>(point_chain),
+                                    to_vector<std::int64_t>(segment_chain), ends, to_vector<double>(limit), certified);
+        }
+        return py::make_tuple(vector_array(lfs), to_array(std::move(certified)));
+      },
+      py::arg("points"), py::arg("triangles"), py::arg("triangle_gids"), py::arg("segments"),
+      py::arg("segment_chain"), py::arg("chain_ids"), py::arg("chain_ends"), py::arg("point"), py::arg("before"),
+      py::arg("after"), py::arg("along"), py::arg("two_sided"), py::arg("point_chain"), py::arg("limit"),
+      "The walks of the local feature size on a part of a mesh (local_feature_size.hpp: chain_feature_sizes): "
+      "(lfs, certified) per query; certified 0 where a walk reached the part's border.");
 
   bind_options(m);
 

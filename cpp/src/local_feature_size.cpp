@@ -95,6 +95,33 @@ namespace {
 
 constexpr double kInfinity = std::numeric_limits<double>::infinity();
 
+// The walks of the local feature size at a point inside a chain: along the
+// normal (towards the domain, both ways for an interior constraint), the
+// distance to the first segment that `counts` (of a chain that neither is the
+// point's own nor shares a corner with it), below `limit`. NaN when the point's
+// chain neighbours coincide (no tangent). The tangent runs u -> w and the normal
+// is on the left of the segment (v, w) as stored, so the result does not depend
+// on the direction the chain is listed in.
+template <class Counts>
+double cast_feature_size(const Mesh_arrays& mesh, const Mesh_walk& walk, const Chain_point& c, double limit,
+                         const Counts& counts, bool* left) {
+  const Vec2& u = mesh.points[c.u];
+  const Vec2& w = mesh.points[c.w];
+  Vec2 tangent{w[0] - u[0], w[1] - u[1]};
+  const double length = std::hypot(tangent[0], tangent[1]);
+  if (!(length > 0)) return std::numeric_limits<double>::quiet_NaN();
+  tangent = {tangent[0] / length, tangent[1] / length};
+  Vec2 normal{-tangent[1], tangent[0]};
+  if (!c.along) normal = {-normal[0], -normal[1]};
+  double best = kInfinity;
+  for (int side = 0; side < (c.two_sided ? 2 : 1); ++side) {
+    const Vec2 d = side == 0 ? normal : Vec2{-normal[0], -normal[1]};
+    const auto [segment, distance] = walk.cast(c.v, d, std::min(limit, best), left);
+    if (segment >= 0 && counts(segment)) best = std::min(best, distance);
+  }
+  return best;
+}
+
 }  // namespace
 
 std::vector<double> local_feature_size(const Mesh_arrays& mesh, const std::vector<Segment_chain>& chains,
@@ -124,25 +151,15 @@ std::vector<double> local_feature_size(const Mesh_arrays& mesh, const std::vecto
       const Index v = chain.vertices[k];
       const Vec2& p = mesh.points[v];
       const Vec2& u = mesh.points[chain.vertices[k - 1]];
-      const Vec2& w = mesh.points[chain.closed && k + 1 == chain.vertices.size() ? chain.vertices[0]
-                                                                                  : chain.vertices[k + 1]];
-      // tangent along the chain, and the normal on the domain's side (left of
-      // the segments' orientation for a boundary chain)
-      Vec2 tangent{w[0] - u[0], w[1] - u[1]};
-      const double length = std::hypot(tangent[0], tangent[1]);
-      if (!(length > 0)) continue;
-      tangent = {tangent[0] / length, tangent[1] / length};
-      const bool along = chain.forward[k];  // segment k runs v -> next in its own orientation
-      Vec2 normal{-tangent[1], tangent[0]};
-      if (!along) normal = {-normal[0], -normal[1]};
-      double best = kInfinity;
-      for (int side = 0; side < (chain.boundary ? 1 : 2); ++side) {
-        const Vec2 d = side == 0 ? normal : Vec2{-normal[0], -normal[1]};
-        const auto [segment, distance] = walk.cast(v, d, std::min(limit[v], best));
-        if (segment >= 0 && chain_of[segment] >= 0 && !adjacent(static_cast<Index>(c), chain_of[segment])) {
-          best = std::min(best, distance);
-        }
-      }
+      const Index w_index = chain.closed && k + 1 == chain.vertices.size() ? chain.vertices[0] : chain.vertices[k + 1];
+      const Vec2& w = mesh.points[w_index];
+      // segment k runs v -> next in its own orientation
+      const Chain_point point{v, chain.vertices[k - 1], w_index, chain.forward[k] != 0, !chain.boundary};
+      const auto counts = [&](Index segment) {
+        return chain_of[segment] >= 0 && !adjacent(static_cast<Index>(c), chain_of[segment]);
+      };
+      double best = cast_feature_size(mesh, walk, point, limit[v], counts, nullptr);
+      if (std::isnan(best)) continue;
       if (curved) {
         // a piece of length L turns by about L turn / (edge length) here
         const double a = std::hypot(p[0] - u[0], p[1] - u[1]), b = std::hypot(w[0] - p[0], w[1] - p[1]);
@@ -162,6 +179,44 @@ std::vector<double> local_feature_size(const Mesh_arrays& mesh, const std::vecto
       lfs[a] = std::min(lfs[a], d);
       lfs[b] = std::min(lfs[b], d);
     }
+  }
+  return lfs;
+}
+
+std::vector<double> chain_feature_sizes(const Mesh_arrays& part, const std::vector<Chain_point>& points,
+                                        const std::vector<std::int64_t>& chain_of_point,
+                                        const std::vector<std::int64_t>& chain_of_segment,
+                                        const std::unordered_map<std::int64_t, std::array<std::int64_t, 2>>& ends,
+                                        const std::vector<double>& limit, std::vector<std::uint8_t>& certified) {
+  const std::size_t n = points.size();
+  if (chain_of_point.size() != n || limit.size() != n) throw Input_error("chain_feature_sizes: one chain and limit per point");
+  if (chain_of_segment.size() != part.segments.size()) throw Input_error("chain_feature_sizes: one chain per segment");
+  const auto end_of = [&](std::int64_t chain) -> const std::array<std::int64_t, 2>& {
+    const auto found = ends.find(chain);
+    if (found == ends.end()) throw Input_error("chain_feature_sizes: a chain without its ends");
+    return found->second;
+  };
+  for (const Chain_point& c : points) {
+    for (Index i : {c.v, c.u, c.w}) {
+      if (i < 0 || static_cast<std::size_t>(i) >= part.points.size()) throw Input_error("chain_feature_sizes: point index out of range");
+    }
+  }
+  const Triangle_fans fans(part);
+  const Mesh_walk walk(part, fans);
+  std::vector<double> lfs(n, kInfinity);
+  certified.assign(n, 1);
+  for (std::size_t k = 0; k < n; ++k) {
+    const std::int64_t own = chain_of_point[k];
+    const auto& own_ends = end_of(own);
+    const auto counts = [&](Index segment) {
+      const std::int64_t other = chain_of_segment[segment];
+      if (other < 0 || other == own) return false;
+      const auto& e = end_of(other);
+      return !(own_ends[0] == e[0] || own_ends[0] == e[1] || own_ends[1] == e[0] || own_ends[1] == e[1]);
+    };
+    bool left = false;
+    lfs[k] = cast_feature_size(part, walk, points[k], limit[k], counts, &left);
+    certified[k] = left ? 0 : 1;
   }
   return lfs;
 }

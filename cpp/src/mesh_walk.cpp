@@ -35,7 +35,7 @@ Index Mesh_walk::across(Index t, Index a, Index b) const {
   return -1;
 }
 
-std::pair<Index, double> Mesh_walk::cast(Index v, const Vec2& d, double limit) const {
+std::pair<Index, double> Mesh_walk::cast(Index v, const Vec2& d, double limit, bool* left) const {
   const Vec2& p = mesh_.points[v];
   // the triangle at v whose angle contains d
   Index t = -1;
@@ -66,7 +66,10 @@ std::pair<Index, double> Mesh_walk::cast(Index v, const Vec2& d, double limit) c
     const auto found = segment_of_edge_.find(key(a, b));
     if (found != segment_of_edge_.end()) return {found->second, std::max(s, 0.0)};
     const Index next = across(t, a, b);
-    if (next < 0) return {-1, kInfinity};
+    if (next < 0) {
+      if (left != nullptr) *left = true;
+      return {-1, kInfinity};
+    }
     // the edge of `next` other than (a, b) that the ray leaves through
     const Triangle& ntri = mesh_.triangles[next];
     int m = 0;

@@ -406,7 +406,7 @@ double median_of(std::vector<double> values) {
 
 Spacing_function::Spacing_function(const std::vector<Vec2>& sites, const std::vector<double>& weights,
                                    std::size_t min_sites_per_part, const std::vector<Triangle>* triangles,
-                                   const std::vector<std::int64_t>* site_ids)
+                                   const std::vector<std::int64_t>* site_ids, double shift)
     : impl_(std::make_unique<Impl>()) {
   if (min_sites_per_part == 0) min_sites_per_part = kMinSitesPerPart;
   if (sites.empty()) throw Input_error("spacing function needs at least one site");
@@ -420,6 +420,12 @@ Spacing_function::Spacing_function(const std::vector<Vec2>& sites, const std::ve
   // Apollonius distance is |x - c| - W; with W_i = shift - w_i >= 0 the nearest
   // site minimises w_i + |x - c_i|.
   impl.shift = *std::max_element(weights.begin(), weights.end());
+  if (shift != 0) {
+    if (!(shift >= impl.shift) || !std::isfinite(shift)) {
+      throw Input_error("spacing function: shift must be finite and at least the largest weight");
+    }
+    impl.shift = shift;
+  }
   // Queries between sites have f a little above the weights: twice the largest
   // weight certifies nearly all of them (and every query at a site).
   impl.halo = 2 * impl.shift;

@@ -162,6 +162,7 @@ class SpacingFunction:
         min_sites_per_part: int = 0,
         triangles: ArrayLike | None = None,
         site_ids: ArrayLike | None = None,
+        shift: float = 0.0,
     ) -> None: ...
     def evaluate(
         self, x: ArrayLike, threads: int = 0, certified: bool = True
@@ -216,6 +217,48 @@ def nn_within_domain(
     points: ArrayLike, triangles: ArrayLike, euclidean: ArrayLike | None = None
 ) -> tuple[NDArray[np.float64], NDArray[np.int64]]: ...
 def default_thread_count() -> int: ...
+def step_spacing(
+    points: ArrayLike,
+    triangles: ArrayLike,
+    segments: ArrayLike,
+    segment_is_boundary: ArrayLike,
+    kind: ArrayLike,
+    delta: ArrayLike,
+    within_domain: bool = True,
+    segment_tags: ArrayLike | None = None,
+    required: ArrayLike | None = None,
+    nn: ArrayLike | None = None,
+    nn_grew: ArrayLike | None = None,
+    point_gids: ArrayLike | None = None,
+    triangle_gids: ArrayLike | None = None,
+    segment_keys: ArrayLike | None = None,
+) -> dict[str, NDArray[np.float64]]: ...
+def chain_table(
+    points: ArrayLike,
+    segments: ArrayLike,
+    segment_is_boundary: ArrayLike,
+    kind: ArrayLike,
+    segment_tags: ArrayLike | None = None,
+    required: ArrayLike | None = None,
+    point_gids: ArrayLike | None = None,
+    segment_keys: ArrayLike | None = None,
+) -> dict[str, NDArray[Any]]: ...
+def chain_feature_sizes(
+    points: ArrayLike,
+    triangles: ArrayLike,
+    triangle_gids: ArrayLike,
+    segments: ArrayLike,
+    segment_chain: ArrayLike,
+    chain_ids: ArrayLike,
+    chain_ends: ArrayLike,
+    point: ArrayLike,
+    before: ArrayLike,
+    after: ArrayLike,
+    along: ArrayLike,
+    two_sided: ArrayLike,
+    point_chain: ArrayLike,
+    limit: ArrayLike,
+) -> tuple[NDArray[np.float64], NDArray[np.uint8]]: ...
 def lexical_first_mis(
     centers: ArrayLike, radii: ArrayLike, order: ArrayLike, n_forced: int = 0
 ) -> NDArray[np.uint8]: ...

@@ -87,3 +87,24 @@ def sends(x: np.ndarray, y: np.ndarray, extra: np.ndarray, starts: np.ndarray, b
     if not index_out:
         return np.zeros(0, np.int64), np.zeros(0, np.int64)
     return np.concatenate(index_out), np.concatenate(dest_out)
+
+
+def copies_within_reach(comm, lo: np.ndarray, span: float, magnitude: float, query_xy: np.ndarray,
+                        query_reach: np.ndarray, record_xy: np.ndarray,
+                        record_extra: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(record index, destination rank) of every copy of this rank's records
+    that another rank needs: record t goes to rank q when it lies within
+    reach + extra_t of one of q's query chunks (every record within
+    query_reach[i] + extra_t of query i passes). One allgather of the query
+    chunks' boxes; no exchange (the caller sends what it needs of the records)."""
+    qperm, qstarts = hilbert_chunks(query_xy[:, 0], query_xy[:, 1], lo, span)
+    qx, qy = query_xy[qperm, 0], query_xy[qperm, 1]
+    qbox = chunk_boxes(qx, qy, qstarts)
+    qreach = np.maximum.reduceat(query_reach[qperm], qstarts) if len(qperm) else np.zeros(0)
+    tables = comm.allgather(np.column_stack([qbox, qreach]))
+    rperm, rstarts = hilbert_chunks(record_xy[:, 0], record_xy[:, 1], lo, span)
+    rx, ry = record_xy[rperm, 0], record_xy[rperm, 1]
+    rbox = chunk_boxes(rx, ry, rstarts)
+    index, dest = sends(rx, ry, np.asarray(record_extra, dtype=np.float64)[rperm], rstarts, rbox, tables, comm.rank,
+                        magnitude)
+    return rperm[index], dest

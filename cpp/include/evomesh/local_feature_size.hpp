@@ -12,7 +12,9 @@
 // facing, non-adjacent chain of segments.
 #pragma once
 
+#include <array>
 #include <cstdint>
+#include <unordered_map>
 #include <vector>
 
 #include "evomesh/segment_chains.hpp"
@@ -44,5 +46,29 @@ std::vector<std::uint8_t> keep_within_domain(const std::vector<Vec2>& points, co
 // over the points on segments.
 std::vector<double> local_feature_size(const Mesh_arrays& mesh, const std::vector<Segment_chain>& chains,
                                        const std::vector<double>& limit);
+
+// A point inside a chain of segments, as the walks of local_feature_size see it.
+struct Chain_point {
+  Index v = 0, u = 0, w = 0;  // the point, and its neighbours along the chain
+  bool along = true;          // the segment (v, w) is stored v -> w
+  bool two_sided = false;     // an interior constraint: walk both ways
+};
+
+// The walks of local_feature_size on a part of a mesh (a rank's triangles plus
+// those its walks may cross; docs/distributed-step.md 3.1). Chains are named by
+// global ids: `chain_of_segment` per segment of `part` (-1: none), `chain_of_point`
+// per query; two chains are adjacent when equal or when they share an end corner
+// (`ends`: chain id -> the global ids of its two end corners). Returns, per query,
+// the distance local_feature_size finds by its walks (+inf: nothing below
+// limit[k]; NaN: the chain neighbours coincide, no tangent), and clears
+// certified[k] where a walk reached the part's border, where the whole mesh's
+// answer needs more triangles. Not included: the curved term and the corners'
+// rule, which read the chain only. Triangle_fans order by part.triangle_gids, so
+// with the whole mesh's triangle ids the walks are the whole mesh's.
+std::vector<double> chain_feature_sizes(const Mesh_arrays& part, const std::vector<Chain_point>& points,
+                                        const std::vector<std::int64_t>& chain_of_point,
+                                        const std::vector<std::int64_t>& chain_of_segment,
+                                        const std::unordered_map<std::int64_t, std::array<std::int64_t, 2>>& ends,
+                                        const std::vector<double>& limit, std::vector<std::uint8_t>& certified);
 
 }  // namespace evomesh

@@ -23,8 +23,11 @@ class Mesh_walk {
 
   // From point v along direction d (unit), through the triangles: the first
   // segment crossed and the distance to it, or (-1, inf) beyond `limit`
-  // (floating point: an estimate, for feature sizes).
-  std::pair<Index, double> cast(Index v, const Vec2& d, double limit) const;
+  // (floating point: an estimate, for feature sizes). `left` (optional) is set
+  // when the walk ends at an edge with one triangle that is no segment: on a
+  // whole mesh that edge does not exist (boundary edges are segments); on a part
+  // of a mesh it is the part's border, and the answer is not the whole mesh's.
+  std::pair<Index, double> cast(Index v, const Vec2& d, double limit, bool* left = nullptr) const;
 
   // The triangle that contains x strictly inside, reached from point v along
   // the straight line v -> x without crossing a segment or the boundary, or -1

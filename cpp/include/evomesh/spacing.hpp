@@ -49,9 +49,14 @@ class Spacing_function {
   // `site_ids` (optional; global ids of the sites, Mesh_arrays::point_gids):
   // exact ties of f go to the site of lowest id (else of lowest index), and of
   // several neighbours hiding a site, the one of lowest id counts.
+  // `shift` (optional, >= every weight; 0: the largest weight): the graph stores
+  // the weights as shift - w, and CGAL decides which sites are hidden on those
+  // rounded values. Graphs over different site sets that must agree bit for bit
+  // (a rank's part of a distributed mesh, docs/distributed-step.md 3.2) pass the
+  // same shift, the largest weight of the whole mesh.
   Spacing_function(const std::vector<Vec2>& sites, const std::vector<double>& weights,
                    std::size_t min_sites_per_part = 0, const std::vector<Triangle>* triangles = nullptr,
-                   const std::vector<std::int64_t>* site_ids = nullptr);
+                   const std::vector<std::int64_t>* site_ids = nullptr, double shift = 0);
 
   // Number of Apollonius graphs the sites are split into (1, 2 or 4).
   int n_parts() const;
