@@ -13,6 +13,7 @@
 #include <unordered_map>
 
 #include "evomesh/boundary_geometry.hpp"
+#include "evomesh/candidates.hpp"
 #include "evomesh/drfc.hpp"
 #include "evomesh/frfc.hpp"
 #include "evomesh/global_ids.hpp"
@@ -26,6 +27,7 @@
 #include "evomesh/spacing.hpp"
 #include "evomesh/step.hpp"
 #include "evomesh/step_context.hpp"
+#include "evomesh/triangle_fans.hpp"
 #include "evomesh/triangulation.hpp"
 
 #include "numpy_arrays.hpp"
@@ -892,6 +894,107 @@ PYBIND11_MODULE(_core, m) {
       py::arg("after"), py::arg("along"), py::arg("two_sided"), py::arg("point_chain"), py::arg("limit"),
       "The walks of the local feature size on a part of a mesh (local_feature_size.hpp: chain_feature_sizes): "
       "(lfs, certified) per query; certified 0 where a walk reached the part's border.");
+
+  // A rank's part of a mesh for the stages of a distributed step (issue 29;
+  // python/evomesh/distributed_step.py): the held points and triangles with their
+  // global ids, and the whole segment skeleton, in global-id order.
+  const auto part_mesh = [](const py::dict& part) {
+    Mesh_arrays mesh = to_mesh(part["points"].cast<Float_array>(), part["triangles"].cast<Int_array>(),
+                               part["segments"].cast<Int_array>(), part["segment_is_boundary"].cast<Byte_array>(),
+                               part["kind"].cast<Byte_array>());
+    add_labels(mesh, part["segment_tags"].cast<Int_array>(), std::nullopt, part["required"].cast<Byte_array>());
+    add_global_ids(mesh, part["point_gids"].cast<Int_array>(), part["triangle_gids"].cast<Int_array>(),
+                   part["segment_keys"].cast<Int_array>());
+    return mesh;
+  };
+  const auto per_point = [](const Float_array& values, const Mesh_arrays& mesh, const char* name) {
+    auto v = to_vector<double>(values);
+    if (v.size() != mesh.points.size()) throw Input_error(std::string(name) + ": one value per point of the part");
+    return v;
+  };
+
+  m.def(
+      "part_input_spheres",
+      [part_mesh, per_point](const py::dict& part, const Float_array& f, const Frfc_options& options) {
+        const Mesh_arrays mesh = part_mesh(part);
+        const auto fv = per_point(f, mesh, "f");
+        const auto chains = segment_chains(mesh);
+        std::size_t n_forced = 0;
+        const auto forced = forced_corners(mesh, chains, n_forced, mesh.required);
+        std::vector<std::uint8_t> classes(mesh.points.size());
+        for (std::size_t i = 0; i < classes.size(); ++i) classes[i] = old_point_class(mesh.kind[i], forced[i] != 0);
+        return py::make_tuple(vector_array(input_point_radii(mesh, fv, options)), vector_array(classes),
+                              vector_array(forced));
+      },
+      py::arg("part"), py::arg("f"), py::arg("options"),
+      "FRFC's first pass at the input points of a part: (radius, packing class, forced) per point.");
+
+  m.def(
+      "part_segment_candidates",
+      [part_mesh, per_point](const py::dict& part, const Float_array& delta, const Float_array& f,
+                             const Frfc_options& options) {
+        const Mesh_arrays mesh = part_mesh(part);
+        const auto d = per_point(delta, mesh, "delta"), fv = per_point(f, mesh, "f");
+        Candidates c;
+        {
+          py::gil_scoped_release release;
+          c = segment_candidates(mesh, d, fv, segment_chains(mesh), options, nullptr);
+        }
+        return py::make_tuple(points_array(c.samples.points), vector_array(c.samples.parent),
+                              vector_array(c.classes(true)));
+      },
+      py::arg("part"), py::arg("delta"), py::arg("f"), py::arg("options"),
+      "FRFC's candidates on every segment of a part (its segments are the whole skeleton): (centres, parent "
+      "segment, packing class), in the serial step's order.");
+
+  m.def(
+      "part_interior_candidates",
+      [part_mesh, per_point](const py::dict& part, const Float_array& delta, const Float_array& f,
+                             const Frfc_options& options, const Byte_array& sampled) {
+        const Mesh_arrays mesh = part_mesh(part);
+        const auto d = per_point(delta, mesh, "delta"), fv = per_point(f, mesh, "f");
+        auto quiet = to_vector<std::uint8_t>(sampled);
+        if (quiet.size() != mesh.triangles.size()) throw Input_error("sampled: one flag per triangle of the part");
+        for (auto& q : quiet) q = q ? 0 : 1;
+        Candidates c;
+        std::size_t n_drawn = 0;
+        {
+          py::gil_scoped_release release;
+          const Triangle_fans fans(mesh);
+          const std::vector<std::uint8_t> demoted(mesh.points.size(), 0);
+          c = interior_candidates(mesh, fans, d, fv, demoted, Cover_discs{}, options, n_drawn, &quiet, nullptr);
+        }
+        return py::make_tuple(points_array(c.samples.points), vector_array(c.samples.parent),
+                              vector_array(c.classes(false)));
+      },
+      py::arg("part"), py::arg("delta"), py::arg("f"), py::arg("options"), py::arg("sampled"),
+      "FRFC's candidates inside the triangles of a part flagged in `sampled`: (centres, parent triangle, class), "
+      "in the serial step's order (triangle id, then draw).");
+
+  m.def(
+      "part_candidate_radii",
+      [part_mesh, per_point](const py::dict& part, const Float_array& f, const Spacing_function& spacing,
+                             const Frfc_options& options, bool on_segment, const Float_array& centres,
+                             const Int_array& parent) {
+        const Mesh_arrays mesh = part_mesh(part);
+        const auto fv = per_point(f, mesh, "f");
+        Candidates c;
+        c.samples.points = to_points(centres, "centres");
+        for (Index p : to_vector<Index>(parent)) {
+          const std::size_t limit = on_segment ? mesh.segments.size() : mesh.triangles.size();
+          if (p < 0 || static_cast<std::size_t>(p) >= limit) throw Input_error("parent out of range");
+          c.samples.parent.push_back(static_cast<std::uint32_t>(p));
+        }
+        if (c.samples.parent.size() != c.samples.points.size()) throw Input_error("one parent per centre");
+        {
+          py::gil_scoped_release release;
+          candidate_radii(mesh, spacing, fv, std::vector<std::uint8_t>(mesh.points.size(), 0), options, on_segment, c);
+        }
+        return vector_array(c.radius);
+      },
+      py::arg("part"), py::arg("f"), py::arg("spacing"), py::arg("options"), py::arg("on_segment"),
+      py::arg("centres"), py::arg("parent"),
+      "FRFC's sphere radii of candidates of a part (candidate_radii; no demoted points).");
 
   bind_options(m);
 

@@ -243,6 +243,24 @@ def chain_table(
     point_gids: ArrayLike | None = None,
     segment_keys: ArrayLike | None = None,
 ) -> dict[str, NDArray[Any]]: ...
+def part_input_spheres(
+    part: dict[str, Any], f: ArrayLike, options: FrfcOptions
+) -> tuple[NDArray[np.float64], NDArray[np.uint8], NDArray[np.uint8]]: ...
+def part_segment_candidates(
+    part: dict[str, Any], delta: ArrayLike, f: ArrayLike, options: FrfcOptions
+) -> tuple[NDArray[np.float64], NDArray[np.int64], NDArray[np.uint8]]: ...
+def part_interior_candidates(
+    part: dict[str, Any], delta: ArrayLike, f: ArrayLike, options: FrfcOptions, sampled: ArrayLike
+) -> tuple[NDArray[np.float64], NDArray[np.int64], NDArray[np.uint8]]: ...
+def part_candidate_radii(
+    part: dict[str, Any],
+    f: ArrayLike,
+    spacing: SpacingFunction,
+    options: FrfcOptions,
+    on_segment: bool,
+    centres: ArrayLike,
+    parent: ArrayLike,
+) -> NDArray[np.float64]: ...
 def chain_feature_sizes(
     points: ArrayLike,
     triangles: ArrayLike,

@@ -42,13 +42,14 @@ import numpy as np
 from . import _core, _halo
 from .distributed import DistributedMesh, _check_comm, _collective, _exchange, _mpi
 
-__all__ = ["DistributedSpacing"]
+__all__ = ["DistributedSpacing", "segment_skeleton"]
 
 _POINT = np.dtype([("gid", "<i8"), ("x", "<f8"), ("y", "<f8")])
 _SITE = np.dtype([("gid", "<i8"), ("x", "<f8"), ("y", "<f8"), ("w", "<f8")])
 _TRIANGLE = np.dtype([("gid", "<i8"), ("v", "<i8", (3,)), ("xy", "<f8", (3, 2))])
 _SKELETON_SEGMENT = np.dtype([("gid", "<i8"), ("v", "<i8", (2,)), ("tag", "<i8"), ("boundary", "u1")])
-_SKELETON_POINT = np.dtype([("gid", "<i8"), ("x", "<f8"), ("y", "<f8"), ("kind", "u1"), ("required", "u1")])
+_SKELETON_POINT = np.dtype([("gid", "<i8"), ("x", "<f8"), ("y", "<f8"), ("kind", "u1"), ("required", "u1"),
+                            ("owner", "<i4")])
 # Widening of a walk that reached the part's border: its reach grows fourfold.
 _WIDEN = 4.0
 
@@ -62,6 +63,41 @@ def _union(gids: np.ndarray, xy: np.ndarray, more_gids: np.ndarray, more_xy: np.
 
 def _local_index(sorted_gids: np.ndarray, order: np.ndarray, gids: np.ndarray) -> np.ndarray:
     return order[np.searchsorted(sorted_gids, gids)]
+
+
+def segment_skeleton(dmesh: DistributedMesh) -> tuple[np.ndarray, np.ndarray]:
+    """Every segment of the mesh (gid, end gids, tag, boundary flag) in global-id
+    order, and its end points (gid, coordinates, kind, required, owner) in
+    global-id order, on every rank: one allgather of O(segments) records.
+    Collective."""
+    comm = dmesh.comm
+    held_triangles = np.concatenate([dmesh.triangles, dmesh.halo_triangles]).reshape(-1, 3)
+    seg = np.asarray(dmesh.segments, dtype=np.int64).reshape(-1, 2)
+    # A segment is on the boundary when one triangle has it as an edge; its
+    # smaller-gid end is owned here, so all of them are held.
+    edges = np.sort(np.concatenate([held_triangles[:, [0, 1]], held_triangles[:, [1, 2]],
+                                    held_triangles[:, [2, 0]]]), axis=1)
+    n = max(len(dmesh.points), 1)
+    edge_key, edge_count = np.unique(edges[:, 0] * n + edges[:, 1], return_counts=True)
+    sorted_seg = np.sort(seg, axis=1)
+    at = np.searchsorted(edge_key, sorted_seg[:, 0] * n + sorted_seg[:, 1])
+    records = np.empty(len(seg), dtype=_SKELETON_SEGMENT)
+    records["gid"] = dmesh.segment_global_ids
+    records["v"] = dmesh.global_ids[seg] if len(seg) else np.zeros((0, 2), np.int64)
+    records["tag"] = dmesh.segment_tags
+    records["boundary"] = edge_count[np.minimum(at, len(edge_count) - 1)] == 1 if len(seg) else []
+    ends = np.unique(seg.reshape(-1))
+    points = np.empty(len(ends), dtype=_SKELETON_POINT)
+    points["gid"] = dmesh.global_ids[ends]
+    points["x"], points["y"] = dmesh.points[ends, 0], dmesh.points[ends, 1]
+    points["kind"] = 0 if dmesh.kind is None else dmesh.kind[ends]
+    points["required"] = dmesh.required[ends]
+    points["owner"] = dmesh.owners[ends]
+    all_segments = np.concatenate(comm.allgather(records))
+    all_points = np.concatenate(comm.allgather(points))
+    all_segments = all_segments[np.argsort(all_segments["gid"], kind="stable")]
+    _, first = np.unique(all_points["gid"], return_index=True)
+    return all_segments, all_points[first]
 
 
 class DistributedSpacing:
@@ -210,45 +246,15 @@ class DistributedSpacing:
         return np.asarray(_core.nn_spacing(np.ascontiguousarray(xy)))[: len(held)]
 
     # ---------------------------------------------------------------- stage 1b
-    def _skeleton(self) -> tuple[np.ndarray, np.ndarray]:
-        """Every segment of the mesh and its end points, in global-id order, on every rank."""
-        dmesh = self._dmesh
-        comm = dmesh.comm
-        held_triangles = self._held_triangles()[0]
-        seg = np.asarray(dmesh.segments, dtype=np.int64).reshape(-1, 2)
-        # A segment is on the boundary when one triangle has it as an edge; its
-        # smaller-gid end is owned here, so all of them are held.
-        edges = np.sort(np.concatenate([held_triangles[:, [0, 1]], held_triangles[:, [1, 2]],
-                                        held_triangles[:, [2, 0]]]), axis=1)
-        n = max(len(dmesh.points), 1)
-        edge_key, edge_count = np.unique(edges[:, 0] * n + edges[:, 1], return_counts=True)
-        sorted_seg = np.sort(seg, axis=1)
-        at = np.searchsorted(edge_key, sorted_seg[:, 0] * n + sorted_seg[:, 1])
-        records = np.empty(len(seg), dtype=_SKELETON_SEGMENT)
-        records["gid"] = dmesh.segment_global_ids
-        records["v"] = dmesh.global_ids[seg] if len(seg) else np.zeros((0, 2), np.int64)
-        records["tag"] = dmesh.segment_tags
-        records["boundary"] = edge_count[np.minimum(at, len(edge_count) - 1)] == 1 if len(seg) else []
-        ends = np.unique(seg.reshape(-1))
-        points = np.empty(len(ends), dtype=_SKELETON_POINT)
-        points["gid"] = dmesh.global_ids[ends]
-        points["x"], points["y"] = dmesh.points[ends, 0], dmesh.points[ends, 1]
-        points["kind"] = 0 if dmesh.kind is None else dmesh.kind[ends]
-        points["required"] = dmesh.required[ends]
-        all_segments = np.concatenate(comm.allgather(records))
-        all_points = np.concatenate(comm.allgather(points))
-        self._counts["bytes"] += (records.nbytes + points.nbytes) * (comm.size - 1)
-        all_segments = all_segments[np.argsort(all_segments["gid"], kind="stable")]
-        _, first = np.unique(all_points["gid"], return_index=True)
-        self._counts["skeleton_segments"] = len(all_segments) if comm.rank == 0 else 0
-        return all_segments, all_points[first]
-
     def _feature_size(self, limit: np.ndarray) -> np.ndarray:
         """The serial local_feature_size at the owned points (+inf off the chains)."""
         dmesh = self._dmesh
         n_owned = dmesh.n_owned
         lfs = np.full(n_owned, np.inf)
-        segments, points = self._skeleton()
+        segments, points = segment_skeleton(dmesh)
+        self._counts["skeleton_segments"] = len(segments) if dmesh.comm.rank == 0 else 0
+        self._counts["bytes"] += (len(segments) * _SKELETON_SEGMENT.itemsize + len(points) * _SKELETON_POINT.itemsize) \
+            * (dmesh.comm.size - 1) // max(dmesh.comm.size, 1)
         if not len(segments):
             return lfs
         pgid = points["gid"]
@@ -358,6 +364,12 @@ class DistributedSpacing:
 
     # ----------------------------------------------------------------- stage 2
     def _evaluate(self, x: np.ndarray, counter: str) -> np.ndarray:
+        graph = self._graph_at(x, counter)
+        return np.asarray(graph.evaluate(x)[0]) if graph is not None and len(x) else np.zeros(0)
+
+    def _graph_at(self, x: np.ndarray, counter: str) -> Any:
+        """A spacing function over the held sites and those of other ranks within
+        the bound at x: exact at x. None when this rank has no site."""
         dmesh = self._dmesh
         n_owned = dmesh.n_owned
         held_xy = np.ascontiguousarray(dmesh.points, dtype=np.float64)
@@ -372,12 +384,19 @@ class DistributedSpacing:
         mine["w"] = self.weight
         got = self._copies(x, np.asarray(bound, dtype=np.float64), held_xy[:n_owned], np.zeros(n_owned), mine)
         self._counts[counter] += int(len(got))
-        if not len(x):
-            return np.zeros(0)
         gids, xy = _union(dmesh.global_ids, held_xy, got["gid"], np.column_stack([got["x"], got["y"]]))
+        if not len(gids):
+            return None
         more, first = np.unique(got["gid"], return_index=True)
         weight = np.concatenate([self._held_weight, got["w"][first][~np.isin(more, dmesh.global_ids)]])
-        return np.asarray(self._graph(gids, xy, weight).evaluate(x)[0])
+        return self._graph(gids, xy, weight)
+
+    def graph_for(self, x: Any) -> Any:
+        """A spacing function (``_core.SpacingFunction``) exact at this rank's
+        points `x` ((k, 2)): it holds every site that attains or ties f there.
+        Collective. None on a rank that holds no point."""
+        q = np.ascontiguousarray(np.asarray(x, dtype=np.float64).reshape(-1, 2))
+        return self._graph_at(q, "sites_received")
 
     def _graph(self, gids: np.ndarray, xy: np.ndarray, weight: np.ndarray) -> Any:
         return _core.SpacingFunction(np.ascontiguousarray(xy), np.ascontiguousarray(weight, dtype=np.float64),

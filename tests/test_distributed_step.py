@@ -1,0 +1,112 @@
+"""FRFC's step on MPI ranks (evomesh.distributed_step, issue 29): the kept
+points of the packing, and the step's mesh, equal the serial step's on any
+number of ranks and partitions.
+
+Plain ``pytest`` runs these on one rank; CI runs them under ``mpiexec -n 2`` and
+``-n 4`` too (tools/run-tests.sh).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import evomesh
+from evomesh import _core
+from evomesh.meshgen import disc_with_hole_mesh, polygon_mesh
+from strategies import grid_mesh
+
+MPI = pytest.importorskip("mpi4py.MPI")
+from evomesh import DistributedMesh  # noqa: E402
+from evomesh.distributed_step import packing  # noqa: E402
+from mpi_support import check_everywhere, watchdog  # noqa: E402,F401 (watchdog: an autouse fixture)
+
+COMM = MPI.COMM_WORLD
+RANK, SIZE = COMM.rank, COMM.size
+
+
+def _cracks() -> evomesh.Mesh:
+    grid = grid_mesh(21, 21, notch=True)
+    p = grid.points
+    y = p[:, 1][np.argmin(np.abs(p[:, 1] - 0.3))]
+    row = np.flatnonzero((np.abs(p[:, 1] - y) < 1e-12) & (p[:, 0] > 0.1) & (p[:, 0] < 0.9))
+    row = row[np.argsort(p[row, 0])]
+    return evomesh.Mesh(p, grid.triangles, segments=np.stack([row[:-1], row[1:]], axis=1),
+                        segment_tags=np.full(len(row) - 1, 7))
+
+
+_DOMAINS = {
+    "L-shape": lambda: polygon_mesh([[(0, 0), (2, 0), (2, 1), (1, 1), (1, 2), (0, 2)]], 0.12),
+    "two holes": lambda: polygon_mesh([[(0, 0), (3, 0), (3, 2), (0, 2)],
+                                       [(0.5, 0.5), (0.5, 1.5), (1.2, 1.5), (1.2, 0.5)],
+                                       [(1.8, 0.5), (1.8, 1.5), (2.5, 1.5), (2.5, 0.5)]], 0.15),
+    "disc with a hole": lambda: disc_with_hole_mesh(0.1),
+    "crack and a notch": _cracks,
+}
+_MESHES: dict = {}
+
+
+def _mesh(name: str) -> evomesh.Mesh:
+    if name not in _MESHES:
+        _MESHES[name] = _DOMAINS[name]()
+    return _MESHES[name]
+
+
+def _delta(mesh: evomesh.Mesh, kind: str, seed: int) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    if kind == "random":
+        return rng.uniform(0.3, 3.0, mesh.n_points)
+    lo, hi = mesh.points.min(axis=0), mesh.points.max(axis=0)
+    centre = lo + rng.uniform(0.3, 0.7, 2) * (hi - lo)
+    distance = np.abs(np.hypot(*(mesh.points - centre).T) - 0.25 * (hi - lo).min())
+    return np.where(distance < 0.1 * (hi - lo).min(), 0.4, 2.0)
+
+
+def _options(within: bool, seed: int) -> _core.FrfcOptions:
+    options = _core.FrfcOptions.paper()
+    options.within_domain = within
+    options.seed = seed
+    return options
+
+
+def _scatter(mesh: evomesh.Mesh, layout: str, seed: int) -> DistributedMesh:
+    weights = None
+    if layout == "weighted":
+        weights = np.random.default_rng(seed).uniform(0.1, 10.0, len(mesh.triangles))
+    return DistributedMesh.scatter(mesh if RANK == 0 else None, COMM, weights=weights)
+
+
+def _sorted_rows(a: np.ndarray) -> np.ndarray:
+    return a[np.lexsort(a.T[::-1])]
+
+
+@pytest.mark.parametrize("within", [True, False], ids=["within", "euclidean"])
+@pytest.mark.parametrize("layout", ["even", "weighted"])
+@pytest.mark.parametrize("kind", ["random", "front"])
+@pytest.mark.parametrize("name", list(_DOMAINS))
+def test_packing_keeps_the_serial_points(name: str, kind: str, layout: str, within: bool) -> None:
+    mesh = _mesh(name)
+    delta = _delta(mesh, kind, seed=len(name))
+    options = _options(within, seed=11)
+    dmesh = _scatter(mesh, layout, seed=5)
+    stats: dict = {}
+    points, input_gid = packing(dmesh, delta[dmesh.global_ids[: dmesh.n_owned]], options, stats=stats)
+    mine = np.concatenate(COMM.allgather(points))
+    gids = np.concatenate(COMM.allgather(input_gid))
+    serial = evomesh.evolve(mesh, delta, options=options, seed=11)
+    check_everywhere(mine.shape == serial.points.shape
+                     and np.array_equal(_sorted_rows(mine), _sorted_rows(serial.points)), "kept points differ")
+    # The input points kept are the serial step's, by global id (origin).
+    kept_old = np.sort(serial.origin[serial.origin >= 0])
+    check_everywhere(np.array_equal(np.sort(gids[gids >= 0]), kept_old), "kept input points differ")
+    assert stats["segment_candidates"] > 0 and stats["interior_candidates"] > 0
+    if SIZE > 1:
+        assert stats["first_pass_rounds"] >= 1 and stats["second_pass_rounds"] >= 1
+
+
+def test_packing_refuses_what_it_does_not_do_yet() -> None:
+    dmesh = _scatter(_mesh("L-shape"), "even", 0)
+    with pytest.raises(ValueError, match="ring_samples"):
+        packing(dmesh, np.ones(dmesh.n_owned), _core.FrfcOptions.recommended())
+    with pytest.raises(TypeError, match="FrfcOptions"):
+        packing(dmesh, np.ones(dmesh.n_owned), "paper")
