@@ -443,11 +443,15 @@ def test_gather_of_an_invalid_mesh_raises_on_every_rank():
     assert "not used by any triangle" in message
 
 
-def test_evolve_refuses_a_distributed_mesh_with_the_way_round():
+def test_evolve_on_a_distributed_mesh_says_what_it_does_not_do_yet():
     mesh = unit_square_mesh(300)
     d = evomesh.DistributedMesh.scatter(mesh if RANK == 0 else None, COMM)
-    with pytest.raises(TypeError, match="not available yet"):
-        evomesh.evolve(d, 1.0)
+    with pytest.raises(ValueError, match="FrfcOptions.paper"):
+        evomesh.evolve(d, 1.0)  # the recommended options: rings, repair, quality pass
+    with pytest.raises(ValueError, match="size="):
+        evomesh.evolve(d, size=0.1, options=evomesh.FrfcOptions.paper())
+    with pytest.raises(ValueError, match="displacement="):
+        evomesh.evolve(d, 1.0, displacement=np.zeros((d.n_owned, 2)))
 
 
 # A nearly flat triangle whose doubled area, in floating point, is positive read from its first point

@@ -996,6 +996,47 @@ PYBIND11_MODULE(_core, m) {
       py::arg("centres"), py::arg("parent"),
       "FRFC's sphere radii of candidates of a part (candidate_radii; no demoted points).");
 
+  m.def(
+      "part_pieces",
+      [part_mesh](const py::dict& part, const Int_array& candidate_segment, const Byte_array& kept_candidate,
+                  const Byte_array& kept_point) {
+        const Mesh_arrays mesh = part_mesh(part);
+        const auto parent = to_vector<Index>(candidate_segment);
+        const auto kept_c = to_vector<std::uint8_t>(kept_candidate);
+        const auto kept_p = to_vector<std::uint8_t>(kept_point);
+        if (kept_c.size() != parent.size()) throw Input_error("kept_candidate: one flag per candidate");
+        if (kept_p.size() != mesh.points.size()) throw Input_error("kept_point: one flag per point of the part");
+        const std::size_t n = mesh.points.size(), k = mesh.segments.size();
+        // The candidates come grouped by segment in segment order, sorted along each (segment_candidates).
+        std::vector<Index> begin(k + 1, 0);
+        for (std::size_t j = 0; j < parent.size(); ++j) {
+          if (parent[j] < 0 || static_cast<std::size_t>(parent[j]) >= k) throw Input_error("candidate_segment out of range");
+          if (j > 0 && parent[j] < parent[j - 1]) throw Input_error("candidates must come grouped in segment order");
+          ++begin[parent[j] + 1];
+        }
+        for (std::size_t s = 0; s < k; ++s) begin[s + 1] += begin[s];
+        std::vector<Index> out_vertex(n, -1), out_on_segment(parent.size(), -1);
+        for (std::size_t v = 0; v < n; ++v) {
+          if (kept_p[v]) out_vertex[v] = static_cast<Index>(v);
+        }
+        for (std::size_t j = 0; j < parent.size(); ++j) {
+          if (kept_c[j]) out_on_segment[j] = static_cast<Index>(n + j);
+        }
+        const auto pieces = constraint_pieces(segment_chains(mesh), out_vertex, begin, out_on_segment);
+        std::vector<std::int64_t> ends(2 * pieces.size()), tags(pieces.size());
+        std::vector<std::uint8_t> boundary(pieces.size());
+        for (std::size_t i = 0; i < pieces.size(); ++i) {
+          ends[2 * i] = pieces[i].a;
+          ends[2 * i + 1] = pieces[i].b;
+          boundary[i] = pieces[i].boundary;
+          tags[i] = pieces[i].tag;
+        }
+        return py::make_tuple(vector_array(ends), to_array(std::move(boundary)), vector_array(tags));
+      },
+      py::arg("part"), py::arg("candidate_segment"), py::arg("kept_candidate"), py::arg("kept_point"),
+      "The constraint pieces between the kept points along every chain of a part's segments (constraint_pieces): "
+      "(ends (2k,) as part point index or n + candidate index, boundary, tag).");
+
   bind_options(m);
 
   bind_step<Frfc_options>(m, "frfc", &frfc, evolve_result_dict,

@@ -261,6 +261,9 @@ def part_candidate_radii(
     centres: ArrayLike,
     parent: ArrayLike,
 ) -> NDArray[np.float64]: ...
+def part_pieces(
+    part: dict[str, Any], candidate_segment: ArrayLike, kept_candidate: ArrayLike, kept_point: ArrayLike
+) -> tuple[NDArray[np.int64], NDArray[np.uint8], NDArray[np.int64]]: ...
 def chain_feature_sizes(
     points: ArrayLike,
     triangles: ArrayLike,

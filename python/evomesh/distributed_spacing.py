@@ -35,12 +35,14 @@ the exact value:
 
 from __future__ import annotations
 
-from typing import Any
+from types import SimpleNamespace
+from typing import Any, cast
 
 import numpy as np
 
 from . import _core, _halo
 from .distributed import DistributedMesh, _check_comm, _collective, _exchange, _mpi
+from .spacing_function import as_delta
 
 __all__ = ["DistributedSpacing", "segment_skeleton"]
 
@@ -65,27 +67,35 @@ def _local_index(sorted_gids: np.ndarray, order: np.ndarray, gids: np.ndarray) -
     return order[np.searchsorted(sorted_gids, gids)]
 
 
-def segment_skeleton(dmesh: DistributedMesh) -> tuple[np.ndarray, np.ndarray]:
-    """Every segment of the mesh (gid, end gids, tag, boundary flag) in global-id
-    order, and its end points (gid, coordinates, kind, required, owner) in
-    global-id order, on every rank: one allgather of O(segments) records.
-    Collective."""
-    comm = dmesh.comm
+def boundary_flags(dmesh: DistributedMesh) -> np.ndarray:
+    """Per owned segment: whether it is on the boundary (an edge of one
+    triangle). Local: a segment's smaller-gid end is owned here, so every
+    triangle at it is held."""
     held_triangles = np.concatenate([dmesh.triangles, dmesh.halo_triangles]).reshape(-1, 3)
     seg = np.asarray(dmesh.segments, dtype=np.int64).reshape(-1, 2)
-    # A segment is on the boundary when one triangle has it as an edge; its
-    # smaller-gid end is owned here, so all of them are held.
+    if not len(seg):
+        return np.zeros(0, dtype=bool)
     edges = np.sort(np.concatenate([held_triangles[:, [0, 1]], held_triangles[:, [1, 2]],
                                     held_triangles[:, [2, 0]]]), axis=1)
     n = max(len(dmesh.points), 1)
     edge_key, edge_count = np.unique(edges[:, 0] * n + edges[:, 1], return_counts=True)
     sorted_seg = np.sort(seg, axis=1)
     at = np.searchsorted(edge_key, sorted_seg[:, 0] * n + sorted_seg[:, 1])
+    return edge_count[np.minimum(at, len(edge_count) - 1)] == 1
+
+
+def segment_skeleton(dmesh: DistributedMesh) -> tuple[np.ndarray, np.ndarray]:
+    """Every segment of the mesh (gid, end gids, tag, boundary flag) in global-id
+    order, and its end points (gid, coordinates, kind, required, owner) in
+    global-id order, on every rank: one allgather of O(segments) records.
+    Collective."""
+    comm = dmesh.comm
+    seg = np.asarray(dmesh.segments, dtype=np.int64).reshape(-1, 2)
     records = np.empty(len(seg), dtype=_SKELETON_SEGMENT)
     records["gid"] = dmesh.segment_global_ids
     records["v"] = dmesh.global_ids[seg] if len(seg) else np.zeros((0, 2), np.int64)
     records["tag"] = dmesh.segment_tags
-    records["boundary"] = edge_count[np.minimum(at, len(edge_count) - 1)] == 1 if len(seg) else []
+    records["boundary"] = boundary_flags(dmesh)
     ends = np.unique(seg.reshape(-1))
     points = np.empty(len(ends), dtype=_SKELETON_POINT)
     points["gid"] = dmesh.global_ids[ends]
@@ -108,9 +118,10 @@ class DistributedSpacing:
     Parameters
     ----------
     dmesh : DistributedMesh
-    delta : array_like, shape (n_owned,), or callable
-        The factor per owned point (finite, > 0), or a function of the owned
-        points' coordinates (an (n_owned, 2) array) returning it.
+    delta : float, array_like of shape (n_owned,), or callable
+        The factor per owned point (as :func:`evomesh.evolve` takes it: finite,
+        in [DELTA_MIN, DELTA_MAX]), or a function of the owned points'
+        coordinates (an (n_owned, 2) array) returning it.
     within_domain : bool, default True
         As in :func:`evomesh.evolve`: nn within the domain and weights capped by
         the local feature size.
@@ -189,18 +200,12 @@ class DistributedSpacing:
 
     # ------------------------------------------------------------------ checks
     def _check_delta(self, delta: Any) -> np.ndarray:
+        """delta over the owned points, checked as evolve checks it (a scalar, an
+        array or a function of the owned coordinates; finite, in [DELTA_MIN, DELTA_MAX])."""
         dmesh = self._dmesh
         if callable(delta):
             delta = delta(np.array(dmesh.owned_points))
-        d = np.asarray(delta)
-        if d.dtype == object or not (np.issubdtype(d.dtype, np.floating) or np.issubdtype(d.dtype, np.integer)):
-            raise TypeError(f"delta must be a numeric array, got dtype {d.dtype}")
-        if d.shape != (dmesh.n_owned,):
-            raise ValueError(f"delta must have one value per owned point: shape ({dmesh.n_owned},), got {d.shape}")
-        d = np.ascontiguousarray(d, dtype=np.float64)
-        if not (np.isfinite(d).all() and (d > 0).all()):
-            raise ValueError("delta must be finite and > 0 at every owned point")
-        return d
+        return as_delta(cast(Any, SimpleNamespace(n_points=dmesh.n_owned)), delta)
 
     def _frame(self) -> None:
         """The global box the halos' Hilbert chunks are cut over."""

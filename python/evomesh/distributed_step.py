@@ -30,11 +30,12 @@ from typing import Any
 import numpy as np
 
 from . import _core
-from .distributed import DistributedMesh, _collective, _mpi
+from .distributed import DistributedMesh, _collective, _exchange, _mpi
 from .distributed_packing import lexical_first_mis
-from .distributed_spacing import DistributedSpacing, segment_skeleton
+from .distributed_spacing import DistributedSpacing, boundary_flags, segment_skeleton
+from .mesh import PointKind
 
-__all__ = ["packing"]
+__all__ = ["evolve_distributed", "packing", "step"]
 
 # Packing ties, unique over the ranks and in the serial order within each kind:
 # input points by global id (< 2^60), segment candidates by their position in
@@ -59,6 +60,39 @@ def _unsupported(options: Any) -> list[str]:
         out.append("skip_settled / skip_coarse")
     if options.radius == _core.RadiusRule.cheap:
         out.append("radius='cheap'")
+    return out
+
+
+def _global_rank(comm: Any, keys: np.ndarray) -> np.ndarray:
+    """The position of each of this rank's rows of `keys` ((n, c) int64, rows
+    unique over all ranks) in the lexicographic order of every rank's rows.
+    Collective: a sample sort (each rank sends its rows to the rank of their key
+    range, which sorts them; an exclusive scan of the counts numbers them), so no
+    rank holds more than its share plus the splitters."""
+    MPI = _mpi()
+    size = comm.size
+    row = np.dtype([(f"k{i}", "<i8") for i in range(keys.shape[1])])
+    record = np.dtype([("key", row), ("index", "<i8")])
+    mine = np.zeros(len(keys), dtype=record)
+    for i in range(keys.shape[1]):
+        mine["key"][f"k{i}"] = keys[:, i]
+    mine["index"] = np.arange(len(keys))
+    mine = mine[np.argsort(mine["key"], kind="stable")]
+    # Splitters from evenly spaced samples of every rank's sorted rows.
+    take = np.linspace(0, len(mine) - 1, min(len(mine), 32 * size)).astype(np.int64) if len(mine) else []
+    samples = np.sort(np.concatenate(comm.allgather(mine["key"][take])), kind="stable")
+    splitters = samples[np.linspace(0, len(samples), size + 1).astype(np.int64)[1:-1]] if len(samples) else samples
+    bucket = np.searchsorted(splitters, mine["key"], side="right") if len(splitters) else np.zeros(len(mine), np.int64)
+    tagged = np.zeros(len(mine), dtype=[("key", row), ("index", "<i8"), ("source", "<i4")])
+    tagged["key"], tagged["index"], tagged["source"] = mine["key"], mine["index"], comm.rank
+    got, _ = _exchange(comm, bucket, tagged)
+    got = got[np.argsort(got["key"], kind="stable")]
+    first = comm.exscan(len(got), op=MPI.SUM) or 0
+    answer = np.zeros(len(got), dtype=[("index", "<i8"), ("rank", "<i8")])
+    answer["index"], answer["rank"] = got["index"], first + np.arange(len(got))
+    back, _ = _exchange(comm, got["source"], answer)
+    out = np.empty(len(keys), dtype=np.int64)
+    out[back["index"]] = back["rank"]
     return out
 
 
@@ -115,6 +149,11 @@ def packing(dmesh: DistributedMesh, delta: Any, options: Any = None, *, stats: d
     (points (k, 2), input_gid (k,)): the kept points this rank contributes, and
     for each the global id of the input point it keeps (-1 for a new point).
     """
+    packed = _pack(dmesh, delta, options, stats)
+    return packed["points"], packed["input_gid"]
+
+
+def _pack(dmesh: DistributedMesh, delta: Any, options: Any, stats: dict[str, Any] | None) -> dict[str, Any]:
     MPI = _mpi()
     comm = dmesh.comm
     if options is None:
@@ -150,6 +189,7 @@ def packing(dmesh: DistributedMesh, delta: Any, options: Any = None, *, stats: d
     radius, classes, forced = _core.part_input_spheres(part, f_part, options)
     own = at_held[:n_owned]
     seg_xy, seg_parent, seg_class = _core.part_segment_candidates(part, values["delta"], f_part, options)
+    all_parent = seg_parent
     seg_owner = np.where(segments["v"][:, 0] < segments["v"][:, 1], 0, 1)
     owner_of_segment = spoints["owner"][np.searchsorted(spoints["gid"],
                                                         segments["v"][np.arange(len(segments)), seg_owner])]
@@ -194,11 +234,156 @@ def packing(dmesh: DistributedMesh, delta: Any, options: Any = None, *, stats: d
     second: dict = {}
     kept2 = lexical_first_mis(comm, centres2, radii2, kinds2, ties2, forced2, stats=second)
     points = centres2[kept2]
-    input_gid = np.where(ties2[kept2] < _SEGMENT_TIE, ties2[kept2], -1)
+    keys = ties2[kept2]
+    input_gid = np.where(keys < _SEGMENT_TIE, keys, -1)
     if stats is not None:
         stats.update(step1=step1, first_pass_rounds=first["rounds"], second_pass_rounds=second["rounds"],
                      segment_candidates=comm.allreduce(len(take), op=MPI.SUM),
                      interior_candidates=comm.allreduce(len(in_xy), op=MPI.SUM),
                      bytes=step1["bytes"] + first["bytes_halo"] + first["bytes_states"] + second["bytes_halo"]
                      + second["bytes_states"])
-    return points, input_gid
+    return dict(points=points, keys=keys, input_gid=input_gid, part=part, at_held=at_held, skeleton=skeleton,
+                all_segment_parent=all_parent, kept_segment_candidates=take[kept[n_owned:]],
+                kept_inputs=owned_gids[kept[:n_owned]], spacing=spacing, forced_corner=forced[own] == 1)
+
+
+# A point of the step's output as the ranks look it up (distributed_triangulation._lookup).
+_OUT_POINT = np.dtype([("gid", "<i8"), ("x", "<f8"), ("y", "<f8"), ("owner", "<i4"), ("required", "u1"),
+                       ("origin", "<i8"), ("id", "<i8"), ("kind", "u1")])  # gid: the packing key; id: the output global id
+
+
+def step(dmesh: DistributedMesh, delta: Any, options: Any = None, *, stats: dict[str, Any] | None = None
+         ) -> DistributedMesh:
+    """One FRFC step on a distributed mesh (what ``evolve(dmesh, delta,
+    options=...)`` runs). Collective.
+
+    The packing (:func:`packing`), the constraint pieces between the kept
+    points along every chain (every rank holds the segment skeleton and the kept
+    flags on it, and gives a share of the pieces), and the distributed
+    constrained Delaunay triangulation (distributed_triangulation). The result
+    is a DistributedMesh over the same communicator: each rank owns the points
+    it kept; global ids are the packing keys (an input point keeps its global
+    id, a new point gets a key above 2^60); ``origin`` holds the input global id
+    of a kept input point and -1 for a new one. ``gather`` gives the serial
+    step's points, triangles, segments and tags, with the quality pass off, in
+    global-id order. The input is not modified.
+    """
+    MPI = _mpi()
+    comm = dmesh.comm
+    if options is None:
+        options = _core.FrfcOptions.paper()
+
+    def check() -> None:
+        if isinstance(options, _core.FrfcOptions) and options.quality:
+            raise ValueError("not yet on a DistributedMesh: the quality pass (quality=False, or "
+                             "FrfcOptions.paper())")
+        if dmesh.kind is None:
+            raise ValueError("the step needs the points' kinds: give kind= to DistributedMesh.from_local "
+                             "(scatter and a step's output have them)")
+        if len(dmesh.triangle_tags) and (dmesh.triangle_tags != 0).any():
+            raise ValueError("not yet on a DistributedMesh: triangle tags (they need the step's parent map)")
+
+    _collective(comm, check)
+    packed = _pack(dmesh, delta, options, stats)
+    part = packed["part"]
+    gids = part["point_gids"]
+    n_part = len(gids)
+
+    # The pieces, the same list on every rank: kept flags on the skeleton are replicated.
+    kept_inputs = np.concatenate(comm.allgather(packed["kept_inputs"]))
+    kept_point = np.isin(gids, kept_inputs).astype(np.uint8)
+    kept_candidate = np.zeros(len(packed["all_segment_parent"]), np.uint8)
+    kept_candidate[np.concatenate(comm.allgather(packed["kept_segment_candidates"])).astype(np.int64)] = 1
+    ends, boundary, tags = _core.part_pieces(part, packed["all_segment_parent"], kept_candidate, kept_point)
+    ends = np.asarray(ends, dtype=np.int64)
+    keys = np.where(ends < n_part, gids[np.minimum(ends, n_part - 1)], _SEGMENT_TIE + (ends - n_part)).reshape(-1, 2)
+    share = np.flatnonzero(np.arange(len(keys)) % comm.size == comm.rank)
+    pieces, piece_boundary, piece_tags = keys[share], boundary[share].astype(bool), tags[share]
+
+    # The triangulation, each triangle on the rank of its least id.
+    points, point_keys = packed["points"], packed["keys"]
+    cdt: dict = {}
+    from .distributed_triangulation import _lookup, constrained_delaunay
+
+    triangles = constrained_delaunay(comm, points, point_keys, pieces, piece_boundary, stats=cdt)
+
+    # The output mesh from the ranks' pieces: the points they kept, their
+    # triangles' and pieces' vertices looked up by id.
+    owned_gids = dmesh.global_ids[: dmesh.n_owned]
+    mine = np.zeros(len(points), dtype=_OUT_POINT)
+    mine["gid"], mine["x"], mine["y"], mine["owner"] = point_keys, points[:, 0], points[:, 1], comm.rank
+    old = packed["input_gid"]
+    mine["origin"] = old
+    is_old = old >= 0
+    at_old = np.searchsorted(owned_gids, old[is_old])
+    mine["required"][is_old] = dmesh.required[: dmesh.n_owned][at_old]
+    # Kinds as the serial step gives them: a kept input point keeps its own, a
+    # new point on a segment is a boundary point, one inside a sampled point.
+    mine["kind"] = np.where(point_keys < _INTERIOR_TIE, int(PointKind.BOUNDARY), int(PointKind.SAMPLED))
+    was = dmesh.kind[: dmesh.n_owned][at_old]
+    # (kept_point_kind, step.hpp: a forced corner is a corner, a sampled point of an earlier step a Steiner point)
+    mine["kind"][is_old] = np.where(packed["forced_corner"][at_old], int(PointKind.CORNER),
+                                    np.where(was == int(PointKind.SAMPLED), int(PointKind.STEINER), was))
+    # Output ids: the keys' order is the serial output's point order (kept input
+    # points by input id, then segment candidates, then interior candidates), so
+    # a point's id is its key's rank; a triangle's is the rank of its vertex ids
+    # rotated to the least first (the serial canonical order); a segment's is the
+    # piece's position in the pieces' list (chain order, as serial).
+    mine["id"] = _global_rank(comm, point_keys[:, None])
+    wanted = np.unique(np.concatenate([point_keys, triangles.reshape(-1), pieces.reshape(-1)]))
+    found = _collective(comm, _lookup, comm, mine, wanted, "point")
+    ids = found["id"]
+    local = np.searchsorted(found["gid"], triangles)
+    tri_ids = ids[local].reshape(-1, 3)
+    roll = np.argmin(tri_ids, axis=1)
+    rotate = (roll[:, None] + np.arange(3)[None, :]) % 3
+    local = np.take_along_axis(local.reshape(-1, 3), rotate, axis=1)
+    tri_ids = np.take_along_axis(tri_ids, rotate, axis=1)
+    triangle_gids = _global_rank(comm, tri_ids)
+    out = DistributedMesh.from_local(
+        np.column_stack([found["x"], found["y"]]), local, ids, comm, owners=found["owner"],
+        segments=np.searchsorted(found["gid"], pieces).reshape(-1, 2), segment_tags=piece_tags,
+        required=found["required"].astype(bool), origin=found["origin"], kind=found["kind"],
+        tag_names=dict(dmesh.tag_names), triangle_global_ids=triangle_gids, segment_global_ids=share)
+    # A step's output is valid by construction, as the serial step's: gather
+    # returns its arrays as they are (Mesh._trusted), in the serial order.
+    object.__setattr__(out, "_segment_is_boundary", boundary_flags(out))
+    object.__setattr__(out, "_trusted", True)
+    if stats is not None:
+        stats.update(cdt=cdt, pieces=len(keys), triangles=comm.allreduce(len(triangles), op=MPI.SUM))
+    return out
+
+
+def evolve_distributed(dmesh: DistributedMesh, delta: Any = None, *, size: Any = None, method: str = "frfc",
+                       seed: int | None = None, options: Any = None, stats: dict[str, Any] | None = None,
+                       **overrides: Any) -> DistributedMesh:
+    """:func:`evomesh.evolve` on a :class:`~evomesh.DistributedMesh` (it calls
+    this). Collective: every rank calls it with its own delta. The step is
+    :func:`step`, the result rebalanced (:meth:`DistributedMesh.rebalance`,
+    global ids kept: the serial step's output order)."""
+    from .evolution import _check_seed, make_options
+
+    comm = dmesh.comm
+
+    def check() -> Any:
+        if size is not None:
+            raise ValueError("not yet on a DistributedMesh: size= (give delta)")
+        if delta is None:
+            raise TypeError("evolve on a DistributedMesh needs delta (a factor per owned point, a scalar or a "
+                            "function of the owned coordinates)")
+        if method != "frfc":
+            raise ValueError(f"not yet on a DistributedMesh: method={method!r} (only 'frfc')")
+        o = make_options("frfc", options, **overrides)
+        if seed is not None:
+            o.seed = _check_seed(seed)
+        missing = _unsupported(o) + (["the quality pass"] if o.quality else [])
+        if missing:
+            raise ValueError("not yet on a DistributedMesh: " + ", ".join(missing) + "; the distributed step is "
+                             "the paper's FRFC: pass options=evomesh.FrfcOptions.paper() (within_domain=True "
+                             "may be added)")
+        return o
+
+    o = _collective(comm, check)
+    out = step(dmesh, delta, o, stats=stats)
+    rebalance = getattr(out, "rebalance", None)
+    return rebalance(renumber=False) if rebalance is not None else out

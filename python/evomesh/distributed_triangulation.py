@@ -72,8 +72,8 @@ def _check(points: Any, global_ids: Any, pieces: Any, boundary: Any) -> tuple[np
     return p, g.astype(np.int64), e.astype(np.int64), b
 
 
-def _lookup(comm: Any, records: np.ndarray, gids: np.ndarray) -> np.ndarray:
-    """The point records (gid, x, y, owner) of `gids`, from the directory rank gid % P
+def _lookup(comm: Any, records: np.ndarray, gids: np.ndarray, what: str = "piece end") -> np.ndarray:
+    """The point records (gid, x, y, owner, and any further fields) of `gids`, from the directory rank gid % P
     (three exchanges, made on every rank whatever it finds, so that a failure here
     never leaves another rank waiting); ValueError for a repeated gid or a gid
     that is no rank's point."""
@@ -87,7 +87,7 @@ def _lookup(comm: Any, records: np.ndarray, gids: np.ndarray) -> np.ndarray:
     asks, asker = _exchange(comm, gids % size, np.ascontiguousarray(gids))
     at = np.minimum(np.searchsorted(directory["gid"], asks), max(len(directory) - 1, 0))
     found = (directory["gid"][at] == asks) if len(directory) else np.zeros(len(asks), bool)
-    answer = np.zeros(len(asks), dtype=_POINT)
+    answer = np.zeros(len(asks), dtype=records.dtype)
     answer["gid"] = asks
     answer["owner"] = -1
     answer[found] = directory[at[found]]
@@ -98,7 +98,7 @@ def _lookup(comm: Any, records: np.ndarray, gids: np.ndarray) -> np.ndarray:
     if problem:
         raise ValueError(problem)
     if (out["owner"] < 0).any():
-        raise ValueError(f"piece end {int(out['gid'][out['owner'] < 0][0])} is no rank's point")
+        raise ValueError(f"{what} {int(out['gid'][out['owner'] < 0][0])} is no rank's point")
     return out
 
 

@@ -134,8 +134,14 @@ def evolve(mesh: Mesh, delta: Any = None, *, size: Any = None, method: str = "fr
 
     Parameters
     ----------
-    mesh : Mesh
-        The current mesh.
+    mesh : Mesh or DistributedMesh
+        The current mesh. A :class:`~evomesh.DistributedMesh` (every rank calls
+        evolve with delta over its owned points, a scalar, or a function of the
+        owned coordinates) is stepped on its ranks without gathering it and
+        returns a DistributedMesh whose ``gather()`` is this function's result
+        on the gathered mesh, bit for bit, on any number of ranks; for now with
+        the paper's FRFC options (``options=FrfcOptions.paper()``, optionally
+        ``within_domain=True``) and delta (evomesh.distributed_step).
     delta : array_like, shape (n,), or a scalar
         Per-point factor, relative to the current spacing: the new spacing
         (nearest-neighbour distance) at p is about delta(p) nn_M(p); < 1
@@ -435,10 +441,13 @@ def evolve(mesh: Mesh, delta: Any = None, *, size: Any = None, method: str = "fr
         domain, crossing boundaries). The input is never modified.
     """
     if type(mesh).__name__ == "DistributedMesh":  # (not imported here: mpi4py is optional)
-        raise TypeError(
-            "evolve runs on one process: a step on an evomesh.DistributedMesh is not available yet; "
-            "gather() the mesh, evolve it on the root, and scatter() the result (docs/distributed-step.md)"
-        )
+        if displacement is not None or interface is not None or geometry is not None:
+            raise ValueError("not yet on a DistributedMesh: displacement=, interface= and geometry= (gather() the "
+                             "mesh, evolve it on the root, and scatter() the result)")
+        from evomesh.distributed_step import evolve_distributed
+
+        return evolve_distributed(mesh, delta, size=size, method=method, seed=seed, options=options,  # type: ignore
+                                  **overrides)
     _require_mesh(mesh)
     if (delta is None) == (size is None):
         raise TypeError(
