@@ -223,6 +223,9 @@ def test_renumbering_maps_owned_entities_to_their_old_gids():
     d = distributed(mesh, "scatter")
     e, renumbering = d.rebalance(return_map=True)
     check_everywhere(isinstance(renumbering, Renumbering), "a Renumbering")
+    with pytest.raises(AttributeError):
+        renumbering.points = None
+    check_everywhere(not renumbering.points.flags.writeable, "read-only arrays")
     old = e.exchange_halo(renumbering.points)  # old gid of every held point
     ok = (np.array_equal(e.owned_points, mesh.points[renumbering.points])
           and np.array_equal(e.points, mesh.points[old])
@@ -238,6 +241,24 @@ def test_renumbering_maps_owned_entities_to_their_old_gids():
     # Old gids are unique over the ranks and cover the mesh.
     every = np.concatenate(COMM.allgather(renumbering.points))
     assert np.array_equal(np.sort(every), np.arange(mesh.n_points))
+
+
+@pytest.mark.parametrize("renumber", [True, False])
+def test_values_move_with_their_points_and_triangles(renumber):
+    mesh = mesh_named("tags_required_names")
+    d = distributed(mesh, "x_stripes")
+    e, renumbering = d.rebalance(renumber=renumber, return_map=True)
+    gid, tgid = d.global_ids[: d.n_owned], d.triangle_global_ids
+    moved = renumbering.move_point_values(np.c_[gid * 2.0, -gid])  # any row shape
+    labels = renumbering.move_triangle_values((tgid % 5).astype(np.int8))  # any dtype
+    check_everywhere(np.array_equal(moved, np.c_[renumbering.points * 2.0, -renumbering.points])
+                     and labels.dtype == np.int8 and np.array_equal(labels, renumbering.triangles % 5),
+                     "values land on the rows that hold their old gids")
+    check_everywhere(np.array_equal(renumbering.move_point_values(d.required[: d.n_owned]), e.required[: e.n_owned]),
+                     "a field of the points is the new mesh's")
+    message = raises_everywhere(ValueError, renumbering.move_point_values,
+                                np.zeros(d.n_owned + (RANK == BAD_RANK)))
+    assert f"rank {BAD_RANK}" in message and "one row per owned point of the mesh before rebalance" in message
 
 
 @pytest.mark.parametrize("how", ["scatter", "random"])

@@ -4,7 +4,8 @@ Each rank holds the points and triangles it **owns**, plus a **halo**: the
 rings of triangles around them, with their points, that a step or a solver
 reads but another rank owns. Every point, triangle and segment has a global id
 (int64) and an owner rank, so the pieces say exactly which global mesh they
-make (``gather``). The layout and the partition rule are in
+make (``gather``). ``rebalance`` cuts and renumbers any partition into the
+canonical one. The layout and the partition rules are in
 docs/distributed-step.md ("Part 4, as built").
 
 Ownership rules (the contract a distributed step relies on):
@@ -25,7 +26,7 @@ raise (the same exception type and message, naming the rank), never a hang.
 from __future__ import annotations
 
 from types import MappingProxyType
-from typing import Any, Callable, Mapping, NamedTuple, TypeVar
+from typing import Any, Callable, Mapping, TypeVar
 
 import numpy as np
 
@@ -511,25 +512,117 @@ def _canonical(v: np.ndarray) -> np.ndarray:
     return np.take_along_axis(v, idx, axis=1)
 
 
-class Renumbering(NamedTuple):
+def _field_rows(comm: Any, values: Any, rows: int, name: str, what: str = "owned point") -> np.ndarray:
+    """`values` as an array of `rows` rows, checked to have the same dtype and
+    trailing shape on every rank (else every rank raises). Collective."""
+
+    def check() -> np.ndarray:
+        array = np.asarray(values)
+        if array.dtype == object:
+            raise TypeError(f"{name} must be a numeric array, got dtype object")
+        if array.ndim < 1 or len(array) != rows:
+            raise ValueError(f"{name} must have one row per {what}: shape ({rows}, ...), got {array.shape}")
+        return np.ascontiguousarray(array)
+
+    array = _collective(comm, check)
+    layouts = comm.allgather((array.dtype.str, array.shape[1:]))
+
+    def agree() -> None:
+        for r, layout in enumerate(layouts):
+            if layout != layouts[0]:
+                raise ValueError(f"{name} has dtype {layout[0]} and row shape {layout[1]} on rank {r} but "
+                                 f"{layouts[0][0]} and {layouts[0][1]} on rank 0")
+
+    _collective(comm, agree)
+    return array
+
+
+class Renumbering:
     """What :meth:`DistributedMesh.rebalance` returns with ``return_map=True``
-    beside the new mesh: the global ids the new mesh's owned entities had in the
-    mesh it was called on (new → old, this rank's rows only).
+    beside the new mesh: where this rank's owned entities came from, and a way
+    to move values along. Immutable.
 
     Attributes
     ----------
     points : ndarray of int64, shape (n_owned,)
-        ``points[i]`` is the old gid of the new mesh's owned point ``i``
-        (``new.global_ids[i]`` now).
+        ``points[i]`` is the gid, in the mesh ``rebalance`` was called on, of
+        the new mesh's owned point ``i`` (``new.global_ids[i]`` now).
     triangles : ndarray of int64, shape (m_owned,)
         Old gid of each owned triangle, in the order of ``new.triangles``.
     segments : ndarray of int64, shape (k_owned,)
         Old gid of each owned segment, in the order of ``new.segments``.
     """
 
+    __slots__ = ("points", "triangles", "segments", "_comm", "_point_dest", "_old_point_gids", "_triangle_dest",
+                 "_old_triangle_gids")
+
     points: np.ndarray
     triangles: np.ndarray
     segments: np.ndarray
+    _comm: Any
+    # Where each old owned point / triangle was sent, and its old gid (the sender's side of a move).
+    _point_dest: np.ndarray
+    _old_point_gids: np.ndarray
+    _triangle_dest: np.ndarray
+    _old_triangle_gids: np.ndarray
+
+    def __init__(self, comm: Any, points: np.ndarray, triangles: np.ndarray, segments: np.ndarray,
+                 sent: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]):
+        set_ = object.__setattr__
+        set_(self, "_comm", comm)
+        for name, value in (("points", points), ("triangles", triangles), ("segments", segments),
+                            ("_point_dest", sent[0]), ("_old_point_gids", sent[1]), ("_triangle_dest", sent[2]),
+                            ("_old_triangle_gids", sent[3])):
+            set_(self, name, _frozen(np.asarray(value, dtype=np.int64)))
+
+    def __setattr__(self, name: str, value: Any) -> None:
+        raise AttributeError("Renumbering is immutable")
+
+    def __repr__(self) -> str:
+        return (f"Renumbering(rank={self._comm.rank}, points={len(self.points)}, triangles={len(self.triangles)}, "
+                f"segments={len(self.segments)})")
+
+    def _move(self, values: Any, dest: np.ndarray, old_gids: np.ndarray, new_rows: np.ndarray,
+              what: str) -> np.ndarray:
+        comm = self._comm
+        array = _field_rows(comm, values, len(dest), "values", f"owned {what} of the mesh before rebalance")
+        record = np.dtype([("gid", "<i8"), ("value", array.dtype, array.shape[1:])])
+        rows = np.empty(len(array), record)
+        rows["gid"], rows["value"] = old_gids, array
+        rows = _exchange(comm, dest, rows)[0]
+        rows = rows[np.argsort(rows["gid"], kind="stable")]
+        return np.ascontiguousarray(rows["value"][_index_of(rows["gid"], new_rows)])
+
+    def move_point_values(self, values: Any) -> np.ndarray:
+        """Values over the old mesh's owned points, moved to the new owners. Collective.
+
+        Parameters
+        ----------
+        values : array_like, shape (old n_owned, ...)
+            One row per owned point of the mesh ``rebalance`` was called on, in
+            its order; any dtype and row shape, the same on every rank.
+
+        Returns
+        -------
+        ndarray, shape (new n_owned, ...)
+            The rows in the new mesh's owned point order (one Alltoallv).
+        """
+        return self._move(values, self._point_dest, self._old_point_gids, self.points, "point")
+
+    def move_triangle_values(self, values: Any) -> np.ndarray:
+        """Values over the old mesh's owned triangles, moved to the new owners. Collective.
+
+        Parameters
+        ----------
+        values : array_like, shape (old m_owned, ...)
+            One row per owned triangle of the old mesh, in its order.
+
+        Returns
+        -------
+        ndarray, shape (new m_owned, ...)
+            The rows in the order of the new mesh's ``triangles``.
+        """
+        return self._move(values, self._triangle_dest, self._old_triangle_gids, self.triangles, "triangle")
 
 
 def _point_weights(weights: Any, owned_points: np.ndarray) -> np.ndarray:
@@ -642,6 +735,14 @@ class DistributedMesh:
     Build one with :meth:`scatter` (a :class:`~evomesh.Mesh` on one rank) or
     :meth:`from_local` (pieces already on every rank); :meth:`gather` gives the
     Mesh back. Arrays are read-only; local point indices index ``points``.
+
+    :meth:`rebalance` gives the same mesh in the canonical layout a distributed
+    step returns: points cut into ``comm.size`` equal-weight ranges along a
+    Hilbert curve and (by default) renumbered along it, triangles and segments
+    renumbered in their vertex gid order, halo rebuilt. It depends on the
+    global mesh only, not on the partition it is called on, so any pieces
+    (``from_local`` of a caller's own cut, a rank owning everything) become
+    the same balanced mesh; its :class:`Renumbering` moves fields along.
 
     Attributes
     ----------
@@ -1066,10 +1167,10 @@ class DistributedMesh:
           plus the local position), so rank r owns a contiguous gid range and
           ranks follow each other along the curve;
         - each triangle is rotated to start at its smallest gid (still
-          counter-clockwise) and the triangle gids are the ranks of the
-          triangles by their (g0, g1, g2);
-        - segment gids are the ranks of the segments by (smaller gid, larger
-          gid); segment orientation is kept;
+          counter-clockwise) and the triangle gids are the positions of the
+          triangles in (g0, g1, g2) order;
+        - segment gids are the positions of the segments in (smaller gid,
+          larger gid) order; segment orientation is kept;
         - ``origin`` is carried along unchanged (it maps to the gids of the
           mesh a step started from, not to the gids before rebalancing; ask
           for ``return_map`` for those).
@@ -1103,9 +1204,9 @@ class DistributedMesh:
             The same on every rank.
         return_map : bool, optional
             Also return a :class:`Renumbering`: the old gids of this rank's
-            owned points, triangles and segments in the new mesh (to move
-            per-point or per-triangle data: a value of old gid g belongs to the
-            new owned row where ``renumbering.points == g``).
+            owned points, triangles and segments in the new mesh, and
+            ``move_point_values`` / ``move_triangle_values`` to carry fields
+            over the old owned rows to the new ones.
 
         Returns
         -------
@@ -1122,12 +1223,13 @@ class DistributedMesh:
 
         Examples
         --------
-        Under ``mpiexec -n 4``, a mesh given in x-stripes by
-        :meth:`from_local`, rebalanced, and a point field moved along::
+        Pieces cut by the caller (say x-stripes) made canonical, and a point
+        field over the old owned points moved along::
 
             d = DistributedMesh.from_local(points, triangles, gids, comm)
             e, renumbering = d.rebalance(return_map=True)
-            e.partition_stats()["point_balance"]          # <= 1.1 (counts differ by one at most)
+            e.partition_stats()["point_balance"]    # owned counts differ by one at most
+            u_new = renumbering.move_point_values(u)  # u: shape (d.n_owned, ...)
         """
         comm = self.comm
         n_owned = self.n_owned
@@ -1191,43 +1293,22 @@ class DistributedMesh:
                              trusted=self._trusted and not renumber_)
         if not return_map_:
             return result
+        sent = (owner_owned, old_owned, tri_owner, self.triangle_global_ids)
         if not renumber_:
-            return result, Renumbering(result.global_ids[: result.n_owned], result.triangle_global_ids,
-                                       result.segment_global_ids)
+            return result, Renumbering(comm, result.global_ids[: result.n_owned], result.triangle_global_ids,
+                                       result.segment_global_ids, sent)
         assert old_point_gids is not None
         old_point_gids = old_point_gids[np.argsort(old_point_gids[:, 0])]
-        renumbering = Renumbering(
-            _frozen(old_point_gids[_index_of(old_point_gids[:, 0], result.global_ids[: result.n_owned]), 1]),
-            _frozen(old_triangle_gids[_index_of(tri["gid"], result.triangle_global_ids)]),
-            _frozen(old_segment_gids[_index_of(seg["gid"], result.segment_global_ids)]))
-        return result, renumbering
+        return result, Renumbering(
+            comm, old_point_gids[_index_of(old_point_gids[:, 0], result.global_ids[: result.n_owned]), 1],
+            old_triangle_gids[_index_of(tri["gid"], result.triangle_global_ids)],
+            old_segment_gids[_index_of(seg["gid"], result.segment_global_ids)], sent)
 
     # ------------------------------------------------------------ point fields
     def _field(self, values: Any, name: str) -> np.ndarray:
         """values over the owned points, checked to have the same dtype and
         trailing shape on every rank."""
-        comm = self.comm
-
-        def check() -> np.ndarray:
-            array = np.asarray(values)
-            if array.dtype == object:
-                raise TypeError(f"{name} must be a numeric array, got dtype object")
-            if array.ndim < 1 or len(array) != self.n_owned:
-                raise ValueError(f"{name} must have one row per owned point: shape ({self.n_owned}, ...), "
-                                 f"got {array.shape}")
-            return np.ascontiguousarray(array)
-
-        array = _collective(comm, check)
-        layouts = comm.allgather((array.dtype.str, array.shape[1:]))
-
-        def agree() -> None:
-            for r, layout in enumerate(layouts):
-                if layout != layouts[0]:
-                    raise ValueError(f"{name} has dtype {layout[0]} and row shape {layout[1]} on rank {r} but "
-                                     f"{layouts[0][0]} and {layouts[0][1]} on rank 0")
-
-        _collective(comm, agree)
-        return array
+        return _field_rows(self.comm, values, self.n_owned, name)
 
     def exchange_halo(self, values: Any) -> np.ndarray:
         """Values on every local point from values on the owned points. Collective.
