@@ -4,7 +4,8 @@ Each rank holds the points and triangles it **owns**, plus a **halo**: the
 rings of triangles around them, with their points, that a step or a solver
 reads but another rank owns. Every point, triangle and segment has a global id
 (int64) and an owner rank, so the pieces say exactly which global mesh they
-make (``gather``). The layout and the partition rule are in
+make (``gather``). ``rebalance`` cuts and renumbers any partition into the
+canonical one. The layout and the partition rules are in
 docs/distributed-step.md ("Part 4, as built").
 
 Ownership rules (the contract a distributed step relies on):
@@ -31,7 +32,7 @@ import numpy as np
 
 from evomesh.mesh import _MAX_COORDINATE, Mesh, _as_array, _as_tag_names, _frozen
 
-__all__ = ["DistributedMesh"]
+__all__ = ["DistributedMesh", "Renumbering"]
 
 # Records that travel between ranks, sent as raw bytes (no pickling of big arrays).
 # kind 255 means "not given" (from_local without kind).
@@ -43,6 +44,12 @@ _SEGMENT = np.dtype([("v", "<i8", (2,)), ("owners", "<i4", (2,)), ("gid", "<i8")
 _UNKNOWN_KIND = 255
 # Hilbert curve order of the partition: 2^21 cells a side (keys below 2^42).
 _HILBERT_ORDER = 21
+# Hilbert curve order of the canonical point order (docs/distributed-step.md 2.4): 2^31 cells a side.
+_CANONICAL_ORDER = 31
+# What rebalance's distributed sort moves per point: the sort key, the weight
+# (fixed point, so prefix sums are exact) and the point's row on its sender.
+_SORT_RECORD = np.dtype([("hkey", "<i8"), ("xy", "<f8", (2,)), ("gid", "<i8"), ("weight", "<i8"),
+                         ("index", "<i8")])
 
 _T = TypeVar("_T")
 
@@ -505,12 +512,237 @@ def _canonical(v: np.ndarray) -> np.ndarray:
     return np.take_along_axis(v, idx, axis=1)
 
 
+def _field_rows(comm: Any, values: Any, rows: int, name: str, what: str = "owned point") -> np.ndarray:
+    """`values` as an array of `rows` rows, checked to have the same dtype and
+    trailing shape on every rank (else every rank raises). Collective."""
+
+    def check() -> np.ndarray:
+        array = np.asarray(values)
+        if array.dtype == object:
+            raise TypeError(f"{name} must be a numeric array, got dtype object")
+        if array.ndim < 1 or len(array) != rows:
+            raise ValueError(f"{name} must have one row per {what}: shape ({rows}, ...), got {array.shape}")
+        return np.ascontiguousarray(array)
+
+    array = _collective(comm, check)
+    layouts = comm.allgather((array.dtype.str, array.shape[1:]))
+
+    def agree() -> None:
+        for r, layout in enumerate(layouts):
+            if layout != layouts[0]:
+                raise ValueError(f"{name} has dtype {layout[0]} and row shape {layout[1]} on rank {r} but "
+                                 f"{layouts[0][0]} and {layouts[0][1]} on rank 0")
+
+    _collective(comm, agree)
+    return array
+
+
+class Renumbering:
+    """What :meth:`DistributedMesh.rebalance` returns with ``return_map=True``
+    beside the new mesh: where this rank's owned entities came from, and a way
+    to move values along. Immutable.
+
+    Attributes
+    ----------
+    points : ndarray of int64, shape (n_owned,)
+        ``points[i]`` is the gid, in the mesh ``rebalance`` was called on, of
+        the new mesh's owned point ``i`` (``new.global_ids[i]`` now).
+    triangles : ndarray of int64, shape (m_owned,)
+        Old gid of each owned triangle, in the order of ``new.triangles``.
+    segments : ndarray of int64, shape (k_owned,)
+        Old gid of each owned segment, in the order of ``new.segments``.
+    """
+
+    __slots__ = ("points", "triangles", "segments", "_comm", "_point_dest", "_old_point_gids", "_triangle_dest",
+                 "_old_triangle_gids")
+
+    points: np.ndarray
+    triangles: np.ndarray
+    segments: np.ndarray
+    _comm: Any
+    # Where each old owned point / triangle was sent, and its old gid (the sender's side of a move).
+    _point_dest: np.ndarray
+    _old_point_gids: np.ndarray
+    _triangle_dest: np.ndarray
+    _old_triangle_gids: np.ndarray
+
+    def __init__(self, comm: Any, points: np.ndarray, triangles: np.ndarray, segments: np.ndarray,
+                 sent: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]):
+        set_ = object.__setattr__
+        set_(self, "_comm", comm)
+        for name, value in (("points", points), ("triangles", triangles), ("segments", segments),
+                            ("_point_dest", sent[0]), ("_old_point_gids", sent[1]), ("_triangle_dest", sent[2]),
+                            ("_old_triangle_gids", sent[3])):
+            set_(self, name, _frozen(np.asarray(value, dtype=np.int64)))
+
+    def __setattr__(self, name: str, value: Any) -> None:
+        raise AttributeError("Renumbering is immutable")
+
+    def __repr__(self) -> str:
+        return (f"Renumbering(rank={self._comm.rank}, points={len(self.points)}, triangles={len(self.triangles)}, "
+                f"segments={len(self.segments)})")
+
+    def _move(self, values: Any, dest: np.ndarray, old_gids: np.ndarray, new_rows: np.ndarray,
+              what: str) -> np.ndarray:
+        comm = self._comm
+        array = _field_rows(comm, values, len(dest), "values", f"owned {what} of the mesh before rebalance")
+        record = np.dtype([("gid", "<i8"), ("value", array.dtype, array.shape[1:])])
+        rows = np.empty(len(array), record)
+        rows["gid"], rows["value"] = old_gids, array
+        rows = _exchange(comm, dest, rows)[0]
+        rows = rows[np.argsort(rows["gid"], kind="stable")]
+        return np.ascontiguousarray(rows["value"][_index_of(rows["gid"], new_rows)])
+
+    def move_point_values(self, values: Any) -> np.ndarray:
+        """Values over the old mesh's owned points, moved to the new owners. Collective.
+
+        Parameters
+        ----------
+        values : array_like, shape (old n_owned, ...)
+            One row per owned point of the mesh ``rebalance`` was called on, in
+            its order; any dtype and row shape, the same on every rank.
+
+        Returns
+        -------
+        ndarray, shape (new n_owned, ...)
+            The rows in the new mesh's owned point order (one Alltoallv).
+        """
+        return self._move(values, self._point_dest, self._old_point_gids, self.points, "point")
+
+    def move_triangle_values(self, values: Any) -> np.ndarray:
+        """Values over the old mesh's owned triangles, moved to the new owners. Collective.
+
+        Parameters
+        ----------
+        values : array_like, shape (old m_owned, ...)
+            One row per owned triangle of the old mesh, in its order.
+
+        Returns
+        -------
+        ndarray, shape (new m_owned, ...)
+            The rows in the order of the new mesh's ``triangles``.
+        """
+        return self._move(values, self._triangle_dest, self._old_triangle_gids, self.triangles, "triangle")
+
+
+def _point_weights(weights: Any, owned_points: np.ndarray) -> np.ndarray:
+    """rebalance's weights on this rank: one finite value >= 0 per owned point."""
+    n = len(owned_points)
+    if weights is None:
+        return np.ones(n)
+    name = "weights"
+    if callable(weights):
+        weights, name = weights(owned_points), "weights(owned_points)"
+    w = _as_array(weights, name)
+    if w.dtype == object or w.dtype.kind not in "fiub":
+        raise TypeError(f"{name} must be a real array, got dtype {w.dtype}")
+    if w.shape != (n,):
+        raise ValueError(f"{name} must have one value per owned point: shape ({n},), got {w.shape}")
+    w = w.astype(np.float64)
+    finite = np.isfinite(w)
+    if not finite.all():
+        raise ValueError(f"{name} must be finite (owned point {int(np.argmin(finite))} has {w[~finite][0]})")
+    if (w < 0).any():
+        raise ValueError(f"{name} must be >= 0 (owned point {int(np.argmax(w < 0))} has {w[w < 0][0]})")
+    return w
+
+
+def _sort_order(records: np.ndarray) -> np.ndarray:
+    """The order of sort records by (Hilbert key, x, y, gid): a total order (gids are unique)."""
+    return np.lexsort((records["gid"], records["xy"][:, 1], records["xy"][:, 0], records["hkey"]))
+
+
+def _bucket_of(records: np.ndarray, splitters: np.ndarray) -> np.ndarray:
+    """For each record, the number of splitters not after it in the sort order."""
+    both = np.concatenate([records[["hkey", "xy", "gid"]], splitters[["hkey", "xy", "gid"]]])
+    is_splitter = np.r_[np.zeros(len(records), bool), np.ones(len(splitters), bool)]
+    # A splitter equal to a record (the sampled record itself) sorts before it.
+    order = np.lexsort((~is_splitter, both["gid"], both["xy"][:, 1], both["xy"][:, 0], both["hkey"]))
+    below = np.cumsum(is_splitter[order])
+    bucket = np.empty(len(records), np.int64)
+    is_record = ~is_splitter[order]
+    bucket[order[is_record]] = below[is_record]
+    return bucket
+
+
+def _hilbert_cut(comm: Any, xy: np.ndarray, gids: np.ndarray, weights: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """rebalance's cut of the points (this rank's owned `xy`, `gids`, `weights`).
+
+    Returns each point's position in the global order by (Hilbert key over the
+    global bounding box, x, y, gid) and the rank whose range it falls in: ranges
+    of equal weight, a point in the range of its weight's midpoint. The order
+    is found by a sample sort (regular samples, allgathered splitters; each rank
+    then holds a contiguous run of the order, sorts it and numbers it by an
+    Exscan). Weights are made fixed point (a multiple of max weight / 2^b, b as
+    large as int64 prefix sums allow) so the prefix sums are exact: the result
+    depends on the global point set only, not on which rank held what."""
+    MPI = _mpi()
+    size = comm.size
+    n = len(xy)
+    total = comm.allreduce(n, op=MPI.SUM)
+    if total == 0:
+        return np.empty(0, np.int64), np.empty(0, np.int64)
+    # One allreduce: the bounding box and the largest weight (signs flipped for MIN).
+    extremes = np.full(5, np.inf)
+    if n:
+        extremes[:2], extremes[2:4], extremes[4] = xy.min(axis=0), -xy.max(axis=0), -weights.max()
+    comm.Allreduce(MPI.IN_PLACE, extremes, op=MPI.MIN)
+    low, high, largest = extremes[:2], -extremes[2:4], -float(extremes[4])
+    if not largest > 0:
+        raise ValueError("weights are all zero: their sum over the ranks must be positive")
+    # Quantised as in _partition, over the points' bounding box (square cells).
+    extent = float((high - low).max())
+    top = (1 << _CANONICAL_ORDER) - 1
+    scale = top / extent if extent > 0 else 0.0
+    cells = np.clip(np.floor((xy - low) * scale), 0, top)
+    bits = min(52, 62 - total.bit_length())  # total weight < 2^62: 2 * prefix + weight fits in int64
+    records = np.empty(n, _SORT_RECORD)
+    records["hkey"] = _hilbert_keys(cells[:, 0], cells[:, 1], _CANONICAL_ORDER)
+    records["xy"], records["gid"], records["index"] = xy, gids, np.arange(n)
+    records["weight"] = np.floor(weights / largest * 2.0 ** bits + 0.5)
+    records = records[_sort_order(records)]
+    # Regular samples, about 2 * size per rank on average, in proportion to the
+    # rank's share: each run between splitters then holds at most about
+    # 1.5 total / size + size points, whatever the input partition.
+    samples_here = -(-2 * size * size * n // total)
+    picks = ((np.arange(samples_here) + 0.5) * n / max(samples_here, 1)).astype(np.int64)
+    samples = np.concatenate(comm.allgather(records[picks]))
+    samples = samples[_sort_order(samples)]
+    splitters = samples[(np.arange(1, size) * len(samples)) // size]
+    run, source = _exchange(comm, _bucket_of(records, splitters), records)
+    order = _sort_order(run)
+    run, source = run[order], source[order]
+    # Positions and prefix weights: Exscans over the runs (Python ints: exact).
+    first = comm.exscan(len(run), op=MPI.SUM) or 0
+    weight_here = int(run["weight"].sum())
+    weight_before = comm.exscan(weight_here, op=MPI.SUM) or 0
+    weight_total = comm.allreduce(weight_here, op=MPI.SUM)
+    w = run["weight"]
+    twice_middle = 2 * (weight_before + np.cumsum(w) - w) + w
+    # Rank r takes the points whose weight midpoint lies in [r, r + 1) * total / size.
+    starts = np.array([-(-r * 2 * weight_total // size) for r in range(size)], dtype=np.int64)
+    rank = np.searchsorted(starts, twice_middle, side="right") - 1
+    answer = np.stack([run["index"], first + np.arange(len(run)), rank], axis=1)
+    answer = _exchange(comm, source, answer)[0]
+    position, owner = np.empty(n, np.int64), np.empty(n, np.int64)
+    position[answer[:, 0]], owner[answer[:, 0]] = answer[:, 1], answer[:, 2]
+    return position, owner
+
+
 class DistributedMesh:
     """This rank's part of a triangle mesh distributed over an MPI communicator; immutable.
 
     Build one with :meth:`scatter` (a :class:`~evomesh.Mesh` on one rank) or
     :meth:`from_local` (pieces already on every rank); :meth:`gather` gives the
     Mesh back. Arrays are read-only; local point indices index ``points``.
+
+    :meth:`rebalance` gives the same mesh in the canonical layout a distributed
+    step returns: points cut into ``comm.size`` equal-weight ranges along a
+    Hilbert curve and (by default) renumbered along it, triangles and segments
+    renumbered in their vertex gid order, halo rebuilt. It depends on the
+    global mesh only, not on the partition it is called on, so any pieces
+    (``from_local`` of a caller's own cut, a rank owning everything) become
+    the same balanced mesh; its :class:`Renumbering` moves fields along.
 
     Attributes
     ----------
@@ -911,32 +1143,172 @@ class DistributedMesh:
 
         return _collective(comm, build)
 
+    # ---------------------------------------------------------------- rebalance
+    def rebalance(self, weights: Any = None, *, renumber: bool = True, halo_rings: int | None = None,
+                  return_map: bool = False) -> Any:
+        """The same mesh, cut into equal-weight ranges along a Hilbert curve. Collective.
+
+        The points are ordered along a Hilbert curve over their global bounding
+        box (2^31 cells a side, square cells; ties by exact (x, y), then by
+        global id), and the order is cut into ``comm.size`` contiguous ranges
+        of equal weight: rank r owns the points whose weight midpoint lies in
+        the r-th ``1 / size`` of the total weight. A triangle is then owned by
+        the owner of its smallest-gid vertex, a segment by the owner of its
+        smaller-gid end, and the halo is rebuilt. The result is a function of
+        the global mesh only: the same owned sets, gids and halos whatever
+        partition the mesh had (the order is found by a distributed sample sort
+        and the weights' prefix sums are exact, see below); no rank ever holds
+        a global array.
+
+        This is the canonical output order of a distributed step
+        (docs/distributed-step.md, 2.4). With ``renumber=True`` (default):
+
+        - point gids become positions in that order (``Exscan`` of the counts
+          plus the local position), so rank r owns a contiguous gid range and
+          ranks follow each other along the curve;
+        - each triangle is rotated to start at its smallest gid (still
+          counter-clockwise) and the triangle gids are the positions of the
+          triangles in (g0, g1, g2) order;
+        - segment gids are the positions of the segments in (smaller gid,
+          larger gid) order; segment orientation is kept;
+        - ``origin`` is carried along unchanged (it maps to the gids of the
+          mesh a step started from, not to the gids before rebalancing; ask
+          for ``return_map`` for those).
+
+        With ``renumber=False`` every gid and every triangle's rotation is
+        kept and only the owners change, so :meth:`gather` returns exactly the
+        same Mesh as before. Coordinates, tags, ``required``, ``kind`` and
+        ``tag_names`` are kept in both cases.
+
+        Balance. With unit weights the owned point counts differ by at most one
+        between ranks. With weights, every rank's owned weight is within the
+        largest single weight of ``total / size`` (the first and last point of
+        each range straddle its ends by at most half their weight each). The
+        weights are used in fixed point: each is rounded to a multiple of
+        ``max(weights) * 2**-b`` with ``b = min(52, 62 - N.bit_length())`` for
+        ``N`` points in all (b = 42 for a million points), so that the
+        prefix sums are exact integers; a weight below ``max(weights) * 2**-(b+1)``
+        counts as zero.
+
+        Parameters
+        ----------
+        weights : array_like of float, shape (n_owned,), or callable, optional
+            Work per owned point: finite and >= 0, not all zero over the ranks.
+            A callable is called with ``owned_points`` (shape (n_owned, 2)) and
+            must return such an array. Default 1 each (equal point counts).
+        renumber : bool, optional
+            Renumber points, triangles and segments into the canonical order
+            (default True); False keeps every gid.
+        halo_rings : int, optional
+            Rings of halo triangles of the result; default ``self.halo_rings``.
+            The same on every rank.
+        return_map : bool, optional
+            Also return a :class:`Renumbering`: the old gids of this rank's
+            owned points, triangles and segments in the new mesh, and
+            ``move_point_values`` / ``move_triangle_values`` to carry fields
+            over the old owned rows to the new ones.
+
+        Returns
+        -------
+        DistributedMesh, or (DistributedMesh, Renumbering) with ``return_map``
+
+        Raises
+        ------
+        TypeError, ValueError
+            On every rank, when the weights on any rank are bad (wrong length,
+            dtype, NaN or infinite, negative; all zero everywhere), or
+            ``renumber``, ``halo_rings`` or ``return_map`` are bad or differ
+            between ranks. A callable's own exception is raised everywhere too
+            (a RuntimeError when it is not a ValueError or TypeError).
+
+        Examples
+        --------
+        Pieces cut by the caller (say x-stripes) made canonical, and a point
+        field over the old owned points moved along::
+
+            d = DistributedMesh.from_local(points, triangles, gids, comm)
+            e, renumbering = d.rebalance(return_map=True)
+            e.partition_stats()["point_balance"]    # owned counts differ by one at most
+            u_new = renumbering.move_point_values(u)  # u: shape (d.n_owned, ...)
+        """
+        comm = self.comm
+        n_owned = self.n_owned
+
+        def prepare() -> tuple[int, bool, bool, np.ndarray]:
+            rings = self.halo_rings if halo_rings is None else _check_halo_rings(halo_rings)
+            for name, flag in (("renumber", renumber), ("return_map", return_map)):
+                if not isinstance(flag, (bool, np.bool_)):
+                    raise TypeError(f"{name} must be True or False, got {flag!r}")
+            return rings, bool(renumber), bool(return_map), _point_weights(weights, self.owned_points)
+
+        rings, renumber_, return_map_, w = _collective(comm, prepare)
+        _same_everywhere(comm, {"halo_rings": rings, "renumber": renumber_, "return_map": return_map_})
+        old_owned = self.global_ids[:n_owned]
+        position, owner_owned = _hilbert_cut(comm, self.owned_points, old_owned, w)
+        gid_owned = position if renumber_ else old_owned
+        # Every held point's new gid and owner, from its old owner.
+        both = self.exchange_halo(np.stack([gid_owned, owner_owned], axis=1))
+        gid, owner = both[:, 0], both[:, 1]
+        n_local = len(gid)
+        points = np.empty(n_local, _POINT)
+        points["gid"], points["xy"], points["origin"], points["owner"] = gid, self.points, self.origin, owner
+        points["kind"] = _UNKNOWN_KIND if self.kind is None else self.kind
+        points["required"] = self.required
+        tri = np.empty(len(self.triangles), _TRIANGLE)
+        local = self.triangles
+        if renumber_ and len(local):  # rotated to start at the smallest new gid (a rotation keeps CCW)
+            shift = np.argmin(gid[local], axis=1)
+            local = np.take_along_axis(local, (shift[:, None] + np.arange(3)[None, :]) % 3, axis=1)
+        tri["v"], tri["owners"], tri["gid"], tri["tag"] = gid[local], owner[local], self.triangle_global_ids, \
+            self.triangle_tags
+        tri_owner = owner[local][np.arange(len(local)), np.argmin(gid[local], axis=1)] if len(local) \
+            else np.empty(0, np.int64)
+        seg = np.empty(len(self.segments), _SEGMENT)
+        seg["v"], seg["owners"], seg["gid"] = gid[self.segments], owner[self.segments], self.segment_global_ids
+        seg["tag"], seg["boundary"] = self.segment_tags, self._segment_is_boundary
+        seg_owner = owner[self.segments][np.arange(len(seg)), np.argmin(seg["v"], axis=1)] if len(seg) \
+            else np.empty(0, np.int64)
+        # Owned points to their new owners; the vertices of each triangle owned
+        # elsewhere to the triangle's new owner (few: along the new cuts).
+        vertex, dest = local.ravel(), np.repeat(tri_owner, 3)
+        across = owner[vertex] != dest
+        pair = _unique(dest[across] * n_local + vertex[across])
+        points_dest = np.concatenate([owner[:n_owned], pair // max(n_local, 1)])
+        points = _exchange(comm, points_dest, points[np.concatenate([np.arange(n_owned), pair % max(n_local, 1)])])[0]
+        tri = _exchange(comm, tri_owner, tri)[0]
+        seg = _exchange(comm, seg_owner, seg)[0]
+        old_point_gids = _exchange(comm, owner_owned, np.stack([gid_owned, old_owned], axis=1))[0] \
+            if return_map_ and renumber_ else None
+        if renumber_:
+            tri = tri[np.lexsort(tri["v"].T[::-1])] if len(tri) else tri
+            old_triangle_gids = tri["gid"].copy()
+            tri = _numbered(tri, tri["v"], comm)  # already in key order: this numbers them
+            seg_key = np.sort(seg["v"], axis=1)
+            order = np.lexsort(seg_key.T[::-1]) if len(seg) else np.empty(0, np.int64)
+            seg, seg_key = seg[order], seg_key[order]
+            old_segment_gids = seg["gid"].copy()
+            seg = _numbered(seg, seg_key, comm)
+        parts = _assemble(comm, points, tri, seg, rings)
+        result = self._build(comm, parts, self.tag_names, self.kind is not None, rings,
+                             trusted=self._trusted and not renumber_)
+        if not return_map_:
+            return result
+        sent = (owner_owned, old_owned, tri_owner, self.triangle_global_ids)
+        if not renumber_:
+            return result, Renumbering(comm, result.global_ids[: result.n_owned], result.triangle_global_ids,
+                                       result.segment_global_ids, sent)
+        assert old_point_gids is not None
+        old_point_gids = old_point_gids[np.argsort(old_point_gids[:, 0])]
+        return result, Renumbering(
+            comm, old_point_gids[_index_of(old_point_gids[:, 0], result.global_ids[: result.n_owned]), 1],
+            old_triangle_gids[_index_of(tri["gid"], result.triangle_global_ids)],
+            old_segment_gids[_index_of(seg["gid"], result.segment_global_ids)], sent)
+
     # ------------------------------------------------------------ point fields
     def _field(self, values: Any, name: str) -> np.ndarray:
         """values over the owned points, checked to have the same dtype and
         trailing shape on every rank."""
-        comm = self.comm
-
-        def check() -> np.ndarray:
-            array = np.asarray(values)
-            if array.dtype == object:
-                raise TypeError(f"{name} must be a numeric array, got dtype object")
-            if array.ndim < 1 or len(array) != self.n_owned:
-                raise ValueError(f"{name} must have one row per owned point: shape ({self.n_owned}, ...), "
-                                 f"got {array.shape}")
-            return np.ascontiguousarray(array)
-
-        array = _collective(comm, check)
-        layouts = comm.allgather((array.dtype.str, array.shape[1:]))
-
-        def agree() -> None:
-            for r, layout in enumerate(layouts):
-                if layout != layouts[0]:
-                    raise ValueError(f"{name} has dtype {layout[0]} and row shape {layout[1]} on rank {r} but "
-                                     f"{layouts[0][0]} and {layouts[0][1]} on rank 0")
-
-        _collective(comm, agree)
-        return array
+        return _field_rows(self.comm, values, self.n_owned, name)
 
     def exchange_halo(self, values: Any) -> np.ndarray:
         """Values on every local point from values on the owned points. Collective.
