@@ -110,3 +110,73 @@ def test_packing_refuses_what_it_does_not_do_yet() -> None:
         packing(dmesh, np.ones(dmesh.n_owned), _core.FrfcOptions.recommended())
     with pytest.raises(TypeError, match="FrfcOptions"):
         packing(dmesh, np.ones(dmesh.n_owned), "paper")
+
+
+_ARRAYS = ("points", "triangles", "segments", "segment_tags", "segment_is_boundary", "kind", "origin", "required")
+
+
+def _with_required(mesh: evomesh.Mesh) -> evomesh.Mesh:
+    """The mesh with a few interior points required (forced in every step)."""
+    required = np.zeros(mesh.n_points, bool)
+    inside = np.flatnonzero(mesh.kind == int(evomesh.PointKind.ORIGINAL))
+    required[inside[:: max(len(inside) // 5, 1)]] = True
+    return evomesh.Mesh(mesh.points, mesh.triangles, mesh.segments, segment_tags=mesh.segment_tags,
+                        required=required)
+
+
+def _front(points: np.ndarray, t: int) -> np.ndarray:
+    """A circle moving to the right: refine near it, coarsen elsewhere."""
+    centre = np.array([0.3 + 0.35 * t, 0.7])
+    distance = np.abs(np.hypot(points[:, 0] - centre[0], points[:, 1] - centre[1]) - 0.4)
+    return np.where(distance < 0.1, 0.5, 1.5)
+
+
+@pytest.mark.parametrize("within", [True, False], ids=["within", "euclidean"])
+@pytest.mark.parametrize("layout", ["even", "weighted"])
+@pytest.mark.parametrize("name", list(_DOMAINS))
+def test_a_time_loop_on_ranks_gives_the_serial_meshes(name: str, layout: str, within: bool) -> None:
+    """Three steps of a moving front, and one of random delta: every gathered
+    mesh equals the serial step's array for array, and every step's output is
+    balanced."""
+    mesh = _mesh(name)
+    if name == "two holes":
+        mesh = _with_required(mesh)
+    options = _options(within, seed=2)
+    dmesh = _scatter(mesh, layout, seed=1)
+    serial = mesh
+    for t in range(4):
+        if t < 3:
+            dmesh = evomesh.evolve(dmesh, lambda xy, t=t: _front(xy, t), options=options)
+            if RANK == 0:
+                serial = evomesh.evolve(serial, _front(serial.points, t), options=options)
+        else:
+            rng = np.random.default_rng(9)
+            gathered = dmesh.gather()
+            delta = COMM.bcast(rng.uniform(0.4, 2.5, gathered.n_points) if RANK == 0 else None)
+            dmesh = evomesh.evolve(dmesh, delta[dmesh.global_ids[: dmesh.n_owned]], options=options)
+            if RANK == 0:
+                serial = evomesh.evolve(serial, delta, options=options)
+        gathered = dmesh.gather()
+        same = RANK != 0 or all(np.array_equal(getattr(gathered, k), getattr(serial, k)) for k in _ARRAYS)
+        check_everywhere(same, f"step {t} differs from the serial step")
+        owned = np.array(COMM.allgather(dmesh.n_owned))
+        assert owned.max() <= 1.1 * owned.mean() + 1
+        assert not np.shares_memory(dmesh.points, mesh.points)
+
+
+def test_evolve_on_ranks_raises_everywhere_for_bad_delta_on_one_rank() -> None:
+    dmesh = _scatter(_mesh("L-shape"), "even", 0)
+    delta = np.ones(dmesh.n_owned)
+    if RANK == SIZE - 1:
+        delta[0] = np.nan
+    with pytest.raises(ValueError, match=f"on rank {SIZE - 1}"):
+        evomesh.evolve(dmesh, delta, options=_options(True, 0))
+
+
+def test_the_step_refuses_triangle_tags_for_now() -> None:
+    mesh = _mesh("L-shape")
+    tagged = evomesh.Mesh(mesh.points, mesh.triangles, mesh.segments,
+                          triangle_tags=(mesh.points[mesh.triangles].mean(axis=1)[:, 0] > 1).astype(int))
+    dmesh = _scatter(tagged, "even", 0)
+    with pytest.raises(ValueError, match="triangle tags"):
+        evomesh.evolve(dmesh, 1.0, options=_options(True, 0))

@@ -33,7 +33,6 @@ from . import _core
 from .distributed import DistributedMesh, _collective, _exchange, _mpi
 from .distributed_packing import lexical_first_mis
 from .distributed_spacing import DistributedSpacing, boundary_flags, segment_skeleton
-from .mesh import PointKind
 
 __all__ = ["evolve_distributed", "packing", "step"]
 
@@ -43,6 +42,7 @@ __all__ = ["evolve_distributed", "packing", "step"]
 _SEGMENT_TIE = 1 << 61
 _INTERIOR_TIE = 1 << 62
 _DRAW_BITS = 20
+_KIND = dict(_core.POINT_KINDS)  # PointKind's values
 
 
 def _unsupported(options: Any) -> list[str]:
@@ -79,7 +79,7 @@ def _global_rank(comm: Any, keys: np.ndarray) -> np.ndarray:
     mine["index"] = np.arange(len(keys))
     mine = mine[np.argsort(mine["key"], kind="stable")]
     # Splitters from evenly spaced samples of every rank's sorted rows.
-    take = np.linspace(0, len(mine) - 1, min(len(mine), 32 * size)).astype(np.int64) if len(mine) else []
+    take = np.linspace(0, len(mine) - 1, min(len(mine), 32 * size)).astype(np.int64)
     samples = np.sort(np.concatenate(comm.allgather(mine["key"][take])), kind="stable")
     splitters = samples[np.linspace(0, len(samples), size + 1).astype(np.int64)[1:-1]] if len(samples) else samples
     bucket = np.searchsorted(splitters, mine["key"], side="right") if len(splitters) else np.zeros(len(mine), np.int64)
@@ -319,11 +319,12 @@ def step(dmesh: DistributedMesh, delta: Any, options: Any = None, *, stats: dict
     mine["required"][is_old] = dmesh.required[: dmesh.n_owned][at_old]
     # Kinds as the serial step gives them: a kept input point keeps its own, a
     # new point on a segment is a boundary point, one inside a sampled point.
-    mine["kind"] = np.where(point_keys < _INTERIOR_TIE, int(PointKind.BOUNDARY), int(PointKind.SAMPLED))
+    mine["kind"] = np.where(point_keys < _INTERIOR_TIE, _KIND["BOUNDARY"], _KIND["SAMPLED"])
+    assert dmesh.kind is not None  # (checked above)
     was = dmesh.kind[: dmesh.n_owned][at_old]
     # (kept_point_kind, step.hpp: a forced corner is a corner, a sampled point of an earlier step a Steiner point)
-    mine["kind"][is_old] = np.where(packed["forced_corner"][at_old], int(PointKind.CORNER),
-                                    np.where(was == int(PointKind.SAMPLED), int(PointKind.STEINER), was))
+    mine["kind"][is_old] = np.where(packed["forced_corner"][at_old], _KIND["CORNER"],
+                                    np.where(was == _KIND["SAMPLED"], _KIND["STEINER"], was))
     # Output ids: the keys' order is the serial output's point order (kept input
     # points by input id, then segment candidates, then interior candidates), so
     # a point's id is its key's rank; a triangle's is the rank of its vertex ids
