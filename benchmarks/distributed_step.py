@@ -1,0 +1,85 @@
+"""Issue 29: one FRFC step on real MPI ranks (evolve on a DistributedMesh, the
+paper's options with within_domain): MIS rounds of both packing passes, the
+triangulation's widenings and label rounds, bytes exchanged per point, the
+balance of the output, and seconds against the serial evolve of the same mesh
+in the same run (on rank 0, one process); every run is checked array for array
+against the serial result.
+
+The mesh is a rectangle with two holes, graded (coarse on the left, fine on
+the right: a refining front's leftovers), and delta comes from a moving
+circle (0.5 near it, 1.5 elsewhere).
+
+    for p in 2 4 8; do
+      .venv/bin/mpiexec -n $p .venv/bin/python benchmarks/distributed_step.py --sizes 1e4,1e5
+    done
+
+Ranks above the core count are oversubscribed: seconds are then wall time of
+ranks sharing cores; rounds and bytes are the algorithm's.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+import numpy as np
+from mpi4py import MPI
+
+import evomesh
+from evomesh import DistributedMesh
+from evomesh.distributed_step import evolve_distributed
+from evomesh.meshgen import polygon_mesh
+
+_ARRAYS = ("points", "triangles", "segments", "segment_tags", "kind", "origin")
+
+
+def domain(n: int) -> evomesh.Mesh:
+    loops = [[(0, 0), (3, 0), (3, 2), (0, 2)], [(0.5, 0.5), (0.5, 1.5), (1.2, 1.5), (1.2, 0.5)],
+             [(1.8, 0.5), (1.8, 1.5), (2.5, 1.5), (2.5, 0.5)]]
+    return polygon_mesh(loops, float(np.sqrt(2 * 4.6 / n)))
+
+
+def front(xy: np.ndarray) -> np.ndarray:
+    distance = np.abs(np.hypot(xy[:, 0] - 1.5, xy[:, 1] - 1.0) - 0.8)
+    return np.where(distance < 0.15, 0.5, 1.5)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--sizes", default="1e4,1e5")
+    parser.add_argument("--header", action="store_true")
+    args = parser.parse_args()
+    comm = MPI.COMM_WORLD
+    options = evomesh.FrfcOptions.paper()
+    options.within_domain = True
+    if args.header and comm.rank == 0:
+        print("| input points | output points | ranks | MIS rounds (pass 1 / 2) | CDT widenings / label rounds | "
+              "bytes / point | balance (max / mean owned) | seconds (slowest rank) | serial seconds | equal |")
+        print("|---:|---:|---:|---|---|---:|---:|---:|---:|---|")
+    for size in args.sizes.split(","):
+        mesh = domain(int(float(size))) if comm.rank == 0 else None
+        serial, serial_seconds = None, 0.0
+        if comm.rank == 0:
+            t = time.perf_counter()
+            serial = evomesh.evolve(mesh, front(mesh.points), options=options)
+            serial_seconds = time.perf_counter() - t
+        n_points = comm.bcast(mesh.n_points if mesh is not None else 0)
+        dmesh = DistributedMesh.scatter(mesh, comm)
+        comm.Barrier()
+        stats: dict = {}
+        t = time.perf_counter()
+        out = evolve_distributed(dmesh, front, options=options, stats=stats)
+        seconds = comm.allreduce(time.perf_counter() - t, op=MPI.MAX)
+        owned = np.array(comm.allgather(out.n_owned))
+        gathered = out.gather()
+        if comm.rank == 0:
+            equal = all(np.array_equal(getattr(gathered, k), getattr(serial, k)) for k in _ARRAYS)
+            cdt = stats["cdt"]
+            print(f"| {n_points:,} | {gathered.n_points:,} | {comm.size} | {stats['first_pass_rounds']} / "
+                  f"{stats['second_pass_rounds']} | {cdt['widenings']} / {cdt['label_rounds']} | "
+                  f"{(stats['bytes'] + cdt['bytes']) / n_points:.0f} | {owned.max() / owned.mean():.3f} | "
+                  f"{seconds:.2f} | {serial_seconds:.2f} | {'yes' if equal else 'NO'} |", flush=True)
+
+
+if __name__ == "__main__":
+    main()
