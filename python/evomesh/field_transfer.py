@@ -408,6 +408,10 @@ def transfer(
         match old, a new point lies outside the old domain, method is
         unknown, or (conservative) new has no lineage from old.
     """
+    if "DistributedMesh" in (type(old).__name__, type(new).__name__):  # (mpi4py is optional: not imported here)
+        from evomesh import distributed_transfer
+
+        return distributed_transfer.transfer(old, new, values, method, frame=frame)
     if frame not in ("eulerian", "lagrangian"):
         raise ValueError(f"frame must be 'eulerian' or 'lagrangian', got {frame!r}")
     _require_mesh(old)
@@ -487,6 +491,10 @@ def transfer_cells(
     TypeError, ValueError
         As :func:`transfer` with method="conservative".
     """
+    if "DistributedMesh" in (type(old).__name__, type(new).__name__):  # (mpi4py is optional: not imported here)
+        from evomesh import distributed_transfer
+
+        return distributed_transfer.transfer_cells(old, new, values)
     supermesh = Supermesh(old, new, mass=False)
     if isinstance(values, Mapping):
         return {name: _named(supermesh.project_cells, name, v) for name, v in values.items()}
