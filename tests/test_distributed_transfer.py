@@ -133,7 +133,8 @@ def test_linear_transfer_equals_the_serial_one_bit_for_bit(name, partition):
     got = evomesh.transfer(d_old, d_new, {key: owned(d_old, f) for key, f in fields.items()})
     want = lineage_free_reference(d_old, d_new, lambda o, n: evomesh.transfer(o, n, fields))
     for key in fields:
-        check_everywhere(got[key].dtype == want[key].dtype and got[key].shape == (d_new.n_owned,) + fields[key].shape[1:]
+        shape = (d_new.n_owned,) + fields[key].shape[1:]
+        check_everywhere(got[key].dtype == want[key].dtype and got[key].shape == shape
                          and np.array_equal(got[key], owned(d_new, want[key])), f"linear field {key} is the serial one")
     kept = d_new.origin[: d_new.n_owned] >= 0
     check_everywhere(np.array_equal(got["u"][kept], u[d_new.origin[: d_new.n_owned][kept]]),

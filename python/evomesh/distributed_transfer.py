@@ -487,7 +487,7 @@ class _LocalSupermesh:
         domain leaves uncovered, their stand-in old triangle and gap mass."""
         old, new = self.old, self.new
         n_new = new.n_triangles
-        self._new_area, edge = _areas_and_longest_sides(new)
+        self._new_area, edge = _areas_and_longest_sides(new)  # type: ignore[arg-type]
         covered = np.bincount(self.new_triangle, self.area, minlength=n_new)
         counts = np.diff(self.offsets)
         gap = np.flatnonzero(self._new_area - covered > _area_rounding(self._magnitude, edge, counts))
@@ -504,9 +504,9 @@ class _LocalSupermesh:
             stand_in[lone] = Supermesh._old_triangle_at_points(self, gap[lone], parent)  # type: ignore[arg-type]
             missing = lone[stand_in[lone] < 0]
             if len(missing):
-                raise ValueError(f"new triangle with global id {int(self.new_mesh.triangle_global_ids[gap[missing[0]]])}"
-                                 " overlaps no old triangle and none of its points lies in one: new was not "
-                                 "evolved from old")
+                gid = int(self.new_mesh.triangle_global_ids[gap[missing[0]]])
+                raise ValueError(f"new triangle with global id {gid} overlaps no old triangle and none of its "
+                                 "points lies in one: new was not evolved from old")
         self.gap_triangle = gap
         self.gap_old_triangle = stand_in
         self.gap_area = self._new_area[gap] - covered[gap]
