@@ -63,7 +63,7 @@ from typing import Any, Mapping
 import numpy as np
 
 from . import _core, _halo
-from .distributed import DistributedMesh, _collective, _contains, _exchange, _index_of, _mpi, _offsets
+from .distributed import DistributedMesh, _collective, _contains, _exchange, _first_of_each, _index_of, _mpi, _offsets
 from .field_transfer import (
     _ROUNDING_ULPS,
     Supermesh,
@@ -209,18 +209,26 @@ class _HeldOld:
         perm, starts = _halo.hilbert_chunks(centre[:, 0], centre[:, 1], low, span)
         box = _halo.chunk_boxes(centre[perm, 0], centre[perm, 1], starts)
         tables = comm.allgather(table)
-        # rank=-1: this rank's own chunks are tested too (its copies come back through the same exchange)
-        index, dest = _halo.sends(centre[perm, 0], centre[perm, 1], extra[perm], starts, box, tables, -1,
+        index, dest = _halo.sends(centre[perm, 0], centre[perm, 1], extra[perm], starts, box, tables, comm.rank,
                                   magnitude)
-        self.send_index = perm[index]
-        self.send_dest = dest
+        # This rank's own triangles: tested against the box around all its chunks with their largest reach
+        # (a superset of what its chunks ask for: one test per triangle instead of dense chunk pairs; more
+        # held triangles change no result, see the module docstring).
+        mine = np.zeros(0, np.int64)
+        if len(table):
+            around = np.array([[table[:, 0].min(), table[:, 1].max(), table[:, 2].min(), table[:, 3].max()]])
+            gap = _halo.box_distance(centre[:, 0], centre[:, 1], np.repeat(around, len(centre), axis=0))
+            mine = np.flatnonzero(gap < (float(table[:, 4].max()) + extra) * (1 + _halo._SLACK) + 1e-12 * magnitude)
+        self.send_index = np.concatenate([perm[index], mine])
+        self.send_dest = np.concatenate([dest, np.full(len(mine), comm.rank, dtype=np.int64)])
+        dest = self.send_dest
         received, _ = _exchange(comm, dest, records[self.send_index])
         self.order = np.argsort(received["gid"], kind="stable")
         held = received[self.order]
         self.bytes_moved = int((dest != comm.rank).sum()) * _OLD_TRIANGLE.itemsize
         self.gid, self.tags, self.boundary = held["gid"], held["tag"], held["boundary"]
         vertex = held["v"].ravel()
-        self.point_gid, first = np.unique(vertex, return_index=True)
+        self.point_gid, first = _first_of_each(vertex)
         self.points = np.ascontiguousarray(held["xy"].reshape(-1, 2)[first])
         self.triangles = _index_of(self.point_gid, held["v"]).astype(np.int64).reshape(-1, 3)
         self.n_triangles = len(held)
