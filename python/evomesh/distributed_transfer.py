@@ -63,7 +63,17 @@ from typing import Any, Mapping
 import numpy as np
 
 from . import _core, _halo
-from .distributed import DistributedMesh, _collective, _contains, _exchange, _first_of_each, _index_of, _mpi, _offsets
+from .distributed import (
+    DistributedMesh,
+    _collective,
+    _contains,
+    _exchange,
+    _first_of_each,
+    _index_of,
+    _mpi,
+    _offsets,
+    _unique,
+)
 from .field_transfer import (
     _ROUNDING_ULPS,
     Supermesh,
@@ -83,6 +93,15 @@ _OLD_TRIANGLE = np.dtype([("gid", "<i8"), ("v", "<i8", (3,)), ("xy", "<f8", (3, 
                           ("boundary", "u1")])
 # The CG iteration cap of the serial solve (_core.solve_p1_mass).
 _MAX_ITERATIONS = 200
+# At most this many receiving chunks per rank: the senders' chunk-pair test is
+# (their chunks) x (these), so a fixed count keeps it linear in the mesh size;
+# coarser boxes only hold a slightly wider band of old triangles along the cuts.
+_MAX_CHUNKS = 512
+
+
+def _receiving_chunks(n: int) -> np.ndarray:
+    """Chunk starts of n Hilbert-ordered receiving records."""
+    return np.arange(0, n, max(_halo._CHUNK, -(-n // _MAX_CHUNKS)), dtype=np.int64)
 
 
 # ------------------------------------------------------------------ checks
@@ -360,7 +379,8 @@ def _linear(comm: Any, old: DistributedMesh, new: DistributedMesh, fields: list[
                                   float(np.abs(queries).max(initial=0.0))))
     tolerance = _ROUNDING_ULPS * float(np.finfo(np.float64).eps) * scale
     # Chunks of the owned new points (kept ones too: their origin's star carries the value to copy).
-    perm, starts = _halo.hilbert_chunks(new.owned_points[:, 0], new.owned_points[:, 1], low, span)
+    perm, _ = _halo.hilbert_chunks(new.owned_points[:, 0], new.owned_points[:, 1], low, span)
+    starts = _receiving_chunks(len(perm))
     box = _halo.chunk_boxes(new.owned_points[perm, 0], new.owned_points[perm, 1], starts)
     held = _HeldOld(old, _table(box, np.full(len(box), 4.0 * tolerance)), low, span, magnitude)
     stats["old_triangles_held"] = held.n_triangles
@@ -426,7 +446,8 @@ class _LocalSupermesh:
         margin = 1e-9 * (hi - lo) + 64 * np.finfo(np.float64).eps * np.maximum(np.abs(lo), np.abs(hi))
         size = np.hypot(*(hi - lo).T)
         centroid = corners.mean(axis=1)
-        perm, starts = _halo.hilbert_chunks(centroid[:, 0], centroid[:, 1], low, span)
+        perm, _ = _halo.hilbert_chunks(centroid[:, 0], centroid[:, 1], low, span)
+        starts = _receiving_chunks(len(perm))
         box = np.empty((len(starts), 4))
         if len(starts):
             box[:, 0], box[:, 1] = np.minimum.reduceat(lo[perm, 0], starts), np.maximum.reduceat(hi[perm, 0], starts)
@@ -450,7 +471,7 @@ class _LocalSupermesh:
     def _build(self, new: DistributedMesh, mass: bool, reach_triangle: np.ndarray) -> None:
         held = self.held
         tri = new.triangles
-        vertices = np.unique(tri.ravel())
+        vertices = _unique(tri.ravel())
         origin = np.full(new.n_local, -1, dtype=np.int64)
         origin[vertices] = _origins(held, new, vertices)
         parent = np.full(new.n_local, -1, dtype=np.int64)
