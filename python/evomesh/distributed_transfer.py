@@ -75,6 +75,7 @@ from .distributed import (
     _unique,
 )
 from .field_transfer import (
+    _DISTRIBUTED,
     _ROUNDING_ULPS,
     Supermesh,
     _area_rounding,
@@ -790,3 +791,7 @@ def transfer_cells(old: Any, new: Any, values: Any, *, stats: dict[str, Any] | N
     if names is None:
         return out[0]
     return dict(zip(names, out))
+
+
+# evomesh.transfer and evomesh.transfer_cells dispatch here for DistributedMesh arguments.
+_DISTRIBUTED.update(transfer=transfer, transfer_cells=transfer_cells)

@@ -315,6 +315,17 @@ def _carried(values: Any, origin: np.ndarray, n_old: int) -> np.ndarray:
     return array[origin]
 
 
+# The transfers on two DistributedMesh, registered by evomesh.distributed_transfer
+# (which builds on this module, so this one does not import it).
+_DISTRIBUTED: dict[str, Callable[..., Any]] = {}
+
+
+def _distributed(name: str) -> Callable[..., Any]:
+    if name not in _DISTRIBUTED:
+        raise ImportError("the transfers on DistributedMesh live in evomesh.distributed_transfer: import evomesh")
+    return _DISTRIBUTED[name]
+
+
 Method = Literal["linear", "conservative"]
 Frame = Literal["eulerian", "lagrangian"]
 
@@ -409,9 +420,7 @@ def transfer(
         unknown, or (conservative) new has no lineage from old.
     """
     if "DistributedMesh" in (type(old).__name__, type(new).__name__):  # (mpi4py is optional: not imported here)
-        from evomesh import distributed_transfer
-
-        return distributed_transfer.transfer(old, new, values, method, frame=frame)
+        return _distributed("transfer")(old, new, values, method, frame=frame)
     if frame not in ("eulerian", "lagrangian"):
         raise ValueError(f"frame must be 'eulerian' or 'lagrangian', got {frame!r}")
     _require_mesh(old)
@@ -492,9 +501,7 @@ def transfer_cells(
         As :func:`transfer` with method="conservative".
     """
     if "DistributedMesh" in (type(old).__name__, type(new).__name__):  # (mpi4py is optional: not imported here)
-        from evomesh import distributed_transfer
-
-        return distributed_transfer.transfer_cells(old, new, values)
+        return _distributed("transfer_cells")(old, new, values)
     supermesh = Supermesh(old, new, mass=False)
     if isinstance(values, Mapping):
         return {name: _named(supermesh.project_cells, name, v) for name, v in values.items()}
