@@ -56,6 +56,7 @@ __all__ = [
 
 __version__ = "0.1.0"
 
+from evomesh import distributed_transfer  # noqa: E402,F401 (registers transfer on DistributedMesh with field_transfer)
 from evomesh._core import default_thread_count  # noqa: E402
 
 # Moving-front workflow.

@@ -315,6 +315,17 @@ def _carried(values: Any, origin: np.ndarray, n_old: int) -> np.ndarray:
     return array[origin]
 
 
+# The transfers on two DistributedMesh, registered by evomesh.distributed_transfer
+# (which builds on this module, so this one does not import it).
+_DISTRIBUTED: dict[str, Callable[..., Any]] = {}
+
+
+def _distributed(name: str) -> Callable[..., Any]:
+    if name not in _DISTRIBUTED:
+        raise ImportError("the transfers on DistributedMesh live in evomesh.distributed_transfer: import evomesh")
+    return _DISTRIBUTED[name]
+
+
 Method = Literal["linear", "conservative"]
 Frame = Literal["eulerian", "lagrangian"]
 
@@ -408,6 +419,8 @@ def transfer(
         match old, a new point lies outside the old domain, method is
         unknown, or (conservative) new has no lineage from old.
     """
+    if "DistributedMesh" in (type(old).__name__, type(new).__name__):  # (mpi4py is optional: not imported here)
+        return _distributed("transfer")(old, new, values, method, frame=frame)
     if frame not in ("eulerian", "lagrangian"):
         raise ValueError(f"frame must be 'eulerian' or 'lagrangian', got {frame!r}")
     _require_mesh(old)
@@ -487,6 +500,8 @@ def transfer_cells(
     TypeError, ValueError
         As :func:`transfer` with method="conservative".
     """
+    if "DistributedMesh" in (type(old).__name__, type(new).__name__):  # (mpi4py is optional: not imported here)
+        return _distributed("transfer_cells")(old, new, values)
     supermesh = Supermesh(old, new, mass=False)
     if isinstance(values, Mapping):
         return {name: _named(supermesh.project_cells, name, v) for name, v in values.items()}
