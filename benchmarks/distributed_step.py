@@ -20,7 +20,9 @@ ranks sharing cores; rounds and bytes are the algorithm's.
 from __future__ import annotations
 
 import argparse
+import sys
 import time
+from pathlib import Path
 
 import numpy as np
 from mpi4py import MPI
@@ -28,15 +30,11 @@ from mpi4py import MPI
 import evomesh
 from evomesh import DistributedMesh
 from evomesh.distributed_step import evolve_distributed
-from evomesh.meshgen import polygon_mesh
+
+sys.path.insert(0, str(Path(__file__).parent))
+from distributed_spacing import domain  # noqa: E402 (the same plate with two holes)
 
 _ARRAYS = ("points", "triangles", "segments", "segment_tags", "kind", "origin")
-
-
-def domain(n: int) -> evomesh.Mesh:
-    loops = [[(0, 0), (3, 0), (3, 2), (0, 2)], [(0.5, 0.5), (0.5, 1.5), (1.2, 1.5), (1.2, 0.5)],
-             [(1.8, 0.5), (1.8, 1.5), (2.5, 1.5), (2.5, 0.5)]]
-    return polygon_mesh(loops, float(np.sqrt(2 * 4.6 / n)))
 
 
 def front(xy: np.ndarray) -> np.ndarray:

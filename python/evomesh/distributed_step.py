@@ -25,7 +25,7 @@ skipping); the quality pass is not part of the packing.
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, Callable
 
 import numpy as np
 
@@ -249,7 +249,7 @@ def _pack(dmesh: DistributedMesh, delta: Any, options: Any, stats: dict[str, Any
 
 # A point of the step's output as the ranks look it up (distributed_triangulation._lookup).
 _OUT_POINT = np.dtype([("gid", "<i8"), ("x", "<f8"), ("y", "<f8"), ("owner", "<i4"), ("required", "u1"),
-                       ("origin", "<i8"), ("id", "<i8"), ("kind", "u1")])  # gid: the packing key; id: the output global id
+                       ("origin", "<i8"), ("id", "<i8"), ("kind", "u1")])  # gid: packing key; id: output global id
 
 
 def step(dmesh: DistributedMesh, delta: Any, options: Any = None, *, stats: dict[str, Any] | None = None
@@ -356,14 +356,14 @@ def step(dmesh: DistributedMesh, delta: Any, options: Any = None, *, stats: dict
 
 
 def evolve_distributed(dmesh: DistributedMesh, delta: Any = None, *, size: Any = None, method: str = "frfc",
-                       seed: int | None = None, options: Any = None, stats: dict[str, Any] | None = None,
-                       **overrides: Any) -> DistributedMesh:
+                       options: Any = None, stats: dict[str, Any] | None = None,
+                       build_options: Callable[[], Any] | None = None) -> DistributedMesh:
     """:func:`evomesh.evolve` on a :class:`~evomesh.DistributedMesh` (it calls
-    this). Collective: every rank calls it with its own delta. The step is
+    this, with `build_options` making the options from its arguments as for a
+    Mesh). Collective: every rank calls it with its own delta. The step is
     :func:`step`, the result rebalanced (:meth:`DistributedMesh.rebalance`,
-    global ids kept: the serial step's output order)."""
-    from .evolution import _check_seed, make_options
-
+    global ids kept: the serial step's output order). `options`: an
+    FrfcOptions, when called directly (default: the paper's)."""
     comm = dmesh.comm
 
     def check() -> Any:
@@ -374,9 +374,13 @@ def evolve_distributed(dmesh: DistributedMesh, delta: Any = None, *, size: Any =
                             "function of the owned coordinates)")
         if method != "frfc":
             raise ValueError(f"not yet on a DistributedMesh: method={method!r} (only 'frfc')")
-        o = make_options("frfc", options, **overrides)
-        if seed is not None:
-            o.seed = _check_seed(seed)
+        if build_options is not None:
+            o = build_options()
+        else:
+            o = _core.FrfcOptions.paper() if options is None else options
+            if not isinstance(o, _core.FrfcOptions):
+                raise TypeError(f"options must be evomesh FrfcOptions, got {type(o).__name__}")
+            o.validate()
         missing = _unsupported(o) + (["the quality pass"] if o.quality else [])
         if missing:
             raise ValueError("not yet on a DistributedMesh: " + ", ".join(missing) + "; the distributed step is "
@@ -386,5 +390,4 @@ def evolve_distributed(dmesh: DistributedMesh, delta: Any = None, *, size: Any =
 
     o = _collective(comm, check)
     out = step(dmesh, delta, o, stats=stats)
-    rebalance = getattr(out, "rebalance", None)
-    return rebalance(renumber=False) if rebalance is not None else out
+    return out.rebalance(renumber=False)

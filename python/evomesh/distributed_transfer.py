@@ -81,6 +81,7 @@ from .field_transfer import (
     _area_rounding,
     _areas_and_longest_sides,
     _barycentric,
+    _largest_overlap,
     _numeric,
     _pairs_within,
     _to_segments,
@@ -524,11 +525,7 @@ class _LocalSupermesh:
         stand_in = np.full(len(gap), -1, dtype=np.int64)
         with_pairs = counts[gap] > 0
         if with_pairs.any():
-            rows = gap[with_pairs]
-            members = np.flatnonzero(np.isin(self.new_triangle, rows))
-            order = members[np.lexsort((self.area[members], self.new_triangle[members]))]
-            last = order[np.r_[self.new_triangle[order][1:] != self.new_triangle[order][:-1], True]]
-            stand_in[with_pairs] = self.old_triangle[last]
+            stand_in[with_pairs] = _largest_overlap(self.new_triangle, self.old_triangle, self.area, gap[with_pairs])
         lone = np.flatnonzero(~with_pairs)
         if len(lone):
             stand_in[lone] = Supermesh._old_triangle_at_points(self, gap[lone], parent)  # type: ignore[arg-type]

@@ -446,8 +446,14 @@ def evolve(mesh: Mesh, delta: Any = None, *, size: Any = None, method: str = "fr
                              "mesh, evolve it on the root, and scatter() the result)")
         from evomesh.distributed_step import evolve_distributed
 
-        return evolve_distributed(mesh, delta, size=size, method=method, seed=seed, options=options,  # type: ignore
-                                  **overrides)
+        def build_options() -> Any:  # (on every rank, inside the step's failure agreement)
+            o = make_options("frfc", options, **overrides)
+            if seed is not None:
+                o.seed = _check_seed(seed)
+            return o
+
+        return evolve_distributed(mesh, delta, size=size, method=method,  # type: ignore[return-value]
+                                  build_options=build_options)
     _require_mesh(mesh)
     if (delta is None) == (size is None):
         raise TypeError(

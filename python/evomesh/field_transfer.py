@@ -667,12 +667,7 @@ class Supermesh:
         stand_in = np.full(len(gap), -1, dtype=np.int64)
         with_pairs = counts[gap] > 0
         if with_pairs.any():
-            # the pair of largest overlap: order pairs by (new triangle, area) and take each group's last
-            rows = gap[with_pairs]
-            members = np.flatnonzero(np.isin(self.new_triangle, rows))
-            order = members[np.lexsort((self.area[members], self.new_triangle[members]))]
-            last = order[np.r_[self.new_triangle[order][1:] != self.new_triangle[order][:-1], True]]
-            stand_in[with_pairs] = self.old_triangle[last]
+            stand_in[with_pairs] = _largest_overlap(self.new_triangle, self.old_triangle, self.area, gap[with_pairs])
         lone = np.flatnonzero(~with_pairs)
         if len(lone):
             stand_in[lone] = self._old_triangle_at_points(gap[lone], parent)
@@ -976,6 +971,16 @@ def region_exchange(old: Mesh, new: Mesh, values: Any = None) -> RegionExchange:
     values_given = values is not None
     points_field = values_given and np.shape(values) == (old.n_points,)
     return Supermesh(old, new, mass=not values_given or points_field).region_exchange(values)
+
+
+def _largest_overlap(new_triangle: np.ndarray, old_triangle: np.ndarray, area: np.ndarray,
+                     rows: np.ndarray) -> np.ndarray:
+    """For each new triangle in `rows` (sorted, each with pairs), the old triangle
+    of its pair of largest overlap area (ties: the last in pair order)."""
+    members = np.flatnonzero(np.isin(new_triangle, rows))
+    order = members[np.lexsort((area[members], new_triangle[members]))]
+    last = order[np.r_[new_triangle[order][1:] != new_triangle[order][:-1], True]]
+    return old_triangle[last]
 
 
 def _areas_and_longest_sides(mesh: Mesh) -> tuple[np.ndarray, np.ndarray]:
