@@ -173,13 +173,26 @@ def test_evolve_on_ranks_raises_everywhere_for_bad_delta_on_one_rank() -> None:
         evomesh.evolve(dmesh, delta, options=_options(True, 0))
 
 
-def test_the_step_refuses_triangle_tags_for_now() -> None:
-    mesh = _mesh("L-shape")
-    tagged = evomesh.Mesh(mesh.points, mesh.triangles, mesh.segments,
-                          triangle_tags=(mesh.points[mesh.triangles].mean(axis=1)[:, 0] > 1).astype(int))
-    dmesh = _scatter(tagged, "even", 0)
-    with pytest.raises(ValueError, match="triangle tags"):
-        evomesh.evolve(dmesh, 1.0, options=_options(True, 0))
+def test_triangle_tags_come_along() -> None:
+    """Regions (triangle tags bounded by an interior constraint): each new
+    triangle takes the tag of the old triangle at its centroid, as serial."""
+    mesh = _mesh("crack and a notch")
+    centroid = mesh.points[mesh.triangles].mean(axis=1)
+    tagged = evomesh.Mesh(mesh.points, mesh.triangles, mesh.segments, segment_tags=mesh.segment_tags,
+                          triangle_tags=np.where(centroid[:, 1] > 0.3, 2, 5), tag_names={(2, 2): "top"})
+    options = _options(True, 4)
+    dmesh = _scatter(tagged, "weighted", 2)
+    serial = tagged
+    for t in range(2):
+        dmesh = evomesh.evolve(dmesh, lambda xy, t=t: _front(xy, t), options=options)
+        if RANK == 0:
+            serial = evomesh.evolve(serial, _front(serial.points, t), options=options)
+        gathered = dmesh.gather()
+        same = RANK != 0 or (np.array_equal(gathered.triangle_tags, serial.triangle_tags)
+                             and all(np.array_equal(getattr(gathered, k), getattr(serial, k)) for k in _ARRAYS))
+        check_everywhere(same, f"step {t}: triangle tags differ from the serial step")
+    if RANK == 0:
+        assert set(np.unique(gathered.triangle_tags)) == {2, 5} and gathered.tag_names == serial.tag_names
 
 
 def test_the_worked_example_runs_without_gathering(capsys, monkeypatch) -> None:

@@ -29,7 +29,7 @@ from typing import Any, Callable
 
 import numpy as np
 
-from . import _core
+from . import _core, _halo
 from .distributed import DistributedMesh, _collective, _exchange, _mpi
 from .distributed_packing import lexical_first_mis
 from .distributed_spacing import DistributedSpacing, boundary_flags, segment_skeleton
@@ -280,8 +280,6 @@ def step(dmesh: DistributedMesh, delta: Any, options: Any = None, *, stats: dict
         if dmesh.kind is None:
             raise ValueError("the step needs the points' kinds: give kind= to DistributedMesh.from_local "
                              "(scatter and a step's output have them)")
-        if len(dmesh.triangle_tags) and (dmesh.triangle_tags != 0).any():
-            raise ValueError("not yet on a DistributedMesh: triangle tags (they need the step's parent map)")
 
     _collective(comm, check)
     packed = _pack(dmesh, delta, options, stats)
@@ -341,11 +339,14 @@ def step(dmesh: DistributedMesh, delta: Any, options: Any = None, *, stats: dict
     local = np.take_along_axis(local.reshape(-1, 3), rotate, axis=1)
     tri_ids = np.take_along_axis(tri_ids, rotate, axis=1)
     triangle_gids = _global_rank(comm, tri_ids)
+    xy = np.column_stack([found["x"], found["y"]])
+    triangle_tags = _carried_triangle_tags(dmesh, xy[local[:, 0]], xy[local[:, 1]], xy[local[:, 2]])
     out = DistributedMesh.from_local(
         np.column_stack([found["x"], found["y"]]), local, ids, comm, owners=found["owner"],
         segments=np.searchsorted(found["gid"], pieces).reshape(-1, 2), segment_tags=piece_tags,
         required=found["required"].astype(bool), origin=found["origin"], kind=found["kind"],
-        tag_names=dict(dmesh.tag_names), triangle_global_ids=triangle_gids, segment_global_ids=share)
+        tag_names=dict(dmesh.tag_names), triangle_global_ids=triangle_gids, segment_global_ids=share,
+        triangle_tags=triangle_tags)
     # A step's output is valid by construction, as the serial step's: gather
     # returns its arrays as they are (Mesh._trusted), in the serial order.
     object.__setattr__(out, "_segment_is_boundary", boundary_flags(out))
@@ -353,6 +354,39 @@ def step(dmesh: DistributedMesh, delta: Any, options: Any = None, *, stats: dict
     if stats is not None:
         stats.update(cdt=cdt, pieces=len(keys), triangles=comm.allreduce(len(triangles), op=MPI.SUM))
     return out
+
+
+def _carried_triangle_tags(old: DistributedMesh, a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
+    """The tag of each new triangle (a, b, c) (this rank's, in their stored
+    rotation): that of the old triangle containing its centroid, as the serial
+    carry_tags (parent_map.cpp): region borders are constraints, so a new
+    triangle lies in one region. The old triangles whose bounding boxes contain
+    a centroid come by the transfer's reach halo (distributed_transfer._HeldOld).
+    Collective."""
+    from .distributed_transfer import _HeldOld, _bounds, _receiving_chunks, _table
+
+    comm = old.comm
+    MPI = _mpi()
+    centroid = (a + b + c) / 3.0
+    tagged = comm.allreduce(bool(len(old.triangle_tags) and (old.triangle_tags != 0).any()), op=MPI.LOR)
+    if not tagged:
+        return np.zeros(len(centroid), dtype=np.int64)
+    low, span, magnitude = _bounds(comm, old.points, centroid)
+    perm, _ = _halo.hilbert_chunks(centroid[:, 0], centroid[:, 1], low, span)
+    starts = _receiving_chunks(len(perm))
+    box = _halo.chunk_boxes(centroid[perm, 0], centroid[perm, 1], starts)
+    held = _HeldOld(old, _table(box, np.zeros(len(box))), low, span, magnitude)
+
+    def locate() -> np.ndarray:
+        if not len(centroid):
+            return np.zeros(0, dtype=np.int64)
+        found = _core.locate_points(held.points, held.triangles, centroid)[0] if held.n_triangles \
+            else np.full(len(centroid), -1)
+        if (found < 0).any():
+            raise RuntimeError("carry_tags: a new triangle outside the old mesh (an internal error)")
+        return np.asarray(held.tags[found], dtype=np.int64)
+
+    return _collective(comm, locate)
 
 
 def evolve_distributed(dmesh: DistributedMesh, delta: Any = None, *, size: Any = None, method: str = "frfc",
