@@ -448,8 +448,8 @@ def test_evolve_on_a_distributed_mesh_says_what_it_does_not_do_yet():
     d = evomesh.DistributedMesh.scatter(mesh if RANK == 0 else None, COMM)
     with pytest.raises(ValueError, match="FrfcOptions.paper"):
         evomesh.evolve(d, 1.0)  # the recommended options: rings, repair, quality pass
-    with pytest.raises(ValueError, match="size="):
-        evomesh.evolve(d, size=0.1, options=evomesh.FrfcOptions.paper())
+    with pytest.raises(ValueError, match="method='drfc'"):
+        evomesh.evolve(d, 1.0, method="drfc")
     with pytest.raises(ValueError, match="displacement="):
         evomesh.evolve(d, 1.0, displacement=np.zeros((d.n_owned, 2)))
 

@@ -164,6 +164,43 @@ def test_a_time_loop_on_ranks_gives_the_serial_meshes(name: str, layout: str, wi
         assert not np.shares_memory(dmesh.points, mesh.points)
 
 
+@pytest.mark.parametrize("name", ["L-shape", "disc with a hole"])
+def test_size_requests_on_ranks_give_the_serial_meshes(name: str) -> None:
+    """evolve(dmesh, size=h): delta_from_size on the ranks (two rings of
+    triangles, then three and one more by halo exchanges) equals the serial
+    one bit for bit, and so do the meshes, step after step: refining half the
+    domain, coarsening the other, then the same request again (it stays put)."""
+    from evomesh.distributed_spacing import delta_from_size
+    from evomesh.spacing_function import delta_from_size as serial_delta_from_size
+
+    mesh = _mesh(name)
+    lo, hi = mesh.points.min(axis=0), mesh.points.max(axis=0)
+    middle, h = 0.5 * (lo[0] + hi[0]), 0.06 * float((hi - lo).max())
+
+    def size(xy: np.ndarray) -> np.ndarray:
+        return np.where(xy[:, 0] < middle, 0.5 * h, 2.0 * h)
+
+    options = _options(True, 6)
+    dmesh = _scatter(mesh, "weighted", 3)
+    serial = mesh
+    first = None
+    for t in range(3):
+        delta = dmesh.gather_field(delta_from_size(dmesh, size))
+        if RANK == 0:
+            reference = serial_delta_from_size(serial, size)
+            first = reference if first is None else first
+        same = RANK != 0 or np.array_equal(delta.view(np.int64), reference.view(np.int64))
+        check_everywhere(same, f"step {t}: delta_from_size differs from the serial one")
+        dmesh = evomesh.evolve(dmesh, size=size, options=options)
+        if RANK == 0:
+            serial = evomesh.evolve(serial, size=size, options=options)
+        gathered = dmesh.gather()
+        same = RANK != 0 or all(np.array_equal(getattr(gathered, k), getattr(serial, k)) for k in _ARRAYS)
+        check_everywhere(same, f"step {t} (size=) differs from the serial step")
+    if RANK == 0:  # the first request refines and coarsens
+        assert (first < 1).any() and (first > 1).any()
+
+
 def test_evolve_on_ranks_raises_everywhere_for_bad_delta_on_one_rank() -> None:
     dmesh = _scatter(_mesh("L-shape"), "even", 0)
     delta = np.ones(dmesh.n_owned)

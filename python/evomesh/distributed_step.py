@@ -32,7 +32,7 @@ import numpy as np
 from . import _core, _halo
 from .distributed import DistributedMesh, _collective, _exchange, _mpi
 from .distributed_packing import lexical_first_mis
-from .distributed_spacing import DistributedSpacing, boundary_flags, segment_skeleton
+from .distributed_spacing import DistributedSpacing, boundary_flags, delta_from_size, segment_skeleton
 
 __all__ = ["evolve_distributed", "packing", "step"]
 
@@ -401,11 +401,9 @@ def evolve_distributed(dmesh: DistributedMesh, delta: Any = None, *, size: Any =
     comm = dmesh.comm
 
     def check() -> Any:
-        if size is not None:
-            raise ValueError("not yet on a DistributedMesh: size= (give delta)")
-        if delta is None:
-            raise TypeError("evolve on a DistributedMesh needs delta (a factor per owned point, a scalar or a "
-                            "function of the owned coordinates)")
+        if (delta is None) == (size is None):
+            raise TypeError("evolve on a DistributedMesh needs exactly one of delta and size (each a value per "
+                            "owned point, a scalar, or a function of the owned coordinates)")
         if method != "frfc":
             raise ValueError(f"not yet on a DistributedMesh: method={method!r} (only 'frfc')")
         if build_options is not None:
@@ -423,5 +421,5 @@ def evolve_distributed(dmesh: DistributedMesh, delta: Any = None, *, size: Any =
         return o
 
     o = _collective(comm, check)
-    out = step(dmesh, delta, o, stats=stats)
+    out = step(dmesh, delta if size is None else delta_from_size(dmesh, size), o, stats=stats)
     return out.rebalance(renumber=False)

@@ -141,8 +141,8 @@ def evolve(mesh: Mesh, delta: Any = None, *, size: Any = None, method: str = "fr
         returns a DistributedMesh whose ``gather()`` is this function's result
         on the gathered mesh, bit for bit, on any number of ranks; for now with
         the paper's FRFC options (``options=FrfcOptions.paper()``, optionally
-        ``within_domain=True``) and delta (evomesh.distributed_step); tags,
-        required points and origin come along.
+        ``within_domain=True``), with delta or size (evomesh.distributed_step);
+        tags, required points and origin come along.
     delta : array_like, shape (n,), or a scalar
         Per-point factor, relative to the current spacing: the new spacing
         (nearest-neighbour distance) at p is about delta(p) nn_M(p); < 1
