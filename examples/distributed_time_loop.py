@@ -39,19 +39,6 @@ def target_size(xy: np.ndarray, t: float, h: float) -> np.ndarray:
     return np.minimum(h, h / 4 + 0.5 * np.maximum(distance - 0.1, 0.0))
 
 
-def delta_towards(dmesh: evomesh.DistributedMesh, size: np.ndarray) -> np.ndarray:
-    """delta at the owned points that asks for `size`: size over the mean length of a
-    point's edges (its triangles are all held), within [0.4, 2.5] per step."""
-    triangles = np.concatenate([dmesh.triangles, dmesh.halo_triangles])
-    a = triangles.ravel()
-    b = np.roll(triangles, -1, axis=1).ravel()
-    length = np.hypot(*(dmesh.points[a] - dmesh.points[b]).T)
-    total = np.bincount(a, length, dmesh.n_local) + np.bincount(b, length, dmesh.n_local)
-    count = np.bincount(a, minlength=dmesh.n_local) + np.bincount(b, minlength=dmesh.n_local)
-    mean = total[: dmesh.n_owned] / np.maximum(count[: dmesh.n_owned], 1)
-    return np.clip(size / mean, 0.4, 2.5)
-
-
 def smallest_angle(dmesh: evomesh.DistributedMesh) -> float:
     """The smallest angle (degrees) of the owned triangles, over all ranks."""
     p = dmesh.points[dmesh.triangles]
@@ -91,8 +78,8 @@ def main() -> None:
         print("step  points  balance  min_angle  integral_before  integral_after")
     for step in range(1, args.steps + 1):
         before = integral(dmesh, u)
-        delta = delta_towards(dmesh, target_size(dmesh.owned_points, step, h))
-        new = evomesh.evolve(dmesh, delta, options=options, within_domain=True, seed=step)
+        new = evomesh.evolve(dmesh, size=lambda xy: target_size(xy, step, h), options=options, within_domain=True,
+                             seed=step)
         u = evomesh.transfer(dmesh, new, u, method="conservative")
         dmesh = new
         after = integral(dmesh, u)
