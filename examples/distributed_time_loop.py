@@ -78,8 +78,10 @@ def main() -> None:
         print("step  points  balance  min_angle  integral_before  integral_after")
     for step in range(1, args.steps + 1):
         before = integral(dmesh, u)
-        new = evomesh.evolve(dmesh, size=lambda xy, step=step: target_size(xy, step, h), options=options, within_domain=True,
-                             seed=step)
+        def size(xy: np.ndarray, step: int = step) -> np.ndarray:
+            return target_size(xy, step, h)
+
+        new = evomesh.evolve(dmesh, size=size, options=options, within_domain=True, seed=step)
         u = evomesh.transfer(dmesh, new, u, method="conservative")
         dmesh = new
         after = integral(dmesh, u)

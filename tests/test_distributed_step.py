@@ -251,7 +251,8 @@ def test_the_worked_example_runs_without_gathering(capsys, monkeypatch) -> None:
         rows = [line.split() for line in out.splitlines() if line.split() and line.split()[0].isdigit()]
         assert [row[0] for row in rows] == ["1", "2", "3"]
         points = [int(row[1]) for row in rows]
-        assert max(points) < 1.3 * min(points)  # (the paper's FRFC coarsens behind the front more slowly than it refines)
+        # (the paper's FRFC coarsens behind the front more slowly than it refines)
+        assert max(points) < 1.3 * min(points)
         for row in rows:
             assert float(row[2]) <= 1.1
             assert abs(float(row[4]) - float(row[5])) <= 1e-12 * abs(float(row[4]))

@@ -363,7 +363,7 @@ def _carried_triangle_tags(old: DistributedMesh, a: np.ndarray, b: np.ndarray, c
     triangle lies in one region. The old triangles whose bounding boxes contain
     a centroid come by the transfer's reach halo (distributed_transfer._HeldOld).
     Collective."""
-    from .distributed_transfer import _HeldOld, _bounds, _receiving_chunks, _table
+    from .distributed_transfer import _bounds, _HeldOld, _receiving_chunks, _table
 
     comm = old.comm
     MPI = _mpi()
