@@ -30,31 +30,52 @@ std::int64_t cell_of(double x, double side) {
 // 2R, one cell, so every query visits at most 3 x 3 cells per octave (a pair
 // within one octave is found from both ends and kept from the lower index).
 // O(n L) cell visits for L octaves, plus the pairs met.
-std::vector<std::vector<Index>> earlier_conflicts(const std::vector<Vec2>& c, const std::vector<double>& r,
-                                                  const std::vector<std::size_t>& rank) {
+Conflict_lists earlier_conflicts(const std::vector<Vec2>& c, const std::vector<double>& r,
+                                 const std::vector<std::size_t>& rank) {
   const std::size_t n = c.size();
   std::map<int, std::vector<Index>> by_octave;  // (ordered: the octaves at or above a sphere's)
   for (std::size_t i = 0; i < n; ++i) by_octave[std::ilogb(r[i])].push_back(static_cast<Index>(i));
+  // One grid per octave, its members laid out cell by cell (one flat array; a
+  // hash map gives a cell's range), so a query reads contiguous memory.
   struct Grid {
     int octave;
     double side;
     double reach;  // the octave's largest radius
-    std::unordered_map<std::uint64_t, std::vector<Index>> cells;
+    std::unordered_map<std::uint64_t, std::uint32_t> cell;  // key -> cell number
+    std::vector<std::uint32_t> start;                        // cell number -> first member
+    std::vector<Index> members;
   };
   auto key = [](std::int64_t ix, std::int64_t iy) {
     return (static_cast<std::uint64_t>(ix) << 32) ^ static_cast<std::uint64_t>(iy & 0xffffffff);
   };
   std::vector<Grid> grids;  // by increasing octave
+  grids.reserve(by_octave.size());
   for (auto& [octave, members] : by_octave) {
     Grid g;
     g.octave = octave;
     g.reach = 0;
     for (Index i : members) g.reach = std::max(g.reach, r[i]);
     g.side = 2 * g.reach;
-    for (Index i : members) g.cells[key(cell_of(c[i][0], g.side), cell_of(c[i][1], g.side))].push_back(i);
+    std::vector<std::pair<std::uint64_t, Index>> keyed(members.size());
+    for (std::size_t k = 0; k < members.size(); ++k) {
+      const Index i = members[k];
+      keyed[k] = {key(cell_of(c[i][0], g.side), cell_of(c[i][1], g.side)), i};
+    }
+    std::sort(keyed.begin(), keyed.end());
+    g.members.resize(keyed.size());
+    for (std::size_t k = 0; k < keyed.size(); ++k) {
+      g.members[k] = keyed[k].second;
+      if (k == 0 || keyed[k].first != keyed[k - 1].first) {
+        g.cell.emplace(keyed[k].first, static_cast<std::uint32_t>(g.start.size()));
+        g.start.push_back(static_cast<std::uint32_t>(k));
+      }
+    }
+    g.start.push_back(static_cast<std::uint32_t>(keyed.size()));
     grids.push_back(std::move(g));
   }
-  std::vector<std::vector<Index>> earlier(n);
+  // The pairs (later sphere, earlier sphere), then counted into lists.
+  std::vector<std::pair<Index, Index>> pairs;
+  pairs.reserve(8 * n);
   for (std::size_t s = 0; s < n; ++s) {
     const int own = std::ilogb(r[s]);
     for (const Grid& g : grids) {
@@ -64,35 +85,53 @@ std::vector<std::vector<Index>> earlier_conflicts(const std::vector<Vec2>& c, co
       const std::int64_t y0 = cell_of(c[s][1] - reach, g.side), y1 = cell_of(c[s][1] + reach, g.side);
       for (std::int64_t ix = x0; ix <= x1; ++ix) {
         for (std::int64_t iy = y0; iy <= y1; ++iy) {
-          const auto it = g.cells.find(key(ix, iy));
-          if (it == g.cells.end()) continue;
-          for (Index t : it->second) {
+          const auto it = g.cell.find(key(ix, iy));
+          if (it == g.cell.end()) continue;
+          for (std::uint32_t m = g.start[it->second]; m < g.start[it->second + 1]; ++m) {
+            const Index t = g.members[m];
             if (static_cast<std::size_t>(t) == s || (g.octave == own && static_cast<std::size_t>(t) < s)) continue;
             // (packing.cpp's leaf_conflicts, operation for operation: symmetric in s and t)
             const double ex = c[t][0] - c[s][0], ey = c[t][1] - c[s][1], sum = r[s] + r[t];
             if (!(ex * ex + ey * ey < sum * sum)) continue;
-            if (rank[t] < rank[s]) earlier[s].push_back(t);
-            else earlier[t].push_back(static_cast<Index>(s));
+            if (rank[t] < rank[s]) pairs.emplace_back(static_cast<Index>(s), t);
+            else pairs.emplace_back(t, static_cast<Index>(s));
           }
         }
       }
     }
   }
   // (two cells of one grid can share a key: a pair met twice is listed twice, harmlessly for the rule)
-  for (auto& list : earlier) {
-    std::sort(list.begin(), list.end());
-    list.erase(std::unique(list.begin(), list.end()), list.end());
+  Conflict_lists out;
+  out.offset.assign(n + 1, 0);
+  for (const auto& [later, earlier] : pairs) ++out.offset[static_cast<std::size_t>(later) + 1];
+  for (std::size_t s = 0; s < n; ++s) out.offset[s + 1] += out.offset[s];
+  out.list.resize(pairs.size());
+  std::vector<std::size_t> fill(out.offset.begin(), out.offset.end() - 1);
+  for (const auto& [later, earlier] : pairs) out.list[fill[static_cast<std::size_t>(later)]++] = earlier;
+  pairs = {};
+  // Each list sorted, repeats removed, compacted in place.
+  std::size_t write = 0;
+  for (std::size_t s = 0; s < n; ++s) {
+    const auto first = out.list.begin() + static_cast<std::ptrdiff_t>(out.offset[s]);
+    const auto last = out.list.begin() + static_cast<std::ptrdiff_t>(out.offset[s + 1]);
+    std::sort(first, last);
+    const auto unique_end = std::unique(first, last);
+    out.offset[s] = write;
+    for (auto it = first; it != unique_end; ++it) out.list[write++] = *it;
   }
-  return earlier;
+  out.offset[n] = write;
+  out.list.resize(write);
+  return out;
 }
 
 // The rule of a round for one sphere, given its earlier conflicting spheres
 // and the states it may read: out if one of them is in, in if all are out,
 // else undecided (unknown).
 template <class State_of>
-std::uint8_t decide(const std::vector<Index>& earlier, State_of state_of) {
+std::uint8_t decide(const Conflict_lists& lists, std::size_t s, State_of state_of) {
   bool all_out = true;
-  for (Index t : earlier) {
+  for (const Index* it = lists.begin(s); it != lists.end(s); ++it) {
+    const Index t = *it;
     const std::uint8_t v = state_of(t);
     if (v == Mis_part::in) return Mis_part::out;
     if (v != Mis_part::out) all_out = false;
@@ -134,10 +173,7 @@ Mis_part::Mis_part(const std::vector<Vec2>& centers, const std::vector<double>& 
   check_spheres(centers, radii, "Mis_part");
   earlier_ = earlier_conflicts(centers, radii, rank);
   for (std::size_t s = 0; s < n; ++s) {
-    for (Index t : earlier_[s]) conflicts_with_copies_ += owned[s] != owned[t];
-  }
-  for (std::size_t s = 0; s < n; ++s) {
-    if (!owned[s]) earlier_[s] = std::vector<Index>();  // (a copy's conflicts are its owner's to read)
+    for (const Index* t = earlier_.begin(s); t != earlier_.end(s); ++t) conflicts_with_copies_ += owned[s] != owned[*t];
   }
   for (Index i : order) {
     if (owned[i]) pending_.push_back(i);
@@ -149,7 +185,7 @@ std::vector<Index> Mis_part::sweep(std::vector<std::uint8_t>& state) {
   std::vector<Index> decided;
   std::size_t left = 0;
   for (Index s : pending_) {
-    if (state[s] == unknown) state[s] = decide(earlier_[s], [&](Index t) { return state[t]; });
+    if (state[s] == unknown) state[s] = decide(earlier_, static_cast<std::size_t>(s), [&](Index t) { return state[t]; });
     if (state[s] == unknown) pending_[left++] = s;
     else decided.push_back(s);
   }
@@ -174,7 +210,8 @@ Mis_rounds lexical_first_mis_in_rounds(const std::vector<Vec2>& centers, const s
   // For the messages: the other parts each sphere conflicts with (either way round).
   std::vector<std::vector<std::int32_t>> told(n);
   for (std::size_t s = 0; s < n; ++s) {
-    for (Index t : earlier[s]) {
+    for (const Index* it = earlier.begin(s); it != earlier.end(s); ++it) {
+      const Index t = *it;
       if (part[t] == part[s]) continue;
       told[s].push_back(part[t]);
       told[t].push_back(part[s]);
@@ -199,7 +236,8 @@ Mis_rounds lexical_first_mis_in_rounds(const std::vector<Vec2>& centers, const s
     for (auto& spheres : sweep) {
       std::size_t kept_undecided = 0;
       for (Index s : spheres) {
-        const std::uint8_t v = decide(earlier[s], [&](Index t) { return part[t] == part[s] ? state[t] : seen[t]; });
+        const std::uint8_t v = decide(earlier, static_cast<std::size_t>(s),
+                                      [&](Index t) { return part[t] == part[s] ? state[t] : seen[t]; });
         if (v != unknown) {
           state[s] = v;
           messages += static_cast<std::int64_t>(told[s].size());

@@ -20,21 +20,25 @@ import numpy as np
 from .distributed import _HILBERT_ORDER, _hilbert_keys, _ranges
 
 # Records per chunk: boxes of a few hundred Hilbert-ordered records are tight,
-# and P x (n / 256) boxes are cheap to share.
+# and P x (n / 256) boxes are cheap to share. At most _MAX_CHUNKS chunks a rank
+# (larger chunks beyond 256 x 1024 records): the senders test chunk pairs, a
+# (their chunks x my chunks) table per other rank, which must stay small (at 1e6
+# points a pass's 4e6 spheres in chunks of 256 made tables of 1e8 entries).
 _CHUNK = 256
+_MAX_CHUNKS = 1024
 # Relative slack on every reach test, far above rounding: more copies are harmless, a missing one is not.
 _SLACK = 1e-9
 
 
 def hilbert_chunks(x: np.ndarray, y: np.ndarray, lo: np.ndarray, span: float) -> tuple[np.ndarray, np.ndarray]:
     """The permutation sorting (x, y) along a Hilbert curve over the box [lo, lo + span]^2,
-    and the chunk starts in that order."""
+    and the chunk starts in that order (chunks of _CHUNK records, at most _MAX_CHUNKS of them)."""
     cells = (1 << _HILBERT_ORDER) - 1
     scale = cells / span if span > 0 else 0.0
     ix = np.clip(((x - lo[0]) * scale).astype(np.int64), 0, cells)
     iy = np.clip(((y - lo[1]) * scale).astype(np.int64), 0, cells)
     perm = np.argsort(_hilbert_keys(ix, iy, _HILBERT_ORDER), kind="stable")
-    return perm, np.arange(0, len(x), _CHUNK, dtype=np.int64)
+    return perm, np.arange(0, len(x), max(_CHUNK, -(-len(x) // _MAX_CHUNKS)), dtype=np.int64)
 
 
 def chunk_boxes(x: np.ndarray, y: np.ndarray, starts: np.ndarray) -> np.ndarray:

@@ -46,6 +46,16 @@ Mis_rounds lexical_first_mis_in_rounds(const std::vector<Vec2>& centers, const s
 // them (its halo), `order` lists them all in the global order, and sweep()
 // applies the rule of a round to its own undecided spheres, reading its own
 // states as it sets them and the copies' as the last exchange left them.
+// Every sphere's earlier conflicting spheres, as one flat array: sphere s's are
+// list[offset[s] .. offset[s + 1]), sorted.
+struct Conflict_lists {
+  std::vector<std::size_t> offset;
+  std::vector<Index> list;
+  const Index* begin(std::size_t s) const { return list.data() + offset[s]; }
+  const Index* end(std::size_t s) const { return list.data() + offset[s + 1]; }
+  std::size_t size() const { return offset.empty() ? 0 : offset.size() - 1; }
+};
+
 class Mis_part {
  public:
   enum : std::uint8_t { unknown = 0, in = 1, out = 2 };
@@ -62,7 +72,7 @@ class Mis_part {
   std::size_t conflicts_with_copies() const { return conflicts_with_copies_; }
 
  private:
-  std::vector<std::vector<Index>> earlier_;
+  Conflict_lists earlier_;  // (a copy's list is its owner's to read; sweep reads own spheres' only)
   std::vector<Index> pending_;
   std::size_t conflicts_with_copies_ = 0;
 };
