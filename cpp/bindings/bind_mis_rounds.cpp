@@ -91,6 +91,5 @@ void bind_mis_rounds(py::module_& m) {
             return py::make_tuple(to_array(std::move(s)), to_array(std::move(decided)));
           },
           py::arg("state"), "One round's sweep: (the new states, the own spheres it decided, in the order).")
-      .def_property_readonly("undecided", &Mis_part::undecided)
-      .def_property_readonly("conflicts_with_copies", &Mis_part::conflicts_with_copies);
+      .def_property_readonly("undecided", &Mis_part::undecided);
 }

@@ -163,33 +163,105 @@ void check_spheres(const std::vector<Vec2>& centers, const std::vector<double>& 
 
 }  // namespace
 
+namespace {
+
+std::uint64_t cell_key(std::int64_t ix, std::int64_t iy) {
+  return (static_cast<std::uint64_t>(ix) << 32) ^ static_cast<std::uint64_t>(iy & 0xffffffff);
+}
+
+}  // namespace
+
 Mis_part::Mis_part(const std::vector<Vec2>& centers, const std::vector<double>& radii, const std::vector<Index>& order,
-                   const std::vector<std::uint8_t>& owned) {
+                   const std::vector<std::uint8_t>& owned)
+    : centers_(centers), radii_(radii), order_(order), owned_(owned), reported_(centers.size(), 0) {
   const std::size_t n = centers.size();
   if (radii.size() != n || order.size() != n || owned.size() != n) {
     throw Input_error("Mis_part: centers, radii, order and owned must have one entry per sphere");
   }
-  const auto rank = ranks_of(order, "Mis_part");
+  ranks_of(order, "Mis_part");
   check_spheres(centers, radii, "Mis_part");
-  earlier_ = earlier_conflicts(centers, radii, rank);
-  for (std::size_t s = 0; s < n; ++s) {
-    for (const Index* t = earlier_.begin(s); t != earlier_.end(s); ++t) conflicts_with_copies_ += owned[s] != owned[*t];
+  std::map<int, double> largest;  // octave -> its largest radius
+  for (double r : radii) {
+    auto& l = largest[std::ilogb(r)];
+    l = std::max(l, r);
   }
-  for (Index i : order) {
-    if (owned[i]) pending_.push_back(i);
+  std::map<int, std::uint32_t> index;
+  for (const auto& [octave, reach] : largest) {
+    index[octave] = static_cast<std::uint32_t>(grids_.size());
+    Grid g;
+    g.octave = octave;
+    g.reach = reach;
+    g.side = 2 * reach;
+    grids_.push_back(std::move(g));
+  }
+  grid_of_.resize(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    grid_of_[i] = index[std::ilogb(radii[i])];
+    undecided_ += owned[i] != 0;
   }
 }
 
-std::vector<Index> Mis_part::sweep(std::vector<std::uint8_t>& state) {
-  if (state.size() != earlier_.size()) throw Input_error("Mis_part::sweep: one state per sphere");
-  std::vector<Index> decided;
-  std::size_t left = 0;
-  for (Index s : pending_) {
-    if (state[s] == unknown) state[s] = decide(earlier_, static_cast<std::size_t>(s), [&](Index t) { return state[t]; });
-    if (state[s] == unknown) pending_[left++] = s;
-    else decided.push_back(s);
+// The rule of a round for sphere s against the earlier spheres in the grids
+// (in or undecided ones: out ones are never put there): out if one of them
+// conflicts and is in, else undecided if one conflicts, else in.
+std::uint8_t Mis_part::decide(Index s, const std::vector<std::uint8_t>& state) const {
+  const Vec2& c = centers_[s];
+  const double r = radii_[s];
+  bool waits = false;
+  for (const Grid& g : grids_) {
+    if (g.cells.empty()) continue;
+    const double reach = r + g.reach;
+    const std::int64_t x0 = cell_of(c[0] - reach, g.side), x1 = cell_of(c[0] + reach, g.side);
+    const std::int64_t y0 = cell_of(c[1] - reach, g.side), y1 = cell_of(c[1] + reach, g.side);
+    const auto visit = [&](const std::vector<Index>& members) {
+      for (Index t : members) {
+        // (packing.cpp's leaf_conflicts, operation for operation: symmetric in s and t)
+        const double ex = centers_[t][0] - c[0], ey = centers_[t][1] - c[1], sum = r + radii_[t];
+        if (!(ex * ex + ey * ey < sum * sum)) continue;
+        if (state[t] == in) return true;
+        waits = true;
+      }
+      return false;
+    };
+    // (a larger sphere over a grid of small ones: when the range holds more
+    // cells than the grid has occupied, every occupied cell is visited instead)
+    const double range = (static_cast<double>(x1 - x0) + 1) * (static_cast<double>(y1 - y0) + 1);
+    if (range > static_cast<double>(g.cells.size())) {
+      for (const auto& cell : g.cells) {
+        if (visit(cell.second)) return out;
+      }
+      continue;
+    }
+    for (std::int64_t ix = x0; ix <= x1; ++ix) {
+      for (std::int64_t iy = y0; iy <= y1; ++iy) {
+        const auto it = g.cells.find(cell_key(ix, iy));
+        if (it != g.cells.end() && visit(it->second)) return out;
+      }
+    }
   }
-  pending_.resize(left);
+  return waits ? unknown : in;
+}
+
+std::vector<Index> Mis_part::sweep(std::vector<std::uint8_t>& state) {
+  if (state.size() != centers_.size()) throw Input_error("Mis_part::sweep: one state per sphere");
+  for (Grid& g : grids_) g.cells.clear();
+  std::vector<Index> decided;
+  undecided_ = 0;
+  for (const Index s : order_) {
+    if (owned_[s]) {
+      if (state[s] == unknown) state[s] = decide(s, state);
+      if (state[s] == unknown) {
+        ++undecided_;
+      } else if (!reported_[s]) {
+        reported_[s] = 1;
+        decided.push_back(s);
+      }
+    }
+    if (state[s] != out) {
+      Grid& g = grids_[grid_of_[s]];
+      g.cells[cell_key(cell_of(centers_[s][0], g.side), cell_of(centers_[s][1], g.side))].push_back(s);
+    }
+  }
   return decided;
 }
 

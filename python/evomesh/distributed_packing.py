@@ -62,7 +62,7 @@ def _check(centers: Any, radii: Any, classes: Any, ties: Any, forced: Any) -> tu
 
 
 def lexical_first_mis(comm: Any, centers: Any, radii: Any, classes: Any, ties: Any, forced: Any = None,
-                      stats: dict[str, Any] | None = None) -> np.ndarray:
+                      stats: dict[str, Any] | None = None, *, check_ties: bool = True) -> np.ndarray:
     """The lexical-first MIS of the spheres B(centers[i], radii[i]) owned by all
     ranks of `comm`, each rank passing its own: the serial packing's kept set,
     on any number of ranks and any partition.
@@ -80,6 +80,10 @@ def lexical_first_mis(comm: Any, centers: Any, radii: Any, classes: Any, ties: A
     forced : (n,) bool, optional
         Spheres kept whatever they meet (the serial ``n_forced``); they must come
         before every other sphere in the order.
+    check_ties : bool, default True
+        Check that ties are unique over the ranks and forced spheres come
+        first (an exchange of every tie); False for a caller that guarantees
+        both (evomesh.distributed_step).
     stats : dict, optional
         Filled with "rounds", "copies" (halo spheres held, summed over ranks),
         "bytes_halo" and "bytes_states" (sent, summed over ranks), and
@@ -115,8 +119,9 @@ def lexical_first_mis(comm: Any, centers: Any, radii: Any, classes: Any, ties: A
         if len(np.unique(got)) != len(got):
             raise ValueError("ties must be unique over all ranks (a global id per sphere)")
 
-    _collective(comm, check_order)
-    _collective(comm, check_ties_unique)
+    if check_ties:
+        _collective(comm, check_order)
+        _collective(comm, check_ties_unique)
 
     records = np.empty(n, dtype=_SPHERE)
     records["tie"], records["cls"], records["forced"], records["r"] = t, k, f, r

@@ -184,6 +184,7 @@ class DistributedSpacing:
         self.weight = weight
         self.shift = float(comm.allreduce(float(weight.max()) if n_owned else 0.0, op=MPI.MAX))
         self._held_weight = dmesh.exchange_halo(weight)
+        self._held_graph: Any = None
 
         f = weight.copy()
         ask = d > 1
@@ -381,7 +382,9 @@ class DistributedSpacing:
         x = np.ascontiguousarray(x, dtype=np.float64).reshape(-1, 2)
         # The bound: f over the held sites.
         if len(x) and len(held_xy):
-            bound = self._graph(dmesh.global_ids, held_xy, self._held_weight).evaluate(x)[0]
+            if self._held_graph is None:  # (the held sites' graph: built once, it bounds every query)
+                self._held_graph = self._graph(dmesh.global_ids, held_xy, self._held_weight)
+            bound = self._held_graph.evaluate(x)[0]
         else:
             bound = np.zeros(len(x))
         mine = np.empty(n_owned, dtype=_SITE)

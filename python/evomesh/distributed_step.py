@@ -205,7 +205,7 @@ def _pack(dmesh: DistributedMesh, delta: Any, options: Any, stats: dict[str, Any
     first: dict = {}
     kept = lexical_first_mis(comm, centres, radii, kinds, ties, np.concatenate([forced[own] != 0,
                                                                                  np.zeros(len(take), bool)]),
-                             stats=first)
+                             stats=first, check_ties=False)
 
     # Second pass: the interior candidates of the owned triangles.
     sampled = np.concatenate([np.ones(len(dmesh.triangles), np.uint8), np.zeros(len(dmesh.halo_triangles), np.uint8)])
@@ -232,7 +232,7 @@ def _pack(dmesh: DistributedMesh, delta: Any, options: Any, stats: dict[str, Any
     ties2 = np.concatenate([ties[keep], _INTERIOR_TIE + (tri_gid << _DRAW_BITS) + draw]).astype(np.int64)
     forced2 = np.concatenate([np.ones(len(keep), bool), np.zeros(len(in_xy), bool)])
     second: dict = {}
-    kept2 = lexical_first_mis(comm, centres2, radii2, kinds2, ties2, forced2, stats=second)
+    kept2 = lexical_first_mis(comm, centres2, radii2, kinds2, ties2, forced2, stats=second, check_ties=False)
     points = centres2[kept2]
     keys = ties2[kept2]
     input_gid = np.where(keys < _SEGMENT_TIE, keys, -1)

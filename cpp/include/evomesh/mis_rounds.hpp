@@ -10,6 +10,7 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <unordered_map>
 #include <vector>
 
 #include "evomesh/types.hpp"
@@ -64,17 +65,31 @@ class Mis_part {
   Mis_part(const std::vector<Vec2>& centers, const std::vector<double>& radii, const std::vector<Index>& order,
            const std::vector<std::uint8_t>& owned);
   // One round's sweep over the undecided own spheres; `state` (one per sphere:
-  // unknown, in or out; forced ones in) is updated. Returns the spheres it
-  // decided, in the order.
+  // unknown, in or out; forced ones in) is updated. Returns the own spheres
+  // decided since the last sweep (forced ones in the first), in the order.
   std::vector<Index> sweep(std::vector<std::uint8_t>& state);
-  std::size_t undecided() const { return pending_.size(); }
-  // (own sphere, copy) pairs that conflict: what the halo had to hold.
-  std::size_t conflicts_with_copies() const { return conflicts_with_copies_; }
+  std::size_t undecided() const { return undecided_; }
 
  private:
-  Conflict_lists earlier_;  // (a copy's list is its owner's to read; sweep reads own spheres' only)
-  std::vector<Index> pending_;
-  std::size_t conflicts_with_copies_ = 0;
+  // The sweep walks the global order and keeps, in one grid per octave of
+  // radius, the spheres it has passed that are in or undecided (no conflict
+  // lists: a candidate overlaps dozens of others, and the kept ones form a
+  // packing); a sphere is decided against the earlier ones in the grids.
+  struct Grid {
+    int octave = 0;
+    double side = 0;   // twice the octave's largest radius
+    double reach = 0;  // the octave's largest radius
+    std::unordered_map<std::uint64_t, std::vector<Index>> cells;
+  };
+  std::uint8_t decide(Index s, const std::vector<std::uint8_t>& state) const;
+  std::vector<Vec2> centers_;
+  std::vector<double> radii_;
+  std::vector<Index> order_;
+  std::vector<std::uint8_t> owned_;
+  std::vector<std::uint8_t> reported_;
+  std::vector<std::uint32_t> grid_of_;
+  std::vector<Grid> grids_;
+  std::size_t undecided_ = 0;
 };
 
 }  // namespace evomesh
