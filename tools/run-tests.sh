@@ -34,11 +34,11 @@ fi
 bash tools/lint.sh
 .venv/bin/python -m pytest -p no:cacheprovider "$@"
 
-# DistributedMesh and the distributed packing on several MPI ranks
-# (tests/test_distributed*.py; the plain run
-# above covers one rank). MPI and its bindings come from the package index:
+# DistributedMesh, its transfers and the distributed step on MPI ranks
+# (tests/test_distributed*.py). MPI and its bindings come from the package index:
 # the mpich wheel brings the library and mpiexec, mpi4py the bindings
-# (evomesh[mpi]). Two and four ranks, oversubscribed on small machines
+# (evomesh[mpi]). One, two and four ranks (the plain run above skips these
+# files when mpi4py is not installed yet), oversubscribed on small machines
 # (MPICH allows it by default); under a minute together. A failure or a hang on
 # any rank (the tests' watchdog ends a hung rank) makes mpiexec, and so this
 # script, fail. EVOMESH_SKIP_MPI_TESTS=1 skips it.
@@ -47,7 +47,7 @@ if [ "${EVOMESH_SKIP_MPI_TESTS:-0}" != 1 ]; then
     echo "evomesh: installing mpich and mpi4py into .venv for the MPI tests"
     .venv/bin/python -m pip install -q mpich "mpi4py>=3.1"
   fi
-  for ranks in 2 4; do
+  for ranks in 1 2 4; do
     echo "== mpiexec -n $ranks: tests/test_distributed*.py"
     .venv/bin/mpiexec -n "$ranks" .venv/bin/python -m pytest -q -p no:cacheprovider tests/test_distributed.py \
       tests/test_distributed_packing.py tests/test_distributed_triangulation.py tests/test_distributed_spacing.py \

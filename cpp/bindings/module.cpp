@@ -1037,6 +1037,45 @@ PYBIND11_MODULE(_core, m) {
       "The constraint pieces between the kept points along every chain of a part's segments (constraint_pieces): "
       "(ends (2k,) as part point index or n + candidate index, boundary, tag).");
 
+  m.def(
+      "hilbert_keys",
+      [](const Int_array& ix, const Int_array& iy, int order) {
+        const auto x = to_vector<std::int64_t>(ix), y = to_vector<std::int64_t>(iy);
+        if (x.size() != y.size()) throw Input_error("hilbert_keys: ix and iy must have the same length");
+        if (order < 1 || order > 31) throw Input_error("hilbert_keys: order must be in [1, 31]");
+        const std::int64_t side = std::int64_t{1} << order;
+        std::vector<std::int64_t> keys(x.size());
+        {
+          py::gil_scoped_release release;
+          for (std::size_t i = 0; i < x.size(); ++i) {
+            std::int64_t a = x[i], b = y[i], key = 0;
+            if (a < 0 || a >= side || b < 0 || b >= side) {
+              keys[i] = -1;
+              continue;
+            }
+            // the usual xy2d: one bit a level, rotating the quadrant
+            for (std::int64_t s = side >> 1; s > 0; s >>= 1) {
+              const std::int64_t rx = (a & s) > 0 ? 1 : 0, ry = (b & s) > 0 ? 1 : 0;
+              key += s * s * ((3 * rx) ^ ry);
+              if (ry == 0) {
+                if (rx == 1) {
+                  a = side - 1 - a;
+                  b = side - 1 - b;
+                }
+                std::swap(a, b);
+              }
+            }
+            keys[i] = key;
+          }
+        }
+        for (std::int64_t k : keys) {
+          if (k < 0) throw Input_error("hilbert_keys: cells must lie in [0, 2^order)");
+        }
+        return vector_array(keys);
+      },
+      py::arg("ix"), py::arg("iy"), py::arg("order"),
+      "Index along the Hilbert curve of integer cells (ix, iy) in [0, 2^order)^2 (the usual xy2d).");
+
   bind_options(m);
 
   bind_step<Frfc_options>(m, "frfc", &frfc, evolve_result_dict,

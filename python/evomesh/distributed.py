@@ -30,6 +30,7 @@ from typing import Any, Callable, Mapping, TypeVar
 
 import numpy as np
 
+from evomesh import _core
 from evomesh.mesh import _MAX_COORDINATE, Mesh, _as_array, _as_tag_names, _frozen
 
 __all__ = ["DistributedMesh", "Renumbering"]
@@ -117,23 +118,10 @@ def _offsets(counts: np.ndarray) -> np.ndarray:
 
 
 def _hilbert_keys(x: np.ndarray, y: np.ndarray, order: int) -> np.ndarray:
-    """Index along the Hilbert curve of integer cells (x, y) in [0, 2^order)^2,
-    vectorised over the points (one pass per bit; the usual xy2d rotation)."""
-    x, y = x.astype(np.int64), y.astype(np.int64)
-    side = np.int64(1) << order
-    key = np.zeros(len(x), dtype=np.int64)
-    s = side >> 1
-    while s > 0:
-        rx = (x & s) > 0
-        ry = (y & s) > 0
-        key += s * s * ((3 * rx.astype(np.int64)) ^ ry.astype(np.int64))
-        flip = ~ry & rx
-        x = np.where(flip, side - 1 - x, x)
-        y = np.where(flip, side - 1 - y, y)
-        swap = ~ry
-        x, y = np.where(swap, y, x), np.where(swap, x, y)
-        s >>= 1
-    return key
+    """Index along the Hilbert curve of integer cells (x, y) in [0, 2^order)^2
+    (the usual xy2d rotation, one bit a level; in the core, _core.hilbert_keys)."""
+    return np.asarray(_core.hilbert_keys(np.ascontiguousarray(x, dtype=np.int64),
+                                         np.ascontiguousarray(y, dtype=np.int64), order))
 
 
 def _partition(mesh: Mesh, size: int, weights: np.ndarray) -> np.ndarray:
