@@ -80,7 +80,7 @@ from .field_transfer import (
     Supermesh,
     _area_rounding,
     _areas_and_longest_sides,
-    _barycentric,
+    _gap_mass,
     _largest_overlap,
     _numeric,
     _pairs_within,
@@ -540,17 +540,7 @@ class _LocalSupermesh:
         if not len(gap) or self.mass.size == 0:
             self._gap_mass = np.zeros((len(gap), 3, 3))
             return
-        s_points = old.points[old.triangles[stand_in]]
-        t_points = new.points[new.triangles[gap]]
-        element = (self._new_area[gap] / 12.0)[:, None, None] * (np.ones((3, 3)) + np.eye(3))
-        gap_mass = element @ _barycentric(s_points, t_points)
-        pairs = np.flatnonzero(np.isin(self.new_triangle, gap))
-        if len(pairs):
-            slot = np.searchsorted(gap, self.new_triangle[pairs])
-            pair_points = old.points[old.triangles[self.old_triangle[pairs]]]
-            pair_terms = self.mass[pairs] @ _barycentric(s_points[slot], pair_points)
-            np.subtract.at(gap_mass, slot, pair_terms)
-        self._gap_mass = gap_mass
+        self._gap_mass = _gap_mass(self, old, new, gap, stand_in)
 
     def cells(self, values: np.ndarray) -> np.ndarray:
         """P0 projection: the serial project_cells on the held values."""

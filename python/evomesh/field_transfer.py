@@ -684,19 +684,7 @@ class Supermesh:
         if not len(gap) or self.mass.size == 0:
             self._gap_mass = np.zeros((len(gap), 3, 3))
             return
-        s_points = old.points[old.triangles[stand_in]]  # (g, 3, 2)
-        t_points = new.points[new.triangles[gap]]
-        # int_t phi_a^t E = (M_t e)_a, e = E at t's points = lambda^{s*}(t's points) @ values(s*)
-        element = (self._new_area[gap] / 12.0)[:, None, None] * (np.ones((3, 3)) + np.eye(3))
-        gap_mass = element @ _barycentric(s_points, t_points)
-        pairs = np.flatnonzero(np.isin(self.new_triangle, gap))
-        if len(pairs):
-            slot = np.searchsorted(gap, self.new_triangle[pairs])
-            pair_points = old.points[old.triangles[self.old_triangle[pairs]]]
-            # int_(t n s_i) phi_a^t E = sum_b mass_i[a, b] E(s_i's point b)
-            pair_terms = self.mass[pairs] @ _barycentric(s_points[slot], pair_points)
-            np.subtract.at(gap_mass, slot, pair_terms)
-        self._gap_mass = gap_mass
+        self._gap_mass = _gap_mass(self, old, new, gap, stand_in)
 
     def _lost_part(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Old triangles that new ones leave partly uncovered (the domain lost
@@ -971,6 +959,26 @@ def region_exchange(old: Mesh, new: Mesh, values: Any = None) -> RegionExchange:
     values_given = values is not None
     points_field = values_given and np.shape(values) == (old.n_points,)
     return Supermesh(old, new, mass=not values_given or points_field).region_exchange(values)
+
+
+def _gap_mass(supermesh: Any, old: Any, new: Any, gap: np.ndarray, stand_in: np.ndarray) -> np.ndarray:
+    """Supermesh._find_domain_change's gap masses: for each uncovered new
+    triangle t (`gap`) and its stand-in old triangle s* (`stand_in`), the map
+    from s*'s three values to t's three right-hand sides over the uncovered
+    part (the supermesh's pairs: new_triangle, old_triangle, mass; _new_area)."""
+    s_points = old.points[old.triangles[stand_in]]  # (g, 3, 2)
+    t_points = new.points[new.triangles[gap]]
+    # int_t phi_a^t E = (M_t e)_a, e = E at t's points = lambda^{s*}(t's points) @ values(s*)
+    element = (supermesh._new_area[gap] / 12.0)[:, None, None] * (np.ones((3, 3)) + np.eye(3))
+    gap_mass = element @ _barycentric(s_points, t_points)
+    pairs = np.flatnonzero(np.isin(supermesh.new_triangle, gap))
+    if len(pairs):
+        slot = np.searchsorted(gap, supermesh.new_triangle[pairs])
+        pair_points = old.points[old.triangles[supermesh.old_triangle[pairs]]]
+        # int_(t n s_i) phi_a^t E = sum_b mass_i[a, b] E(s_i's point b)
+        pair_terms = supermesh.mass[pairs] @ _barycentric(s_points[slot], pair_points)
+        np.subtract.at(gap_mass, slot, pair_terms)
+    return gap_mass
 
 
 def _largest_overlap(new_triangle: np.ndarray, old_triangle: np.ndarray, area: np.ndarray,
