@@ -1,6 +1,6 @@
-"""FRFC's packing on a distributed mesh (issue 29; docs/distributed-step.md,
-section 3): the kept points of the step, the same set as the serial step's, on
-any number of ranks. Stages, each the serial one on a rank's part:
+"""FRFC's step on a distributed mesh (issue 29; docs/distributed-step.md,
+sections 3 and 3.7): the serial step's mesh, on any number of ranks, without
+gathering it. The packing's stages, each the serial one on a rank's part:
 
 1. Step 1 (distributed_spacing.DistributedSpacing): nn, weights, f.
 2. The part: the rank's held points and triangles plus the *segment skeleton*
@@ -18,9 +18,14 @@ any number of ranks. Stages, each the serial one on a rank's part:
    clipping from the stored rotation, as serial), their radii, second pass with
    the first pass's kept spheres forced.
 
+Then (:func:`step`) the constraint pieces along the chains, the distributed
+constrained Delaunay triangulation and the output in the serial order;
+:func:`evolve_distributed` (what ``evomesh.evolve`` calls on a DistributedMesh)
+adds size requests and the rebalance.
+
 Supported options: those of the paper's FRFC plus ``within_domain`` (no ring
 candidates, no demotion, no spacing repair, uniform grids, no settled or coarse
-skipping); the quality pass is not part of the packing.
+skipping, no quality pass); the others are refused by name.
 """
 
 from __future__ import annotations
@@ -262,11 +267,12 @@ def step(dmesh: DistributedMesh, delta: Any, options: Any = None, *, stats: dict
     flags on it, and gives a share of the pieces), and the distributed
     constrained Delaunay triangulation (distributed_triangulation). The result
     is a DistributedMesh over the same communicator: each rank owns the points
-    it kept; global ids are the packing keys (an input point keeps its global
-    id, a new point gets a key above 2^60); ``origin`` holds the input global id
-    of a kept input point and -1 for a new one. ``gather`` gives the serial
-    step's points, triangles, segments and tags, with the quality pass off, in
-    global-id order. The input is not modified.
+    it kept; a point's global id is its position in the serial step's output
+    (the rank of its packing key), a triangle's the serial canonical position,
+    a segment's the serial piece order; ``origin`` holds the input global id of
+    a kept input point and -1 for a new one; kinds, required points and tags as
+    the serial step gives them. ``gather`` returns the serial step's mesh (the
+    quality pass off) array for array. The input is not modified.
     """
     MPI = _mpi()
     comm = dmesh.comm
