@@ -101,10 +101,15 @@ for threads in (1, 2):
         before, seen, peak, done = threads_now(), set(), [0], threading.Event()
         def watch():
             me = threading.get_native_id()
+            running = set()
             while not done.is_set():
                 now = {t: v for t, v in threads_now().items() if t != me}
                 seen.update(now)
-                peak[0] = max(peak[0], sum(state == "R" for state, _ in now.values()))
+                # running in two samples in a row: a thread caught in its start-up (or as it
+                # hands its turn on) is seen running for a moment, which is not work
+                now_running = {t for t, (state, _) in now.items() if state == "R"}
+                peak[0] = max(peak[0], len(now_running & running))
+                running = now_running
         watcher = threading.Thread(target=watch)
         watcher.start()
         new = evomesh.evolve(mesh, delta, method=method, threads=threads)
