@@ -1312,9 +1312,14 @@ class DistributedMesh:
             ``values`` on the owned points, the owners' values on the halo
             points (one Alltoallv with the neighbours; the plan is made once).
         """
+        return self._halo_rows(self._field(values, "values"))
+
+    def _halo_rows(self, array: np.ndarray) -> np.ndarray:
+        """exchange_halo without its per-call checks: `array` (n_owned, ...),
+        contiguous, the same dtype and row shape on every rank (callers that
+        checked a field once reuse this)."""
         MPI = _mpi()
-        array = self._field(values, "values")
-        row = array[:1].nbytes if len(array) else int(np.prod(array.shape[1:], dtype=np.int64)) * array.itemsize
+        row = int(np.prod(array.shape[1:], dtype=np.int64)) * array.itemsize
         out = np.empty((len(self.points),) + array.shape[1:], dtype=array.dtype)
         out[: self.n_owned] = array
         send = np.ascontiguousarray(array[self._send_index])

@@ -71,7 +71,6 @@ from .distributed import (
     _first_of_each,
     _index_of,
     _mpi,
-    _offsets,
     _unique,
 )
 from .field_transfer import (
@@ -298,18 +297,7 @@ def _boundary_bits(old: DistributedMesh) -> np.ndarray:
 def _halo_rows(mesh: DistributedMesh, values: np.ndarray) -> np.ndarray:
     """Rows on every local point from rows on the owned points: exchange_halo's
     plan, without its per-call checks (the callers checked the field once)."""
-    MPI = _mpi()
-    array = np.ascontiguousarray(values)
-    row = int(np.prod(array.shape[1:], dtype=np.int64)) * array.itemsize
-    out = np.empty((mesh.n_local,) + array.shape[1:], dtype=array.dtype)
-    out[: mesh.n_owned] = array
-    send = np.ascontiguousarray(array[mesh._send_index])
-    received = np.empty((int(mesh._recv_counts.sum()),) + array.shape[1:], dtype=array.dtype)
-    send_bytes, recv_bytes = mesh._send_counts * row, mesh._recv_counts * row
-    mesh.comm.Alltoallv([send.view(np.uint8).reshape(-1), (send_bytes, _offsets(send_bytes)), MPI.BYTE],
-                        [received.view(np.uint8).reshape(-1), (recv_bytes, _offsets(recv_bytes)), MPI.BYTE])
-    out[mesh._recv_positions] = received
-    return out
+    return mesh._halo_rows(np.ascontiguousarray(values))
 
 
 def _table(box: np.ndarray, reach: np.ndarray) -> np.ndarray:
