@@ -789,7 +789,8 @@ PYBIND11_MODULE(_core, m) {
       "chain_table",
       [](const Float_array& points, const Int_array& segments, const Byte_array& segment_is_boundary,
          const Byte_array& kind, std::optional<Int_array> segment_tags, std::optional<Byte_array> required,
-         std::optional<Int_array> point_gids, std::optional<Int_array> segment_keys) {
+         std::optional<Int_array> point_gids, std::optional<Int_array> segment_keys,
+         std::optional<Int_array> curved_tags, double corner_angle, std::optional<py::function> project) {
         Mesh_arrays mesh;
         mesh.points = to_points(points);
         mesh.segments = to_index_rows<2>(segments, "segments");
@@ -800,6 +801,7 @@ PYBIND11_MODULE(_core, m) {
         if (mesh.kind.size() != mesh.points.size()) throw Input_error("kind must have one value per point");
         add_labels(mesh, segment_tags, std::nullopt, required);
         add_global_ids(mesh, point_gids, std::nullopt, segment_keys);
+        mesh.geometry = to_geometry(curved_tags, corner_angle, project);  // (chains end where curves turn)
         std::vector<Segment_chain> chains;
         {
           py::gil_scoped_release release;
@@ -812,9 +814,10 @@ PYBIND11_MODULE(_core, m) {
         std::vector<Index> v, u, w;
         std::vector<std::uint8_t> along, two_sided;
         std::vector<std::int64_t> chain_of_point;
-        std::vector<double> corner(n, std::numeric_limits<double>::infinity());
+        std::vector<double> corner(n, std::numeric_limits<double>::infinity()), curve_cap;
         for (std::size_t c = 0; c < chains.size(); ++c) {
           const auto& chain = chains[c];
+          const bool on_curve = mesh.geometry && mesh.geometry->is_curved(chain.tag);
           for (Index s : chain.segments) chain_of[s] = static_cast<std::int64_t>(c);
           ends[2 * c] = chain.vertices.front();
           ends[2 * c + 1] = chain.vertices.back();
@@ -827,8 +830,11 @@ PYBIND11_MODULE(_core, m) {
             along.push_back(chain.forward[i]);
             two_sided.push_back(!chain.boundary);
             chain_of_point.push_back(static_cast<std::int64_t>(c));
+            curve_cap.push_back(on_curve ? curve_turn_cap(mesh.points[u.back()], mesh.points[v.back()],
+                                                          mesh.points[w.back()], mesh.geometry->corner_angle)
+                                         : std::numeric_limits<double>::infinity());
           }
-          if (!chain.closed) {  // the corners' rule of local_feature_size (no geometry here)
+          if (!chain.closed && !on_curve) {  // the corners' rule of local_feature_size
             const Index a = chain.vertices.front(), b = chain.vertices.back();
             const double d = std::hypot(mesh.points[b][0] - mesh.points[a][0], mesh.points[b][1] - mesh.points[a][1]);
             corner[a] = std::min(corner[a], d);
@@ -846,14 +852,17 @@ PYBIND11_MODULE(_core, m) {
         out["two_sided"] = vector_array(two_sided);
         out["point_chain"] = vector_array(chain_of_point);
         out["corner_feature_size"] = vector_array(corner);
+        out["curve_cap"] = vector_array(curve_cap);
         return out;
       },
       py::arg("points"), py::arg("segments"), py::arg("segment_is_boundary"), py::arg("kind"),
       py::arg("segment_tags") = py::none(), py::arg("required") = py::none(), py::arg("point_gids") = py::none(),
-      py::arg("segment_keys") = py::none(),
+      py::arg("segment_keys") = py::none(), py::arg("curved_tags") = py::none(),
+      py::arg("corner_angle") = kDefaultCornerAngle, py::arg("project") = py::none(),
       "segment_chains of a segment skeleton: the chain of each segment, each chain's end points (2 per chain, "
       "local indices) and closed flag, the points inside chains with their neighbours as local_feature_size walks "
-      "from them, and the corners' feature size (+inf elsewhere).");
+      "from them, the cap a curved chain (a geometry: curved_tags, corner_angle, project) puts on them (curve_turn_cap, +inf off curves), and the "
+      "corners' feature size (+inf elsewhere).");
 
   m.def(
       "chain_feature_sizes",
@@ -905,6 +914,10 @@ PYBIND11_MODULE(_core, m) {
     add_labels(mesh, part["segment_tags"].cast<Int_array>(), std::nullopt, part["required"].cast<Byte_array>());
     add_global_ids(mesh, part["point_gids"].cast<Int_array>(), part["triangle_gids"].cast<Int_array>(),
                    part["segment_keys"].cast<Int_array>());
+    if (part.contains("curved_tags")) {  // a boundary geometry (geometry.BoundaryGeometry._core_arguments)
+      mesh.geometry = to_geometry(part["curved_tags"].cast<Int_array>(), part["corner_angle"].cast<double>(),
+                                  part["project"].cast<py::function>());
+    }
     return mesh;
   };
   const auto per_point = [](const Float_array& values, const Mesh_arrays& mesh, const char* name) {
@@ -995,6 +1008,40 @@ PYBIND11_MODULE(_core, m) {
       py::arg("part"), py::arg("f"), py::arg("spacing"), py::arg("options"), py::arg("on_segment"),
       py::arg("centres"), py::arg("parent"),
       "FRFC's sphere radii of candidates of a part (candidate_radii; no demoted points).");
+
+  m.def(
+      "part_curve_kinds",
+      [part_mesh](const py::dict& part) {
+        const Mesh_arrays mesh = part_mesh(part);
+        if (!mesh.geometry) throw Input_error("part_curve_kinds: the part has no geometry");
+        const Mesh_arrays with_curves = with_curve_kinds(mesh);
+        std::vector<std::uint8_t> kind(with_curves.kind.size());
+        for (std::size_t i = 0; i < kind.size(); ++i) kind[i] = static_cast<std::uint8_t>(with_curves.kind[i]);
+        return to_array(std::move(kind));
+      },
+      py::arg("part"),
+      "The kinds of a part's points with the corners of curved chains taken from its geometry "
+      "(boundary_geometry.hpp: with_curve_kinds; only the segments are read).");
+
+  m.def(
+      "part_project_segment_candidates",
+      [part_mesh](const py::dict& part, const Float_array& centres, const Int_array& parent, const Float_array& radius) {
+        const Mesh_arrays mesh = part_mesh(part);
+        if (!mesh.geometry) throw Input_error("part_project_segment_candidates: the part has no geometry");
+        std::vector<Vec2> c = to_points(centres, "centres");
+        std::vector<std::uint32_t> on;
+        for (Index p : to_vector<Index>(parent)) {
+          if (p < 0 || static_cast<std::size_t>(p) >= mesh.segments.size()) throw Input_error("parent out of range");
+          on.push_back(static_cast<std::uint32_t>(p));
+        }
+        const auto r = to_vector<double>(radius);
+        if (on.size() != c.size() || r.size() != c.size()) throw Input_error("one parent and radius per centre");
+        const double largest = project_segment_candidates(mesh, on, 0, std::vector<std::uint8_t>(c.size(), 1), r, c);
+        return py::make_tuple(points_array(c), largest);
+      },
+      py::arg("part"), py::arg("centres"), py::arg("parent"), py::arg("radius"),
+      "Kept candidates on a part's segments moved onto their curves (project_segment_candidates; all of them "
+      "kept): (centres, largest move).");
 
   m.def(
       "part_pieces",

@@ -124,6 +124,14 @@ double cast_feature_size(const Mesh_arrays& mesh, const Mesh_walk& walk, const C
 
 }  // namespace
 
+double curve_turn_cap(const Vec2& u, const Vec2& p, const Vec2& w, double corner_angle) {
+  const double a = std::hypot(p[0] - u[0], p[1] - u[1]), b = std::hypot(w[0] - p[0], w[1] - p[1]);
+  const double ux = p[0] - u[0], uy = p[1] - u[1], wx = w[0] - p[0], wy = w[1] - p[1];
+  const double turn = std::atan2(std::abs(ux * wy - uy * wx), ux * wx + uy * wy);
+  const double allowed = corner_angle * (3.14159265358979323846 / 180.0);
+  return turn > 0 ? 0.25 * (a + b) * allowed / turn : std::numeric_limits<double>::infinity();
+}
+
 std::vector<double> local_feature_size(const Mesh_arrays& mesh, const std::vector<Segment_chain>& chains,
                                        const std::vector<double>& limit) {
   const std::size_t n = mesh.points.size();
@@ -160,15 +168,7 @@ std::vector<double> local_feature_size(const Mesh_arrays& mesh, const std::vecto
       };
       double best = cast_feature_size(mesh, walk, point, limit[v], counts, nullptr);
       if (std::isnan(best)) continue;
-      if (curved) {
-        // a piece of length L turns by about L turn / (edge length) here
-        const double a = std::hypot(p[0] - u[0], p[1] - u[1]), b = std::hypot(w[0] - p[0], w[1] - p[1]);
-        const double ux = p[0] - u[0], uy = p[1] - u[1], wx = w[0] - p[0], wy = w[1] - p[1];
-        const double turn = std::atan2(std::abs(ux * wy - uy * wx), ux * wx + uy * wy);
-        const double allowed = geometry->corner_angle * (3.14159265358979323846 / 180.0);
-        // (half of it: a packing of spacing f leaves gaps up to about 2 f)
-        if (turn > 0) best = std::min(best, 0.25 * (a + b) * allowed / turn);
-      }
+      if (curved) best = std::min(best, curve_turn_cap(u, p, w, geometry->corner_angle));
       lfs[v] = best;
     }
     // Two corners are features of their own (Ruppert): a corner carries no

@@ -242,6 +242,9 @@ def chain_table(
     required: ArrayLike | None = None,
     point_gids: ArrayLike | None = None,
     segment_keys: ArrayLike | None = None,
+    curved_tags: ArrayLike | None = None,
+    corner_angle: float = ...,
+    project: Callable[..., Any] | None = None,
 ) -> dict[str, NDArray[Any]]: ...
 def part_input_spheres(
     part: dict[str, Any], f: ArrayLike, options: FrfcOptions
@@ -262,6 +265,10 @@ def part_candidate_radii(
     parent: ArrayLike,
 ) -> NDArray[np.float64]: ...
 def hilbert_keys(ix: ArrayLike, iy: ArrayLike, order: int) -> NDArray[np.int64]: ...
+def part_curve_kinds(part: dict[str, Any]) -> NDArray[np.uint8]: ...
+def part_project_segment_candidates(
+    part: dict[str, Any], centres: ArrayLike, parent: ArrayLike, radius: ArrayLike
+) -> tuple[NDArray[np.float64], float]: ...
 def part_pieces(
     part: dict[str, Any], candidate_segment: ArrayLike, kept_candidate: ArrayLike, kept_point: ArrayLike
 ) -> tuple[NDArray[np.int64], NDArray[np.uint8], NDArray[np.int64]]: ...

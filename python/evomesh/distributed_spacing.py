@@ -130,6 +130,11 @@ class DistributedSpacing:
         received for nn), "walk_triangles" (triangles received for the walks),
         "walk_widenings" (rounds of widening), "sites_received" (sites received
         for f at the points), "skeleton_segments", and "bytes" (sent).
+    geometry : BoundaryGeometry, optional
+        Curved boundaries, as :func:`evomesh.evolve` takes them: on a chain of
+        a curved tag the local feature size is also capped where the chain
+        turns (as serial). The kinds of `dmesh` must already be the geometry's
+        (the step sets them: distributed_step.with_curve_kinds).
 
     Attributes
     ----------
@@ -148,17 +153,19 @@ class DistributedSpacing:
     The segment skeleton (every segment with its two end points) is replicated
     on every rank, so memory per rank grows with the number of segments (for a
     domain boundary, like the square root of the number of points). Curved
-    boundaries (a geometry) are not part of a DistributedMesh.
+    boundaries are not part of a DistributedMesh: a step is given them, as
+    a serial step is.
     """
 
     def __init__(self, dmesh: DistributedMesh, delta: Any, *, within_domain: bool = True,
-                 stats: dict[str, Any] | None = None):
+                 stats: dict[str, Any] | None = None, geometry: Any = None):
         if not isinstance(dmesh, DistributedMesh):
             raise TypeError(f"dmesh must be an evomesh.DistributedMesh, got {type(dmesh).__name__}")
         comm = dmesh.comm
         _check_comm(comm)
         MPI = _mpi()
         self._dmesh = dmesh
+        self._geometry = geometry
         self._counts = dict(halo_points=0, walk_triangles=0, sites_received=0, skeleton_segments=0, bytes=0)
         self._widenings = 0
         d = _collective(comm, self._check_delta, delta)
@@ -268,7 +275,8 @@ class DistributedSpacing:
         table = _core.chain_table(np.column_stack([points["x"], points["y"]]), local,
                                   segments["boundary"].astype(np.uint8), points["kind"],
                                   segment_tags=segments["tag"], required=points["required"],
-                                  point_gids=pgid, segment_keys=segments["gid"])
+                                  point_gids=pgid, segment_keys=segments["gid"],
+                                  **({} if self._geometry is None else self._geometry._core_arguments()))
         owned_gids = dmesh.global_ids[:n_owned]  # sorted (owned points are in gid order)
         # The corners' rule.
         corner = np.asarray(table["corner_feature_size"])
@@ -282,7 +290,8 @@ class DistributedSpacing:
         at = np.searchsorted(owned_gids, v_gid[take])
         chain_ends = pgid[np.asarray(table["chain_ends"]).reshape(-1, 2)]
         walked = self._walks(rows, pgid, at, limit[at], np.asarray(table["segment_chain"]), segments, chain_ends)
-        walked = np.where(np.isnan(walked), np.inf, walked)  # no tangent: the serial walk skips the point
+        # No tangent: the serial walk skips the point; on a curved chain, the turn caps the rest.
+        walked = np.where(np.isnan(walked), np.inf, np.minimum(walked, np.asarray(table["curve_cap"])[take]))
         lfs[at] = np.minimum(lfs[at], walked)
         return lfs
 

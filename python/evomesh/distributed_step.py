@@ -38,8 +38,9 @@ from . import _core, _halo
 from .distributed import DistributedMesh, _collective, _exchange, _mpi
 from .distributed_packing import lexical_first_mis
 from .distributed_spacing import DistributedSpacing, boundary_flags, delta_from_size, segment_skeleton
+from .geometry import as_geometry
 
-__all__ = ["evolve_distributed", "packing", "step"]
+__all__ = ["evolve_distributed", "packing", "step", "with_curve_kinds"]
 
 # Packing ties, unique over the ranks and in the serial order within each kind:
 # input points by global id (< 2^60), segment candidates by their position in
@@ -158,7 +159,8 @@ def packing(dmesh: DistributedMesh, delta: Any, options: Any = None, *, stats: d
     return packed["points"], packed["input_gid"]
 
 
-def _pack(dmesh: DistributedMesh, delta: Any, options: Any, stats: dict[str, Any] | None) -> dict[str, Any]:
+def _pack(dmesh: DistributedMesh, delta: Any, options: Any, stats: dict[str, Any] | None,
+          geometry: Any = None) -> dict[str, Any]:
     MPI = _mpi()
     comm = dmesh.comm
     if options is None:
@@ -174,7 +176,7 @@ def _pack(dmesh: DistributedMesh, delta: Any, options: Any, stats: dict[str, Any
 
     _collective(comm, check)
     step1: dict = {}
-    spacing = DistributedSpacing(dmesh, delta, within_domain=options.within_domain, stats=step1)
+    spacing = DistributedSpacing(dmesh, delta, within_domain=options.within_domain, stats=step1, geometry=geometry)
     n_owned = dmesh.n_owned
     owned_delta = _collective(comm, spacing._check_delta, delta)
     held_f = dmesh.exchange_halo(spacing.f)
@@ -188,6 +190,8 @@ def _pack(dmesh: DistributedMesh, delta: Any, options: Any, stats: dict[str, Any
                                                            spacing.f[mine], owned_delta[mine]])))
     pairs = pairs[np.argsort(pairs[:, 0], kind="stable")]
     part, at_held, values = _part(dmesh, skeleton, held_f, held_delta, pairs[:, 1], pairs[:, 2])
+    if geometry is not None:
+        part.update(geometry._core_arguments())
     f_part = values["f"]
 
     # First pass: the owned input points and the candidates on owned segments.
@@ -211,6 +215,26 @@ def _pack(dmesh: DistributedMesh, delta: Any, options: Any, stats: dict[str, Any
     kept = lexical_first_mis(comm, centres, radii, kinds, ties, np.concatenate([forced[own] != 0,
                                                                                  np.zeros(len(take), bool)]),
                              stats=first, check_ties=False)
+
+    # On curves: the kept candidates on segments of curved tags move onto their
+    # curves before the triangulation (as serial: after the packing, which used
+    # the sampled positions). Twice: the serial step projects them again after
+    # triangulating (fit_to_curves; a projection need not be idempotent to the
+    # last bit), and a CDT is a function of its points and constraints.
+    on_curve = np.flatnonzero(kept[n_owned:])
+    curve_move = 0.0
+    if geometry is not None:
+        def project() -> tuple[np.ndarray, float]:
+            xy = seg_xy[on_curve]
+            if not len(xy):
+                return xy, 0.0
+            args = (seg_parent[on_curve], seg_radius[on_curve])
+            once, first_move = _core.part_project_segment_candidates(part, xy, *args)
+            twice, second_move = _core.part_project_segment_candidates(part, once, *args)
+            return np.asarray(twice), max(float(first_move), float(second_move))
+
+        projected, curve_move = _collective(comm, project)
+        curve_move = float(comm.allreduce(curve_move, op=MPI.MAX))
 
     # Second pass: the interior candidates of the owned triangles.
     sampled = np.concatenate([np.ones(len(dmesh.triangles), np.uint8), np.zeros(len(dmesh.halo_triangles), np.uint8)])
@@ -240,6 +264,11 @@ def _pack(dmesh: DistributedMesh, delta: Any, options: Any, stats: dict[str, Any
     kept2 = lexical_first_mis(comm, centres2, radii2, kinds2, ties2, forced2, stats=second, check_ties=False)
     points = centres2[kept2]
     keys = ties2[kept2]
+    if geometry is not None and len(on_curve):
+        # (the kept segment candidates are forced in the second pass: all kept)
+        rows = np.flatnonzero((keys >= _SEGMENT_TIE) & (keys < _INTERIOR_TIE))  # (in tie order)
+        points = points.copy()
+        points[rows[np.searchsorted(keys[rows], _SEGMENT_TIE + take[on_curve])]] = projected
     input_gid = np.where(keys < _SEGMENT_TIE, keys, -1)
     if stats is not None:
         stats.update(step1=step1, first_pass_rounds=first["rounds"], second_pass_rounds=second["rounds"],
@@ -249,7 +278,8 @@ def _pack(dmesh: DistributedMesh, delta: Any, options: Any, stats: dict[str, Any
                      + second["bytes_states"])
     return dict(points=points, keys=keys, input_gid=input_gid, part=part, at_held=at_held, skeleton=skeleton,
                 all_segment_parent=all_parent, kept_segment_candidates=take[kept[n_owned:]],
-                kept_inputs=owned_gids[kept[:n_owned]], spacing=spacing, forced_corner=forced[own] == 1)
+                kept_inputs=owned_gids[kept[:n_owned]], spacing=spacing, forced_corner=forced[own] == 1,
+                curve_move=curve_move)
 
 
 # A point of the step's output as the ranks look it up (distributed_triangulation._lookup).
@@ -257,8 +287,116 @@ _OUT_POINT = np.dtype([("gid", "<i8"), ("x", "<f8"), ("y", "<f8"), ("owner", "<i
                        ("origin", "<i8"), ("id", "<i8"), ("kind", "u1")])  # gid: packing key; id: output global id
 
 
-def step(dmesh: DistributedMesh, delta: Any, options: Any = None, *, stats: dict[str, Any] | None = None
-         ) -> DistributedMesh:
+def _replaced(dmesh: DistributedMesh, **fields: Any) -> DistributedMesh:
+    """A DistributedMesh with some fields replaced (the others shared: immutable)."""
+    out = object.__new__(DistributedMesh)
+    for name in DistributedMesh.__slots__:
+        if name in fields:
+            object.__setattr__(out, name, fields[name])
+        elif hasattr(dmesh, name):
+            object.__setattr__(out, name, getattr(dmesh, name))
+    return out
+
+
+def with_curve_kinds(dmesh: DistributedMesh, geometry: Any) -> DistributedMesh:
+    """`dmesh` with the kinds a step with `geometry` (curved boundaries) gives
+    its points (the serial with_curve_kinds, boundary_geometry.hpp): a boundary
+    vertex of a curved tag is a corner only where the boundary turns by more than
+    the geometry's corner angle, at a tag change or at a required point. Computed
+    on the replicated segment skeleton (only segments are read), so every rank
+    agrees. ValueError on every rank for a curved tag no segment has. Collective."""
+    segments, spoints = segment_skeleton(dmesh)
+    if dmesh.kind is None:
+        raise ValueError("curved boundaries need the points' kinds: give kind= to DistributedMesh.from_local")
+
+    def kinds() -> np.ndarray:
+        part = dict(points=np.column_stack([spoints["x"], spoints["y"]]), triangles=np.zeros((0, 3), np.int64),
+                    segments=np.searchsorted(spoints["gid"], segments["v"]),
+                    segment_is_boundary=segments["boundary"].astype(np.uint8), kind=spoints["kind"],
+                    segment_tags=segments["tag"], required=spoints["required"], point_gids=spoints["gid"],
+                    triangle_gids=np.zeros(0, np.int64), segment_keys=segments["gid"],
+                    **geometry._core_arguments())
+        return np.asarray(_core.part_curve_kinds(part))
+
+    new = _collective(dmesh.comm, kinds)
+    at = np.minimum(np.searchsorted(spoints["gid"], dmesh.global_ids), max(len(spoints) - 1, 0))
+    on = (spoints["gid"][at] == dmesh.global_ids) if len(spoints) else np.zeros(len(dmesh.global_ids), bool)
+    kind = np.array(dmesh.kind, dtype=np.uint8)
+    kind[on] = new[at[on]]
+    kind.flags.writeable = False
+    return _replaced(dmesh, kind=kind)
+
+
+def _used(comm: Any, keys: np.ndarray, triangles: np.ndarray) -> np.ndarray:
+    """Which of this rank's points (`keys`) a triangle of any rank uses: the
+    used keys meet the asked ones at the directory rank key % P. Collective."""
+    size = comm.size
+    used = np.unique(triangles.reshape(-1))
+    directory, _ = _exchange(comm, used % size, used)
+    directory = np.unique(directory)
+    asks, asker = _exchange(comm, keys % size, np.ascontiguousarray(keys))
+    answer = np.column_stack([asks, np.isin(asks, directory)]).astype(np.int64)
+    back, _ = _exchange(comm, asker, answer)
+    back = back[np.argsort(back[:, 0], kind="stable")]
+    return back[np.searchsorted(back[:, 0], keys), 1].astype(bool) if len(keys) else np.zeros(0, bool)
+
+
+def _same_rows(comm: Any, old_keys: np.ndarray, old_payload: np.ndarray, new_keys: np.ndarray
+               ) -> np.ndarray | None:
+    """Whether the rows `new_keys` ((k, c) int64) of all ranks are, as a set,
+    the rows `old_keys` of all ranks (each set without repeats); if so, the
+    `old_payload` row ((k, d) int64) of each new row, else None. Rows meet at
+    the directory rank (first column) % P. Collective."""
+    size = comm.size
+    c, d = old_keys.shape[1], old_payload.shape[1]
+    olds, _ = _exchange(comm, old_keys[:, 0] % size, np.ascontiguousarray(np.hstack([old_keys, old_payload])))
+    news, asker = _exchange(comm, new_keys[:, 0] % size, np.ascontiguousarray(np.hstack(
+        [new_keys, np.arange(len(new_keys))[:, None]])))
+    olds = olds[np.lexsort(olds[:, :c].T[::-1])]
+    order = np.lexsort(news[:, :c].T[::-1])
+    same = len(olds) == len(news) and np.array_equal(olds[:, :c], news[order, :c])
+    if not comm.allreduce(bool(same), op=_mpi().LAND):
+        return None
+    answer = np.hstack([news[order, c:], olds[:, c:]])  # (asker's index, payload)
+    back, _ = _exchange(comm, asker[order], np.ascontiguousarray(answer))
+    out = np.empty((len(new_keys), d), dtype=np.int64)
+    out[back[:, 0]] = back[:, 1:]
+    return out
+
+
+def _input_order(old: DistributedMesh, n_out: int, ids: np.ndarray, origin: np.ndarray, tri_ids: np.ndarray,
+                 seg_ids: np.ndarray, seg_boundary: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+    """When the step returned its input (the serial adopt_input_order, step.cpp:
+    every point kept with its id, the same triangles and the same segments with
+    the same boundary flags), the input's order: for each of this rank's new
+    triangles (`tri_ids`, ids rotated least first) the old triangle's global id
+    and stored rotation (4 columns), and for each new segment (`seg_ids`) the old
+    segment's global id, stored orientation and tag (4 columns). None otherwise.
+    A mesh that stays put keeps the indices of its triangles and segments, so
+    per-cell data stays aligned. Collective."""
+    comm = old.comm
+    MPI = _mpi()
+    if comm.allreduce(n_out, op=MPI.SUM) != comm.allreduce(old.n_owned, op=MPI.SUM) or \
+            not comm.allreduce(bool(np.array_equal(ids, origin)), op=MPI.LAND):
+        return None
+    stored = old.global_ids[np.asarray(old.triangles, dtype=np.int64).reshape(-1, 3)]
+    roll = np.argmin(stored, axis=1)
+    least = np.take_along_axis(stored, (roll[:, None] + np.arange(3)[None, :]) % 3, axis=1)
+    triangles = _same_rows(comm, least, np.column_stack([old.triangle_global_ids, stored]), tri_ids)
+    if triangles is None:
+        return None
+    seg = old.global_ids[np.asarray(old.segments, dtype=np.int64).reshape(-1, 2)]
+    flags = boundary_flags(old).astype(np.int64)
+    segments = _same_rows(comm, np.column_stack([np.sort(seg, axis=1), flags]),
+                          np.column_stack([old.segment_global_ids, seg, old.segment_tags]),
+                          np.column_stack([np.sort(seg_ids, axis=1), seg_boundary.astype(np.int64)]))
+    if segments is None:
+        return None
+    return triangles, segments
+
+
+def step(dmesh: DistributedMesh, delta: Any, options: Any = None, *, stats: dict[str, Any] | None = None,
+         geometry: Any = None) -> DistributedMesh:
     """One FRFC step on a distributed mesh (what ``evolve(dmesh, delta,
     options=...)`` runs). Collective.
 
@@ -288,7 +426,9 @@ def step(dmesh: DistributedMesh, delta: Any, options: Any = None, *, stats: dict
                              "(scatter and a step's output have them)")
 
     _collective(comm, check)
-    packed = _pack(dmesh, delta, options, stats)
+    if geometry is not None:
+        dmesh = with_curve_kinds(dmesh, geometry)
+    packed = _pack(dmesh, delta, options, stats, geometry)
     part = packed["part"]
     gids = part["point_gids"]
     n_part = len(gids)
@@ -310,13 +450,20 @@ def step(dmesh: DistributedMesh, delta: Any, options: Any = None, *, stats: dict
     from .distributed_triangulation import _lookup, constrained_delaunay
 
     triangles = constrained_delaunay(comm, points, point_keys, pieces, piece_boundary, stats=cdt)
+    old = packed["input_gid"]
+    dropped = 0
+    if geometry is not None:
+        # Interior points that a coarser curved boundary left outside are in no
+        # triangle: dropped, as serial (fit_to_curves).
+        used = _used(comm, point_keys, triangles)
+        dropped = int(comm.allreduce(int((~used).sum()), op=MPI.SUM))
+        points, point_keys, old = points[used], point_keys[used], old[used]
 
     # The output mesh from the ranks' pieces: the points they kept, their
     # triangles' and pieces' vertices looked up by id.
     owned_gids = dmesh.global_ids[: dmesh.n_owned]
     mine = np.zeros(len(points), dtype=_OUT_POINT)
     mine["gid"], mine["x"], mine["y"], mine["owner"] = point_keys, points[:, 0], points[:, 1], comm.rank
-    old = packed["input_gid"]
     mine["origin"] = old
     is_old = old >= 0
     at_old = np.searchsorted(owned_gids, old[is_old])
@@ -346,29 +493,54 @@ def step(dmesh: DistributedMesh, delta: Any, options: Any = None, *, stats: dict
     tri_ids = np.take_along_axis(tri_ids, rotate, axis=1)
     triangle_gids = _global_rank(comm, tri_ids)
     xy = np.column_stack([found["x"], found["y"]])
-    triangle_tags = _carried_triangle_tags(dmesh, xy[local[:, 0]], xy[local[:, 1]], xy[local[:, 2]])
+    reach = 0.0
+    if geometry is not None:
+        # How far outside the old domain a new triangle may reach: a chord
+        # between points on a curve strays from the old polygon by at most about
+        # its sagitta, under its length (as the serial step's curve_reach).
+        ends = np.searchsorted(found["gid"], pieces)
+        on_curve = np.isin(piece_tags, np.asarray(geometry.tags, dtype=np.int64))
+        length = np.hypot(*(xy[ends[on_curve, 1]] - xy[ends[on_curve, 0]]).T) if on_curve.any() else np.zeros(1)
+        reach = float(comm.allreduce(max(float(length.max()), 2 * packed["curve_move"]), op=MPI.MAX))
+    triangle_tags = _carried_triangle_tags(dmesh, xy[local[:, 0]], xy[local[:, 1]], xy[local[:, 2]], reach)
+    segments = np.searchsorted(found["gid"], pieces).reshape(-1, 2)
+    segment_gids = share
+    same = _input_order(dmesh, len(point_keys), mine["id"], mine["origin"], tri_ids, ids[segments],
+                        piece_boundary)
+    if same is not None:
+        # The step returned its input: the input's triangle and segment order and rotations (as serial).
+        by_id = np.argsort(ids, kind="stable")
+        triangle_gids, local = same[0][:, 0], by_id[np.searchsorted(ids[by_id], same[0][:, 1:])]
+        segment_gids, segments = same[1][:, 0], by_id[np.searchsorted(ids[by_id], same[1][:, 1:3])]
+        piece_tags = same[1][:, 3]
     out = DistributedMesh.from_local(
         np.column_stack([found["x"], found["y"]]), local, ids, comm, owners=found["owner"],
-        segments=np.searchsorted(found["gid"], pieces).reshape(-1, 2), segment_tags=piece_tags,
+        segments=segments, segment_tags=piece_tags,
         required=found["required"].astype(bool), origin=found["origin"], kind=found["kind"],
-        tag_names=dict(dmesh.tag_names), triangle_global_ids=triangle_gids, segment_global_ids=share,
+        tag_names=dict(dmesh.tag_names), triangle_global_ids=triangle_gids, segment_global_ids=segment_gids,
         triangle_tags=triangle_tags)
     # A step's output is valid by construction, as the serial step's: gather
     # returns its arrays as they are (Mesh._trusted), in the serial order.
     object.__setattr__(out, "_segment_is_boundary", boundary_flags(out))
     object.__setattr__(out, "_trusted", True)
     if stats is not None:
-        stats.update(cdt=cdt, pieces=len(keys), triangles=comm.allreduce(len(triangles), op=MPI.SUM))
+        stats.update(cdt=cdt, pieces=len(keys), triangles=comm.allreduce(len(triangles), op=MPI.SUM),
+                     unchanged=same is not None)
+        if geometry is not None:
+            stats.update(curve_points_dropped_outside=dropped, curve_reach=reach)
     return out
 
 
-def _carried_triangle_tags(old: DistributedMesh, a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
+def _carried_triangle_tags(old: DistributedMesh, a: np.ndarray, b: np.ndarray, c: np.ndarray,
+                           reach: float = 0.0) -> np.ndarray:
     """The tag of each new triangle (a, b, c) (this rank's, in their stored
     rotation): that of the old triangle containing its centroid, as the serial
     carry_tags (parent_map.cpp): region borders are constraints, so a new
     triangle lies in one region. The old triangles whose bounding boxes contain
     a centroid come by the transfer's reach halo (distributed_transfer._HeldOld).
-    Collective."""
+    After a step on curves, a centroid may lie outside the old domain by up to
+    `reach`: it gets the nearest old triangle (the serial walk stops in a
+    boundary triangle within that distance). Collective."""
     from .distributed_transfer import _bounds, _HeldOld, _receiving_chunks, _table
 
     comm = old.comm
@@ -381,13 +553,18 @@ def _carried_triangle_tags(old: DistributedMesh, a: np.ndarray, b: np.ndarray, c
     perm, _ = _halo.hilbert_chunks(centroid[:, 0], centroid[:, 1], low, span)
     starts = _receiving_chunks(len(perm))
     box = _halo.chunk_boxes(centroid[perm, 0], centroid[perm, 1], starts)
-    held = _HeldOld(old, _table(box, np.zeros(len(box))), low, span, magnitude)
+    held = _HeldOld(old, _table(box, np.full(len(box), reach)), low, span, magnitude)
 
     def locate() -> np.ndarray:
         if not len(centroid):
             return np.zeros(0, dtype=np.int64)
         found = _core.locate_points(held.points, held.triangles, centroid)[0] if held.n_triangles \
             else np.full(len(centroid), -1)
+        outside = np.flatnonzero(found < 0)
+        if len(outside) and reach > 0 and held.n_triangles:
+            found[outside], distance = _nearest_triangles(held.points, held.triangles, centroid[outside])
+            if (distance > reach).any():
+                found[outside[distance > reach]] = -1
         if (found < 0).any():
             raise RuntimeError("carry_tags: a new triangle outside the old mesh (an internal error)")
         return np.asarray(held.tags[found], dtype=np.int64)
@@ -395,9 +572,44 @@ def _carried_triangle_tags(old: DistributedMesh, a: np.ndarray, b: np.ndarray, c
     return _collective(comm, locate)
 
 
+def _nearest_triangles(points: np.ndarray, triangles: np.ndarray, queries: np.ndarray
+                       ) -> tuple[np.ndarray, np.ndarray]:
+    """For each query, the triangle at least distance (ties: the lower index)
+    and that distance. Candidates by a k-d tree over the centroids: a triangle
+    within distance d of q has its centroid within d + (its largest centroid to
+    vertex distance) of q, and d is at most the distance to the nearest
+    centroid's triangle."""
+    from scipy.spatial import cKDTree
+
+    corners = points[triangles]  # (m, 3, 2)
+    centroid = corners.mean(axis=1)
+    radius = float(np.sqrt(((corners - centroid[:, None, :]) ** 2).sum(axis=2)).max())
+    tree = cKDTree(centroid)
+    nearest, _ = tree.query(queries)
+    lists = tree.query_ball_point(queries, nearest + radius * (1 + 1e-9) + 1e-300)
+    counts = np.array([len(x) for x in lists], dtype=np.int64)
+    query = np.repeat(np.arange(len(queries)), counts)
+    tri = np.concatenate([np.asarray(x, dtype=np.int64) for x in lists]) if len(lists) else np.zeros(0, np.int64)
+    q = queries[query]
+    p = corners[tri]
+    # distance from q to each edge, 0 when q is inside (all orientations >= 0)
+    best = np.full(len(tri), np.inf)
+    inside = np.ones(len(tri), bool)
+    for k in range(3):
+        u, v = p[:, k], p[:, (k + 1) % 3]
+        e, w = v - u, q - u
+        inside &= e[:, 0] * w[:, 1] - e[:, 1] * w[:, 0] >= 0
+        t = np.clip((w * e).sum(axis=1) / np.maximum((e * e).sum(axis=1), np.finfo(float).tiny), 0.0, 1.0)
+        best = np.minimum(best, np.hypot(*(w - t[:, None] * e).T))
+    best[inside] = 0.0
+    order = np.lexsort((tri, best, query))
+    first = np.flatnonzero(np.r_[True, query[order][1:] != query[order][:-1]]) if len(order) else order
+    return tri[order][first], best[order][first]
+
+
 def evolve_distributed(dmesh: DistributedMesh, delta: Any = None, *, size: Any = None, method: str = "frfc",
                        options: Any = None, stats: dict[str, Any] | None = None,
-                       build_options: Callable[[], Any] | None = None) -> DistributedMesh:
+                       build_options: Callable[[], Any] | None = None, geometry: Any = None) -> DistributedMesh:
     """:func:`evomesh.evolve` on a :class:`~evomesh.DistributedMesh` (it calls
     this, with `build_options` making the options from its arguments as for a
     Mesh). Collective: every rank calls it with its own delta. The step is
@@ -427,5 +639,6 @@ def evolve_distributed(dmesh: DistributedMesh, delta: Any = None, *, size: Any =
         return o
 
     o = _collective(comm, check)
-    out = step(dmesh, delta if size is None else delta_from_size(dmesh, size), o, stats=stats)
+    g = _collective(comm, as_geometry, geometry)
+    out = step(dmesh, delta if size is None else delta_from_size(dmesh, size), o, stats=stats, geometry=g)
     return out.rebalance(renumber=False)

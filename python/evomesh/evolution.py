@@ -141,8 +141,9 @@ def evolve(mesh: Mesh, delta: Any = None, *, size: Any = None, method: str = "fr
         returns a DistributedMesh whose ``gather()`` is this function's result
         on the gathered mesh, bit for bit, on any number of ranks; for now with
         the paper's FRFC options (``options=FrfcOptions.paper()``, optionally
-        ``within_domain=True``), with delta or size (evomesh.distributed_step);
-        tags, required points and origin come along.
+        ``within_domain=True``), with delta or size and curved boundaries
+        (``geometry``; evomesh.distributed_step); tags, required points and
+        origin come along, and a step that returns its input keeps its order.
     delta : array_like, shape (n,), or a scalar
         Per-point factor, relative to the current spacing: the new spacing
         (nearest-neighbour distance) at p is about delta(p) nn_M(p); < 1
@@ -442,8 +443,8 @@ def evolve(mesh: Mesh, delta: Any = None, *, size: Any = None, method: str = "fr
         domain, crossing boundaries). The input is never modified.
     """
     if type(mesh).__name__ == "DistributedMesh":  # (not imported here: mpi4py is optional)
-        if displacement is not None or interface is not None or geometry is not None:
-            raise ValueError("not yet on a DistributedMesh: displacement=, interface= and geometry= (gather() the "
+        if displacement is not None or interface is not None:
+            raise ValueError("not yet on a DistributedMesh: displacement= and interface= (gather() the "
                              "mesh, evolve it on the root, and scatter() the result)")
         from evomesh.distributed_step import evolve_distributed
 
@@ -454,7 +455,7 @@ def evolve(mesh: Mesh, delta: Any = None, *, size: Any = None, method: str = "fr
             return o
 
         return evolve_distributed(mesh, delta, size=size, method=method,  # type: ignore[return-value]
-                                  build_options=build_options)
+                                  build_options=build_options, geometry=geometry)
     _require_mesh(mesh)
     if (delta is None) == (size is None):
         raise TypeError(

@@ -48,6 +48,12 @@ std::vector<double> local_feature_size(const Mesh_arrays& mesh, const std::vecto
                                        const std::vector<double>& limit);
 
 // A point inside a chain of segments, as the walks of local_feature_size see it.
+// On a chain of a curved tag (boundary_geometry.hpp), the spacing at which a
+// piece through u, p, w turns by the geometry's corner angle: a piece of length
+// L turns by about L turn / (edge length) here; half of it, as a packing of
+// spacing f leaves gaps up to about 2 f. +inf where the chain runs straight.
+double curve_turn_cap(const Vec2& u, const Vec2& p, const Vec2& w, double corner_angle);
+
 struct Chain_point {
   Index v = 0, u = 0, w = 0;  // the point, and its neighbours along the chain
   bool along = true;          // the segment (v, w) is stored v -> w
