@@ -191,7 +191,14 @@ class DistributedSpacing:
         self.weight = weight
         self.shift = float(comm.allreduce(float(weight.max()) if n_owned else 0.0, op=MPI.MAX))
         self._held_weight = dmesh.exchange_halo(weight)
-        self._held_graph: Any = None
+        # The graph over the held sites and every site received so far (built on
+        # the first query, rebuilt only when a query brings sites it lacks): a
+        # graph over more true sites is still exact where its sites include those
+        # that attain f (ties go to the least site id, whatever the set).
+        self._graph_cache: Any = None
+        self._cache_gids = np.zeros(0, dtype=np.int64)
+        self._cache_xy = np.zeros((0, 2))
+        self._cache_weight = np.zeros(0)
 
         f = weight.copy()
         ask = d > 1
@@ -389,24 +396,29 @@ class DistributedSpacing:
         n_owned = dmesh.n_owned
         held_xy = np.ascontiguousarray(dmesh.points, dtype=np.float64)
         x = np.ascontiguousarray(x, dtype=np.float64).reshape(-1, 2)
-        # The bound: f over the held sites.
-        if len(x) and len(held_xy):
-            if self._held_graph is None:  # (the held sites' graph: built once, it bounds every query)
-                self._held_graph = self._graph(dmesh.global_ids, held_xy, self._held_weight)
-            bound = self._held_graph.evaluate(x)[0]
-        else:
-            bound = np.zeros(len(x))
+        if self._graph_cache is None and len(held_xy):
+            order = np.argsort(dmesh.global_ids, kind="stable")
+            self._cache_gids, self._cache_xy = dmesh.global_ids[order], held_xy[order]
+            self._cache_weight = np.asarray(self._held_weight)[order]
+            self._graph_cache = self._graph(self._cache_gids, self._cache_xy, self._cache_weight)
+        # The bound: f over the sites of the graph so far (true sites: an upper bound).
+        bound = self._graph_cache.evaluate(x)[0] if len(x) and self._graph_cache is not None else np.zeros(len(x))
         mine = np.empty(n_owned, dtype=_SITE)
         mine["gid"], mine["x"], mine["y"] = dmesh.global_ids[:n_owned], held_xy[:n_owned, 0], held_xy[:n_owned, 1]
         mine["w"] = self.weight
         got = self._copies(x, np.asarray(bound, dtype=np.float64), held_xy[:n_owned], np.zeros(n_owned), mine)
         self._counts[counter] += int(len(got))
-        gids, xy = _union(dmesh.global_ids, held_xy, got["gid"], np.column_stack([got["x"], got["y"]]))
-        if not len(gids):
-            return None
         more, first = np.unique(got["gid"], return_index=True)
-        weight = np.concatenate([self._held_weight, got["w"][first][~np.isin(more, dmesh.global_ids)]])
-        return self._graph(gids, xy, weight)
+        new = ~np.isin(more, self._cache_gids)
+        if new.any():
+            gids = np.concatenate([self._cache_gids, more[new]])
+            order = np.argsort(gids, kind="stable")
+            take = first[new]
+            self._cache_gids = gids[order]
+            self._cache_xy = np.concatenate([self._cache_xy, np.column_stack([got["x"][take], got["y"][take]])])[order]
+            self._cache_weight = np.concatenate([self._cache_weight, got["w"][take]])[order]
+            self._graph_cache = self._graph(self._cache_gids, self._cache_xy, self._cache_weight)
+        return self._graph_cache
 
     def graph_for(self, x: Any) -> Any:
         """A spacing function (``_core.SpacingFunction``) exact at this rank's
