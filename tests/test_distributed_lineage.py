@@ -1,0 +1,158 @@
+"""The lineage of a step on MPI ranks (evomesh.distributed_lineage, issue 29):
+``evolve(dmesh, ...).lineage`` names each owned point's old triangle by global
+id, survives the step's rebalance, and ``gather()`` gives the serial step's
+Lineage: bit for bit wherever the serial parent is the same triangle (every
+point strictly inside an old triangle), and the same bits on any number of
+ranks everywhere.
+
+Plain ``pytest`` runs these on one rank; CI runs them under ``mpiexec -n 2`` and
+``-n 4`` too (tools/run-tests.sh; 3 ranks checked by hand).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import evomesh
+from evomesh import _core
+
+MPI = pytest.importorskip("mpi4py.MPI")
+from evomesh import DistributedLineage  # noqa: E402
+from mpi_support import check_everywhere, watchdog  # noqa: E402,F401 (watchdog: an autouse fixture)
+from test_distributed_step import _DOMAINS, _front, _mesh, _options, _scatter, _with_required  # noqa: E402
+
+COMM = MPI.COMM_WORLD
+RANK, SIZE = COMM.rank, COMM.size
+
+
+def _steps(name: str, within: bool, layout: str):
+    """Two steps of a time loop (a moving front, then random delta) on the
+    ranks and serially: yields (old Mesh, distributed output, serial output)
+    per step, the serial meshes on every rank."""
+    mesh = _mesh(name)
+    if name == "two holes":
+        mesh = _with_required(mesh)
+    options = _options(within, seed=3)
+    dmesh = _scatter(mesh, layout, seed=1)
+    serial = mesh
+    for t in range(2):
+        if t == 0:
+            delta = _front(serial.points, 1)
+            new = evomesh.evolve(dmesh, lambda xy: _front(xy, 1), options=options)
+        else:
+            delta = np.random.default_rng(7).uniform(0.3, 2.5, serial.n_points)
+            new = evomesh.evolve(dmesh, delta[dmesh.global_ids[: dmesh.n_owned]], options=options)
+        step = evomesh.evolve(serial, delta, options=options)
+        yield serial, new, step
+        dmesh, serial = new, step
+
+
+def _fresh_parents(old: evomesh.Mesh, new: evomesh.Mesh) -> tuple[np.ndarray, np.ndarray]:
+    """The lineage's rule on the whole old mesh (one rank holding every old
+    triangle): parent and barycentric per new point, -1 and zeros where kept."""
+    parent = np.full(new.n_points, -1, dtype=np.int64)
+    barycentric = np.zeros((new.n_points, 3))
+    fresh = np.flatnonzero(new.origin < 0)
+    found, weights = _core.part_parent_triangles(old.points, old.triangles, np.arange(old.n_triangles),
+                                                 new.points[fresh])
+    parent[fresh], barycentric[fresh] = found, weights
+    return parent, barycentric
+
+
+def _check_lineage(lineage: evomesh.Lineage, old: evomesh.Mesh, new: evomesh.Mesh) -> None:
+    """Parents contain their points: barycentric coordinates sum to 1 and
+    rebuild the point (they reproduce linear functions), to rounding."""
+    fresh = new.origin < 0
+    assert lineage.matches(old)
+    assert (lineage.parent_triangle[~fresh] == -1).all() and not lineage.barycentric[~fresh].any()
+    assert (lineage.parent_triangle[fresh] >= 0).all()
+    weights = lineage.barycentric[fresh]
+    eps = np.finfo(np.float64).eps
+    assert np.abs(weights.sum(axis=1) - 1.0).max(initial=0.0) <= 8 * eps
+    assert weights.min(initial=0.0) >= -64 * eps
+    corners = old.points[old.triangles[lineage.parent_triangle[fresh]]]
+    rebuilt = np.einsum("kj,kjc->kc", weights, corners)
+    assert np.abs(rebuilt - new.points[fresh]).max(initial=0.0) <= 64 * eps * np.abs(old.points).max()
+
+
+@pytest.mark.parametrize("within", [True, False], ids=["within", "euclidean"])
+@pytest.mark.parametrize("layout", ["even", "weighted"])
+@pytest.mark.parametrize("name", list(_DOMAINS))
+def test_gathered_lineage_is_the_serial_one(name: str, layout: str, within: bool) -> None:
+    """Over a two-step time loop: the gathered lineage equals the rule applied
+    on the whole old mesh bit for bit (so it is the same on any number of
+    ranks), and the serial step's lineage wherever the parents agree; they
+    differ only at points on an old edge (a candidate on an interior
+    constraint), a small fraction, and there both parents contain the point."""
+    differ = 0
+    total = 0
+    for old, new, serial in _steps(name, within, layout):
+        gathered = new.gather()
+        ok, what = True, ""
+        if RANK == 0:
+            lineage, reference = gathered.lineage, serial.lineage
+            assert lineage is not None and reference is not None
+            parent, barycentric = _fresh_parents(old, serial)
+            same = lineage.parent_triangle == reference.parent_triangle
+            differ += int((~same).sum())
+            total += int((serial.origin < 0).sum())
+            checks = {
+                "sizes": (lineage.n_old_points, lineage.n_old_triangles)
+                == (reference.n_old_points, reference.n_old_triangles),
+                "old_nn": np.array_equal(lineage.old_nn, reference.old_nn),
+                "old_f": np.array_equal(lineage.old_f, reference.old_f),
+                "the rule on one rank": np.array_equal(lineage.parent_triangle, parent)
+                and np.array_equal(lineage.barycentric.view(np.int64), barycentric.view(np.int64)),
+                "barycentric where the serial parent is the same":
+                    np.array_equal(lineage.barycentric[same].view(np.int64),
+                                   reference.barycentric[same].view(np.int64)),
+                # (on an old edge: the serial coordinates have an exact zero, as ours)
+                "parents differ only on old edges": bool((reference.barycentric[~same] == 0).any(axis=1).all()
+                                                         and (lineage.barycentric[~same] == 0).any(axis=1).all()),
+                "parents differ only on segments": bool((serial.kind[~same] == int(evomesh.PointKind.BOUNDARY))
+                                                        .all()),
+            }
+            _check_lineage(lineage, old, gathered)
+            what = ", ".join(k for k, v in checks.items() if not v)
+            ok = not what
+        check_everywhere(ok, f"{name}: the gathered lineage differs: {what}")
+    if RANK == 0:
+        assert differ <= 0.02 * total, f"{differ} of {total} parents differ from the serial step's"
+        if name != "crack and a notch":  # (no interior constraint: every new point has one parent)
+            assert differ == 0
+
+
+def test_lineage_rows_are_the_owned_points() -> None:
+    """Without gathering: each rank's rows are its owned points (after the
+    step's rebalance), their parents old triangle global ids that rebuild them;
+    old_nn and old_f are the old mesh's owned points'. A mesh not made by a
+    step has none; the lineage is read-only."""
+    old = _mesh("two holes")
+    dold = _scatter(old, "weighted", seed=4)
+    assert dold.lineage is None
+    dnew = evomesh.evolve(dold, lambda xy: _front(xy, 0), options=_options(True, 1))
+    lineage = dnew.lineage
+    assert isinstance(lineage, DistributedLineage)
+    assert lineage.parent_triangle.shape == (dnew.n_owned,) and lineage.barycentric.shape == (dnew.n_owned, 3)
+    assert np.array_equal(lineage.old_global_ids, dold.global_ids[: dold.n_owned])
+    assert lineage.old_nn.shape == lineage.old_f.shape == (dold.n_owned,)
+    assert lineage.matches(dold) and not lineage.matches(dnew)
+    # scattered: old triangle global ids are the serial indices
+    fresh = dnew.origin[: dnew.n_owned] < 0
+    parent = lineage.parent_triangle
+    ok = bool((parent[~fresh] == -1).all() and (parent[fresh] >= 0).all()
+              and (parent[fresh] < old.n_triangles).all())
+    if ok and fresh.any():
+        corners = old.points[old.triangles[parent[fresh]]]
+        rebuilt = np.einsum("kj,kjc->kc", lineage.barycentric[fresh], corners)
+        ok = np.abs(rebuilt - dnew.owned_points[fresh]).max() <= 1e-13 * np.abs(old.points).max()
+    check_everywhere(ok, "the owned rows rebuild the owned points")
+    check_everywhere(COMM.allreduce(int(fresh.sum())) > 0, "the step made new points")
+    with pytest.raises(AttributeError):
+        lineage.parent_triangle = parent  # type: ignore[misc]
+    with pytest.raises(ValueError):
+        lineage.barycentric[0, 0] = 1.0
+    assert "DistributedLineage" in repr(lineage)
+    # rebalance and from_local make meshes without one
+    assert dnew.rebalance().lineage is None
