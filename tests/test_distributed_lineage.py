@@ -19,6 +19,7 @@ from evomesh import _core
 
 MPI = pytest.importorskip("mpi4py.MPI")
 from evomesh import DistributedLineage  # noqa: E402
+from evomesh.distributed_transfer import transfer as distributed_transfer  # noqa: E402 (evomesh.transfer's, with stats)
 from mpi_support import check_everywhere, watchdog  # noqa: E402,F401 (watchdog: an autouse fixture)
 from test_distributed_step import _DOMAINS, _front, _mesh, _options, _scatter, _with_required  # noqa: E402
 
@@ -165,3 +166,32 @@ def test_lineage_rows_are_the_owned_points() -> None:
     assert "DistributedLineage" in repr(lineage)
     # rebalance and from_local make meshes without one
     assert dnew.rebalance().lineage is None
+
+
+@pytest.mark.parametrize("name", ["crack and a notch", "disc with a hole"])
+def test_linear_transfer_uses_the_lineage(name: str) -> None:
+    """transfer(old, new, u) on a step's output places new points by the
+    lineage: equal bit for bit to the serial transfer of the gathered meshes
+    (which carry it), and to the serial step's transfer wherever the parents
+    agree (elsewhere to rounding); linear fields are reproduced."""
+    for old, new, serial in _steps(name, True, "weighted"):
+        dold = _scatter(old, "even", seed=0)  # (the step's input, as a mesh of its own)
+        u = np.sin(3.0 * old.points[:, 0]) + old.points[:, 1] ** 2
+        linear = old.points @ np.array([2.0, -1.0]) + 0.5
+        stats: dict = {}
+        got = distributed_transfer(dold, new, {"u": u[dold.global_ids[: dold.n_owned]],
+                                           "linear": linear[dold.global_ids[: dold.n_owned]]}, stats=stats)
+        assert stats["used_lineage"]
+        gathered = new.gather()
+        g_old = dold.gather()
+        want = COMM.bcast(evomesh.transfer(g_old, gathered, {"u": u, "linear": linear}) if RANK == 0 else None)
+        reference = COMM.bcast(evomesh.transfer(old, serial, u) if RANK == 0 else None)
+        same = COMM.bcast(gathered.lineage.parent_triangle == serial.lineage.parent_triangle if RANK == 0 else None)
+        mine = new.global_ids[: new.n_owned]
+        check_everywhere(np.array_equal(got["u"], want["u"][mine])
+                         and np.array_equal(got["linear"], want["linear"][mine]),
+                         "the serial transfer of the gathered meshes")
+        check_everywhere(np.array_equal(got["u"][same[mine]], reference[mine][same[mine]])
+                         and np.allclose(got["u"], reference[mine], rtol=0, atol=1e-14), "the serial step's transfer")
+        exact = new.owned_points @ np.array([2.0, -1.0]) + 0.5
+        check_everywhere(np.allclose(got["linear"], exact, rtol=0, atol=1e-13), "linear fields reproduced")
