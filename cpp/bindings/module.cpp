@@ -17,6 +17,7 @@
 #include "evomesh/drfc.hpp"
 #include "evomesh/frfc.hpp"
 #include "evomesh/global_ids.hpp"
+#include "evomesh/kernel.hpp"
 #include "evomesh/local_feature_size.hpp"
 #include "evomesh/options.hpp"
 #include "evomesh/packing.hpp"
@@ -1083,6 +1084,85 @@ PYBIND11_MODULE(_core, m) {
       py::arg("part"), py::arg("candidate_segment"), py::arg("kept_candidate"), py::arg("kept_point"),
       "The constraint pieces between the kept points along every chain of a part's segments (constraint_pieces): "
       "(ends (2k,) as part point index or n + candidate index, boundary, tag).");
+
+  m.def(
+      "part_parent_triangles",
+      [](const Float_array& points, const Int_array& triangles, const Int_array& triangle_keys,
+         const Float_array& queries, std::optional<Int_array> fallback) {
+        auto [pts, tris] = to_points_and_triangles(points, triangles);
+        const auto keys = to_vector<std::int64_t>(triangle_keys);
+        if (keys.size() != tris.size()) throw Input_error("triangle_keys: one key per triangle");
+        const auto q = to_points(queries, "queries");
+        const auto other = fallback ? to_vector<Index>(*fallback) : std::vector<Index>(q.size(), -1);
+        if (other.size() != q.size()) throw Input_error("fallback: one triangle (or -1) per query");
+        for (Index t : other) {
+          if (t >= static_cast<Index>(tris.size())) throw Input_error("fallback: triangle index out of range");
+        }
+        std::vector<Index> parent(q.size(), -1);
+        std::vector<std::array<double, 3>> bary(q.size(), {0, 0, 0});
+        {
+          py::gil_scoped_release release;
+          std::vector<Index> seed;
+          std::vector<std::array<double, 3>> unused;
+          locate_points(pts, tris, q, seed, unused);
+          // The triangles around each point (compressed lists).
+          std::vector<Index> xadj(pts.size() + 1, 0), adj(3 * tris.size());
+          for (const auto& t : tris) {
+            for (Index v : t) ++xadj[v + 1];
+          }
+          for (std::size_t v = 0; v < pts.size(); ++v) xadj[v + 1] += xadj[v];
+          {
+            std::vector<Index> fill(xadj.begin(), xadj.end() - 1);
+            for (std::size_t t = 0; t < tris.size(); ++t) {
+              for (Index v : tris[t]) adj[fill[v]++] = static_cast<Index>(t);
+            }
+          }
+          // Every triangle that contains q (on its edges included) shares the
+          // edge or vertex q lies on with the seed, so it is around one of the
+          // seed's vertices: the least key among them is a function of q and the
+          // mesh, not of the subset of triangles held. A q outside every
+          // triangle by rounding gets the nearest of them (ties: least key).
+          for (std::size_t k = 0; k < q.size(); ++k) {
+            if (seed[k] < 0) {
+              if (other[k] >= 0) {  // (outside by more than rounding: the caller's triangle)
+                parent[k] = other[k];
+                bary[k] = barycentric_coordinates(pts, tris[parent[k]], q[k]);
+              }
+              continue;
+            }
+            Index best = -1, nearest = -1;
+            double nearest_gap = std::numeric_limits<double>::infinity();
+            for (Index v : tris[seed[k]]) {
+              for (Index a = xadj[v]; a < xadj[v + 1]; ++a) {
+                const Index t = adj[a];
+                const Triangle& tri = tris[t];
+                bool inside = true;
+                for (int e = 0; e < 3 && inside; ++e) inside = orientation(pts[tri[e]], pts[tri[(e + 1) % 3]], q[k]) >= 0;
+                if (inside) {
+                  if (best < 0 || keys[t] < keys[best]) best = t;
+                  continue;
+                }
+                const double gap = distance_to_triangle(pts, tri, q[k]);
+                if (gap < nearest_gap || (gap == nearest_gap && keys[t] < keys[nearest])) {
+                  nearest_gap = gap;
+                  nearest = t;
+                }
+              }
+            }
+            parent[k] = best >= 0 ? best : nearest;
+            bary[k] = barycentric_coordinates(pts, tris[parent[k]], q[k]);  // (the parent map's formula, unclamped)
+          }
+        }
+        Float_array b({static_cast<py::ssize_t>(bary.size()), py::ssize_t{3}});
+        if (!bary.empty()) std::memcpy(b.mutable_data(), bary.data(), bary.size() * sizeof(bary[0]));
+        return py::make_tuple(vector_array(parent), b);
+      },
+      py::arg("points"), py::arg("triangles"), py::arg("triangle_keys"), py::arg("queries"),
+      py::arg("fallback") = py::none(),
+      "The parent of each query in a part of an old mesh (distributed lineage): among the triangles containing it "
+      "(exact orientation tests), the one of least key; outside every one by rounding, the nearest; farther "
+      "than rounding outside (locate_points), fallback[k] (-1: none). Returns (triangle index or -1, barycentric coordinates (k, 3) in "
+      "its vertex order, as the step's parent map computes them).");
 
   m.def(
       "hilbert_keys",

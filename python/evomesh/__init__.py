@@ -7,6 +7,7 @@ as it can.
 """
 
 from evomesh.distributed import DistributedMesh
+from evomesh.distributed_lineage import DistributedLineage
 from evomesh.evolution import (
     DRFC_DEFAULTS,
     FRFC_DEFAULTS,
@@ -28,6 +29,7 @@ from evomesh.spacing_function import SpacingFunction, nn_spacing, spacing
 __all__ = [
     "Mesh",
     "DistributedMesh",
+    "DistributedLineage",
     "PointKind",
     "BoundaryGeometry",
     "Circle",

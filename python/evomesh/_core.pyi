@@ -272,6 +272,14 @@ def part_project_segment_candidates(
 def part_pieces(
     part: dict[str, Any], candidate_segment: ArrayLike, kept_candidate: ArrayLike, kept_point: ArrayLike
 ) -> tuple[NDArray[np.int64], NDArray[np.uint8], NDArray[np.int64]]: ...
+def part_parent_triangles(
+    points: ArrayLike,
+    triangles: ArrayLike,
+    triangle_keys: ArrayLike,
+    queries: ArrayLike,
+    fallback: ArrayLike | None = None,
+) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
+    """(triangle containing each query of least key, -1 if outside; barycentric coordinates (k, 3))."""
 def chain_feature_sizes(
     points: ArrayLike,
     triangles: ArrayLike,

@@ -768,12 +768,18 @@ class DistributedMesh:
     origin : ndarray of int64, shape (n_local,)
     tag_names : mapping, the same on every rank.
     halo_rings : int
+    lineage : DistributedLineage or None
+        For the mesh ``evomesh.evolve`` returns: where its owned points lie in
+        the mesh the step started from (old triangles by global id; nn and f
+        at the old points). :meth:`gather` gives the serial
+        :class:`~evomesh.Lineage`. None for a mesh made by :meth:`scatter`,
+        :meth:`from_local` or :meth:`rebalance`.
     """
 
     __slots__ = ("comm", "points", "n_owned", "global_ids", "owners", "triangles", "triangle_global_ids",
                  "triangle_tags", "halo_triangles", "halo_triangle_global_ids", "halo_triangle_tags", "segments",
                  "segment_global_ids", "segment_tags", "halo_segments", "halo_segment_global_ids",
-                 "halo_segment_tags", "required", "kind", "origin", "tag_names", "halo_rings", "_send_index",
+                 "halo_segment_tags", "required", "kind", "origin", "tag_names", "halo_rings", "lineage", "_send_index",
                  "_send_counts", "_recv_positions", "_recv_counts", "_segment_is_boundary", "_trusted")
 
     comm: Any
@@ -798,6 +804,7 @@ class DistributedMesh:
     origin: np.ndarray
     tag_names: Mapping[tuple[int, int], str]
     halo_rings: int
+    lineage: Any  # DistributedLineage | None (distributed_lineage.py)
     _send_index: np.ndarray  # owned points to send in a halo exchange, grouped by destination rank
     _send_counts: np.ndarray
     _recv_positions: np.ndarray  # halo positions the received values go to, grouped by source rank
@@ -831,6 +838,7 @@ class DistributedMesh:
             set_(self, name, _frozen(np.asarray(parts[name], dtype=np.int64)))
         set_(self, "tag_names", MappingProxyType(dict(tag_names)))
         set_(self, "halo_rings", int(halo_rings))
+        set_(self, "lineage", None)
         set_(self, "_segment_is_boundary", _frozen(parts["segment_is_boundary"].astype(bool)))
         set_(self, "_trusted", bool(trusted))
         for name in ("send_index", "send_counts", "recv_positions", "recv_counts"):
@@ -1090,6 +1098,10 @@ class DistributedMesh:
         ValueError
             On every rank, if the assembled mesh is not valid (the Mesh
             constructor's message) or root is bad.
+
+        The Mesh of a step's output (``evomesh.evolve`` on a DistributedMesh)
+        carries its lineage (``Mesh.lineage``, from ``self.lineage``) with old
+        points and triangles numbered as in the old mesh's ``gather``.
         """
         comm = self.comm
         root_ = _collective(comm, _check_root, comm, root)
@@ -1112,6 +1124,7 @@ class DistributedMesh:
         tri = _exchange(comm, np.full(len(tri), root_), tri)[0]
         seg = _exchange(comm, np.full(len(seg), root_), seg)[0]
         kind_known = self.kind is not None
+        lineage = None if self.lineage is None else self.lineage._gather(comm, self.global_ids[owned], root_)
 
         def build() -> Mesh | None:
             if comm.rank != root_:
@@ -1122,7 +1135,8 @@ class DistributedMesh:
             gids = pts["gid"]
             if self._trusted:  # the pieces of a valid Mesh: its arrays exactly, no second validation
                 return Mesh._trusted(pts["xy"], _index_of(gids, t["v"]), _index_of(gids, s["v"]),
-                                     s["boundary"].astype(bool), pts["kind"], pts["origin"], segment_tags=s["tag"],
+                                     s["boundary"].astype(bool), pts["kind"], pts["origin"], lineage=lineage,
+                                     segment_tags=s["tag"],
                                      triangle_tags=t["tag"], required=pts["required"].astype(bool),
                                      tag_names=self.tag_names)
             return Mesh(pts["xy"], _index_of(gids, t["v"]), _index_of(gids, s["v"]), segment_tags=s["tag"],

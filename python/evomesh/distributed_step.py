@@ -523,6 +523,8 @@ def step(dmesh: DistributedMesh, delta: Any, options: Any = None, *, stats: dict
     # returns its arrays as they are (Mesh._trusted), in the serial order.
     object.__setattr__(out, "_segment_is_boundary", boundary_flags(out))
     object.__setattr__(out, "_trusted", True)
+    from .distributed_lineage import step_lineage  # (where the output's points lie in dmesh)
+    object.__setattr__(out, "lineage", step_lineage(dmesh, out, packed["spacing"], reach))
     if stats is not None:
         stats.update(cdt=cdt, pieces=len(keys), triangles=comm.allreduce(len(triangles), op=MPI.SUM),
                      unchanged=same is not None)
@@ -614,8 +616,9 @@ def evolve_distributed(dmesh: DistributedMesh, delta: Any = None, *, size: Any =
     this, with `build_options` making the options from its arguments as for a
     Mesh). Collective: every rank calls it with its own delta. The step is
     :func:`step`, the result rebalanced (:meth:`DistributedMesh.rebalance`,
-    global ids kept: the serial step's output order). `options`: an
-    FrfcOptions, when called directly (default: the paper's)."""
+    global ids kept: the serial step's output order) with its lineage moved
+    along. `options`: an FrfcOptions, when called directly (default: the
+    paper's)."""
     comm = dmesh.comm
 
     def check() -> Any:
@@ -641,4 +644,6 @@ def evolve_distributed(dmesh: DistributedMesh, delta: Any = None, *, size: Any =
     o = _collective(comm, check)
     g = _collective(comm, as_geometry, geometry)
     out = step(dmesh, delta if size is None else delta_from_size(dmesh, size), o, stats=stats, geometry=g)
-    return out.rebalance(renumber=False)
+    balanced, renumbering = out.rebalance(renumber=False, return_map=True)
+    object.__setattr__(balanced, "lineage", out.lineage._moved(renumbering))
+    return balanced

@@ -29,7 +29,11 @@ the partitions of old and new. What needs what:
 Equality with the serial transfer of the gathered meshes (scattered meshes:
 global ids are the serial indices, triangles keep their rotation):
 
-- linear: the same kept copies and the same C++ point location and
+- linear, new a step's output from old: the lineage's parents (by global
+  id; they contain the points, so they are held) and weights, checked and
+  mixed as serially: bit for bit against the serial transfer of the gathered
+  meshes, which carry that lineage (distributed_lineage.py).
+- linear otherwise: the same kept copies and the same C++ point location and
   barycentric weights (the containing triangle is unique unless a point lies
   exactly on an old edge or vertex: then CGAL's walk picks one of the
   triangles, in either case the same value up to rounding), the same boundary
@@ -75,6 +79,7 @@ from .distributed import (
 )
 from .field_transfer import (
     _DISTRIBUTED,
+    _LINEAGE_SLACK,
     _ROUNDING_ULPS,
     Supermesh,
     _area_rounding,
@@ -357,8 +362,11 @@ def _nearest_boundary(held: _HeldOld, queries: np.ndarray, radius: float | np.nd
 # ------------------------------------------------------------------- linear
 def _linear(comm: Any, old: DistributedMesh, new: DistributedMesh, fields: list[Any], names: list[Any] | None,
             stats: dict[str, Any]) -> list[np.ndarray]:
-    """method="linear": Interpolation of the serial transfer without a lineage
-    (new points located in the held old triangles by the C++ core)."""
+    """method="linear": Interpolation of the serial transfer: new points
+    placed by ``new.lineage`` when it refers to old (a step's output: parents
+    by global id, held since they contain the points), else located in the
+    held old triangles by the C++ core, as the serial transfer does without a
+    lineage."""
     owned = np.arange(new.n_owned)
     kept = new.origin[owned] >= 0
     located = np.flatnonzero(~kept)
@@ -374,13 +382,33 @@ def _linear(comm: Any, old: DistributedMesh, new: DistributedMesh, fields: list[
     box = _halo.chunk_boxes(new.owned_points[perm, 0], new.owned_points[perm, 1], starts)
     held = _HeldOld(old, _table(box, np.full(len(box), 4.0 * tolerance)), low, span, magnitude)
     stats["old_triangles_held"] = held.n_triangles
+    lineage = new.lineage if new.lineage is not None and new.lineage.matches(old) else None
+    stats["used_lineage"] = lineage is not None
+
+    def search(at: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        if len(at) and held.n_triangles:
+            return _core.locate_points(held.points, held.triangles, queries[at])
+        return np.full(len(at), -1, np.int64), np.zeros((len(at), 3))
 
     def locate() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         origin = _origins(held, new, owned)
-        if len(queries) and held.n_triangles:
-            triangle, weights = _core.locate_points(held.points, held.triangles, queries)
+        if lineage is None:
+            triangle, weights = search(np.arange(len(queries)))
         else:
-            triangle, weights = np.full(len(queries), -1, np.int64), np.zeros((len(queries), 3))
+            # The serial Interpolation with a lineage: its parents and weights,
+            # checked by rebuilding the points; unlocated points searched.
+            parent = lineage.parent_triangle[located]
+            weights = lineage.barycentric[located].copy()
+            known = parent >= 0
+            triangle = np.full(len(queries), -1, np.int64)
+            held_parent = known & _contains(held.gid, parent)
+            triangle[held_parent] = _index_of(held.gid, parent[held_parent])
+            rebuilt = np.einsum("kj,kjc->kc", weights[held_parent], held.points[held.triangles[triangle[held_parent]]])
+            gap = np.abs(rebuilt - queries[held_parent]).max(initial=0.0)
+            if not held_parent[known].all() or gap > _LINEAGE_SLACK * tolerance:
+                raise ValueError("new.lineage does not fit old: new was not evolved from old")
+            unknown = np.flatnonzero(~known)
+            triangle[unknown], weights[unknown] = search(unknown)
         vertices = held.triangles[np.maximum(triangle, 0)] if held.n_triangles else np.zeros((len(queries), 3),
                                                                                              np.int64)
         outside = np.flatnonzero(triangle < 0)
@@ -653,18 +681,20 @@ def transfer(old: Any, new: Any, values: Any, method: str = "linear", *, frame: 
         rank) gives a dict, with one search for all fields.
     method : {"linear", "conservative"}
         As the serial transfer. "linear": equal bit for bit to the serial
-        transfer of the gathered meshes (no lineage: new points located in the
-        old mesh, within rounding outside it on the nearest boundary edge,
-        farther outside an error). "conservative": the L2 projection; agrees
+        transfer of the gathered meshes (new points placed by ``new.lineage``
+        when new is a step's output from old, else located in the old mesh;
+        within rounding outside it on the nearest boundary edge, farther
+        outside an error). "conservative": the L2 projection; agrees
         with the serial one to its solver tolerance, and keeps the integral
         (plus what a changed domain gains, minus what it loses, as
         :func:`evomesh.domain_change` says) to rounding.
     frame : {"eulerian", "lagrangian"}
         Accepted for the serial signature; the same without a move (a
-        DistributedMesh carries no lineage, so no move).
+        distributed step moves no points).
     stats : dict, optional
         Filled with "bytes_moved" (sent by this rank to others),
-        "old_triangles_held" and, for "conservative", "cg_iterations".
+        "old_triangles_held", for "linear" "used_lineage", and for
+        "conservative" "cg_iterations".
 
     Returns
     -------
