@@ -373,15 +373,18 @@ class DistributedSpacing:
         graph = self._graph_at(x, counter)
         return np.asarray(graph.evaluate(x)[0]) if graph is not None and len(x) else np.zeros(0)
 
-    def _graph_at(self, x: np.ndarray, counter: str) -> Any:
+    def _graph_at(self, x: np.ndarray, counter: str, reach: np.ndarray | None = None) -> Any:
         """A spacing function over the held sites and those of other ranks within
-        the bound at x: exact at x. None when this rank has no site."""
+        the bound at x: exact at x. None when this rank has no site. `reach`
+        (optional): every site within reach[i] of x[i] instead of the bound."""
         dmesh = self._dmesh
         n_owned = dmesh.n_owned
         held_xy = np.ascontiguousarray(dmesh.points, dtype=np.float64)
         x = np.ascontiguousarray(x, dtype=np.float64).reshape(-1, 2)
         # The bound: f over the held sites.
-        if len(x) and len(held_xy):
+        if reach is not None:
+            bound = reach
+        elif len(x) and len(held_xy):
             if self._held_graph is None:  # (the held sites' graph: built once, it bounds every query)
                 self._held_graph = self._graph(dmesh.global_ids, held_xy, self._held_weight)
             bound = self._held_graph.evaluate(x)[0]
