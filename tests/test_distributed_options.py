@@ -19,7 +19,7 @@ from strategies import grid_mesh
 
 MPI = pytest.importorskip("mpi4py.MPI")
 from evomesh import DistributedMesh  # noqa: E402
-from evomesh.distributed_step import evolve_distributed  # noqa: E402
+from evomesh.distributed_step import _grid_graph, _pack, evolve_distributed  # noqa: E402
 from mpi_support import check_everywhere, watchdog  # noqa: E402,F401 (watchdog: an autouse fixture)
 
 COMM = MPI.COMM_WORLD
@@ -110,8 +110,7 @@ def _delta(points: np.ndarray, kind: str, t: int, box: tuple[np.ndarray, np.ndar
         return 0.35 + 2.5 * u
     assert kind == "spikes"
     bottom = (np.abs(points[:, 1] - lo[1]) < 1e-12) & (np.abs(points[:, 0] - lo[0] - 0.5 * (hi - lo)[0]) < 0.1)
-    spikes = (u < 0.01) | bottom  # (points on the bottom side among them)
-    return np.where(spikes, 1e-3, 1.5)
+    return np.where(bottom, 1e-4, np.where(u < 0.01, 1e-3, 1.5))  # (1e-4: long enough segment grids to ask f)
 
 
 def _compare_loop(name: str, option: str, kinds: list[str], layout: str = "even") -> list[dict]:
@@ -170,7 +169,62 @@ def test_each_option_changes_the_step(option: str) -> None:
     assert other.points.shape != reference.points.shape or not np.array_equal(other.points, reference.points)
 
 
+def _reference_pack(mesh: evomesh.Mesh, kind: str, options: _core.FrfcOptions) -> dict:
+    """_pack's flags on the whole mesh as one rank's part (every fan whole): the serial flags, by global id."""
+    box = (mesh.points.min(axis=0), mesh.points.max(axis=0))
+    whole = DistributedMesh.scatter(mesh, MPI.COMM_SELF)
+    packed = _pack(whole, lambda xy: _delta(xy, kind, 0, box), options, None)
+    return dict(gids=packed["part"]["point_gids"], demoted=packed["demoted"], settled=packed["settled"])
+
+
+@pytest.mark.parametrize("name", list(_DOMAINS))
+def test_point_flags_are_the_owners(name: str) -> None:
+    """The demoted and settled flags at every point of every rank's part (held
+    points and the skeleton) are the serial ones, also where the part does not
+    hold a point's whole fan (the owner's flag comes by the halo exchange, and
+    by the replicated skeleton)."""
+    mesh = _mesh(name)
+    box = (mesh.points.min(axis=0), mesh.points.max(axis=0))
+    options = _options("all", 3)
+    dmesh = DistributedMesh.scatter(mesh if RANK == 0 else None, COMM, halo_rings=2)
+    for kind in ("front", "front-1"):
+        packed = _pack(dmesh, lambda xy, kind=kind: _delta(xy, kind, 0, box), options, None)
+        reference = COMM.bcast(_reference_pack(mesh, kind, options) if RANK == 0 else None)
+        at = np.searchsorted(reference["gids"], packed["part"]["point_gids"])
+        for flag in ("demoted", "settled"):
+            check_everywhere(np.array_equal(packed[flag], reference[flag][at]), f"{kind}: {flag} flags differ")
+        if RANK == 0:
+            assert reference["demoted"].any() if kind == "front" else reference["settled"].any()
+
+
+def test_grid_graphs_are_exact_over_their_boxes() -> None:
+    """_grid_graph's spacing function gives f exactly (DistributedSpacing.evaluate,
+    the serial f bit for bit) anywhere in the bounding boxes of the simplices
+    it serves, here every owned triangle and segment, on a thin halo (none)."""
+    mesh = _mesh("two holes")
+    box = (mesh.points.min(axis=0), mesh.points.max(axis=0))
+    dmesh = DistributedMesh.scatter(mesh if RANK == 0 else None, COMM, halo_rings=0)
+    options = _options("cheap", 0)
+    options.within_domain = False  # (weights up to 8 nn: f far above the spacing, sites from afar)
+    packed = _pack(dmesh, lambda xy: 4.0 * _delta(xy, "random", 0, box) - 1.0, options, None)
+    part, spacing, f = packed["part"], packed["spacing"], packed["f_part"]
+    rng = np.random.default_rng(RANK)
+    mine = packed["skeleton"][1]["owner"][np.searchsorted(packed["skeleton"][1]["gid"],
+                                                          packed["skeleton"][0]["v"].min(axis=1))] == RANK
+    for rows in (part["triangles"][: len(dmesh.triangles)], part["segments"][mine]):
+        graph = _grid_graph(COMM, spacing, part, f, rows)
+        corners = part["points"][rows]
+        lo, hi = corners.min(axis=1), corners.max(axis=1)
+        x = (lo[:, None, :] + rng.uniform(0, 1, (len(rows), 4, 2)) * (hi - lo)[:, None, :]).reshape(-1, 2)
+        got = graph.evaluate(x)[0] if graph is not None and len(x) else np.zeros(0)
+        want = spacing.evaluate(x)
+        check_everywhere(np.array_equal(got, want), "f from a grid's graph differs from f")
+
+
 def test_still_refused() -> None:
+    thin = DistributedMesh.scatter(_mesh("L-shape") if RANK == 0 else None, COMM, halo_rings=0)
+    with pytest.raises(ValueError, match="halo_rings=0"):
+        evomesh.evolve(thin, np.ones(thin.n_owned), options=_options("ring", 0))
     dmesh = DistributedMesh.scatter(_mesh("L-shape") if RANK == 0 else None, COMM)
     options = _options("all", 0)
     options.repair_ratio = 1.75

@@ -220,6 +220,13 @@ def _pack(dmesh: DistributedMesh, delta: Any, options: Any, stats: dict[str, Any
         missing = _unsupported(options)
         if missing:
             raise ValueError("not yet on a DistributedMesh: " + ", ".join(missing))
+        fans = [name for name, on in (("demote_ratio > 0", options.demote_ratio > 0),
+                                      ("skip_settled", options.skip_settled),
+                                      ("ring_samples", options.ring_samples)) if on]
+        if fans and dmesh.halo_rings < 1:
+            # (they read every owned point's whole fan of triangles, which ring 1 holds)
+            raise ValueError(", ".join(fans) + " on a DistributedMesh need a halo of at least one ring of "
+                             "triangles (halo_rings=1, the default); this one has halo_rings=0")
 
     _collective(comm, check)
     step1: dict = {}
@@ -359,7 +366,8 @@ def _pack(dmesh: DistributedMesh, delta: Any, options: Any, stats: dict[str, Any
                      + second["bytes_states"])
     return dict(points=points, keys=keys, input_gid=input_gid, part=part, at_held=at_held, skeleton=skeleton,
                 all_segment_parent=all_parent, kept_segment_candidates=position[kept[n_first_inputs:]],
-                kept_inputs=kept_inputs, spacing=spacing, forced_corner=forced[own] == 1)
+                kept_inputs=kept_inputs, spacing=spacing, forced_corner=forced[own] == 1, f_part=f_part,
+                demoted=demoted, settled=settled)
 
 
 # A point of the step's output as the ranks look it up (distributed_triangulation._lookup).
