@@ -39,8 +39,14 @@ def _mesh(name: str) -> evomesh.Mesh:
     return _MESHES[name]
 
 
-def _options(within: bool, seed: int) -> _core.FrfcOptions:
+def _options(within: bool, seed: int, distributed: bool = False) -> _core.FrfcOptions:
+    """The paper's options; `distributed`: the recommended ones less what is not
+    distributed yet (spacing repair, the quality pass)."""
     options = _core.FrfcOptions.paper()
+    if distributed:
+        options = _core.FrfcOptions.recommended()
+        options.quality = False
+        options.repair_ratio = options.gap_repair_ratio = options.refine_gap_ratio = 0.0
     options.within_domain = within
     options.seed = seed
     return options
@@ -60,9 +66,10 @@ def _requests(t: int):
     return lambda xy: 0.5 + np.abs(np.sin(7 * xy[:, 0]) * np.cos(5 * xy[:, 1]))
 
 
-@pytest.mark.parametrize("within", [True, False], ids=["within", "euclidean"])
+@pytest.mark.parametrize("within,rings", [(True, False), (False, False), (True, True)],
+                         ids=["within", "euclidean", "rings-demotion-skipping"])
 @pytest.mark.parametrize("name", ["disc", "square with a circular hole"])
-def test_curved_time_loop_on_ranks_gives_the_serial_meshes(name: str, within: bool) -> None:
+def test_curved_time_loop_on_ranks_gives_the_serial_meshes(name: str, within: bool, rings: bool) -> None:
     """Four steps with the geometry: the gathered mesh equals the serial one
     array for array after every step; new boundary points lie on their curves;
     the points the serial step drops outside the new boundary are dropped on
@@ -70,7 +77,7 @@ def test_curved_time_loop_on_ranks_gives_the_serial_meshes(name: str, within: bo
     mesh = _mesh(name)
     g = _DISC if name == "disc" else _SQUARE
     centre, radius = ((0.0, 0.0), (1.0, 0.35)) if name == "disc" else ((1.0, 1.0), (0.4,))
-    options = _options(within, seed=2)
+    options = _options(within, seed=2, distributed=rings)
     dmesh = DistributedMesh.scatter(mesh if RANK == 0 else None, COMM)
     serial = mesh
     for t in range(4):
@@ -82,7 +89,7 @@ def test_curved_time_loop_on_ranks_gives_the_serial_meshes(name: str, within: bo
         gathered = dmesh.gather()
         check_everywhere(_same(gathered, serial), f"step {t} on curves differs from the serial step")
         if RANK == 0:
-            assert stats["curve_points_dropped_outside"] == serial.stats["curve_points_dropped_outside"]
+            assert stats["curve_points_dropped_outside"] == serial.stats.get("curve_points_dropped_outside", 0)
             assert stats["unchanged"] == bool(serial.stats["unchanged"])
             on_curve = np.unique(gathered.segments[np.isin(gathered.segment_tags, list(g.tags))])
             new = on_curve[gathered.origin[on_curve] < 0]

@@ -349,6 +349,10 @@ void bind_options(py::module_& m) {
       py::make_tuple("ORIGINAL", static_cast<int>(Point_kind::original)),
       py::make_tuple("STEINER", static_cast<int>(Point_kind::steiner)),
       py::make_tuple("SAMPLED", static_cast<int>(Point_kind::sampled)));
+  // Packing classes the distributed step keys by (packing.hpp): ring candidates
+  // inside are class_ring + round, the other new points inside class_new.
+  m.attr("PACKING_CLASS_RING") = static_cast<int>(class_ring);
+  m.attr("PACKING_CLASS_NEW") = static_cast<int>(class_new);
   m.attr("MAX_MIN_ANGLE") = kMaxMinAngle;
   m.attr("STRAIGHT_ULPS") = kStraightUlps;
   m.attr("DEFAULT_CORNER_ANGLE") = kDefaultCornerAngle;
@@ -927,71 +931,146 @@ PYBIND11_MODULE(_core, m) {
     return v;
   };
 
+  // Optional flags per point of a part (None: the serial default, none set).
+  const auto part_flags = [](const std::optional<Byte_array>& flags, const Mesh_arrays& mesh, const char* name) {
+    std::vector<std::uint8_t> v = flags ? to_vector<std::uint8_t>(*flags) : std::vector<std::uint8_t>();
+    if (flags && v.size() != mesh.points.size()) {
+      throw Input_error(std::string(name) + ": one flag per point of the part");
+    }
+    if (!flags) v.assign(mesh.points.size(), 0);
+    return v;
+  };
+
   m.def(
       "part_input_spheres",
-      [part_mesh, per_point](const py::dict& part, const Float_array& f, const Frfc_options& options) {
+      [part_mesh, per_point, part_flags](const py::dict& part, const Float_array& f, const Frfc_options& options,
+                                         const std::optional<Byte_array>& demoted) {
         const Mesh_arrays mesh = part_mesh(part);
         const auto fv = per_point(f, mesh, "f");
+        const auto d = part_flags(demoted, mesh, "demoted");
         const auto chains = segment_chains(mesh);
         std::size_t n_forced = 0;
         const auto forced = forced_corners(mesh, chains, n_forced, mesh.required);
         std::vector<std::uint8_t> classes(mesh.points.size());
-        for (std::size_t i = 0; i < classes.size(); ++i) classes[i] = old_point_class(mesh.kind[i], forced[i] != 0);
+        for (std::size_t i = 0; i < classes.size(); ++i) {
+          classes[i] = old_point_class(mesh.kind[i], forced[i] != 0, d[i] != 0);
+        }
         return py::make_tuple(vector_array(input_point_radii(mesh, fv, options)), vector_array(classes),
                               vector_array(forced));
       },
-      py::arg("part"), py::arg("f"), py::arg("options"),
-      "FRFC's first pass at the input points of a part: (radius, packing class, forced) per point.");
+      py::arg("part"), py::arg("f"), py::arg("options"), py::arg("demoted") = py::none(),
+      "FRFC's first pass at the input points of a part: (radius, packing class, forced) per point; `demoted` "
+      "(optional, one flag per point): the demoted points (part_point_flags), packed with the new points.");
+
+  m.def(
+      "part_point_flags",
+      [part_mesh, per_point](const py::dict& part, const Float_array& nn, const Float_array& f,
+                             const Float_array& delta, const Frfc_options& options) {
+        const Mesh_arrays mesh = part_mesh(part);
+        const auto nv = per_point(nn, mesh, "nn"), fv = per_point(f, mesh, "f"), d = per_point(delta, mesh, "delta");
+        const auto chains = segment_chains(mesh);
+        std::size_t n_forced = 0;
+        const auto forced = forced_corners(mesh, chains, n_forced, mesh.required);
+        auto demoted = demoted_points(mesh.triangles, nv, fv, forced, options.demote_ratio);
+        auto settled = settled_points(mesh, d, fv);
+        return py::make_tuple(to_array(std::move(demoted)), to_array(std::move(settled)));
+      },
+      py::arg("part"), py::arg("nn"), py::arg("f"), py::arg("delta"), py::arg("options"),
+      "The demoted (demoted_points, options.demote_ratio) and settled (settled_points) flags of the points of a "
+      "part: (demoted, settled), each exact at the points whose every triangle the part holds (a rank's owned "
+      "points); the others' come from their owners.");
+
+  m.def(
+      "part_asking_spacing",
+      [part_mesh, per_point](const py::dict& part, const Float_array& f, double cell_factor) {
+        const Mesh_arrays mesh = part_mesh(part);
+        const auto fv = per_point(f, mesh, "f");
+        std::vector<std::uint8_t> triangles(mesh.triangles.size()), segments(mesh.segments.size());
+        for (std::size_t t = 0; t < triangles.size(); ++t) triangles[t] = asks_spacing(mesh, fv, mesh.triangles[t], cell_factor);
+        for (std::size_t s = 0; s < segments.size(); ++s) segments[s] = asks_spacing(mesh, fv, mesh.segments[s], cell_factor);
+        return py::make_tuple(to_array(std::move(triangles)), to_array(std::move(segments)));
+      },
+      py::arg("part"), py::arg("f"), py::arg("cell_factor"),
+      "Which triangles and segments of a part have adaptive grids that ask f at points of their bounding box "
+      "(asks_spacing): (per triangle, per segment) flags.");
 
   m.def(
       "part_segment_candidates",
-      [part_mesh, per_point](const py::dict& part, const Float_array& delta, const Float_array& f,
-                             const Frfc_options& options) {
+      [part_mesh, per_point, part_flags](const py::dict& part, const Float_array& delta, const Float_array& f,
+                                         const Frfc_options& options, const std::optional<Byte_array>& settled,
+                                         const Spacing_function* spacing) {
         const Mesh_arrays mesh = part_mesh(part);
         const auto d = per_point(delta, mesh, "delta"), fv = per_point(f, mesh, "f");
+        const auto s = part_flags(settled, mesh, "settled");
         Candidates c;
         {
           py::gil_scoped_release release;
-          c = segment_candidates(mesh, d, fv, segment_chains(mesh), options, nullptr);
+          const Spacing_queries queries = spacing != nullptr ? spacing_queries(*spacing) : Spacing_queries();
+          c = segment_candidates(mesh, d, fv, segment_chains(mesh), options, spacing != nullptr ? &queries : nullptr,
+                                 settled ? &s : nullptr);
         }
         return py::make_tuple(points_array(c.samples.points), vector_array(c.samples.parent),
                               vector_array(c.classes(true)));
       },
-      py::arg("part"), py::arg("delta"), py::arg("f"), py::arg("options"),
+      py::arg("part"), py::arg("delta"), py::arg("f"), py::arg("options"), py::arg("settled") = py::none(),
+      py::arg("spacing") = py::none(),
       "FRFC's candidates on every segment of a part (its segments are the whole skeleton): (centres, parent "
-      "segment, packing class), in the serial step's order.");
+      "segment, packing class), in the serial step's order. `settled` (optional): the points' settled flags "
+      "(default: settled_points on the part); `spacing` (optional): f for the adaptive grids that ask it.");
 
   m.def(
       "part_interior_candidates",
-      [part_mesh, per_point](const py::dict& part, const Float_array& delta, const Float_array& f,
-                             const Frfc_options& options, const Byte_array& sampled) {
+      [part_mesh, per_point, part_flags](const py::dict& part, const Float_array& delta, const Float_array& f,
+                                         const Frfc_options& options, const Byte_array& sampled,
+                                         const std::optional<Byte_array>& demoted,
+                                         const std::optional<Byte_array>& settled,
+                                         const std::optional<Byte_array>& ring_from,
+                                         const Spacing_function* spacing) {
         const Mesh_arrays mesh = part_mesh(part);
         const auto d = per_point(delta, mesh, "delta"), fv = per_point(f, mesh, "f");
+        const auto dem = part_flags(demoted, mesh, "demoted");
+        const auto s = part_flags(settled, mesh, "settled");
+        const auto from = part_flags(ring_from, mesh, "ring_from");
         auto quiet = to_vector<std::uint8_t>(sampled);
         if (quiet.size() != mesh.triangles.size()) throw Input_error("sampled: one flag per triangle of the part");
         for (auto& q : quiet) q = q ? 0 : 1;
         Candidates c;
+        std::vector<Index> ring_point;
         std::size_t n_drawn = 0;
         {
           py::gil_scoped_release release;
           const Triangle_fans fans(mesh);
-          const std::vector<std::uint8_t> demoted(mesh.points.size(), 0);
-          c = interior_candidates(mesh, fans, d, fv, demoted, Cover_discs{}, options, n_drawn, &quiet, nullptr);
+          const Spacing_queries queries = spacing != nullptr ? spacing_queries(*spacing) : Spacing_queries();
+          c = interior_candidates(mesh, fans, d, fv, dem, Cover_discs{}, options, n_drawn, &quiet,
+                                  spacing != nullptr ? &queries : nullptr, settled ? &s : nullptr, &from, &ring_point);
         }
+        const std::size_t n_grid = c.size() - ring_point.size();
+        std::vector<Index> point(c.size(), -1);
+        std::copy(ring_point.begin(), ring_point.end(), point.begin() + static_cast<std::ptrdiff_t>(n_grid));
         return py::make_tuple(points_array(c.samples.points), vector_array(c.samples.parent),
-                              vector_array(c.classes(false)));
+                              vector_array(c.classes(false)), vector_array(point));
       },
       py::arg("part"), py::arg("delta"), py::arg("f"), py::arg("options"), py::arg("sampled"),
-      "FRFC's candidates inside the triangles of a part flagged in `sampled`: (centres, parent triangle, class), "
-      "in the serial step's order (triangle id, then draw).");
+      py::arg("demoted") = py::none(), py::arg("settled") = py::none(), py::arg("ring_from") = py::none(),
+      py::arg("spacing") = py::none(),
+      "FRFC's candidates inside the triangles of a part flagged in `sampled`: (centres, parent triangle, class, "
+      "ring point), in the serial step's order (the grid samples by triangle id, then draw; then the ring "
+      "candidates by R-point id, then direction). Optional, one flag per point: `demoted`, `settled` (default: "
+      "settled_points on the part), `ring_from` (the R-points that offer ring candidates; default none); "
+      "`spacing`: f for the adaptive grids that ask it. ring point: the part index of a ring candidate's R-point, "
+      "-1 for a grid sample.");
 
   m.def(
       "part_candidate_radii",
-      [part_mesh, per_point](const py::dict& part, const Float_array& f, const Spacing_function& spacing,
-                             const Frfc_options& options, bool on_segment, const Float_array& centres,
-                             const Int_array& parent) {
+      [part_mesh, per_point, part_flags](const py::dict& part, const Float_array& f, const Spacing_function* spacing,
+                                         const Frfc_options& options, bool on_segment, const Float_array& centres,
+                                         const Int_array& parent, const std::optional<Byte_array>& demoted) {
         const Mesh_arrays mesh = part_mesh(part);
         const auto fv = per_point(f, mesh, "f");
+        const auto dem = part_flags(demoted, mesh, "demoted");
+        if (spacing == nullptr && options.radius != Radius_rule::cheap) {
+          throw Input_error("part_candidate_radii: a spacing function is needed unless radius is 'cheap'");
+        }
         Candidates c;
         c.samples.points = to_points(centres, "centres");
         for (Index p : to_vector<Index>(parent)) {
@@ -1002,13 +1081,20 @@ PYBIND11_MODULE(_core, m) {
         if (c.samples.parent.size() != c.samples.points.size()) throw Input_error("one parent per centre");
         {
           py::gil_scoped_release release;
-          candidate_radii(mesh, spacing, fv, std::vector<std::uint8_t>(mesh.points.size(), 0), options, on_segment, c);
+          // (cheap radii read f at the vertices only: any spacing function will do)
+          if (spacing != nullptr) {
+            candidate_radii(mesh, *spacing, fv, dem, options, on_segment, c);
+          } else {
+            const Spacing_function unused(std::vector<Vec2>{{0.0, 0.0}}, std::vector<double>{0.0});
+            candidate_radii(mesh, unused, fv, dem, options, on_segment, c);
+          }
         }
         return vector_array(c.radius);
       },
       py::arg("part"), py::arg("f"), py::arg("spacing"), py::arg("options"), py::arg("on_segment"),
-      py::arg("centres"), py::arg("parent"),
-      "FRFC's sphere radii of candidates of a part (candidate_radii; no demoted points).");
+      py::arg("centres"), py::arg("parent"), py::arg("demoted") = py::none(),
+      "FRFC's sphere radii of candidates of a part (candidate_radii); `demoted` (optional): the demoted points "
+      "(the interpolated rule's triangles and segments); `spacing` may be None for radius 'cheap'.");
 
   m.def(
       "part_curve_kinds",

@@ -38,20 +38,22 @@ void add_interior_ring_samples(const Mesh_arrays& mesh, const Triangle_fans& fan
                                const std::vector<double>& f, double reach, double demoted_reach,
                                const std::vector<std::uint8_t>& demoted, std::uint64_t seed,
                                const Cover_discs& cover, int threads, std::vector<Sample_set>& blocks,
-                               std::vector<std::int8_t>& ring_round) {
+                               std::vector<std::int8_t>& ring_round, const std::vector<std::uint8_t>* ring_from,
+                               std::vector<Index>* ring_point) {
   const std::size_t n = mesh.points.size();
   constexpr std::size_t kBlock = 4096;
   const std::size_t n_blocks = (n + kBlock - 1) / kBlock;
   const std::size_t first = blocks.size();
   blocks.resize(first + n_blocks);
   std::vector<std::vector<std::int8_t>> rounds(n_blocks);
+  std::vector<std::vector<Index>> points(ring_point != nullptr ? n_blocks : 0);
   const std::vector<Index> by_id = order_by_ids(mesh.point_gids);  // (points in the order of their ids)
   parallel_for(n_blocks, threads, [&](std::size_t b) {
     std::array<Ring_candidate, kRingDirections> ring;
     Sample_set& out = blocks[first + b];
     for (std::size_t r = b * kBlock; r < std::min(n, (b + 1) * kBlock); ++r) {
       const std::size_t p = visit(by_id, r);
-      if (!(delta[p] < 1)) continue;
+      if (!(delta[p] < 1) || (ring_from != nullptr && !(*ring_from)[p])) continue;
       const double d = !demoted.empty() && demoted[p] ? demoted_reach : reach;
       const int count = ring_candidates_of(mesh, fans, f, d, seed, p, ring);
       for (int k = 0; k < count; ++k) {
@@ -60,6 +62,7 @@ void add_interior_ring_samples(const Mesh_arrays& mesh, const Triangle_fans& fan
         out.points.push_back(r.x);
         out.parent.push_back(static_cast<std::uint32_t>(r.triangle));
         rounds[b].push_back(static_cast<std::int8_t>(r.round));
+        if (ring_point != nullptr) points[b].push_back(static_cast<Index>(p));
       }
     }
   });
@@ -67,6 +70,10 @@ void add_interior_ring_samples(const Mesh_arrays& mesh, const Triangle_fans& fan
   for (const auto& r : rounds) total += r.size();
   ring_round.reserve(total);
   for (const auto& r : rounds) ring_round.insert(ring_round.end(), r.begin(), r.end());
+  if (ring_point != nullptr) {
+    ring_point->reserve(ring_point->size() + total);
+    for (const auto& q : points) ring_point->insert(ring_point->end(), q.begin(), q.end());
+  }
 }
 
 // Segment ring candidates: one each way from an R-point, on the segment, merged
@@ -259,14 +266,14 @@ std::vector<std::uint8_t> settled_points(const Mesh_arrays& mesh, const std::vec
 
 Candidates segment_candidates(const Mesh_arrays& mesh, const std::vector<double>& delta, const std::vector<double>& f,
                               const std::vector<Segment_chain>& chains, const Frfc_options& options,
-                              const Spacing_queries* queries) {
+                              const Spacing_queries* queries, const std::vector<std::uint8_t>* settled_given) {
   Candidates on_segments;
   on_segments.samples = sample_segments(mesh, f, options.cell_factor, options.samples, options.seed,
                                         options.adaptive_cells, queries);
   if (options.skip_settled) {
     // (the samples of a segment come from its own random stream: dropping a
     // segment's changes no other's)
-    const auto settled = settled_points(mesh, delta, f);
+    const auto settled = settled_given != nullptr ? *settled_given : settled_points(mesh, delta, f);
     Sample_set& samples = on_segments.samples;
     std::size_t k = 0;
     for (std::size_t j = 0; j < samples.points.size(); ++j) {
@@ -293,7 +300,9 @@ Candidates interior_candidates(const Mesh_arrays& mesh, const Triangle_fans& fan
                                const std::vector<double>& f, const std::vector<std::uint8_t>& demoted,
                                const Cover_discs& cover,
                                const Frfc_options& options, std::size_t& n_drawn,
-                               const std::vector<std::uint8_t>* quiet, const Spacing_queries* queries) {
+                               const std::vector<std::uint8_t>* quiet, const Spacing_queries* queries,
+                               const std::vector<std::uint8_t>* settled_given,
+                               const std::vector<std::uint8_t>* ring_from, std::vector<Index>* ring_point) {
   std::vector<std::uint8_t> skip;
   if (options.skip_coarse) {
     skip.resize(mesh.triangles.size());
@@ -326,7 +335,7 @@ Candidates interior_candidates(const Mesh_arrays& mesh, const Triangle_fans& fan
     // So the step returns M's points, every one kept. The paper's sampling
     // (skip_settled = false) offers samples wherever a sphere fits between
     // the old ones: in M's larger triangles, a few per thousand points a step.
-    const auto settled = settled_points(mesh, delta, f);
+    const auto settled = settled_given != nullptr ? *settled_given : settled_points(mesh, delta, f);
     skip.resize(mesh.triangles.size(), 0);
     for (std::size_t t = 0; t < mesh.triangles.size(); ++t) {
       const auto& tri = mesh.triangles[t];
@@ -355,7 +364,7 @@ Candidates interior_candidates(const Mesh_arrays& mesh, const Triangle_fans& fan
                                      ? 0.5 * (near + ring_reach(options.radius_scale))
                                      : ring_reach(options.radius_scale);
     add_interior_ring_samples(mesh, fans, delta, f, ring_reach(options.radius_scale), demoted_reach, demoted,
-                              options.seed, cover, /*threads=*/0, blocks, ring_round);
+                              options.seed, cover, /*threads=*/0, blocks, ring_round, ring_from, ring_point);
   }
   Candidates inside;
   inside.samples = join_samples(blocks);

@@ -13,6 +13,8 @@ from numpy.typing import ArrayLike, NDArray
 from typing_extensions import NotRequired
 
 POINT_KINDS: tuple[tuple[str, int], ...]
+PACKING_CLASS_RING: int
+PACKING_CLASS_NEW: int
 MAX_MIN_ANGLE: float
 DEFAULT_CORNER_ANGLE: float
 STRAIGHT_ULPS: float
@@ -247,22 +249,42 @@ def chain_table(
     project: Callable[..., Any] | None = None,
 ) -> dict[str, NDArray[Any]]: ...
 def part_input_spheres(
-    part: dict[str, Any], f: ArrayLike, options: FrfcOptions
+    part: dict[str, Any], f: ArrayLike, options: FrfcOptions, demoted: ArrayLike | None = None
 ) -> tuple[NDArray[np.float64], NDArray[np.uint8], NDArray[np.uint8]]: ...
+def part_point_flags(
+    part: dict[str, Any], nn: ArrayLike, f: ArrayLike, delta: ArrayLike, options: FrfcOptions
+) -> tuple[NDArray[np.uint8], NDArray[np.uint8]]: ...
+def part_asking_spacing(
+    part: dict[str, Any], f: ArrayLike, cell_factor: float
+) -> tuple[NDArray[np.uint8], NDArray[np.uint8]]: ...
 def part_segment_candidates(
-    part: dict[str, Any], delta: ArrayLike, f: ArrayLike, options: FrfcOptions
+    part: dict[str, Any],
+    delta: ArrayLike,
+    f: ArrayLike,
+    options: FrfcOptions,
+    settled: ArrayLike | None = None,
+    spacing: SpacingFunction | None = None,
 ) -> tuple[NDArray[np.float64], NDArray[np.int64], NDArray[np.uint8]]: ...
 def part_interior_candidates(
-    part: dict[str, Any], delta: ArrayLike, f: ArrayLike, options: FrfcOptions, sampled: ArrayLike
-) -> tuple[NDArray[np.float64], NDArray[np.int64], NDArray[np.uint8]]: ...
+    part: dict[str, Any],
+    delta: ArrayLike,
+    f: ArrayLike,
+    options: FrfcOptions,
+    sampled: ArrayLike,
+    demoted: ArrayLike | None = None,
+    settled: ArrayLike | None = None,
+    ring_from: ArrayLike | None = None,
+    spacing: SpacingFunction | None = None,
+) -> tuple[NDArray[np.float64], NDArray[np.int64], NDArray[np.uint8], NDArray[np.int64]]: ...
 def part_candidate_radii(
     part: dict[str, Any],
     f: ArrayLike,
-    spacing: SpacingFunction,
+    spacing: SpacingFunction | None,
     options: FrfcOptions,
     on_segment: bool,
     centres: ArrayLike,
     parent: ArrayLike,
+    demoted: ArrayLike | None = None,
 ) -> NDArray[np.float64]: ...
 def hilbert_keys(ix: ArrayLike, iy: ArrayLike, order: int) -> NDArray[np.int64]: ...
 def part_curve_kinds(part: dict[str, Any]) -> NDArray[np.uint8]: ...

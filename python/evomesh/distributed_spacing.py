@@ -389,9 +389,10 @@ class DistributedSpacing:
         graph = self._graph_at(x, counter)
         return np.asarray(graph.evaluate(x)[0]) if graph is not None and len(x) else np.zeros(0)
 
-    def _graph_at(self, x: np.ndarray, counter: str) -> Any:
+    def _graph_at(self, x: np.ndarray, counter: str, reach: np.ndarray | None = None) -> Any:
         """A spacing function over the held sites and those of other ranks within
-        the bound at x: exact at x. None when this rank has no site."""
+        the bound at x: exact at x. None when this rank has no site. `reach`
+        (optional): every site within reach[i] of x[i] instead of the bound."""
         dmesh = self._dmesh
         n_owned = dmesh.n_owned
         held_xy = np.ascontiguousarray(dmesh.points, dtype=np.float64)
@@ -401,8 +402,12 @@ class DistributedSpacing:
             self._cache_gids, self._cache_xy = dmesh.global_ids[order], held_xy[order]
             self._cache_weight = np.asarray(self._held_weight)[order]
             self._graph_cache = self._graph(self._cache_gids, self._cache_xy, self._cache_weight)
-        # The bound: f over the sites of the graph so far (true sites: an upper bound).
-        bound = self._graph_cache.evaluate(x)[0] if len(x) and self._graph_cache is not None else np.zeros(len(x))
+        # The bound: the caller's reach, or f over the sites of the graph so far (true sites: an upper bound).
+        if reach is not None:
+            bound = reach
+        else:
+            bound = self._graph_cache.evaluate(x)[0] if len(x) and self._graph_cache is not None \
+                else np.zeros(len(x))
         mine = np.empty(n_owned, dtype=_SITE)
         mine["gid"], mine["x"], mine["y"] = dmesh.global_ids[:n_owned], held_xy[:n_owned, 0], held_xy[:n_owned, 1]
         mine["w"] = self.weight

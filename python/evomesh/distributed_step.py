@@ -23,9 +23,10 @@ constrained Delaunay triangulation and the output in the serial order;
 :func:`evolve_distributed` (what ``evomesh.evolve`` calls on a DistributedMesh)
 adds size requests and the rebalance.
 
-Supported options: those of the paper's FRFC plus ``within_domain`` (no ring
-candidates, no demotion, no spacing repair, uniform grids, no settled or coarse
-skipping, no quality pass); the others are refused by name.
+Supported options: all of FRFC's (within_domain, ring candidates, demotion,
+settled and coarse skipping, adaptive cells, the cheap radius) except the spacing
+repair and the quality pass, which are refused by name; curved boundaries
+(``geometry``) too.
 """
 
 from __future__ import annotations
@@ -44,28 +45,23 @@ __all__ = ["evolve_distributed", "packing", "step", "with_curve_kinds"]
 
 # Packing ties, unique over the ranks and in the serial order within each kind:
 # input points by global id (< 2^60), segment candidates by their position in
-# the serial list, interior candidates by (triangle id, draw).
+# the serial list, interior grid samples by (triangle id, draw), interior ring
+# candidates by (R-point id, direction). The keys sort as the serial output
+# (select_output), with the demoted input points the second pass keeps last.
 _SEGMENT_TIE = 1 << 61
 _INTERIOR_TIE = 1 << 62
 _DRAW_BITS = 20
+_RING_TIE = _INTERIOR_TIE + (1 << 61)
+_RING_BITS = 3  # (kRingDirections = 6 directions)
+_DEFERRED_KEY = _RING_TIE + (1 << 60)
 _KIND = dict(_core.POINT_KINDS)  # PointKind's values
 
 
 def _unsupported(options: Any) -> list[str]:
     """What of `options` the distributed packing does not do yet."""
     out = []
-    if options.ring_samples:
-        out.append("ring_samples")
-    if options.demote_ratio > 0:
-        out.append("demote_ratio > 0")
     if options.repair_ratio > 0 or options.gap_repair_ratio > 0 or options.refine_gap_ratio > 0:
         out.append("spacing repair (repair_ratio, gap_repair_ratio, refine_gap_ratio)")
-    if options.adaptive_cells:
-        out.append("adaptive_cells")
-    if options.skip_settled or options.skip_coarse:
-        out.append("skip_settled / skip_coarse")
-    if options.radius == _core.RadiusRule.cheap:
-        out.append("radius='cheap'")
     return out
 
 
@@ -134,6 +130,60 @@ def _part(dmesh: DistributedMesh, skeleton: tuple[np.ndarray, np.ndarray], held_
     return part, at_held, dict(f=f, delta=delta)
 
 
+def _point_flags(dmesh: DistributedMesh, part: dict, at_held: np.ndarray, skeleton: tuple[np.ndarray, np.ndarray],
+                 spacing: DistributedSpacing, values: dict, options: Any) -> tuple[Any, Any]:
+    """The demoted (options.demote_ratio > 0) and settled (options.skip_settled)
+    flags over the part, each None when not asked for. Both read a point's whole
+    fan (nn and f at every point sharing a triangle with it; its shortest edge),
+    which the part holds at the owned points only: every point's flags are its
+    owner's, sent to the halo (exchange_halo) and to every rank for the
+    skeleton's points (replicated like the skeleton). Collective."""
+    if not (options.demote_ratio > 0 or options.skip_settled):
+        return None, None
+    comm = dmesh.comm
+    n_owned = dmesh.n_owned
+    gids = part["point_gids"]
+    nn = np.zeros(len(gids))  # (0 at the skeleton's other points: their flags come from their owners)
+    nn[at_held] = dmesh.exchange_halo(spacing.nn)
+    demoted, settled = _core.part_point_flags(part, nn, values["f"], values["delta"], options)
+    own = at_held[:n_owned]
+    owned = np.ascontiguousarray(np.column_stack([demoted[own], settled[own]]), dtype=np.uint8)
+    flags = np.zeros((len(gids), 2), np.uint8)
+    spoints = skeleton[1]
+    owned_gids = dmesh.global_ids[:n_owned]
+    mine = np.isin(owned_gids, spoints["gid"])
+    rows = np.zeros(int(np.count_nonzero(mine)), dtype=[("gid", "<i8"), ("flags", "u1", (2,))])
+    rows["gid"], rows["flags"] = owned_gids[mine], owned[mine]
+    rows = np.concatenate(comm.allgather(rows))
+    flags[np.searchsorted(gids, rows["gid"])] = rows["flags"]
+    flags[at_held] = dmesh.exchange_halo(owned)
+    return (np.ascontiguousarray(flags[:, 0]) if options.demote_ratio > 0 else None,
+            np.ascontiguousarray(flags[:, 1]) if options.skip_settled else None)
+
+
+def _grid_graph(comm: Any, spacing: DistributedSpacing, part: dict, f_part: np.ndarray, rows: np.ndarray) -> Any:
+    """A spacing function exact wherever the adaptive grids of the simplices
+    `rows` (this rank's triangles or segments whose grids ask f, as part
+    indices) ask it, or None when no rank has such a simplex. Collective.
+
+    Why exact: a grid asks f at block centres x inside its simplex's bounding box,
+    within sqrt(2) r of the simplex's centroid c (every vertex within r of c). For
+    a vertex v, u(x) = f(v) + |x - v| <= f(v) + (1 + sqrt(2)) r bounds f(x), and
+    every site attaining or tying f(x) lies within u(x) of x (weights are
+    non-negative, docs/distributed-step.md 3.2), so within f(v) + (1 + 2 sqrt(2)) r
+    of c. The graph holds every site within f_min + 4 r of c (f at the vertices
+    is exact on the part), so its answer at x is the serial f(x), bit for bit."""
+    MPI = _mpi()
+    if not comm.allreduce(len(rows) > 0, op=MPI.LOR):
+        return None
+    corners = part["points"][rows]  # (k, 2 or 3, 2)
+    centre = corners.mean(axis=1).reshape(-1, 2)
+    r = np.sqrt(((corners - centre[:, None, :]) ** 2).sum(axis=2)).max(axis=1) if len(rows) else np.zeros(0)
+    f_min = f_part[rows].min(axis=1) if len(rows) else np.zeros(0)
+    # (1 % above the bound: the centroid and r are rounded)
+    return spacing._graph_at(centre, "sites_received", reach=1.01 * (f_min + 4.0 * r))
+
+
 def packing(dmesh: DistributedMesh, delta: Any, options: Any = None, *, stats: dict[str, Any] | None = None
             ) -> tuple[np.ndarray, np.ndarray]:
     """The kept points of one FRFC step on a distributed mesh: this rank's share
@@ -173,6 +223,13 @@ def _pack(dmesh: DistributedMesh, delta: Any, options: Any, stats: dict[str, Any
         missing = _unsupported(options)
         if missing:
             raise ValueError("not yet on a DistributedMesh: " + ", ".join(missing))
+        fans = [name for name, on in (("demote_ratio > 0", options.demote_ratio > 0),
+                                      ("skip_settled", options.skip_settled),
+                                      ("ring_samples", options.ring_samples)) if on]
+        if fans and dmesh.halo_rings < 1:
+            # (they read every owned point's whole fan of triangles, which ring 1 holds)
+            raise ValueError(", ".join(fans) + " on a DistributedMesh need a halo of at least one ring of "
+                             "triangles (halo_rings=1, the default); this one has halo_rings=0")
 
     _collective(comm, check)
     step1: dict = {}
@@ -193,27 +250,58 @@ def _pack(dmesh: DistributedMesh, delta: Any, options: Any, stats: dict[str, Any
     if geometry is not None:
         part.update(geometry._core_arguments())
     f_part = values["f"]
+    demoted, settled = _point_flags(dmesh, part, at_held, skeleton, spacing, values, options)
+    cheap = options.radius == _core.RadiusRule.cheap
 
-    # First pass: the owned input points and the candidates on owned segments.
-    radius, classes, forced = _core.part_input_spheres(part, f_part, options)
+    def radii_of(xy: np.ndarray, parent: np.ndarray, on_segment: bool) -> np.ndarray:
+        """The candidates' sphere radii (collective unless cheap: f from a graph exact at them)."""
+        graph = None if cheap else spacing.graph_for(xy)
+        if not len(xy) or (graph is None and not cheap):
+            return np.zeros(0)
+        return _core.part_candidate_radii(part, f_part, graph, options, on_segment, xy, parent, demoted)
+
+    # First pass: the owned input points (less the demoted ones inside, which
+    # the serial first pass orders last and defers) and the candidates on owned
+    # segments.
+    radius, classes, forced = _core.part_input_spheres(part, f_part, options, demoted)
     own = at_held[:n_owned]
-    seg_xy, seg_parent, seg_class = _core.part_segment_candidates(part, values["delta"], f_part, options)
-    all_parent = seg_parent
+    n_segments = len(segments)
     seg_owner = np.where(segments["v"][:, 0] < segments["v"][:, 1], 0, 1)
     owner_of_segment = spoints["owner"][np.searchsorted(spoints["gid"],
-                                                        segments["v"][np.arange(len(segments)), seg_owner])]
+                                                        segments["v"][np.arange(n_segments), seg_owner])]
+    asks_triangle, asks_segment = _core.part_asking_spacing(part, f_part, options.cell_factor) \
+        if options.adaptive_cells else (None, None)
+    seg_graph = None
+    n_asking = 0
+    if asks_segment is not None:
+        asking = part["segments"][(asks_segment != 0) & (owner_of_segment == comm.rank)]
+        n_asking += len(asking)
+        seg_graph = _grid_graph(comm, spacing, part, f_part, asking)
+    seg_xy, seg_parent, seg_class = _core.part_segment_candidates(part, values["delta"], f_part, options, settled,
+                                                                  seg_graph)
+    del seg_graph
+    # Every rank samples every segment, exactly on its own (the adaptive grids
+    # of the others' may ask f where this rank's graph is not exact): each
+    # candidate's position in the serial list comes from the owners' counts.
     take = np.flatnonzero(owner_of_segment[seg_parent] == comm.rank)
+    counts = np.bincount(seg_parent[take], minlength=n_segments).astype(np.int64)
+    counts = comm.allreduce(counts, op=MPI.SUM) if comm.size > 1 else counts
+    all_parent = np.repeat(np.arange(n_segments, dtype=np.int64), counts)
+    seg_start = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.int64)
+    first_local = np.searchsorted(seg_parent, seg_parent[take], side="left")
+    position = seg_start[seg_parent[take]] + (take - first_local)
     seg_xy, seg_parent, seg_class = seg_xy[take], seg_parent[take], seg_class[take]
-    graph = spacing.graph_for(seg_xy)
-    seg_radius = _core.part_candidate_radii(part, f_part, graph, options, True, seg_xy, seg_parent) \
-        if graph is not None and len(seg_xy) else np.zeros(0)
-    centres = np.concatenate([dmesh.owned_points, seg_xy])
-    radii = np.concatenate([radius[own], seg_radius])
-    kinds = np.concatenate([classes[own], seg_class]).astype(np.uint8)
-    ties = np.concatenate([owned_gids, _SEGMENT_TIE + take]).astype(np.int64)
+    seg_radius = radii_of(seg_xy, seg_parent, True)
+    deferred = classes[own] == _core.PACKING_CLASS_NEW  # (demoted inside: class_new)
+    first_inputs = np.flatnonzero(~deferred)
+    centres = np.concatenate([dmesh.owned_points[first_inputs], seg_xy])
+    radii = np.concatenate([radius[own][first_inputs], seg_radius])
+    kinds = np.concatenate([classes[own][first_inputs], seg_class]).astype(np.uint8)
+    ties = np.concatenate([owned_gids[first_inputs], _SEGMENT_TIE + position]).astype(np.int64)
+    n_first_inputs = len(first_inputs)
     first: dict = {}
-    kept = lexical_first_mis(comm, centres, radii, kinds, ties, np.concatenate([forced[own] != 0,
-                                                                                 np.zeros(len(take), bool)]),
+    kept = lexical_first_mis(comm, centres, radii, kinds, ties,
+                             np.concatenate([forced[own][first_inputs] != 0, np.zeros(len(take), bool)]),
                              stats=first, check_ties=False)
 
     # On curves: the kept candidates on segments of curved tags move onto their
@@ -221,7 +309,7 @@ def _pack(dmesh: DistributedMesh, delta: Any, options: Any, stats: dict[str, Any
     # the sampled positions). Twice: the serial step projects them again after
     # triangulating (fit_to_curves; a projection need not be idempotent to the
     # last bit), and a CDT is a function of its points and constraints.
-    on_curve = np.flatnonzero(kept[n_owned:])
+    on_curve = np.flatnonzero(kept[n_first_inputs:])
     curve_move = 0.0
     if geometry is not None:
         def project() -> tuple[np.ndarray, float]:
@@ -236,30 +324,53 @@ def _pack(dmesh: DistributedMesh, delta: Any, options: Any, stats: dict[str, Any
         projected, curve_move = _collective(comm, project)
         curve_move = float(comm.allreduce(curve_move, op=MPI.MAX))
 
-    # Second pass: the interior candidates of the owned triangles.
+    # Second pass: the deferred input points and the interior candidates of the owned triangles.
     sampled = np.concatenate([np.ones(len(dmesh.triangles), np.uint8), np.zeros(len(dmesh.halo_triangles), np.uint8)])
-    in_xy, in_parent, in_class = _core.part_interior_candidates(part, values["delta"], f_part, options, sampled)
-    graph = spacing.graph_for(in_xy)
-    in_radius = _core.part_candidate_radii(part, f_part, graph, options, False, in_xy, in_parent) \
-        if graph is not None and len(in_xy) else np.zeros(0)
+    in_graph = None
+    if asks_triangle is not None:
+        asking = part["triangles"][(asks_triangle != 0) & (sampled != 0)]
+        n_asking += len(asking)
+        in_graph = _grid_graph(comm, spacing, part, f_part, asking)
+    ring_from = None
+    if options.ring_samples:  # (ring candidates drawn by the R-point's owner, which holds its fan)
+        ring_from = np.zeros(len(part["point_gids"]), np.uint8)
+        ring_from[own] = 1
+    in_xy, in_parent, in_class, in_point = _core.part_interior_candidates(
+        part, values["delta"], f_part, options, sampled, demoted, settled, ring_from, in_graph)
+    del in_graph
+    in_radius = radii_of(in_xy, in_parent, False)
     tri_gid = part["triangle_gids"][in_parent]
-    if len(in_parent):
-        starts = np.flatnonzero(np.r_[True, in_parent[1:] != in_parent[:-1]])
-        draw = np.arange(len(in_parent)) - np.repeat(starts, np.diff(np.r_[starts, len(in_parent)]))
+    grid = in_point < 0
+    n_grid = int(np.count_nonzero(grid))  # (the grid samples come first, grouped by triangle)
+    if n_grid:
+        starts = np.flatnonzero(np.r_[True, in_parent[1:n_grid] != in_parent[: n_grid - 1]])
+        draw = np.arange(n_grid) - np.repeat(starts, np.diff(np.r_[starts, n_grid]))
     else:
         draw = np.zeros(0, np.int64)
+    ring_gid = part["point_gids"][in_point[~grid]]
+    direction = in_class[~grid].astype(np.int64) - _core.PACKING_CLASS_RING
 
     def check_ties() -> None:
-        if len(draw) and (draw.max() >= 1 << _DRAW_BITS or tri_gid.max() >= 1 << (62 - _DRAW_BITS)):
-            raise ValueError("too many candidates in one triangle, or triangle ids too large, for packing ties")
+        if (len(draw) and (draw.max() >= 1 << _DRAW_BITS or tri_gid[:n_grid].max() >= 1 << (61 - _DRAW_BITS))) \
+                or (len(ring_gid) and ring_gid.max() >= 1 << (60 - _RING_BITS)):
+            raise ValueError("too many candidates in one triangle, or triangle or point ids too large, for packing "
+                             "ties")
+        if deferred.any() and np.isin(owned_gids[deferred], spoints["gid"]).any():
+            raise ValueError("a demoted point on a segment has an inside point's kind (a segment's end points "
+                             "must have kind CORNER or BOUNDARY)")
 
     _collective(comm, check_ties)
+    in_ties = np.concatenate([_INTERIOR_TIE + (tri_gid[:n_grid] << _DRAW_BITS) + draw,
+                              _RING_TIE + (ring_gid << _RING_BITS) + direction]).astype(np.int64)
     keep = np.flatnonzero(kept)
-    centres2 = np.concatenate([centres[keep], in_xy])
-    radii2 = np.concatenate([radii[keep], in_radius])
-    kinds2 = np.concatenate([np.zeros(len(keep), np.uint8), in_class.astype(np.uint8)])
-    ties2 = np.concatenate([ties[keep], _INTERIOR_TIE + (tri_gid << _DRAW_BITS) + draw]).astype(np.int64)
-    forced2 = np.concatenate([np.ones(len(keep), bool), np.zeros(len(in_xy), bool)])
+    late = np.flatnonzero(deferred)
+    centres2 = np.concatenate([centres[keep], dmesh.owned_points[late], in_xy])
+    radii2 = np.concatenate([radii[keep], radius[own][late], in_radius])
+    kinds2 = np.concatenate([np.zeros(len(keep), np.uint8), classes[own][late], in_class.astype(np.uint8)])
+    # (a deferred point's tie, its id, puts it before the interior candidates of
+    # its class and radius, as the serial second pass does)
+    ties2 = np.concatenate([ties[keep], owned_gids[late], in_ties]).astype(np.int64)
+    forced2 = np.concatenate([np.ones(len(keep), bool), np.zeros(len(late) + len(in_xy), bool)])
     second: dict = {}
     kept2 = lexical_first_mis(comm, centres2, radii2, kinds2, ties2, forced2, stats=second, check_ties=False)
     points = centres2[kept2]
@@ -268,18 +379,25 @@ def _pack(dmesh: DistributedMesh, delta: Any, options: Any, stats: dict[str, Any
         # (the kept segment candidates are forced in the second pass: all kept)
         rows = np.flatnonzero((keys >= _SEGMENT_TIE) & (keys < _INTERIOR_TIE))  # (in tie order)
         points = points.copy()
-        points[rows[np.searchsorted(keys[rows], _SEGMENT_TIE + take[on_curve])]] = projected
-    input_gid = np.where(keys < _SEGMENT_TIE, keys, -1)
+        points[rows[np.searchsorted(keys[rows], _SEGMENT_TIE + position[on_curve])]] = projected
+    # The serial output lists the deferred input points it keeps after the interior candidates.
+    late_kept = np.flatnonzero(kept2[len(keep): len(keep) + len(late)]) + len(keep)
+    keys[np.searchsorted(np.flatnonzero(kept2), late_kept)] += _DEFERRED_KEY
+    input_gid = np.where(keys < _SEGMENT_TIE, keys, np.where(keys >= _DEFERRED_KEY, keys - _DEFERRED_KEY, -1))
+    kept_inputs = np.sort(np.concatenate([owned_gids[first_inputs[kept[:n_first_inputs]]],
+                                          owned_gids[late[kept2[len(keep): len(keep) + len(late)]]]]))
     if stats is not None:
         stats.update(step1=step1, first_pass_rounds=first["rounds"], second_pass_rounds=second["rounds"],
                      segment_candidates=comm.allreduce(len(take), op=MPI.SUM),
                      interior_candidates=comm.allreduce(len(in_xy), op=MPI.SUM),
+                     demoted_points=comm.allreduce(int(np.count_nonzero(deferred)), op=MPI.SUM),
+                     asking_grids=comm.allreduce(n_asking, op=MPI.SUM),
                      bytes=step1["bytes"] + first["bytes_halo"] + first["bytes_states"] + second["bytes_halo"]
                      + second["bytes_states"])
     return dict(points=points, keys=keys, input_gid=input_gid, part=part, at_held=at_held, skeleton=skeleton,
-                all_segment_parent=all_parent, kept_segment_candidates=take[kept[n_owned:]],
-                kept_inputs=owned_gids[kept[:n_owned]], spacing=spacing, forced_corner=forced[own] == 1,
-                curve_move=curve_move)
+                all_segment_parent=all_parent, kept_segment_candidates=position[kept[n_first_inputs:]],
+                kept_inputs=kept_inputs, spacing=spacing, forced_corner=forced[own] == 1, f_part=f_part,
+                demoted=demoted, settled=settled, curve_move=curve_move)
 
 
 # A point of the step's output as the ranks look it up (distributed_triangulation._lookup).
@@ -636,9 +754,10 @@ def evolve_distributed(dmesh: DistributedMesh, delta: Any = None, *, size: Any =
             o.validate()
         missing = _unsupported(o) + (["the quality pass"] if o.quality else [])
         if missing:
-            raise ValueError("not yet on a DistributedMesh: " + ", ".join(missing) + "; the distributed step is "
-                             "the paper's FRFC: pass options=evomesh.FrfcOptions.paper() (within_domain=True "
-                             "may be added)")
+            raise ValueError("not yet on a DistributedMesh: " + ", ".join(missing) + "; the distributed step "
+                             "does all of FRFC but the spacing repair and the quality pass: set repair_ratio = "
+                             "gap_repair_ratio = refine_gap_ratio = 0 and quality=False (or pass "
+                             "options=evomesh.FrfcOptions.paper())")
         return o
 
     o = _collective(comm, check)

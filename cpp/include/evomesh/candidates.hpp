@@ -71,9 +71,13 @@ std::vector<std::uint8_t> settled_points(const Mesh_arrays& mesh, const std::vec
 // settled (settled_points).
 // `queries` (optional): f for the grids of segments far longer than f at their
 // ends (sample_segments).
+// `settled` (optional, one flag per point): the settled flags to use instead of
+// settled_points on `mesh` (a rank's part of a distributed step, whose segment
+// end points come without their triangles: their owners decide).
 Candidates segment_candidates(const Mesh_arrays& mesh, const std::vector<double>& delta, const std::vector<double>& f,
                               const std::vector<Segment_chain>& chains, const Frfc_options& options,
-                              const Spacing_queries* queries = nullptr);
+                              const Spacing_queries* queries = nullptr,
+                              const std::vector<std::uint8_t>* settled = nullptr);
 
 // Candidates inside triangles: grid samples and (options.ring_samples) the ring
 // candidates of every R-point, except those in a cover disc of their triangle
@@ -84,12 +88,21 @@ Candidates segment_candidates(const Mesh_arrays& mesh, const std::vector<double>
 // in a cover disc (incremental_step.cpp); they are not sampled, the result is the same.
 // `queries` (optional): f for the adaptive grids of strongly graded triangles
 // (sample_triangle_blocks).
+// For a rank's part of a distributed step (distributed_step.py), whose halo
+// points come without their whole fans: `settled` (optional, one flag per
+// point) replaces settled_points on `mesh`; `ring_from` (optional, one flag per
+// point) limits the ring candidates to the R-points flagged (the part's owned
+// points); `ring_point` (optional) receives the R-point of every ring candidate
+// (one entry per ring candidate, in their order after the grid samples).
 Candidates interior_candidates(const Mesh_arrays& mesh, const Triangle_fans& fans, const std::vector<double>& delta,
                                const std::vector<double>& f, const std::vector<std::uint8_t>& demoted,
                                const Cover_discs& cover,
                                const Frfc_options& options, std::size_t& n_drawn,
                                const std::vector<std::uint8_t>* quiet = nullptr,
-                               const Spacing_queries* queries = nullptr);
+                               const Spacing_queries* queries = nullptr,
+                               const std::vector<std::uint8_t>* settled = nullptr,
+                               const std::vector<std::uint8_t>* ring_from = nullptr,
+                               std::vector<Index>* ring_point = nullptr);
 
 // Sphere radii of the input points: radius_scale f(p) / 2 (times boundary_scale on segments).
 std::vector<double> input_point_radii(const Mesh_arrays& mesh, const std::vector<double>& f,
