@@ -46,9 +46,16 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--sizes", default="1e4,1e5")
     parser.add_argument("--header", action="store_true")
+    parser.add_argument("--options", choices=["paper", "distributed"], default="paper",
+                        help="paper: FrfcOptions.paper() with within_domain; distributed: the recommended options "
+                             "less what is not distributed yet (spacing repair, quality pass)")
     args = parser.parse_args()
     comm = MPI.COMM_WORLD
     options = evomesh.FrfcOptions.paper()
+    if args.options == "distributed":
+        options = evomesh.FrfcOptions.recommended()
+        options.quality = False
+        options.repair_ratio = options.gap_repair_ratio = options.refine_gap_ratio = 0.0
     options.within_domain = True
     if args.header and comm.rank == 0:
         print("| input points | output points | ranks | MIS rounds (pass 1 / 2) | CDT widenings / label rounds | "
