@@ -86,6 +86,18 @@ def mesh_and_delta(draw, max_side: int = 12):
 _LAYOUTS = ("uniform", "clustered", "integer-grid", "lines", "annulus")
 
 
+def crack_mesh(n: int) -> evomesh.Mesh:
+    """A notched n x n grid with an interior crack (segments tagged 7) along the
+    grid row nearest y = 0.3, from x = 0.1 to 0.9."""
+    grid = grid_mesh(n, n, notch=True)
+    p = grid.points
+    y = p[:, 1][np.argmin(np.abs(p[:, 1] - 0.3))]
+    row = np.flatnonzero((np.abs(p[:, 1] - y) < 1e-12) & (p[:, 0] > 0.1) & (p[:, 0] < 0.9))
+    row = row[np.argsort(p[row, 0])]
+    return evomesh.Mesh(p, grid.triangles, segments=np.stack([row[:-1], row[1:]], axis=1),
+                        segment_tags=np.full(len(row) - 1, 7))
+
+
 def _random_cloud(rng: np.random.Generator, layout: str, n: int) -> np.ndarray:
     if layout == "uniform":
         return rng.random((n, 2))

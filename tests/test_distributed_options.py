@@ -15,7 +15,7 @@ import pytest
 import evomesh
 from evomesh import _core
 from evomesh.meshgen import polygon_mesh
-from strategies import grid_mesh
+from strategies import crack_mesh
 
 MPI = pytest.importorskip("mpi4py.MPI")
 from evomesh import DistributedMesh  # noqa: E402
@@ -30,13 +30,7 @@ _ARRAYS = ("points", "triangles", "segments", "segment_tags", "segment_is_bounda
 
 def _crack() -> evomesh.Mesh:
     """A notched square with a tagged interior crack."""
-    grid = grid_mesh(17, 17, notch=True)
-    p = grid.points
-    y = p[:, 1][np.argmin(np.abs(p[:, 1] - 0.3))]
-    row = np.flatnonzero((np.abs(p[:, 1] - y) < 1e-12) & (p[:, 0] > 0.1) & (p[:, 0] < 0.9))
-    row = row[np.argsort(p[row, 0])]
-    return evomesh.Mesh(p, grid.triangles, segments=np.stack([row[:-1], row[1:]], axis=1),
-                        segment_tags=np.full(len(row) - 1, 7))
+    return crack_mesh(17)
 
 
 def _holes() -> evomesh.Mesh:
