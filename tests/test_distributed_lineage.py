@@ -149,14 +149,19 @@ def test_lineage_rows_are_the_owned_points() -> None:
                      and lineage.old_nn.shape == lineage.old_f.shape == (dold.n_owned,), "the lineage's shapes")
     assert lineage.matches(dold) and not lineage.matches(dnew)  # (the same answer on every rank)
     # scattered: old triangle global ids are the serial indices
-    fresh = dnew.origin[: dnew.n_owned] < 0
+    def rows_rebuild(d: DistributedMesh) -> tuple[bool, np.ndarray]:
+        fresh = d.origin[: d.n_owned] < 0
+        parent = d.lineage.parent_triangle
+        ok = bool((parent[~fresh] == -1).all() and (parent[fresh] >= 0).all()
+                  and (parent[fresh] < old.n_triangles).all())
+        if ok and fresh.any():
+            corners = old.points[old.triangles[parent[fresh]]]
+            rebuilt = np.einsum("kj,kjc->kc", d.lineage.barycentric[fresh], corners)
+            ok = np.abs(rebuilt - d.owned_points[fresh]).max() <= 1e-13 * np.abs(old.points).max()
+        return ok, fresh
+
+    ok, fresh = rows_rebuild(dnew)
     parent = lineage.parent_triangle
-    ok = bool((parent[~fresh] == -1).all() and (parent[fresh] >= 0).all()
-              and (parent[fresh] < old.n_triangles).all())
-    if ok and fresh.any():
-        corners = old.points[old.triangles[parent[fresh]]]
-        rebuilt = np.einsum("kj,kjc->kc", lineage.barycentric[fresh], corners)
-        ok = np.abs(rebuilt - dnew.owned_points[fresh]).max() <= 1e-13 * np.abs(old.points).max()
     check_everywhere(ok, "the owned rows rebuild the owned points")
     check_everywhere(COMM.allreduce(int(fresh.sum())) > 0, "the step made new points")
     with pytest.raises(AttributeError):
@@ -164,8 +169,17 @@ def test_lineage_rows_are_the_owned_points() -> None:
     with pytest.raises(ValueError):
         lineage.barycentric[0, 0] = 1.0
     assert "DistributedLineage" in repr(lineage)
-    # rebalance and from_local make meshes without one
-    assert dnew.rebalance().lineage is None
+    # a user's rebalance moves the rows along (ids kept: the gathered lineage is the same)
+    before = dnew.gather()
+    for renumber in (False, True):
+        moved = dnew.rebalance(weights=lambda xy: 1.0 + xy[:, 0] ** 2, renumber=renumber)
+        check_everywhere(moved.lineage is not None and rows_rebuild(moved)[0],
+                         f"the rows after rebalance(renumber={renumber}) rebuild the owned points")
+        if not renumber:
+            after = moved.gather()
+            same = RANK != 0 or all(np.array_equal(getattr(before.lineage, k), getattr(after.lineage, k))
+                                    for k in ("parent_triangle", "barycentric", "old_nn", "old_f"))
+            check_everywhere(same, "the gathered lineage after a rebalance differs")
 
 
 @pytest.mark.parametrize("name", ["crack and a notch", "disc with a hole"])

@@ -772,8 +772,8 @@ class DistributedMesh:
         For the mesh ``evomesh.evolve`` returns: where its owned points lie in
         the mesh the step started from (old triangles by global id; nn and f
         at the old points). :meth:`gather` gives the serial
-        :class:`~evomesh.Lineage`. None for a mesh made by :meth:`scatter`,
-        :meth:`from_local` or :meth:`rebalance`.
+        :class:`~evomesh.Lineage`. None for a mesh made by :meth:`scatter` or
+        :meth:`from_local`; :meth:`rebalance` moves it along.
     """
 
     __slots__ = ("comm", "points", "n_owned", "global_ids", "owners", "triangles", "triangle_global_ids",
@@ -1245,6 +1245,9 @@ class DistributedMesh:
 
         rings, renumber_, return_map_, w = _collective(comm, prepare)
         _same_everywhere(comm, {"halo_rings": rings, "renumber": renumber_, "return_map": return_map_})
+        wanted_map = return_map_
+        # A step's output carries its lineage (rows per owned point): it moves along.
+        return_map_ = return_map_ or self.lineage is not None
         old_owned = self.global_ids[:n_owned]
         position, owner_owned = _hilbert_cut(comm, self.owned_points, old_owned, w)
         gid_owned = position if renumber_ else old_owned
@@ -1297,14 +1300,18 @@ class DistributedMesh:
             return result
         sent = (owner_owned, old_owned, tri_owner, self.triangle_global_ids)
         if not renumber_:
-            return result, Renumbering(comm, result.global_ids[: result.n_owned], result.triangle_global_ids,
-                                       result.segment_global_ids, sent)
-        assert old_point_gids is not None
-        old_point_gids = old_point_gids[np.argsort(old_point_gids[:, 0])]
-        return result, Renumbering(
-            comm, old_point_gids[_index_of(old_point_gids[:, 0], result.global_ids[: result.n_owned]), 1],
-            old_triangle_gids[_index_of(tri["gid"], result.triangle_global_ids)],
-            old_segment_gids[_index_of(seg["gid"], result.segment_global_ids)], sent)
+            renumbering = Renumbering(comm, result.global_ids[: result.n_owned], result.triangle_global_ids,
+                                      result.segment_global_ids, sent)
+        else:
+            assert old_point_gids is not None
+            old_point_gids = old_point_gids[np.argsort(old_point_gids[:, 0])]
+            renumbering = Renumbering(
+                comm, old_point_gids[_index_of(old_point_gids[:, 0], result.global_ids[: result.n_owned]), 1],
+                old_triangle_gids[_index_of(tri["gid"], result.triangle_global_ids)],
+                old_segment_gids[_index_of(seg["gid"], result.segment_global_ids)], sent)
+        if self.lineage is not None:
+            object.__setattr__(result, "lineage", self.lineage._moved(renumbering))
+        return (result, renumbering) if wanted_map else result
 
     # ------------------------------------------------------------ point fields
     def _field(self, values: Any, name: str) -> np.ndarray:
