@@ -162,7 +162,7 @@ def step_lineage(old: Any, new: Any, spacing: Any, outside: float = 0.0) -> Dist
     (ties: least global id) and a negative coordinate, as the serial walk's
     boundary triangle within that reach.
     """
-    from .distributed_transfer import _bounds, _HeldOld, _receiving_chunks, _table
+    from .distributed_transfer import _bounds, _HeldOld, _nearest_triangles, _receiving_chunks, _table
 
     MPI = _mpi()
     comm = old.comm
@@ -182,8 +182,6 @@ def step_lineage(old: Any, new: Any, spacing: Any, outside: float = 0.0) -> Dist
         if len(queries) and held.n_triangles:
             fallback = None
             if outside > 0:
-                from .distributed_step import _nearest_triangles
-
                 fallback, distance = _nearest_triangles(held.points, held.triangles, queries)
                 fallback[distance > outside] = -1
             found, weights = _core.part_parent_triangles(held.points, held.triangles, held.gid, queries, fallback)

@@ -661,7 +661,7 @@ def _carried_triangle_tags(old: DistributedMesh, a: np.ndarray, b: np.ndarray, c
     After a step on curves, a centroid may lie outside the old domain by up to
     `reach`: it gets the nearest old triangle (the serial walk stops in a
     boundary triangle within that distance). Collective."""
-    from .distributed_transfer import _bounds, _HeldOld, _receiving_chunks, _table
+    from .distributed_transfer import _bounds, _HeldOld, _nearest_triangles, _receiving_chunks, _table
 
     comm = old.comm
     MPI = _mpi()
@@ -690,41 +690,6 @@ def _carried_triangle_tags(old: DistributedMesh, a: np.ndarray, b: np.ndarray, c
         return np.asarray(held.tags[found], dtype=np.int64)
 
     return _collective(comm, locate)
-
-
-def _nearest_triangles(points: np.ndarray, triangles: np.ndarray, queries: np.ndarray
-                       ) -> tuple[np.ndarray, np.ndarray]:
-    """For each query, the triangle at least distance (ties: the lower index)
-    and that distance. Candidates by a k-d tree over the centroids: a triangle
-    within distance d of q has its centroid within d + (its largest centroid to
-    vertex distance) of q, and d is at most the distance to the nearest
-    centroid's triangle."""
-    from scipy.spatial import cKDTree
-
-    corners = points[triangles]  # (m, 3, 2)
-    centroid = corners.mean(axis=1)
-    radius = float(np.sqrt(((corners - centroid[:, None, :]) ** 2).sum(axis=2)).max())
-    tree = cKDTree(centroid)
-    nearest, _ = tree.query(queries)
-    lists = tree.query_ball_point(queries, nearest + radius * (1 + 1e-9) + 1e-300)
-    counts = np.array([len(x) for x in lists], dtype=np.int64)
-    query = np.repeat(np.arange(len(queries)), counts)
-    tri = np.concatenate([np.asarray(x, dtype=np.int64) for x in lists]) if len(lists) else np.zeros(0, np.int64)
-    q = queries[query]
-    p = corners[tri]
-    # distance from q to each edge, 0 when q is inside (all orientations >= 0)
-    best = np.full(len(tri), np.inf)
-    inside = np.ones(len(tri), bool)
-    for k in range(3):
-        u, v = p[:, k], p[:, (k + 1) % 3]
-        e, w = v - u, q - u
-        inside &= e[:, 0] * w[:, 1] - e[:, 1] * w[:, 0] >= 0
-        t = np.clip((w * e).sum(axis=1) / np.maximum((e * e).sum(axis=1), np.finfo(float).tiny), 0.0, 1.0)
-        best = np.minimum(best, np.hypot(*(w - t[:, None] * e).T))
-    best[inside] = 0.0
-    order = np.lexsort((tri, best, query))
-    first = np.flatnonzero(np.r_[True, query[order][1:] != query[order][:-1]]) if len(order) else order
-    return tri[order][first], best[order][first]
 
 
 def evolve_distributed(dmesh: DistributedMesh, delta: Any = None, *, size: Any = None, method: str = "frfc",

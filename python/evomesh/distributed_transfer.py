@@ -208,6 +208,41 @@ def _bounds(comm: Any, *coordinates: np.ndarray) -> tuple[np.ndarray, float, flo
 
 
 # -------------------------------------------------------------- old triangles
+def _nearest_triangles(points: np.ndarray, triangles: np.ndarray, queries: np.ndarray
+                       ) -> tuple[np.ndarray, np.ndarray]:
+    """For each query, the triangle at least distance (ties: the lower index)
+    and that distance. Candidates by a k-d tree over the centroids: a triangle
+    within distance d of q has its centroid within d + (its largest centroid to
+    vertex distance) of q, and d is at most the distance to the nearest
+    centroid's triangle."""
+    from scipy.spatial import cKDTree
+
+    corners = points[triangles]  # (m, 3, 2)
+    centroid = corners.mean(axis=1)
+    radius = float(np.sqrt(((corners - centroid[:, None, :]) ** 2).sum(axis=2)).max())
+    tree = cKDTree(centroid)
+    nearest, _ = tree.query(queries)
+    lists = tree.query_ball_point(queries, nearest + radius * (1 + 1e-9) + 1e-300)
+    counts = np.array([len(x) for x in lists], dtype=np.int64)
+    query = np.repeat(np.arange(len(queries)), counts)
+    tri = np.concatenate([np.asarray(x, dtype=np.int64) for x in lists]) if len(lists) else np.zeros(0, np.int64)
+    q = queries[query]
+    p = corners[tri]
+    # distance from q to each edge, 0 when q is inside (all orientations >= 0)
+    best = np.full(len(tri), np.inf)
+    inside = np.ones(len(tri), bool)
+    for k in range(3):
+        u, v = p[:, k], p[:, (k + 1) % 3]
+        e, w = v - u, q - u
+        inside &= e[:, 0] * w[:, 1] - e[:, 1] * w[:, 0] >= 0
+        t = np.clip((w * e).sum(axis=1) / np.maximum((e * e).sum(axis=1), np.finfo(float).tiny), 0.0, 1.0)
+        best = np.minimum(best, np.hypot(*(w - t[:, None] * e).T))
+    best[inside] = 0.0
+    order = np.lexsort((tri, best, query))
+    first = np.flatnonzero(np.r_[True, query[order][1:] != query[order][:-1]]) if len(order) else order
+    return tri[order][first], best[order][first]
+
+
 class _HeldOld:
     """The old triangles this rank holds for a transfer: those within reach of
     its chunks (module docstring), from every rank (itself too), sorted by global id.
