@@ -259,7 +259,86 @@ void repair_gaps(const Mesh_arrays& mesh, const Triangle_fans& fans, const std::
   }
 }
 
+
+// The points added by the spacing repair, for nearest-point queries (walks
+// start at the last answer: needy points come in id order, mostly neighbours).
+template <class Delaunay>
+struct Added_points {
+  Delaunay dt;
+  typename Delaunay::Vertex_handle hint;
+  // squared distance from x to the nearest added point (infinity: none)
+  double nearest2(const Vec2& x) {
+    if (dt.number_of_vertices() == 0) return std::numeric_limits<double>::infinity();
+    const Point_2 q = to_cgal(x);
+    hint = dt.nearest_vertex(q, hint == typename Delaunay::Vertex_handle() ? typename Delaunay::Face_handle()
+                                                                           : hint->face());
+    return CGAL::squared_distance(q, hint->point());
+  }
+  void insert(const Vec2& x) { dt.insert(to_cgal(x)); }
+};
+
+// One needy point's repair (the serial loop's body, also the distributed
+// step's): none (-1) when its nearest other point, kept (nn2) or added, is
+// within the target, else the candidate farthest from every kept and added
+// point (the first of equals; none when every one is at distance 0). kept2:
+// each candidate's squared distance to the nearest kept centre.
+template <class Added>
+int repair_choice(const Vec2& at, double target2, double nn2, const std::vector<Vec2>& candidates,
+                  const std::vector<double>& kept2, Added& added) {
+  // re-check: an earlier repair may have served p
+  if (std::min(nn2, added.nearest2(at)) <= target2) return -1;
+  int best = -1;
+  double best_d2 = 0;
+  for (std::size_t k = 0; k < candidates.size(); ++k) {
+    const double e2 = std::min(kept2[k], added.nearest2(candidates[k]));
+    if (e2 > best_d2) {
+      best_d2 = e2;
+      best = static_cast<int>(k);
+    }
+  }
+  return best;
+}
+
 }  // namespace
+
+double repair_target2(double repair_ratio, double delta, double nn) {
+  const double target = repair_ratio * delta * nn;
+  return target * target;
+}
+
+void kept_distances(const std::vector<Vec2>& kept, const std::vector<Vec2>& queries, std::vector<double>& nearest2,
+                    std::vector<double>& second2) {
+  nearest2.assign(queries.size(), std::numeric_limits<double>::infinity());
+  second2.assign(queries.size(), std::numeric_limits<double>::infinity());
+  if (kept.empty()) return;
+  const Kept_centres tree(kept);
+  for (std::size_t i = 0; i < queries.size(); ++i) {
+    const auto two = tree.squared_two_nearest(queries[i]);
+    nearest2[i] = two[0];
+    second2[i] = two[1];
+  }
+}
+
+std::vector<Index> decide_repairs(const std::vector<Vec2>& at, const std::vector<double>& target2,
+                                  const std::vector<double>& nn2, const std::vector<Index>& xadj,
+                                  const std::vector<Vec2>& candidates, const std::vector<double>& kept2,
+                                  const std::vector<Vec2>& added) {
+  using Delaunay = CGAL::Delaunay_triangulation_2<Kernel>;
+  Added_points<Delaunay> points;
+  for (const Vec2& x : added) points.insert(x);
+  std::vector<Index> out(at.size(), -1);
+  std::vector<Vec2> mine;
+  std::vector<double> mine2;
+  for (std::size_t i = 0; i < at.size(); ++i) {
+    mine.assign(candidates.begin() + xadj[i], candidates.begin() + xadj[i + 1]);
+    mine2.assign(kept2.begin() + xadj[i], kept2.begin() + xadj[i + 1]);
+    const int best = repair_choice(at[i], target2[i], nn2[i], mine, mine2, points);
+    if (best < 0) continue;
+    out[i] = best;
+    points.insert(mine[static_cast<std::size_t>(best)]);
+  }
+  return out;
+}
 
 std::vector<Vec2> repair_spacing(const Spacing_repair_input& input, const Frfc_options& options,
                                  std::vector<std::uint8_t>& kept, std::size_t& n_added) {
@@ -310,8 +389,7 @@ std::vector<Vec2> repair_spacing(const Spacing_repair_input& input, const Frfc_o
   for (std::size_t r = 0; r < n; ++r) {
     const std::size_t p = visit(by_id, r);
     if (!(repair_ratio > 0) || position_of[p] < 0 || !(delta[p] < 1)) continue;
-    const double target = repair_ratio * delta[p] * nn[p];
-    if (nn2[p] > target * target) {
+    if (nn2[p] > repair_target2(repair_ratio, delta[p], nn[p])) {
       is_needy[p] = 1;
       needy.push_back(static_cast<Index>(p));
     }
@@ -326,61 +404,36 @@ std::vector<Vec2> repair_spacing(const Spacing_repair_input& input, const Frfc_o
     }
   }
   std::sort(on_segments.begin(), on_segments.end());
-  Delaunay added_dt;  // every point added here (segment or interior)
-  Delaunay::Vertex_handle hint;
-  auto nearest2 = [&](const Vec2& x) {
-    double best = tree.squared_nearest(x);
-    if (added_dt.number_of_vertices() > 0) {
-      const Point_2 q = to_cgal(x);
-      hint = added_dt.nearest_vertex(q, hint == Delaunay::Vertex_handle() ? Delaunay::Face_handle() : hint->face());
-      best = std::min(best, CGAL::squared_distance(q, hint->point()));
-    }
-    return best;
-  };
+  Added_points<Delaunay> added_points;  // every point added here (segment or interior)
   std::array<Ring_candidate, kRingDirections> ring;
+  std::vector<Vec2> candidates;
+  std::vector<double> kept2;
+  std::vector<Index> segment_of;  // per candidate: its centre index, or -1 (a ring candidate inside)
   for (Index p : needy) {
-    // re-check: an earlier repair may have served p
-    const double target = repair_ratio * delta[p] * nn[p];
-    double d2 = nn2[p];
-    if (added_dt.number_of_vertices() > 0) {
-      const Point_2 q = to_cgal(mesh.points[p]);
-      d2 = std::min(d2, CGAL::squared_distance(q, added_dt.nearest_vertex(q)->point()));
-    }
-    if (d2 <= target * target) continue;
-    Index best_segment = -1;
-    Vec2 best_point{0.0, 0.0};
-    bool found = false;
-    double best_d2 = 0;
+    candidates.clear();
+    segment_of.clear();
     for (auto it = std::lower_bound(on_segments.begin(), on_segments.end(), std::pair<Index, Index>{p, -1});
          it != on_segments.end() && it->first == p; ++it) {
-      const Index c = it->second;
-      const double e2 = nearest2(centers[c]);
-      if (e2 > best_d2) {
-        best_d2 = e2;
-        best_segment = c;
-        best_point = centers[c];
-        found = true;
-      }
+      candidates.push_back(centers[it->second]);
+      segment_of.push_back(it->second);
     }
     const int count = ring_candidates_of(mesh, fans, f, reach, seed, static_cast<std::size_t>(p), ring);
     for (int k = 0; k < count; ++k) {
-      const Vec2& x = ring[k].x;
-      const double e2 = nearest2(x);
-      if (e2 > best_d2) {
-        best_d2 = e2;
-        best_segment = -1;
-        best_point = x;
-        found = true;
-      }
+      candidates.push_back(ring[k].x);
+      segment_of.push_back(-1);
     }
-    if (!found) continue;
-    if (best_segment >= 0) kept[best_segment] = 1;
-    else added.push_back(best_point);
-    added_dt.insert(to_cgal(best_point));
+    kept2.resize(candidates.size());
+    for (std::size_t k = 0; k < candidates.size(); ++k) kept2[k] = tree.squared_nearest(candidates[k]);
+    const int best = repair_choice(mesh.points[p], repair_target2(repair_ratio, delta[p], nn[p]), nn2[p], candidates,
+                                   kept2, added_points);
+    if (best < 0) continue;
+    if (segment_of[best] >= 0) kept[segment_of[best]] = 1;
+    else added.push_back(candidates[best]);
+    added_points.insert(candidates[best]);
     ++n_added;
   }
   repair_gaps(mesh, fans, delta, nn, gap_repair_ratio, options.refine_gap_ratio, seed, input.demoted, kept, tree,
-              threads, added_dt, added, n_added);
+              threads, added_points.dt, added, n_added);
   return added;
 }
 

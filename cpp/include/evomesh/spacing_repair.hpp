@@ -44,4 +44,30 @@ struct Spacing_repair_input {
 std::vector<Vec2> repair_spacing(const Spacing_repair_input& input, const Frfc_options& options,
                                  std::vector<std::uint8_t>& kept, std::size_t& n_added);
 
+// The pieces of the spacing repair's first part (repair_spacing), for the
+// distributed step (python/evomesh/distributed_repair.py), which decides the
+// needy points in rounds over ranks and must decide each as serial does.
+
+// The squared target of the re-check at an R-point: (repair_ratio delta nn)^2.
+double repair_target2(double repair_ratio, double delta, double nn);
+
+// The squared distances from each query to its nearest and second nearest
+// points of `kept` (the serial repair's kept-centre queries, the same values:
+// exact minima, whatever subset holds the nearest ones). Infinity where none.
+void kept_distances(const std::vector<Vec2>& kept, const std::vector<Vec2>& queries, std::vector<double>& nearest2,
+                    std::vector<double>& second2);
+
+// The needy points' decisions, in the order given, as repair_spacing takes
+// them: point i at at[i], with target2[i], nn2[i] (its second nearest kept
+// centre, squared) and its candidates xadj[i]..xadj[i + 1] (segment ring
+// candidates by centre index, then its interior ring candidates in direction
+// order) with kept2 their squared nearest kept-centre distances; `added`: the
+// points added before (by earlier needy points). Returns per point the index
+// of its chosen candidate among its own, or -1 (none added). Each point's
+// choice is added before the next is decided.
+std::vector<Index> decide_repairs(const std::vector<Vec2>& at, const std::vector<double>& target2,
+                                  const std::vector<double>& nn2, const std::vector<Index>& xadj,
+                                  const std::vector<Vec2>& candidates, const std::vector<double>& kept2,
+                                  const std::vector<Vec2>& added);
+
 }  // namespace evomesh
