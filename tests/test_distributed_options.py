@@ -226,10 +226,11 @@ def test_still_refused() -> None:
     with pytest.raises(ValueError, match="halo_rings=0"):
         evomesh.evolve(thin, np.ones(thin.n_owned), options=_options("ring", 0))
     dmesh = DistributedMesh.scatter(_mesh("L-shape") if RANK == 0 else None, COMM)
-    options = _options("all", 0)
-    options.repair_ratio = 1.75
-    with pytest.raises(ValueError, match="spacing repair"):
-        evomesh.evolve(dmesh, np.ones(dmesh.n_owned), options=options)
+    for ratio in ("gap_repair_ratio", "refine_gap_ratio"):  # (repair_ratio: tests/test_distributed_repair.py)
+        options = _options("all", 0)
+        setattr(options, ratio, 1.3)
+        with pytest.raises(ValueError, match="gap repair"):
+            evomesh.evolve(dmesh, np.ones(dmesh.n_owned), options=options)
     options = _options("all", 0)
     options.quality = True
     with pytest.raises(ValueError, match="quality pass"):

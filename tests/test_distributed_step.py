@@ -106,7 +106,7 @@ def test_packing_keeps_the_serial_points(name: str, kind: str, layout: str, with
 
 def test_packing_refuses_what_it_does_not_do_yet() -> None:
     dmesh = _scatter(_mesh("L-shape"), "even", 0)
-    with pytest.raises(ValueError, match="spacing repair"):
+    with pytest.raises(ValueError, match="gap repair"):
         packing(dmesh, np.ones(dmesh.n_owned), _core.FrfcOptions.recommended())
     with pytest.raises(TypeError, match="FrfcOptions"):
         packing(dmesh, np.ones(dmesh.n_owned), "paper")
