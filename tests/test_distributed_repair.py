@@ -1,7 +1,8 @@
-"""The spacing repair's repair_ratio on MPI ranks (evomesh.distributed_repair,
-issue 29): the needy points decided in rounds give the serial step's mesh array
-for array on any number of ranks, with the recommended options (less the gap
-repair and the quality pass) and with the repair alone.
+"""The spacing repair on MPI ranks (evomesh.distributed_repair, issue 29): the
+needy points (repair_ratio) and then the open points (the gap repair,
+gap_repair_ratio and refine_gap_ratio) decided in rounds give the serial step's
+mesh array for array on any number of ranks, with the recommended options (less
+the quality pass) and with each repair ratio alone.
 
 Plain ``pytest`` runs these on one rank; CI runs them under ``mpiexec -n 2`` and
 ``-n 4`` too (tools/run-tests.sh).
@@ -27,18 +28,25 @@ RANK, SIZE = COMM.rank, COMM.size
 
 
 def _options(which: str, ratio: float = 1.75) -> _core.FrfcOptions:
-    """"recommended": the recommended options less the gap repair and the
-    quality pass; "alone": the paper's with ring candidates and repair_ratio."""
+    """"recommended": the recommended options less the quality pass (repair_ratio
+    set to `ratio`); else the paper's with ring candidates and only the repair
+    ratio named `which` at its recommended value."""
     if which == "recommended":
         o = _core.FrfcOptions.recommended()
         o.quality = False
-        o.gap_repair_ratio = o.refine_gap_ratio = 0.0
+        o.repair_ratio = ratio
     else:
         o = _core.FrfcOptions.paper()
         o.ring_samples = True
-    o.repair_ratio = ratio
+        setattr(o, which, getattr(_core.FrfcOptions.recommended(), which))
     o.seed = 3
     return o
+
+
+def _repaired(stats: dict) -> int:
+    """The points the ranks' repair added (the serial n_spacing_repairs)."""
+    r = stats["repair"]
+    return r["repaired"] + r["gap_added"]
 
 
 def _loop(mesh: evomesh.Mesh, options: _core.FrfcOptions, kinds: list[str], layout: str = "even"
@@ -66,7 +74,7 @@ def _loop(mesh: evomesh.Mesh, options: _core.FrfcOptions, kinds: list[str], layo
 
 
 @pytest.mark.parametrize("name", list(_DOMAINS))
-@pytest.mark.parametrize("which", ["recommended", "alone"])
+@pytest.mark.parametrize("which", ["recommended", "repair_ratio", "gap_repair_ratio", "refine_gap_ratio"])
 def test_repair_on_ranks_gives_the_serial_meshes(which: str, name: str) -> None:
     stats, repairs, same = _loop(_mesh(name), _options(which), ["front", "front-1", "random"],
                                  layout="weighted" if name == "crack" else "even")
@@ -74,7 +82,7 @@ def test_repair_on_ranks_gives_the_serial_meshes(which: str, name: str) -> None:
         check_everywhere(ok, f"{which}, step {t} differs from the serial step")
     # The repair added points in the serial step (so the comparison tests it), as many on the ranks.
     assert sum(repairs) > 0
-    assert [s["repair"]["repaired"] for s in stats] == repairs
+    assert [_repaired(s) for s in stats] == repairs
 
 
 def _dense() -> evomesh.Mesh:
@@ -82,22 +90,29 @@ def _dense() -> evomesh.Mesh:
 
 
 def test_many_needy_points_across_ranks() -> None:
-    """repair_ratio = 1 makes hundreds of points needy, many near the ranks'
-    borders: decisions wait for other ranks' (copies, several rounds)."""
-    stats, repairs, same = _loop(_dense(), _options("recommended", 1.0), ["front", "random"])
+    """repair_ratio = 1 makes hundreds of points needy and open, many near the
+    ranks' borders: decisions wait for other ranks' (copies, several rounds),
+    and some gap walks leave a rank's triangles (walked again on fetched ones)."""
+    stats, repairs, same = _loop(_dense(), _options("recommended", 1.0), ["front", "random", "front"])
     for t, ok in enumerate(same):
         check_everywhere(ok, f"step {t} differs from the serial step")
     assert min(repairs) > 100
-    assert [s["repair"]["repaired"] for s in stats] == repairs
+    assert [_repaired(s) for s in stats] == repairs
     if SIZE > 1:
-        assert stats[0]["repair"]["copies"] > 0 and stats[0]["repair"]["rounds"] > 1
+        repair = [s["repair"] for s in stats]
+        assert all(r["copies"] > 0 and r["gap_copies"] > 0 for r in repair)
+        assert max(r["rounds"] for r in repair) > 1 and max(r["gap_rounds"] for r in repair) > 1
+        assert sum(r["gap_walks_redone"] for r in repair) > 0
 
 
 def test_without_sharing_added_points_the_ranks_differ(monkeypatch: pytest.MonkeyPatch) -> None:
     """A mutant that does not use the points other ranks' decisions added
-    differs from serial on several ranks (so the test above can fail)."""
+    differs from serial on several ranks (so the tests above can fail): with
+    repair_ratio 1, or with the gap repair alone (repair_ratio 0)."""
     if SIZE == 1:
         pytest.skip("one rank shares nothing")
     monkeypatch.setattr(distributed_repair, "_SHARE_ADDED", False)
-    _, _, same = _loop(_dense(), _options("recommended", 1.0), ["front", "random"])
+    same = []
+    for ratio in (1.0, 0.0):
+        same += _loop(_dense(), _options("recommended", ratio), ["front", "random", "front"])[2]
     assert not all(same)

@@ -19,6 +19,7 @@
 #include "evomesh/global_ids.hpp"
 #include "evomesh/kernel.hpp"
 #include "evomesh/local_feature_size.hpp"
+#include "evomesh/mesh_walk.hpp"
 #include "evomesh/options.hpp"
 #include "evomesh/packing.hpp"
 #include "evomesh/parallel.hpp"
@@ -1218,6 +1219,95 @@ PYBIND11_MODULE(_core, m) {
       py::arg("added"),
       "The spacing repair's decisions at needy points, in the order given (decide_repairs): per point the index "
       "of its chosen candidate among its own, -1 for none; each choice is seen by the later points.");
+
+  m.def(
+      "part_gap_candidates",
+      [part_mesh](const py::dict& part, const Int_array& points, const Float_array& delta, const Float_array& nn,
+                  std::uint64_t seed) {
+        const Mesh_arrays mesh = part_mesh(part);
+        const auto at = to_vector<Index>(points);
+        const auto d = to_vector<double>(delta), v = to_vector<double>(nn);
+        if (d.size() != at.size() || v.size() != at.size()) {
+          throw Input_error("part_gap_candidates: one delta and nn per point");
+        }
+        for (Index p : at) {
+          if (p < 0 || static_cast<std::size_t>(p) >= mesh.points.size()) throw Input_error("points out of range");
+        }
+        std::vector<Vec2> xy(at.size() * kGapDirections);
+        std::vector<std::uint8_t> inside(at.size() * kGapDirections), left(at.size(), 0);
+        {
+          py::gil_scoped_release release;
+          const Triangle_fans fans(mesh);
+          const Mesh_walk walk(mesh, fans);
+          for (std::size_t i = 0; i < at.size(); ++i) {
+            const std::size_t p = static_cast<std::size_t>(at[i]);
+            gap_directions(mesh.points[p], d[i] * v[i], seed, mesh.point_gid(p), &xy[i * kGapDirections]);
+            for (int k = 0; k < kGapDirections; ++k) {
+              bool out = false;
+              const std::size_t j = i * kGapDirections + static_cast<std::size_t>(k);
+              inside[j] = walk.locate_from(at[i], xy[j], 64, &out) >= 0;
+              left[i] = left[i] || out;
+            }
+          }
+        }
+        return py::make_tuple(points_array(xy), to_array(std::move(inside)), to_array(std::move(left)));
+      },
+      py::arg("part"), py::arg("points"), py::arg("delta"), py::arg("nn"), py::arg("seed"),
+      "The gap repair's directions at the part's `points` (gap_directions, kGapDirections each) and whether "
+      "each lies inside the mesh seen from its point (Mesh_walk::locate_from): (centres (m k, 2), inside (m k), "
+      "left (m): a walk of the point reached the part's border, so its answers are not the whole mesh's).");
+
+  m.def(
+      "gap_targets",
+      [](const Float_array& delta, const Float_array& nn, const Byte_array& demoted, const Byte_array& kept,
+         double gap_ratio, double refine_ratio) {
+        const auto d = to_vector<double>(delta), v = to_vector<double>(nn);
+        const auto dem = to_vector<std::uint8_t>(demoted), k = to_vector<std::uint8_t>(kept);
+        if (v.size() != d.size() || dem.size() != d.size() || k.size() != d.size()) {
+          throw Input_error("gap_targets: one delta, nn, demoted and kept flag each");
+        }
+        std::vector<double> out(d.size());
+        for (std::size_t i = 0; i < d.size(); ++i) {
+          out[i] = gap_target2(d[i], v[i], dem[i] != 0, k[i] != 0, gap_ratio, refine_ratio);
+        }
+        return vector_array(out);
+      },
+      py::arg("delta"), py::arg("nn"), py::arg("demoted"), py::arg("kept"), py::arg("gap_ratio"),
+      py::arg("refine_ratio"), "The gap repair's squared bounds (gap_target2), as the serial step computes them.");
+
+  m.def(
+      "gap_decisions",
+      [](const Float_array& at, const Float_array& delta, const Float_array& nn, const Byte_array& demoted,
+         const Float_array& directions, const Byte_array& inside, const Float_array& kept2, double gap_ratio,
+         double refine_ratio, const Float_array& added) {
+        Gap_requests r;
+        r.at = to_points(at, "at");
+        r.delta = to_vector<double>(delta);
+        r.nn = to_vector<double>(nn);
+        r.demoted = to_vector<std::uint8_t>(demoted);
+        r.directions = to_points(directions, "directions");
+        r.inside = to_vector<std::uint8_t>(inside);
+        r.kept2 = to_vector<double>(kept2);
+        r.gap_ratio = gap_ratio;
+        r.refine_ratio = refine_ratio;
+        const std::size_t m = r.at.size(), k = kGapDirections;
+        if (r.delta.size() != m || r.nn.size() != m || r.demoted.size() != m || r.directions.size() != m * k ||
+            r.inside.size() != m * k || r.kept2.size() != 2 * m * (k + 1)) {
+          throw Input_error("gap_decisions: per point one delta, nn, demoted flag, 16 directions and inside flags, "
+                            "34 kept distances");
+        }
+        const auto x = to_points(added, "added");
+        std::vector<Index> out;
+        {
+          py::gil_scoped_release release;
+          out = decide_gaps(r, x);
+        }
+        return vector_array(out);
+      },
+      py::arg("at"), py::arg("delta"), py::arg("nn"), py::arg("demoted"), py::arg("directions"), py::arg("inside"),
+      py::arg("kept2"), py::arg("gap_ratio"), py::arg("refine_ratio"), py::arg("added"),
+      "The gap repair's decisions at open points, in the order given (decide_gaps): per point the direction it "
+      "adds, -1 for none; each choice is seen by the later points.");
 
   m.def(
       "part_pieces",

@@ -300,6 +300,24 @@ def repair_decisions(
     kept2: ArrayLike,
     added: ArrayLike,
 ) -> NDArray[np.int64]: ...
+def part_gap_candidates(
+    part: dict[str, Any], points: ArrayLike, delta: ArrayLike, nn: ArrayLike, seed: int
+) -> tuple[NDArray[np.float64], NDArray[np.uint8], NDArray[np.uint8]]: ...
+def gap_targets(
+    delta: ArrayLike, nn: ArrayLike, demoted: ArrayLike, kept: ArrayLike, gap_ratio: float, refine_ratio: float
+) -> NDArray[np.float64]: ...
+def gap_decisions(
+    at: ArrayLike,
+    delta: ArrayLike,
+    nn: ArrayLike,
+    demoted: ArrayLike,
+    directions: ArrayLike,
+    inside: ArrayLike,
+    kept2: ArrayLike,
+    gap_ratio: float,
+    refine_ratio: float,
+    added: ArrayLike,
+) -> NDArray[np.int64]: ...
 def hilbert_keys(ix: ArrayLike, iy: ArrayLike, order: int) -> NDArray[np.int64]: ...
 def part_curve_kinds(part: dict[str, Any]) -> NDArray[np.uint8]: ...
 def part_project_segment_candidates(

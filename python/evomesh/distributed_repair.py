@@ -41,9 +41,8 @@ decisions themselves run the serial C++ (spacing_repair.hpp: decide_repairs,
 kept_distances, repair_target2), so every compared distance is the serial one
 bit for bit.
 
-The gap repair (gap_repair_ratio, refine_gap_ratio) is not here: its
-candidates are located by walks through the old mesh over up to delta(p)
-nn_M(p), which may leave the triangles a rank holds.
+The gap repair (gap_repair_ratio, refine_gap_ratio) follows in the same
+rounds with its own radii (:func:`gap_repair`).
 """
 
 from __future__ import annotations
@@ -53,9 +52,9 @@ from typing import Any
 import numpy as np
 
 from . import _core, _halo
-from .distributed import _exchange, _mpi, _ranges
+from .distributed import _collective, _exchange, _mpi, _ranges
 
-__all__ = ["spacing_repair"]
+__all__ = ["gap_repair", "spacing_repair"]
 
 _SLACK = 1e-9
 # A decision sent to the ranks holding a copy of the needy point: its global
@@ -109,7 +108,7 @@ def spacing_repair(comm: Any, part: dict, f_part: np.ndarray, options: Any, own:
     MPI = _mpi()
     ratio = options.repair_ratio if options.ring_samples else 0.0
     out = dict(segment_positions=np.zeros(0, np.int64), points=np.zeros((0, 2)), gids=np.zeros(0, np.int64),
-               directions=np.zeros(0, np.int64))
+               directions=np.zeros(0, np.int64), added=np.zeros((0, 2)))
     if not ratio > 0:
         if stats is not None:
             stats.update(rounds=0, needy=0, repaired=0)
@@ -144,23 +143,11 @@ def spacing_repair(comm: Any, part: dict, f_part: np.ndarray, options: Any, own:
     target2 = np.asarray(_core.repair_targets(ratio, owned_delta[eligible], owned_nn[eligible]))
     read = np.maximum(np.sqrt(target2), 2.0 * w)
 
-    # Bounds for the halos' Hilbert chunks and margins.
-    big = np.finfo(np.float64).max
-    lo = np.array([comm.allreduce(float(kept_xy[:, 0].min()) if len(kept_xy) else big, op=MPI.MIN),
-                   comm.allreduce(float(kept_xy[:, 1].min()) if len(kept_xy) else big, op=MPI.MIN)])
-    hi = np.array([comm.allreduce(float(kept_xy[:, 0].max()) if len(kept_xy) else -big, op=MPI.MAX),
-                   comm.allreduce(float(kept_xy[:, 1].max()) if len(kept_xy) else -big, op=MPI.MAX)])
-    span = float(max(hi - lo)) if (hi >= lo).all() else 0.0
-    magnitude = float(max(np.abs(lo).max(), np.abs(hi).max())) if (hi >= lo).all() else 0.0
+    lo, span, magnitude = _bounds(comm, kept_xy)
     margin = 1e-12 * magnitude
 
     # The kept centres within read(p) of each eligible p (one exchange).
-    index, dest = _halo.copies_within_reach(comm, lo, span, magnitude, at_xy, read * (1 + _SLACK) + margin, kept_xy,
-                                            np.zeros(len(kept_xy)))
-    records = np.zeros(len(index), dtype=_XY)
-    records["x"], records["y"] = kept_xy[index, 0], kept_xy[index, 1]
-    got, _ = _exchange(comm, dest, records)
-    held_kept = np.ascontiguousarray(np.concatenate([kept_xy, _xy(got)]))
+    held_kept = _points_within(comm, (lo, span, magnitude), at_xy, read * (1 + _SLACK) + margin, kept_xy)
     _, nn2 = _core.repair_kept_distances(held_kept, at_xy)
     kept2, _ = _core.repair_kept_distances(held_kept, cand_xy)
     nn2, kept2 = np.asarray(nn2), np.asarray(kept2)
@@ -173,72 +160,84 @@ def spacing_repair(comm: Any, part: dict, f_part: np.ndarray, options: Any, own:
                                                       read[needy] * (1 + _SLACK) + margin, at_xy[needy],
                                                       w[needy] * (1 + _SLACK) + margin)
     copies, _ = _exchange(comm, send_dest, mine[send_index])
-    held = np.concatenate([mine, copies])
     m = len(needy)
-    copy_order = np.argsort(copies["gid"], kind="stable")
-    # The earlier needy points each of ours waits for: (ours, held) pairs.
-    wait_i, wait_j = _conflicts(held, m, read[needy], margin)
 
-    decided = np.zeros(len(held), dtype=bool)
-    choice = np.full(m, -1, dtype=np.int64)
-    known: list[np.ndarray] = [np.zeros((0, 2))]
-    told = np.zeros(m, dtype=bool)
-    told[send_index] = True
-    sub_xadj = xadj[needy]
-    sub_count = count[needy]
-    rounds = 0
-    while True:
-        undecided = ~decided[:m]
-        # Ready: every earlier conflict decided, or (the sweep) ours and ready before it.
-        waits_on_other = np.bincount(wait_i[~decided[wait_j] & (wait_j >= m)], minlength=m) > 0
-        local = ~decided[wait_j] & (wait_j < m)
-        ready = _sweep_ready(undecided & ~waits_on_other, wait_i[local], wait_j[local], m)
-        now = np.flatnonzero(ready)
-        if len(now):
-            n_count = sub_count[now]
-            take = _ranges(sub_xadj[now], n_count)
-            picks = np.asarray(_core.repair_decisions(
-                at_xy[needy[now]], target2[needy[now]], nn2[needy[now]],
-                np.concatenate([[0], np.cumsum(n_count)]).astype(np.int64), np.ascontiguousarray(cand_xy[take]),
-                np.ascontiguousarray(kept2[take]), np.ascontiguousarray(np.concatenate(known))), dtype=np.int64)
-            choice[now] = picks
-            decided[now] = True
-            has = picks >= 0
-            new_xy = cand_xy[sub_xadj[now[has]] + picks[has]]
-            known.append(new_xy)
-            tell = now[told[now]]
-        else:
-            tell = now
-        send = np.isin(send_index, tell)
-        update = np.zeros(int(send.sum()), dtype=_DECISION)
-        at = send_index[send]
-        update["gid"] = mine["gid"][at]
-        picked = choice[at]
-        update["added"] = picked >= 0
-        xy = cand_xy[sub_xadj[at[picked >= 0]] + picked[picked >= 0]]
-        update["x"][picked >= 0], update["y"][picked >= 0] = xy[:, 0], xy[:, 1]
-        received, _ = _exchange(comm, send_dest[send], update)
-        if len(received):
-            where = copy_order[np.searchsorted(copies["gid"][copy_order], received["gid"])]
-            decided[m + where] = True
-            if _SHARE_ADDED:
-                known.append(_xy(received[received["added"] != 0]))
-        rounds += 1
-        if comm.allreduce(int(np.count_nonzero(~decided[:m])), op=MPI.SUM) == 0:
-            break
+    sub_xadj, sub_count = xadj[needy], count[needy]
 
+    def decide(now: np.ndarray, known: np.ndarray) -> np.ndarray:
+        n_count = sub_count[now]
+        take = _ranges(sub_xadj[now], n_count)
+        return np.asarray(_core.repair_decisions(
+            at_xy[needy[now]], target2[needy[now]], nn2[needy[now]],
+            np.concatenate([[0], np.cumsum(n_count)]).astype(np.int64), np.ascontiguousarray(cand_xy[take]),
+            np.ascontiguousarray(kept2[take]), known), dtype=np.int64)
+
+    choice, rounds = _in_rounds(comm, mine, copies, read[needy], margin, send_index, send_dest, decide,
+                                lambda i, pick: cand_xy[sub_xadj[i] + pick], np.zeros((0, 2)))
     done = np.flatnonzero(choice >= 0)
     kind = cand_kind[sub_xadj[done] + choice[done]]
     on_segment = kind >= 0
     inside = done[~on_segment]
     out = dict(segment_positions=np.sort(kind[on_segment]),
                points=cand_xy[sub_xadj[inside] + choice[inside]],
-               gids=gid[needy[inside]], directions=-1 - kind[~on_segment])
+               gids=gid[needy[inside]], directions=-1 - kind[~on_segment],
+               added=cand_xy[sub_xadj[done] + choice[done]])
     if stats is not None:
         stats.update(rounds=rounds, needy=comm.allreduce(m, op=MPI.SUM),
                      repaired=comm.allreduce(len(done), op=MPI.SUM),
                      copies=comm.allreduce(len(copies), op=MPI.SUM))
     return out
+
+
+def _in_rounds(comm: Any, mine: np.ndarray, copies: np.ndarray, read: np.ndarray, margin: float,
+               send_index: np.ndarray, send_dest: np.ndarray, decide: Any, chosen: Any,
+               known: np.ndarray) -> tuple[np.ndarray, int]:
+    """The rounds (module docstring) over our requests `mine` (_NEEDY records in
+    id order) with copies of the other ranks' that can conflict with them:
+    decide(now, known) decides our requests `now` (in order) given the points
+    added before (`known`); chosen(i, pick) is where request i's pick lies.
+    Our decisions go to the ranks holding copies (send_index, send_dest).
+    Returns (our picks, -1 for none; the number of rounds). Collective."""
+    MPI = _mpi()
+    m = len(mine)
+    held = np.concatenate([mine, copies])
+    copy_order = np.argsort(copies["gid"], kind="stable")
+    # The earlier requests each of ours waits for: (ours, held) pairs.
+    wait_i, wait_j = _conflicts(held, m, read, margin)
+    decided = np.zeros(len(held), dtype=bool)
+    choice = np.full(m, -1, dtype=np.int64)
+    added = [np.asarray(known, dtype=np.float64).reshape(-1, 2)]
+    told = np.zeros(m, dtype=bool)
+    told[send_index] = True
+    rounds = 0
+    while True:
+        undecided = ~decided[:m]
+        # Ready: every earlier conflict decided, or (the sweep) ours and ready before it.
+        waits_on_other = np.bincount(wait_i[~decided[wait_j] & (wait_j >= m)], minlength=m) > 0
+        local = ~decided[wait_j] & (wait_j < m)
+        now = np.flatnonzero(_sweep_ready(undecided & ~waits_on_other, wait_i[local], wait_j[local], m))
+        if len(now):
+            picks = decide(now, np.ascontiguousarray(np.concatenate(added)))
+            choice[now] = picks
+            decided[now] = True
+            added.append(chosen(now[picks >= 0], picks[picks >= 0]).reshape(-1, 2))
+        send = np.isin(send_index, now[told[now]])
+        at = send_index[send]
+        update = np.zeros(len(at), dtype=_DECISION)
+        update["gid"] = mine["gid"][at]
+        picked = choice[at]
+        update["added"] = picked >= 0
+        xy = chosen(at[picked >= 0], picked[picked >= 0]).reshape(-1, 2)
+        update["x"][picked >= 0], update["y"][picked >= 0] = xy[:, 0], xy[:, 1]
+        received, _ = _exchange(comm, send_dest[send], update)
+        if len(received):
+            where = copy_order[np.searchsorted(copies["gid"][copy_order], received["gid"])]
+            decided[m + where] = True
+            if _SHARE_ADDED:
+                added.append(_xy(received[received["added"] != 0]))
+        rounds += 1
+        if comm.allreduce(int(np.count_nonzero(~decided[:m])), op=MPI.SUM) == 0:
+            return choice, rounds
 
 
 def _conflicts(held: np.ndarray, m: int, read: np.ndarray, margin: float) -> tuple[np.ndarray, np.ndarray]:
@@ -277,3 +276,204 @@ def _sweep_ready(free: np.ndarray, wait_i: np.ndarray, wait_j: np.ndarray, m: in
         if np.array_equal(nxt, ready):
             return ready
         ready = nxt
+
+
+def _bounds(comm: Any, xy: np.ndarray) -> tuple[np.ndarray, float, float]:
+    """(lower corner, span, magnitude) of every rank's points `xy`, for the halos' chunks and margins."""
+    MPI = _mpi()
+    big = np.finfo(np.float64).max
+    lo = np.array([comm.allreduce(float(xy[:, 0].min()) if len(xy) else big, op=MPI.MIN),
+                   comm.allreduce(float(xy[:, 1].min()) if len(xy) else big, op=MPI.MIN)])
+    hi = np.array([comm.allreduce(float(xy[:, 0].max()) if len(xy) else -big, op=MPI.MAX),
+                   comm.allreduce(float(xy[:, 1].max()) if len(xy) else -big, op=MPI.MAX)])
+    span = float(max(hi - lo)) if (hi >= lo).all() else 0.0
+    magnitude = float(max(np.abs(lo).max(), np.abs(hi).max())) if (hi >= lo).all() else 0.0
+    return lo, span, magnitude
+
+
+def _points_within(comm: Any, box: tuple[np.ndarray, float, float], query_xy: np.ndarray, reach: np.ndarray,
+                   xy: np.ndarray) -> np.ndarray:
+    """Our points `xy` and every other rank's within `reach` of one of our
+    queries (the senders decide: _halo.copies_within_reach). Collective."""
+    index, dest = _halo.copies_within_reach(comm, *box, query_xy, reach, xy, np.zeros(len(xy)))
+    records = np.zeros(len(index), dtype=_XY)
+    records["x"], records["y"] = xy[index, 0], xy[index, 1]
+    got, _ = _exchange(comm, dest, records)
+    return np.ascontiguousarray(np.concatenate([np.asarray(xy, dtype=np.float64).reshape(-1, 2), _xy(got)]))
+
+
+_DIRECTIONS = 16  # (kGapDirections, spacing_repair.hpp)
+
+
+def gap_repair(comm: Any, dmesh: Any, part: dict, options: Any, own: np.ndarray, owned_gids: np.ndarray,
+               owned_xy: np.ndarray, owned_delta: np.ndarray, owned_nn: np.ndarray, owned_demoted: np.ndarray,
+               kept_xy: np.ndarray, repaired_xy: np.ndarray, stats: dict[str, Any] | None = None
+               ) -> dict[str, np.ndarray]:
+    """The spacing repair's gap repair (gap_repair_ratio, refine_gap_ratio;
+    spacing_repair.hpp: repair_gaps) on the ranks of `comm`, after
+    :func:`spacing_repair`: the serial step's decisions, each made by the
+    owner of its input point. Collective.
+
+    The same rounds as the spacing repair's (module docstring), with these
+    radii. An input point p is *open* when its second nearest kept centre lies
+    beyond its bound t(p) (gap_target2; points added later only bring output
+    points nearer, so no other point can need a gap point); p's decision reads
+    its two nearest output points and, at each of its 16 directions x (at
+    distance h = delta nn_M from p), the two nearest output points of x. The
+    latter lie within h + K2(p) of x (K2(p): p's second nearest kept centre,
+    at least as far as its second nearest output point), so an added point
+    matters only within read(p) = 2 h + K2(p) of p (the re-check reads within
+    t(p) < K2(p)); the point p adds lies at h from p. The kept centres within
+    read(p) come by halos whose reach grows until it covers 2 h + K2(p) (K2
+    from a halo is exact once within its reach). Whether a direction lies inside
+    the old mesh seen from p is a walk along p -> x (Mesh_walk::locate_from),
+    fixed before the repair: a walk that reaches the part's border is redone
+    on the part plus every old triangle within h of p (fetched from their
+    owners; a triangle the walk crosses meets the segment p -> x).
+
+    Parameters
+    ----------
+    dmesh : DistributedMesh (the old mesh, for its triangles)
+    owned_demoted : (n_owned,) uint8, the demoted flags (zeros without demotion).
+    kept_xy : (k, 2) float, this rank's kept centres (before any projection).
+    repaired_xy : (r, 2) float, the points this rank's spacing repair added
+        (segment candidates made kept and interior points).
+    Others as :func:`spacing_repair`.
+
+    Returns
+    -------
+    dict: "points" (k, 2) and "gids" (k,): the points added, each with its
+    input point's global id, in id order.
+    """
+    MPI = _mpi()
+    gap_ratio, refine_ratio = float(options.gap_repair_ratio), float(options.refine_gap_ratio)
+    out = dict(points=np.zeros((0, 2)), gids=np.zeros(0, np.int64))
+    # (the serial repair does nothing with fewer than two kept centres)
+    if not (gap_ratio > 0 or refine_ratio > 0) or comm.allreduce(len(kept_xy), op=MPI.SUM) < 2:
+        if stats is not None:
+            stats.update(gap_rounds=0, gap_open=0, gap_added=0)
+        return out
+    box = _bounds(comm, np.concatenate([kept_xy, owned_xy]))
+    margin = 1e-12 * box[2]
+    h = owned_delta * owned_nn
+    # Open points: the kept centres within the larger bound decide it exactly.
+    first = np.maximum(gap_ratio, refine_ratio) * h
+    held = _points_within(comm, box, owned_xy, first * (1 + _SLACK) + margin, kept_xy)
+    k1, k2 = (np.asarray(a) for a in _core.repair_kept_distances(held, owned_xy))
+    target2 = np.asarray(_core.gap_targets(owned_delta, owned_nn, owned_demoted, (k1 == 0).astype(np.uint8),
+                                           gap_ratio, refine_ratio))
+    open_ = np.flatnonzero(k2 > target2)  # (in id order)
+    at_xy, h_open = owned_xy[open_], h[open_]
+    # Kept centres within 2 h + K2 of each open point: K2 from a halo is an
+    # upper bound, exact once the halo's reach covers it.
+    reach = np.where(np.isfinite(k2[open_]), 2 * h_open + np.sqrt(k2[open_]), 4 * first[open_])
+    while True:
+        held = _points_within(comm, box, at_xy, reach * (1 + _SLACK) + margin, kept_xy)
+        _, k2_open = _core.repair_kept_distances(held, at_xy)
+        k2_open = np.asarray(k2_open)
+        covered = np.isfinite(k2_open) & (2 * h_open + np.sqrt(k2_open) <= reach)
+        if comm.allreduce(bool(covered.all()), op=MPI.LAND):
+            break
+        reach = np.where(covered, reach, np.where(np.isfinite(k2_open), 2 * h_open + np.sqrt(k2_open), 2 * reach))
+    read = 2 * h_open + np.sqrt(k2_open)
+
+    # The directions and their walks, then the kept centres' two nearest at each.
+    directions, inside, left = _walks(comm, dmesh, part, own[open_], at_xy, owned_gids[open_], owned_delta[open_],
+                                      owned_nn[open_], options.seed, box, margin)
+    queries = np.concatenate([at_xy[:, None, :], directions.reshape(-1, _DIRECTIONS, 2)], axis=1).reshape(-1, 2)
+    q1, q2 = _core.repair_kept_distances(held, np.ascontiguousarray(queries))
+    kept2 = np.ascontiguousarray(np.column_stack([q1, q2]).reshape(-1))
+    # The spacing repair's points within reach of our open points.
+    known = _points_within(comm, box, at_xy, read * (1 + _SLACK) + margin,
+                           np.asarray(repaired_xy, dtype=np.float64).reshape(-1, 2))
+
+    mine = np.zeros(len(open_), dtype=_NEEDY)
+    mine["gid"], mine["x"], mine["y"], mine["w"] = owned_gids[open_], at_xy[:, 0], at_xy[:, 1], h_open
+    send_index, send_dest = _halo.copies_within_reach(comm, *box, at_xy, read * (1 + _SLACK) + margin, at_xy,
+                                                      h_open * (1 + _SLACK) + margin)
+    copies, _ = _exchange(comm, send_dest, mine[send_index])
+    dirs = directions.reshape(-1, _DIRECTIONS, 2)
+
+    def decide(now: np.ndarray, added: np.ndarray) -> np.ndarray:
+        rows = (now[:, None] * (_DIRECTIONS + 1) + np.arange(_DIRECTIONS + 1)[None, :]).reshape(-1)
+        return np.asarray(_core.gap_decisions(
+            at_xy[now], owned_delta[open_][now], owned_nn[open_][now], owned_demoted[open_][now],
+            np.ascontiguousarray(dirs[now].reshape(-1, 2)),
+            np.ascontiguousarray(inside.reshape(-1, _DIRECTIONS)[now].reshape(-1)),
+            np.ascontiguousarray(kept2.reshape(-1, 2)[rows].reshape(-1)), gap_ratio, refine_ratio, added),
+            dtype=np.int64)
+
+    choice, rounds = _in_rounds(comm, mine, copies, read, margin, send_index, send_dest, decide,
+                                lambda i, pick: dirs[i, pick], known)
+    done = np.flatnonzero(choice >= 0)
+    out = dict(points=dirs[done, choice[done]].reshape(-1, 2), gids=owned_gids[open_][done])
+    if stats is not None:
+        stats.update(gap_rounds=rounds, gap_open=comm.allreduce(len(open_), op=MPI.SUM),
+                     gap_added=comm.allreduce(len(done), op=MPI.SUM),
+                     gap_copies=comm.allreduce(len(copies), op=MPI.SUM),
+                     gap_walks_redone=comm.allreduce(int(np.count_nonzero(left)), op=MPI.SUM))
+    return out
+
+
+def _walks(comm: Any, dmesh: Any, part: dict, points: np.ndarray, at_xy: np.ndarray, gids: np.ndarray,
+           delta: np.ndarray, nn: np.ndarray, seed: int, box: tuple[np.ndarray, float, float], margin: float
+           ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The gap directions of the part's `points` and whether each lies inside
+    the old mesh seen from its point: (directions (m 16, 2), inside (m 16),
+    left), exact: a point whose walk reached the part's border is walked again
+    on the part plus every old triangle within h of it. Collective."""
+    MPI = _mpi()
+    directions, inside, left = _core.part_gap_candidates(part, points, delta, nn, seed)
+    directions, inside, left = np.asarray(directions), np.array(inside), np.asarray(left, dtype=bool)
+    if not comm.allreduce(bool(left.any()), op=MPI.LOR):
+        return directions, inside, left
+    again = np.flatnonzero(left)
+    # Every rank's owned triangles within h of a point walked again (a triangle
+    # within h of p has its centroid within h + its centroid-vertex distance).
+    n_owned_tri = len(dmesh.triangles)
+    tri = np.asarray(dmesh.triangles, dtype=np.int64).reshape(-1, 3)
+    corners = np.asarray(dmesh.points)[tri]
+    centroid = corners.mean(axis=1) if n_owned_tri else np.zeros((0, 2))
+    extent = np.sqrt(((corners - centroid[:, None, :]) ** 2).sum(axis=2)).max(axis=1) if n_owned_tri else \
+        np.zeros(0)
+    index, dest = _halo.copies_within_reach(comm, *box, at_xy[again],
+                                            (delta[again] * nn[again]) * (1 + _SLACK) + margin, centroid,
+                                            extent * (1 + _SLACK) + margin)
+    record = np.dtype([("tgid", "<i8"), ("v", "<i8", (3,)), ("xy", "<f8", (3, 2))])
+    rows = np.zeros(len(index), dtype=record)
+    rows["tgid"] = np.asarray(dmesh.triangle_global_ids)[index]
+    rows["v"] = np.asarray(dmesh.global_ids)[tri[index]]
+    rows["xy"] = corners[index]
+    got, _ = _exchange(comm, dest, rows)
+    new = got[~np.isin(got["tgid"], part["triangle_gids"])]
+    new = new[np.unique(new["tgid"], return_index=True)[1]]
+    # The part plus those triangles (points in global-id order, as a part's).
+    old_gids = part["point_gids"]
+    gids_all = np.union1d(old_gids, new["v"].reshape(-1))
+    xy = np.empty((len(gids_all), 2))
+    at_old = np.searchsorted(gids_all, old_gids)
+    xy[at_old] = part["points"]
+    at_new = np.searchsorted(gids_all, new["v"].reshape(-1))
+    xy[at_new] = new["xy"].reshape(-1, 2)
+    extended = dict(part)
+    kind = np.full(len(gids_all), dict(_core.POINT_KINDS)["ORIGINAL"], dtype=np.uint8)
+    kind[at_old] = part["kind"]
+    required = np.zeros(len(gids_all), np.uint8)
+    required[at_old] = part["required"]
+    extended.update(points=xy, kind=kind, required=required, point_gids=gids_all,
+                    triangles=np.concatenate([at_old[np.asarray(part["triangles"])], at_new.reshape(-1, 3)]),
+                    triangle_gids=np.concatenate([part["triangle_gids"], new["tgid"]]),
+                    segments=at_old[np.asarray(part["segments"])])
+
+    def walk_again() -> tuple[np.ndarray, np.ndarray]:
+        d2, in2, left2 = _core.part_gap_candidates(extended, at_old[points[again]], delta[again], nn[again], seed)
+        if np.asarray(left2).any():
+            raise RuntimeError("gap repair: a walk left the old triangles within its reach (an internal error)")
+        return np.asarray(d2), np.asarray(in2)
+
+    d2, in2 = _collective(comm, walk_again)
+    per = _DIRECTIONS
+    rows_again = (again[:, None] * per + np.arange(per)[None, :]).reshape(-1)
+    directions[rows_again] = d2
+    inside[rows_again] = in2
+    return directions, inside, left

@@ -39,7 +39,7 @@ import numpy as np
 from . import _core, _halo
 from .distributed import DistributedMesh, _collective, _exchange, _mpi
 from .distributed_packing import lexical_first_mis
-from .distributed_repair import spacing_repair
+from .distributed_repair import gap_repair, spacing_repair
 from .distributed_spacing import DistributedSpacing, boundary_flags, delta_from_size, segment_skeleton
 from .geometry import as_geometry
 
@@ -56,15 +56,18 @@ _DRAW_BITS = 20
 _RING_TIE = _INTERIOR_TIE + (1 << 61)
 _RING_BITS = 3  # (kRingDirections = 6 directions)
 _DEFERRED_KEY = _RING_TIE + (1 << 60)
+# The spacing repair's points inside: (1 << 60) + 2 id + (0 for a needy
+# point's ring candidate, 1 for a gap point), the id its input point's (< 2^59;
+# a needy point's ring candidate is regenerated at the undemoted reach, so it
+# may lie elsewhere than the packing's candidate of its direction: a key of its
+# own). Their output order comes from the order keys (_pack).
+_REPAIR_TIE = 1 << 60
 _KIND = dict(_core.POINT_KINDS)  # PointKind's values
 
 
 def _unsupported(options: Any) -> list[str]:
     """What of `options` the distributed packing does not do yet."""
-    out = []
-    if options.gap_repair_ratio > 0 or options.refine_gap_ratio > 0:
-        out.append("the spacing repair's gap repair (gap_repair_ratio, refine_gap_ratio)")
-    return out
+    return []
 
 
 def _global_rank(comm: Any, keys: np.ndarray) -> np.ndarray:
@@ -227,7 +230,9 @@ def _pack(dmesh: DistributedMesh, delta: Any, options: Any, stats: dict[str, Any
             raise ValueError("not yet on a DistributedMesh: " + ", ".join(missing))
         fans = [name for name, on in (("demote_ratio > 0", options.demote_ratio > 0),
                                       ("skip_settled", options.skip_settled),
-                                      ("ring_samples", options.ring_samples)) if on]
+                                      ("ring_samples", options.ring_samples),
+                                      ("the gap repair", options.gap_repair_ratio > 0 or
+                                       options.refine_gap_ratio > 0)) if on]
         if fans and dmesh.halo_rings < 1:
             # (they read every owned point's whole fan of triangles, which ring 1 holds)
             raise ValueError(", ".join(fans) + " on a DistributedMesh need a halo of at least one ring of "
@@ -361,7 +366,8 @@ def _pack(dmesh: DistributedMesh, delta: Any, options: Any, stats: dict[str, Any
 
     def check_ties() -> None:
         if (len(draw) and (draw.max() >= 1 << _DRAW_BITS or tri_gid[:n_grid].max() >= 1 << (61 - _DRAW_BITS))) \
-                or (len(ring_gid) and ring_gid.max() >= 1 << (60 - _RING_BITS)):
+                or (len(ring_gid) and ring_gid.max() >= 1 << (60 - _RING_BITS)) \
+                or (n_owned and owned_gids.max() >= 1 << 59):
             raise ValueError("too many candidates in one triangle, or triangle or point ids too large, for packing "
                              "ties")
         if deferred.any() and np.isin(owned_gids[deferred], spoints["gid"]).any():
@@ -420,13 +426,19 @@ def _pack(dmesh: DistributedMesh, delta: Any, options: Any, stats: dict[str, Any
 
         flip_xy, move = _collective(comm, project_flipped)
         curve_move = max(curve_move, float(comm.allreduce(move, op=MPI.MAX)))
-    ring_keys = _RING_TIE + (repaired["gids"] << _RING_BITS) + repaired["directions"]
-    points = np.concatenate([points, flip_xy, repaired["points"]])
+    # Then the gap repair (after all of the above: order keys (3, input point id)).
+    gaps = gap_repair(comm, dmesh, part, options, own, owned_gids, dmesh.owned_points, owned_delta, spacing.nn,
+                      demoted[own] if demoted is not None else np.zeros(n_owned, np.uint8), centres2[kept2],
+                      repaired["added"], stats=repair)
+    ring_keys = _REPAIR_TIE + (repaired["gids"] << 1)
+    points = np.concatenate([points, flip_xy, repaired["points"], gaps["points"]])
     order_keys = np.concatenate([np.column_stack([np.zeros(len(keys), np.int64), keys]),
                                  np.column_stack([np.ones(len(flip), np.int64), position[flip]]),
-                                 np.column_stack([np.full(len(ring_keys), 2, np.int64), repaired["gids"]])])
-    keys = np.concatenate([keys, _SEGMENT_TIE + position[flip], ring_keys]).astype(np.int64)
-    input_gid = np.where(keys < _SEGMENT_TIE, keys, np.where(keys >= _DEFERRED_KEY, keys - _DEFERRED_KEY, -1))
+                                 np.column_stack([np.full(len(ring_keys), 2, np.int64), repaired["gids"]]),
+                                 np.column_stack([np.full(len(gaps["gids"]), 3, np.int64), gaps["gids"]])])
+    keys = np.concatenate([keys, _SEGMENT_TIE + position[flip], ring_keys,
+                           _REPAIR_TIE + (gaps["gids"] << 1) + 1]).astype(np.int64)
+    input_gid = np.where(keys < _REPAIR_TIE, keys, np.where(keys >= _DEFERRED_KEY, keys - _DEFERRED_KEY, -1))
     if stats is not None:
         stats.update(step1=step1, first_pass_rounds=first["rounds"], second_pass_rounds=second["rounds"],
                      segment_candidates=comm.allreduce(len(take), op=MPI.SUM),
@@ -630,7 +642,8 @@ def step(dmesh: DistributedMesh, delta: Any, options: Any = None, *, stats: dict
     mine["required"][is_old] = dmesh.required[: dmesh.n_owned][at_old]
     # Kinds as the serial step gives them: a kept input point keeps its own, a
     # new point on a segment is a boundary point, one inside a sampled point.
-    mine["kind"] = np.where(point_keys < _INTERIOR_TIE, _KIND["BOUNDARY"], _KIND["SAMPLED"])
+    mine["kind"] = np.where((point_keys >= _SEGMENT_TIE) & (point_keys < _INTERIOR_TIE), _KIND["BOUNDARY"],
+                            _KIND["SAMPLED"])
     assert dmesh.kind is not None  # (checked above)
     was = dmesh.kind[: dmesh.n_owned][at_old]
     # (kept_point_kind, step.hpp: a forced corner is a corner, a sampled point of an earlier step a Steiner point)

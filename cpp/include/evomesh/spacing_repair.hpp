@@ -70,4 +70,36 @@ std::vector<Index> decide_repairs(const std::vector<Vec2>& at, const std::vector
                                   const std::vector<Vec2>& candidates, const std::vector<double>& kept2,
                                   const std::vector<Vec2>& added);
 
+// The gap repair's pieces (repair_gaps), for the distributed step likewise.
+constexpr int kGapDirections = 16;
+
+// The gap repair's squared bound at an input point: (ratio delta nn)^2, ratio
+// refine_ratio where delta < 1 and the point was demoted or not kept, else
+// gap_ratio; infinity where that ratio is 0.
+double gap_target2(double delta, double nn, bool demoted, bool kept, double gap_ratio, double refine_ratio);
+
+// The kGapDirections points at distance h from `at` (seeded phase from the point's global id).
+void gap_directions(const Vec2& at, double h, std::uint64_t seed, std::int64_t gid, Vec2* out);
+
+// Open points of the gap repair (their kept centres alone leave a gap), in the
+// order they are served, with what their decisions read besides the added
+// points: per point, delta, nn, demoted, its gap_directions and whether each
+// lies inside the old mesh seen from it (kGapDirections each), and the squared
+// distances to the two nearest kept centres at the point and at each direction
+// (kept2: 2 (kGapDirections + 1) each: the point's, then the directions').
+struct Gap_requests {
+  std::vector<Vec2> at;
+  std::vector<double> delta, nn;
+  std::vector<std::uint8_t> demoted;
+  std::vector<Vec2> directions;
+  std::vector<std::uint8_t> inside;
+  std::vector<double> kept2;
+  double gap_ratio = 0, refine_ratio = 0;
+};
+
+// The gap repair's decisions, in order, as repair_gaps takes them: per point
+// the direction it adds, or -1; `added` holds the points added before (the
+// spacing repair's and earlier gaps'), each choice seen by the later points.
+std::vector<Index> decide_gaps(const Gap_requests& requests, const std::vector<Vec2>& added);
+
 }  // namespace evomesh
