@@ -67,7 +67,7 @@ def _loop(mesh: evomesh.Mesh, options: _core.FrfcOptions, kinds: list[str], layo
         if RANK == 0:
             serial = evomesh.evolve(serial, _delta(serial.points, kind, t, box), options=options)
             same = all(np.array_equal(getattr(gathered, k), getattr(serial, k)) for k in _ARRAYS)
-            repairs.append(serial.stats["n_spacing_repairs"])
+            repairs.append(serial.stats.get("n_spacing_repairs", 0))
         stats_out.append(stats)
         same_out.append(bool(COMM.allreduce(same, op=MPI.LAND)))
     return stats_out, COMM.bcast(repairs), same_out
@@ -103,6 +103,7 @@ def test_many_needy_points_across_ranks() -> None:
         assert all(r["copies"] > 0 and r["gap_copies"] > 0 for r in repair)
         assert max(r["rounds"] for r in repair) > 1 and max(r["gap_rounds"] for r in repair) > 1
         assert sum(r["gap_walks_redone"] for r in repair) > 0
+    assert sum(s["repair"]["on_segments"] for s in stats) > 0  # (segment ring candidates made kept)
 
 
 def test_without_sharing_added_points_the_ranks_differ(monkeypatch: pytest.MonkeyPatch) -> None:
@@ -116,3 +117,30 @@ def test_without_sharing_added_points_the_ranks_differ(monkeypatch: pytest.Monke
     for ratio in (1.0, 0.0):
         same += _loop(_dense(), _options("recommended", ratio), ["front", "random", "front"])[2]
     assert not all(same)
+
+
+def test_curved_loops_on_ranks_give_the_serial_meshes() -> None:
+    """With curved boundaries (test_distributed_curves): segment ring
+    candidates the repair makes kept move onto their curves as the others."""
+    from test_distributed_curves import _DISC, _SQUARE, _requests
+    from test_distributed_curves import _mesh as curved_mesh
+
+    flips, repairs = 0, 0.0
+    for name, g, split in (("disc", _DISC, 0.0), ("square with a circular hole", _SQUARE, 1.0)):
+        mesh = curved_mesh(name)
+        options = _options("recommended", 1.0)
+        dmesh = DistributedMesh.scatter(mesh if RANK == 0 else None, COMM)
+        serial = mesh
+        for t in range(4):
+            stats: dict = {}
+            request = _requests(t) if t != 1 else (lambda xy, split=split: np.where(xy[:, 0] > split, 0.5, 1.5))
+            dmesh = evolve_distributed(dmesh, request, options=options, geometry=g, stats=stats)
+            gathered = dmesh.gather()
+            same = True
+            if RANK == 0:
+                serial = evomesh.evolve(serial, request(serial.points), options=options, geometry=g)
+                same = all(np.array_equal(getattr(gathered, k), getattr(serial, k)) for k in _ARRAYS)
+                repairs += serial.stats.get("n_spacing_repairs", 0)
+            check_everywhere(same, f"{name}, step {t} differs from the serial step")
+            flips += stats["repair"]["on_segments"]
+    assert COMM.bcast(repairs) > 0 and flips > 0

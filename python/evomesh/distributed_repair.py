@@ -96,7 +96,8 @@ def spacing_repair(comm: Any, part: dict, f_part: np.ndarray, options: Any, own:
         ring candidate of every rank (replicated): its position in the serial
         list of segment candidates, centre and R-point's global id.
     stats : dict, optional
-        Filled with "rounds", "needy", "repaired" (summed over ranks).
+        Filled with "rounds", "needy", "repaired", "on_segments" (of them,
+        segment candidates made kept) and "copies" (summed over ranks).
 
     Returns
     -------
@@ -111,7 +112,7 @@ def spacing_repair(comm: Any, part: dict, f_part: np.ndarray, options: Any, own:
                directions=np.zeros(0, np.int64), added=np.zeros((0, 2)))
     if not ratio > 0:
         if stats is not None:
-            stats.update(rounds=0, needy=0, repaired=0)
+            stats.update(rounds=0, needy=0, repaired=0, on_segments=0, copies=0)
         return out
 
     # The kept R-points with delta < 1 (the ones that can be needy) and their
@@ -185,6 +186,7 @@ def spacing_repair(comm: Any, part: dict, f_part: np.ndarray, options: Any, own:
     if stats is not None:
         stats.update(rounds=rounds, needy=comm.allreduce(m, op=MPI.SUM),
                      repaired=comm.allreduce(len(done), op=MPI.SUM),
+                     on_segments=comm.allreduce(int(np.count_nonzero(on_segment)), op=MPI.SUM),
                      copies=comm.allreduce(len(copies), op=MPI.SUM))
     return out
 
@@ -351,7 +353,7 @@ def gap_repair(comm: Any, dmesh: Any, part: dict, options: Any, own: np.ndarray,
     # (the serial repair does nothing with fewer than two kept centres)
     if not (gap_ratio > 0 or refine_ratio > 0) or comm.allreduce(len(kept_xy), op=MPI.SUM) < 2:
         if stats is not None:
-            stats.update(gap_rounds=0, gap_open=0, gap_added=0)
+            stats.update(gap_rounds=0, gap_open=0, gap_added=0, gap_copies=0, gap_walks_redone=0)
         return out
     box = _bounds(comm, np.concatenate([kept_xy, owned_xy]))
     margin = 1e-12 * box[2]

@@ -17,6 +17,8 @@ gathering it. The packing's stages, each the serial one on a rank's part:
 5. Interior candidates of the owned triangles (streams keyed by triangle id,
    clipping from the stored rotation, as serial), their radii, second pass with
    the first pass's kept spheres forced.
+6. The spacing repair (distributed_repair): the needy R-points, then the gap
+   repair's open points, each decided by its owner in rounds, as serial.
 
 Then (:func:`step`) the constraint pieces along the chains, the distributed
 constrained Delaunay triangulation and the output in the serial order;
@@ -25,9 +27,8 @@ adds size requests and the rebalance.
 
 Supported options: all of FRFC's (within_domain, ring candidates, demotion,
 settled and coarse skipping, adaptive cells, the cheap radius, the spacing
-repair's repair_ratio: distributed_repair) except the spacing repair's gap
-repair (gap_repair_ratio, refine_gap_ratio) and the quality pass, which are
-refused by name; curved boundaries (``geometry``) too.
+repair with repair_ratio, gap_repair_ratio and refine_gap_ratio) except the
+quality pass, which is refused by name; curved boundaries (``geometry``) too.
 """
 
 from __future__ import annotations
@@ -63,11 +64,6 @@ _DEFERRED_KEY = _RING_TIE + (1 << 60)
 # own). Their output order comes from the order keys (_pack).
 _REPAIR_TIE = 1 << 60
 _KIND = dict(_core.POINT_KINDS)  # PointKind's values
-
-
-def _unsupported(options: Any) -> list[str]:
-    """What of `options` the distributed packing does not do yet."""
-    return []
 
 
 def _global_rank(comm: Any, keys: np.ndarray) -> np.ndarray:
@@ -225,9 +221,6 @@ def _pack(dmesh: DistributedMesh, delta: Any, options: Any, stats: dict[str, Any
         if not isinstance(options, _core.FrfcOptions):
             raise TypeError(f"options must be evomesh FrfcOptions, got {type(options).__name__}")
         options.validate()
-        missing = _unsupported(options)
-        if missing:
-            raise ValueError("not yet on a DistributedMesh: " + ", ".join(missing))
         fans = [name for name, on in (("demote_ratio > 0", options.demote_ratio > 0),
                                       ("skip_settled", options.skip_settled),
                                       ("ring_samples", options.ring_samples),
@@ -617,7 +610,7 @@ def step(dmesh: DistributedMesh, delta: Any, options: Any = None, *, stats: dict
     pieces, piece_boundary, piece_tags = keys[share], boundary[share].astype(bool), tags[share]
 
     # The triangulation, each triangle on the rank of its least id.
-    points, point_keys = packed["points"], packed["keys"]
+    points, point_keys, order_keys = packed["points"], packed["keys"], packed["order_keys"]
     cdt: dict = {}
     from .distributed_triangulation import _lookup, constrained_delaunay
 
@@ -629,7 +622,7 @@ def step(dmesh: DistributedMesh, delta: Any, options: Any = None, *, stats: dict
         # triangle: dropped, as serial (fit_to_curves).
         used = _used(comm, point_keys, triangles)
         dropped = int(comm.allreduce(int((~used).sum()), op=MPI.SUM))
-        points, point_keys, old = points[used], point_keys[used], old[used]
+        points, point_keys, order_keys, old = points[used], point_keys[used], order_keys[used], old[used]
 
     # The output mesh from the ranks' pieces: the points they kept, their
     # triangles' and pieces' vertices looked up by id.
@@ -649,12 +642,13 @@ def step(dmesh: DistributedMesh, delta: Any, options: Any = None, *, stats: dict
     # (kept_point_kind, step.hpp: a forced corner is a corner, a sampled point of an earlier step a Steiner point)
     mine["kind"][is_old] = np.where(packed["forced_corner"][at_old], _KIND["CORNER"],
                                     np.where(was == _KIND["SAMPLED"], _KIND["STEINER"], was))
-    # Output ids: the keys' order is the serial output's point order (kept input
-    # points by input id, then segment candidates, then interior candidates), so
-    # a point's id is its key's rank; a triangle's is the rank of its vertex ids
+    # Output ids: the order keys' order is the serial output's point order (kept
+    # input points by input id, then segment candidates, then interior
+    # candidates, then the spacing repair's points), so a point's id is its
+    # order key's rank; a triangle's is the rank of its vertex ids
     # rotated to the least first (the serial canonical order); a segment's is the
     # piece's position in the pieces' list (chain order, as serial).
-    mine["id"] = _global_rank(comm, packed["order_keys"])
+    mine["id"] = _global_rank(comm, order_keys)
     wanted = np.unique(np.concatenate([point_keys, triangles.reshape(-1), pieces.reshape(-1)]))
     found = _collective(comm, _lookup, comm, mine, wanted, "point")
     ids = found["id"]
@@ -807,11 +801,9 @@ def evolve_distributed(dmesh: DistributedMesh, delta: Any = None, *, size: Any =
             if not isinstance(o, _core.FrfcOptions):
                 raise TypeError(f"options must be evomesh FrfcOptions, got {type(o).__name__}")
             o.validate()
-        missing = _unsupported(o) + (["the quality pass"] if o.quality else [])
-        if missing:
-            raise ValueError("not yet on a DistributedMesh: " + ", ".join(missing) + "; the distributed step "
-                             "does all of FRFC but the gap repair and the quality pass: set gap_repair_ratio = "
-                             "refine_gap_ratio = 0 and quality=False (or pass "
+        if o.quality:
+            raise ValueError("not yet on a DistributedMesh: the quality pass; the distributed step does all of "
+                             "FRFC but the quality pass: set quality=False (or pass "
                              "options=evomesh.FrfcOptions.paper())")
         return o
 
