@@ -102,14 +102,14 @@ def spacing_repair(comm: Any, part: dict, f_part: np.ndarray, options: Any, own:
     Returns
     -------
     dict: "segment_positions" (the segment candidates this rank's needy points
-    made kept), "points" (k, 2) and "gids" (k,) and "directions" (k,) of the
-    interior ring candidates they added (the R-point's global id, the
-    direction), each in the serial order.
+    made kept), "points" (k, 2) and "gids" (k,) of the interior ring
+    candidates they added (with the R-point's global id), each in the serial
+    order, and "added": every point they added (both kinds, unprojected).
     """
     MPI = _mpi()
     ratio = options.repair_ratio if options.ring_samples else 0.0
     out = dict(segment_positions=np.zeros(0, np.int64), points=np.zeros((0, 2)), gids=np.zeros(0, np.int64),
-               directions=np.zeros(0, np.int64), added=np.zeros((0, 2)))
+               added=np.zeros((0, 2)))
     if not ratio > 0:
         if stats is not None:
             stats.update(rounds=0, needy=0, repaired=0, on_segments=0, copies=0)
@@ -181,7 +181,7 @@ def spacing_repair(comm: Any, part: dict, f_part: np.ndarray, options: Any, own:
     inside = done[~on_segment]
     out = dict(segment_positions=np.sort(kind[on_segment]),
                points=cand_xy[sub_xadj[inside] + choice[inside]],
-               gids=gid[needy[inside]], directions=-1 - kind[~on_segment],
+               gids=gid[needy[inside]],
                added=cand_xy[sub_xadj[done] + choice[done]])
     if stats is not None:
         stats.update(rounds=rounds, needy=comm.allreduce(m, op=MPI.SUM),
