@@ -60,8 +60,8 @@ def _mesh(name: str) -> evomesh.Mesh:
 
 def _options(option: str, seed: int) -> _core.FrfcOptions:
     """The paper's options with one of the serial step's recommended options
-    turned on, or ("all") the recommended options less what the distributed
-    step does not do (the spacing repair and the quality pass)."""
+    turned on, or ("all") the recommended options less the spacing repair
+    (tests/test_distributed_repair.py) and the quality pass (not on ranks)."""
     if option == "all":
         o = _core.FrfcOptions.recommended()
         o.quality = False
@@ -221,9 +221,9 @@ def test_still_refused() -> None:
         evomesh.evolve(thin, np.ones(thin.n_owned), options=_options("ring", 0))
     dmesh = DistributedMesh.scatter(_mesh("L-shape") if RANK == 0 else None, COMM)
     options = _options("all", 0)
-    options.repair_ratio = 1.75
-    with pytest.raises(ValueError, match="spacing repair"):
-        evomesh.evolve(dmesh, np.ones(dmesh.n_owned), options=options)
+    options.gap_repair_ratio = 1.1  # (its walks start in each point's fan; the repair: test_distributed_repair.py)
+    with pytest.raises(ValueError, match="the gap repair on a DistributedMesh need a halo"):
+        evomesh.evolve(thin, np.ones(thin.n_owned), options=options)
     options = _options("all", 0)
     options.quality = True
     with pytest.raises(ValueError, match="quality pass"):

@@ -98,10 +98,8 @@ def test_packing_keeps_the_serial_points(name: str, kind: str, layout: str, with
         assert stats["first_pass_rounds"] >= 1 and stats["second_pass_rounds"] >= 1
 
 
-def test_packing_refuses_what_it_does_not_do_yet() -> None:
+def test_packing_refuses_what_is_not_options() -> None:
     dmesh = _scatter(_mesh("L-shape"), "even", 0)
-    with pytest.raises(ValueError, match="spacing repair"):
-        packing(dmesh, np.ones(dmesh.n_owned), _core.FrfcOptions.recommended())
     with pytest.raises(TypeError, match="FrfcOptions"):
         packing(dmesh, np.ones(dmesh.n_owned), "paper")
 

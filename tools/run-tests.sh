@@ -52,6 +52,7 @@ if [ "${EVOMESH_SKIP_MPI_TESTS:-0}" != 1 ]; then
     .venv/bin/mpiexec -n "$ranks" .venv/bin/python -m pytest -q -p no:cacheprovider tests/test_distributed.py \
       tests/test_distributed_packing.py tests/test_distributed_triangulation.py tests/test_distributed_spacing.py \
       tests/test_distributed_step.py tests/test_distributed_curves.py tests/test_distributed_rebalance.py \
-      tests/test_distributed_transfer.py tests/test_distributed_lineage.py tests/test_distributed_options.py
+      tests/test_distributed_transfer.py tests/test_distributed_lineage.py tests/test_distributed_options.py \
+      tests/test_distributed_repair.py
   done
 fi

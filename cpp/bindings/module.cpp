@@ -19,6 +19,7 @@
 #include "evomesh/global_ids.hpp"
 #include "evomesh/kernel.hpp"
 #include "evomesh/local_feature_size.hpp"
+#include "evomesh/mesh_walk.hpp"
 #include "evomesh/options.hpp"
 #include "evomesh/packing.hpp"
 #include "evomesh/parallel.hpp"
@@ -26,6 +27,7 @@
 #include "evomesh/segment_chains.hpp"
 #include "evomesh/size_request.hpp"
 #include "evomesh/spacing.hpp"
+#include "evomesh/spacing_repair.hpp"
 #include "evomesh/step.hpp"
 #include "evomesh/step_context.hpp"
 #include "evomesh/triangle_fans.hpp"
@@ -1010,12 +1012,13 @@ PYBIND11_MODULE(_core, m) {
                                  settled ? &s : nullptr);
         }
         return py::make_tuple(points_array(c.samples.points), vector_array(c.samples.parent),
-                              vector_array(c.classes(true)));
+                              vector_array(c.classes(true)), vector_array(c.owner));
       },
       py::arg("part"), py::arg("delta"), py::arg("f"), py::arg("options"), py::arg("settled") = py::none(),
       py::arg("spacing") = py::none(),
       "FRFC's candidates on every segment of a part (its segments are the whole skeleton): (centres, parent "
-      "segment, packing class), in the serial step's order. `settled` (optional): the points' settled flags "
+      "segment, packing class, ring owner), in the serial step's order; ring owner: the part index of a segment "
+      "ring candidate's R-point, -1 for a grid sample. `settled` (optional): the points' settled flags "
       "(default: settled_points on the part); `spacing` (optional): f for the adaptive grids that ask it.");
 
   m.def(
@@ -1129,6 +1132,182 @@ PYBIND11_MODULE(_core, m) {
       py::arg("part"), py::arg("centres"), py::arg("parent"), py::arg("radius"),
       "Kept candidates on a part's segments moved onto their curves (project_segment_candidates; all of them "
       "kept): (centres, largest move).");
+
+  // The spacing repair in rounds over ranks (python/evomesh/distributed_repair.py).
+  m.def(
+      "part_ring_candidates",
+      [part_mesh, per_point](const py::dict& part, const Float_array& f, const Frfc_options& options,
+                             const Int_array& points) {
+        const Mesh_arrays mesh = part_mesh(part);
+        const auto fv = per_point(f, mesh, "f");
+        const auto at = to_vector<Index>(points);
+        for (Index p : at) {
+          if (p < 0 || static_cast<std::size_t>(p) >= mesh.points.size()) throw Input_error("points out of range");
+        }
+        std::vector<Vec2> xy;
+        std::vector<Index> xadj{0};
+        std::vector<std::uint8_t> direction;
+        {
+          py::gil_scoped_release release;
+          const Triangle_fans fans(mesh);
+          const double reach = ring_reach(options.radius_scale);
+          std::array<Ring_candidate, kRingDirections> ring;
+          for (Index p : at) {
+            const int count = ring_candidates_of(mesh, fans, fv, reach, options.seed, static_cast<std::size_t>(p), ring);
+            for (int k = 0; k < count; ++k) {
+              xy.push_back(ring[k].x);
+              direction.push_back(static_cast<std::uint8_t>(ring[k].round));
+            }
+            xadj.push_back(static_cast<Index>(xy.size()));
+          }
+        }
+        return py::make_tuple(points_array(xy), vector_array(xadj), to_array(std::move(direction)));
+      },
+      py::arg("part"), py::arg("f"), py::arg("options"), py::arg("points"),
+      "The interior ring candidates of the part's `points` (part indices, each with its whole fan held): "
+      "(centres, xadj, direction), point i's being xadj[i]..xadj[i + 1], in direction order "
+      "(ring_candidates_of, as the spacing repair regenerates them).");
+
+  m.def(
+      "repair_targets",
+      [](double repair_ratio, const Float_array& delta, const Float_array& nn) {
+        const auto d = to_vector<double>(delta), v = to_vector<double>(nn);
+        if (d.size() != v.size()) throw Input_error("repair_targets: delta and nn must have one value each");
+        std::vector<double> out(d.size());
+        for (std::size_t i = 0; i < d.size(); ++i) out[i] = repair_target2(repair_ratio, d[i], v[i]);
+        return vector_array(out);
+      },
+      py::arg("repair_ratio"), py::arg("delta"), py::arg("nn"),
+      "The spacing repair's squared targets (repair_ratio delta nn)^2, as the serial step computes them.");
+
+  m.def(
+      "repair_kept_distances",
+      [](const Float_array& kept, const Float_array& queries) {
+        const auto k = to_points(kept, "kept"), q = to_points(queries, "queries");
+        std::vector<double> nearest2, second2;
+        {
+          py::gil_scoped_release release;
+          kept_distances(k, q, nearest2, second2);
+        }
+        return py::make_tuple(vector_array(nearest2), vector_array(second2));
+      },
+      py::arg("kept"), py::arg("queries"),
+      "Squared distances from each query to its nearest and second nearest kept point (the spacing repair's "
+      "kept-centre queries, the same values): (nearest2, second2), infinity where none.");
+
+  m.def(
+      "repair_decisions",
+      [](const Float_array& at, const Float_array& target2, const Float_array& nn2, const Int_array& xadj,
+         const Float_array& candidates, const Float_array& kept2, const Float_array& added) {
+        const auto a = to_points(at, "at"), c = to_points(candidates, "candidates"), x = to_points(added, "added");
+        const auto t = to_vector<double>(target2), n2 = to_vector<double>(nn2), k2 = to_vector<double>(kept2);
+        const auto off = to_vector<Index>(xadj);
+        if (t.size() != a.size() || n2.size() != a.size() || off.size() != a.size() + 1 || k2.size() != c.size() ||
+            off.front() != 0 || static_cast<std::size_t>(off.back()) != c.size() ||
+            !std::is_sorted(off.begin(), off.end())) {
+          throw Input_error("repair_decisions: one target2 and nn2 per point, xadj (points + 1, from 0 to the "
+                            "candidates, non-decreasing), one kept2 per candidate");
+        }
+        std::vector<Index> out;
+        {
+          py::gil_scoped_release release;
+          out = decide_repairs(a, t, n2, off, c, k2, x);
+        }
+        return vector_array(out);
+      },
+      py::arg("at"), py::arg("target2"), py::arg("nn2"), py::arg("xadj"), py::arg("candidates"), py::arg("kept2"),
+      py::arg("added"),
+      "The spacing repair's decisions at needy points, in the order given (decide_repairs): per point the index "
+      "of its chosen candidate among its own, -1 for none; each choice is seen by the later points.");
+
+  m.def(
+      "part_gap_candidates",
+      [part_mesh](const py::dict& part, const Int_array& points, const Float_array& delta, const Float_array& nn,
+                  std::uint64_t seed) {
+        const Mesh_arrays mesh = part_mesh(part);
+        const auto at = to_vector<Index>(points);
+        const auto d = to_vector<double>(delta), v = to_vector<double>(nn);
+        if (d.size() != at.size() || v.size() != at.size()) {
+          throw Input_error("part_gap_candidates: one delta and nn per point");
+        }
+        for (Index p : at) {
+          if (p < 0 || static_cast<std::size_t>(p) >= mesh.points.size()) throw Input_error("points out of range");
+        }
+        std::vector<Vec2> xy(at.size() * kGapDirections);
+        std::vector<std::uint8_t> inside(at.size() * kGapDirections), left(at.size(), 0);
+        {
+          py::gil_scoped_release release;
+          const Triangle_fans fans(mesh);
+          const Mesh_walk walk(mesh, fans);
+          for (std::size_t i = 0; i < at.size(); ++i) {
+            const std::size_t p = static_cast<std::size_t>(at[i]);
+            gap_directions(mesh.points[p], d[i] * v[i], seed, mesh.point_gid(p), &xy[i * kGapDirections]);
+            for (int k = 0; k < kGapDirections; ++k) {
+              bool out = false;
+              const std::size_t j = i * kGapDirections + static_cast<std::size_t>(k);
+              inside[j] = walk.locate_from(at[i], xy[j], 64, &out) >= 0;
+              left[i] = left[i] || out;
+            }
+          }
+        }
+        return py::make_tuple(points_array(xy), to_array(std::move(inside)), to_array(std::move(left)));
+      },
+      py::arg("part"), py::arg("points"), py::arg("delta"), py::arg("nn"), py::arg("seed"),
+      "The gap repair's directions at the part's `points` (gap_directions, kGapDirections each) and whether "
+      "each lies inside the mesh seen from its point (Mesh_walk::locate_from): (centres (m k, 2), inside (m k), "
+      "left (m): a walk of the point reached the part's border, so its answers are not the whole mesh's).");
+
+  m.def(
+      "gap_targets",
+      [](const Float_array& delta, const Float_array& nn, const Byte_array& demoted, const Byte_array& kept,
+         double gap_ratio, double refine_ratio) {
+        const auto d = to_vector<double>(delta), v = to_vector<double>(nn);
+        const auto dem = to_vector<std::uint8_t>(demoted), k = to_vector<std::uint8_t>(kept);
+        if (v.size() != d.size() || dem.size() != d.size() || k.size() != d.size()) {
+          throw Input_error("gap_targets: one delta, nn, demoted and kept flag each");
+        }
+        std::vector<double> out(d.size());
+        for (std::size_t i = 0; i < d.size(); ++i) {
+          out[i] = gap_target2(d[i], v[i], dem[i] != 0, k[i] != 0, gap_ratio, refine_ratio);
+        }
+        return vector_array(out);
+      },
+      py::arg("delta"), py::arg("nn"), py::arg("demoted"), py::arg("kept"), py::arg("gap_ratio"),
+      py::arg("refine_ratio"), "The gap repair's squared bounds (gap_target2), as the serial step computes them.");
+
+  m.def(
+      "gap_decisions",
+      [](const Float_array& at, const Float_array& delta, const Float_array& nn, const Byte_array& demoted,
+         const Float_array& directions, const Byte_array& inside, const Float_array& kept2, double gap_ratio,
+         double refine_ratio, const Float_array& added) {
+        Gap_requests r;
+        r.at = to_points(at, "at");
+        r.delta = to_vector<double>(delta);
+        r.nn = to_vector<double>(nn);
+        r.demoted = to_vector<std::uint8_t>(demoted);
+        r.directions = to_points(directions, "directions");
+        r.inside = to_vector<std::uint8_t>(inside);
+        r.kept2 = to_vector<double>(kept2);
+        r.gap_ratio = gap_ratio;
+        r.refine_ratio = refine_ratio;
+        const std::size_t m = r.at.size(), k = kGapDirections;
+        if (r.delta.size() != m || r.nn.size() != m || r.demoted.size() != m || r.directions.size() != m * k ||
+            r.inside.size() != m * k || r.kept2.size() != 2 * m * (k + 1)) {
+          throw Input_error("gap_decisions: per point one delta, nn, demoted flag, 16 directions and inside flags, "
+                            "34 kept distances");
+        }
+        const auto x = to_points(added, "added");
+        std::vector<Index> out;
+        {
+          py::gil_scoped_release release;
+          out = decide_gaps(r, x);
+        }
+        return vector_array(out);
+      },
+      py::arg("at"), py::arg("delta"), py::arg("nn"), py::arg("demoted"), py::arg("directions"), py::arg("inside"),
+      py::arg("kept2"), py::arg("gap_ratio"), py::arg("refine_ratio"), py::arg("added"),
+      "The gap repair's decisions at open points, in the order given (decide_gaps): per point the direction it "
+      "adds, -1 for none; each choice is seen by the later points.");
 
   m.def(
       "part_pieces",

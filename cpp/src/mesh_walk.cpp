@@ -84,7 +84,8 @@ std::pair<Index, double> Mesh_walk::cast(Index v, const Vec2& d, double limit, b
   return {-1, kInfinity};
 }
 
-Index Mesh_walk::locate_from(Index v, const Vec2& x, int max_steps) const {
+Index Mesh_walk::locate_from(Index v, const Vec2& x, int max_steps, bool* left) const {
+  if (left != nullptr) *left = false;
   const auto& P = mesh_.points;
   const Vec2& p = P[v];
   // the triangle (v, b, c) at v (counter-clockwise) whose open angle contains x
@@ -105,7 +106,10 @@ Index Mesh_walk::locate_from(Index v, const Vec2& x, int max_steps) const {
     if (side > 0) return t;
     if (side == 0 || is_segment(a, b)) return -1;
     const Index next = across(t, a, b);
-    if (next < 0) return -1;  // the boundary
+    if (next < 0) {  // (boundary edges are segments: the border of a part)
+      if (left != nullptr) *left = true;
+      return -1;
+    }
     const Triangle& tri = mesh_.triangles[next];
     const Index c = tri[(index_in(tri, a) + 1) % 3];  // next = (b, a, c) counter-clockwise
     const int at_c = orientation(p, x, P[c]);

@@ -152,7 +152,64 @@ class Kept_centres {
 // Points are served in the order of their global ids (input order without
 // them); each sees the points added before.
 constexpr double kGapClearance = 0.6;
-constexpr int kGapDirections = 16;
+
+constexpr double kTwoPi = 6.283185307179586;
+
+// The squared distances from x to its two nearest output points, from those of
+// the kept centres (`kept`) and the points added so far (a Delaunay
+// triangulation: a second nearest vertex is a neighbour of the nearest; the
+// walks start at the last answer).
+template <class Delaunay>
+std::array<double, 2> with_added(const Vec2& x, const std::array<double, 2>& kept, const Delaunay& added_dt,
+                                 typename Delaunay::Vertex_handle& hint) {
+  using Vertex_handle = typename Delaunay::Vertex_handle;
+  if (added_dt.number_of_vertices() == 0) return kept;
+  const Point_2 q = to_cgal(x);
+  const Vertex_handle v = added_dt.nearest_vertex(q, hint == Vertex_handle() ? typename Delaunay::Face_handle()
+                                                                              : hint->face());
+  hint = v;
+  const double a1 = CGAL::squared_distance(q, v->point());
+  double a2 = std::numeric_limits<double>::infinity();
+  auto c = added_dt.incident_vertices(v), done = c;
+  if (c != nullptr) do {
+    if (!added_dt.is_infinite(c)) a2 = std::min(a2, CGAL::squared_distance(q, c->point()));
+  } while (++c != done);
+  return kept[0] <= a1 ? std::array<double, 2>{kept[0], std::min(kept[1], a1)}
+                       : std::array<double, 2>{a1, std::min(a2, kept[0])};
+}
+
+// One open point's gap repair (the serial loop's body, also the distributed
+// step's): -1 when its two nearest output points (two_nearest(-1, at); k for
+// direction k) leave no
+// gap, else the direction k whose point (`directions`, inside(k): seen from p
+// inside the old mesh) is farthest from the output points, at least the
+// clearance; -1 when none is.
+template <class TwoNearest, class Inside>
+int gap_choice(const Vec2& at, double delta, double nn, bool demoted, double gap_ratio, double refine_ratio,
+               const std::array<Vec2, kGapDirections>& directions, Inside&& inside, TwoNearest&& two_nearest) {
+  const auto around = two_nearest(-1, at);
+  const bool kept = around[0] == 0;
+  if (!(around[1] > gap_target2(delta, nn, demoted, kept, gap_ratio, refine_ratio))) return -1;
+  const double h = delta * nn;
+  const double clearance2 = kGapClearance * kGapClearance * h * h;
+  double best_d2 = -1;
+  int best = -1;
+  for (int k = 0; k < kGapDirections; ++k) {
+    const Vec2& x = directions[k];
+    if (!inside(k)) continue;
+    const auto e = two_nearest(k, x);
+    if (!(e[0] >= clearance2)) continue;
+    // farthest from the output points other than p: a kept p is at distance h
+    // from every direction (a tie that rounding would break)
+    const double dx = x[0] - at[0], dy = x[1] - at[1];
+    const double other = kept && e[0] == dx * dx + dy * dy ? e[1] : e[0];
+    if (other > best_d2) {
+      best_d2 = other;
+      best = k;
+    }
+  }
+  return best;
+}
 
 template <class Delaunay>
 void repair_gaps(const Mesh_arrays& mesh, const Triangle_fans& fans, const std::vector<double>& delta,
@@ -160,36 +217,16 @@ void repair_gaps(const Mesh_arrays& mesh, const Triangle_fans& fans, const std::
                  const std::vector<std::uint8_t>& demoted, const std::vector<std::uint8_t>& kept_centre,
                  const Kept_centres& tree, int threads, Delaunay& added_dt, std::vector<Vec2>& added,
                  std::size_t& n_added) {
-  constexpr double kTwoPi = 6.283185307179586;
   if (!(gap_ratio > 0) && !(refine_ratio > 0)) return;
-  using Vertex_handle = typename Delaunay::Vertex_handle;
   // squared distances from x to its nearest and second nearest output points
   // (the nearest-vertex walks start at the last answer: points come in input
   // order, neighbours mostly, so a walk is short however many points were added)
-  Vertex_handle hint;
-  auto two_nearest = [&](const Vec2& x) {
-    const std::array<double, 2> kept = tree.squared_two_nearest(x);
-    if (added_dt.number_of_vertices() == 0) return kept;
-    const Point_2 q = to_cgal(x);
-    const Vertex_handle v = added_dt.nearest_vertex(q, hint == Vertex_handle() ? typename Delaunay::Face_handle()
-                                                                                : hint->face());
-    hint = v;
-    const double a1 = CGAL::squared_distance(q, v->point());
-    double a2 = std::numeric_limits<double>::infinity();
-    // a second nearest vertex of a Delaunay triangulation is a neighbour of the nearest
-    auto c = added_dt.incident_vertices(v), done = c;
-    if (c != nullptr) do {
-      if (!added_dt.is_infinite(c)) a2 = std::min(a2, CGAL::squared_distance(q, c->point()));
-    } while (++c != done);
-    return kept[0] <= a1 ? std::array<double, 2>{kept[0], std::min(kept[1], a1)}
-                         : std::array<double, 2>{a1, std::min(a2, kept[0])};
-  };
+  typename Delaunay::Vertex_handle hint;
+  auto two_nearest = [&](int, const Vec2& x) { return with_added(x, tree.squared_two_nearest(x), added_dt, hint); };
   // The bound at p (refine_ratio where a fresh packing forms, see above), from
   // whether p is kept (at distance 0 from a kept centre).
   auto target2 = [&](std::size_t p, bool kept) {
-    const double ratio = delta[p] < 1 && (demoted[p] || !kept) ? refine_ratio : gap_ratio;
-    const double target = ratio * (delta[p] * nn[p]);
-    return ratio > 0 ? target * target : std::numeric_limits<double>::infinity();
+    return gap_target2(delta[p], nn[p], demoted[p] != 0, kept, gap_ratio, refine_ratio);
   };
   // Points added later only bring output points nearer: the points whose kept
   // centres alone leave a gap (found in parallel) are all that can need one.
@@ -222,44 +259,143 @@ void repair_gaps(const Mesh_arrays& mesh, const Triangle_fans& fans, const std::
   const Mesh_walk walk(mesh, fans);
   // Points are served in the order of their global ids (positions without them).
   const std::vector<Index> by_id = order_by_ids(mesh.point_gids);
+  std::array<Vec2, kGapDirections> directions;
   for (std::size_t r = 0; r < n; ++r) {
     const std::size_t p = visit(by_id, r);
     if (!open[p]) continue;
     const Vec2& at = mesh.points[p];
-    const auto around = two_nearest(at);
-    const bool kept = around[0] == 0;
-    if (!(around[1] > target2(p, kept))) continue;
-    const double h = delta[p] * nn[p];
-    Random_stream rng(seed, (std::uint64_t{5} << 60) + static_cast<std::uint64_t>(mesh.point_gid(p)));
-    const double phase = rng.uniform() * kTwoPi / kGapDirections;
-    const double clearance2 = kGapClearance * kGapClearance * h * h;
-    double best_d2 = -1;
-    bool found = false;
-    Vec2 best{0.0, 0.0};
-    for (int k = 0; k < kGapDirections; ++k) {
-      const double angle = phase + kTwoPi * k / kGapDirections;
-      const Vec2 x{at[0] + h * std::cos(angle), at[1] + h * std::sin(angle)};
-      if (walk.locate_from(static_cast<Index>(p), x) < 0) continue;
-      const auto e = two_nearest(x);
-      if (!(e[0] >= clearance2)) continue;
-      // farthest from the output points other than p: a kept p is at distance h
-      // from every direction (a tie that rounding would break)
-      const double dx = x[0] - at[0], dy = x[1] - at[1];
-      const double other = kept && e[0] == dx * dx + dy * dy ? e[1] : e[0];
-      if (other > best_d2) {
-        best_d2 = other;
-        best = x;
-        found = true;
-      }
-    }
-    if (!found) continue;
-    added.push_back(best);
-    added_dt.insert(to_cgal(best));
+    gap_directions(at, delta[p] * nn[p], seed, mesh.point_gid(p), directions.data());
+    const int best = gap_choice(
+        at, delta[p], nn[p], demoted[p] != 0, gap_ratio, refine_ratio, directions,
+        [&](int k) { return walk.locate_from(static_cast<Index>(p), directions[k]) >= 0; }, two_nearest);
+    if (best < 0) continue;
+    added.push_back(directions[best]);
+    added_dt.insert(to_cgal(directions[best]));
     ++n_added;
   }
 }
 
+// The points added by the spacing repair, for nearest-point queries (walks
+// start at the last answer: needy points come in id order, mostly neighbours).
+template <class Delaunay>
+struct Added_points {
+  Delaunay dt;
+  typename Delaunay::Vertex_handle hint;
+  // squared distance from x to the nearest added point (infinity: none)
+  double nearest2(const Vec2& x) {
+    if (dt.number_of_vertices() == 0) return std::numeric_limits<double>::infinity();
+    const Point_2 q = to_cgal(x);
+    hint = dt.nearest_vertex(q, hint == typename Delaunay::Vertex_handle() ? typename Delaunay::Face_handle()
+                                                                           : hint->face());
+    return CGAL::squared_distance(q, hint->point());
+  }
+  void insert(const Vec2& x) { dt.insert(to_cgal(x)); }
+};
+
+// One needy point's repair (the serial loop's body, also the distributed
+// step's): none (-1) when its nearest other point, kept (nn2) or added, is
+// within the target, else the candidate farthest from every kept and added
+// point (the first of equals; none when every one is at distance 0). kept2:
+// each candidate's squared distance to the nearest kept centre.
+template <class Added>
+int repair_choice(const Vec2& at, double target2, double nn2, const std::vector<Vec2>& candidates,
+                  const std::vector<double>& kept2, Added& added) {
+  // re-check: an earlier repair may have served p
+  if (std::min(nn2, added.nearest2(at)) <= target2) return -1;
+  int best = -1;
+  double best_d2 = 0;
+  for (std::size_t k = 0; k < candidates.size(); ++k) {
+    const double e2 = std::min(kept2[k], added.nearest2(candidates[k]));
+    if (e2 > best_d2) {
+      best_d2 = e2;
+      best = static_cast<int>(k);
+    }
+  }
+  return best;
+}
+
 }  // namespace
+
+double gap_target2(double delta, double nn, bool demoted, bool kept, double gap_ratio, double refine_ratio) {
+  const double ratio = delta < 1 && (demoted || !kept) ? refine_ratio : gap_ratio;
+  const double target = ratio * (delta * nn);
+  return ratio > 0 ? target * target : std::numeric_limits<double>::infinity();
+}
+
+void gap_directions(const Vec2& at, double h, std::uint64_t seed, std::int64_t gid, Vec2* out) {
+  Random_stream rng(seed, (std::uint64_t{5} << 60) + static_cast<std::uint64_t>(gid));
+  const double phase = rng.uniform() * kTwoPi / kGapDirections;
+  for (int k = 0; k < kGapDirections; ++k) {
+    const double angle = phase + kTwoPi * k / kGapDirections;
+    out[k] = Vec2{at[0] + h * std::cos(angle), at[1] + h * std::sin(angle)};
+  }
+}
+
+std::vector<Index> decide_gaps(const Gap_requests& requests, const std::vector<Vec2>& added) {
+  using Delaunay = CGAL::Delaunay_triangulation_2<Kernel>;
+  Delaunay dt;
+  for (const Vec2& x : added) dt.insert(to_cgal(x));
+  typename Delaunay::Vertex_handle hint;
+  const std::size_t m = requests.at.size();
+  std::vector<Index> out(m, -1);
+  std::array<Vec2, kGapDirections> directions;
+  for (std::size_t i = 0; i < m; ++i) {
+    std::copy_n(requests.directions.begin() + static_cast<std::ptrdiff_t>(i * kGapDirections), kGapDirections,
+                directions.begin());
+    // the kept centres' two nearest at p (slot 0) and at each direction (slots 1..)
+    auto two_nearest = [&](int k, const Vec2& x) {
+      const std::size_t at = i * (kGapDirections + 1) + static_cast<std::size_t>(k + 1);
+      return with_added(x, {requests.kept2[2 * at], requests.kept2[2 * at + 1]}, dt, hint);
+    };
+    const int best = gap_choice(
+        requests.at[i], requests.delta[i], requests.nn[i], requests.demoted[i] != 0, requests.gap_ratio,
+        requests.refine_ratio, directions,
+        [&](int k) { return requests.inside[i * kGapDirections + static_cast<std::size_t>(k)] != 0; }, two_nearest);
+    if (best < 0) continue;
+    out[i] = best;
+    dt.insert(to_cgal(directions[best]));
+  }
+  return out;
+}
+
+double repair_target2(double repair_ratio, double delta, double nn) {
+  const double target = repair_ratio * delta * nn;
+  return target * target;
+}
+
+void kept_distances(const std::vector<Vec2>& kept, const std::vector<Vec2>& queries, std::vector<double>& nearest2,
+                    std::vector<double>& second2) {
+  nearest2.assign(queries.size(), std::numeric_limits<double>::infinity());
+  second2.assign(queries.size(), std::numeric_limits<double>::infinity());
+  if (kept.empty()) return;
+  const Kept_centres tree(kept);
+  for (std::size_t i = 0; i < queries.size(); ++i) {
+    const auto two = tree.squared_two_nearest(queries[i]);
+    nearest2[i] = two[0];
+    second2[i] = two[1];
+  }
+}
+
+std::vector<Index> decide_repairs(const std::vector<Vec2>& at, const std::vector<double>& target2,
+                                  const std::vector<double>& nn2, const std::vector<Index>& xadj,
+                                  const std::vector<Vec2>& candidates, const std::vector<double>& kept2,
+                                  const std::vector<Vec2>& added) {
+  using Delaunay = CGAL::Delaunay_triangulation_2<Kernel>;
+  Added_points<Delaunay> points;
+  for (const Vec2& x : added) points.insert(x);
+  std::vector<Index> out(at.size(), -1);
+  std::vector<Vec2> mine;
+  std::vector<double> mine2;
+  for (std::size_t i = 0; i < at.size(); ++i) {
+    mine.assign(candidates.begin() + xadj[i], candidates.begin() + xadj[i + 1]);
+    mine2.assign(kept2.begin() + xadj[i], kept2.begin() + xadj[i + 1]);
+    const int best = repair_choice(at[i], target2[i], nn2[i], mine, mine2, points);
+    if (best < 0) continue;
+    out[i] = best;
+    points.insert(mine[static_cast<std::size_t>(best)]);
+  }
+  return out;
+}
 
 std::vector<Vec2> repair_spacing(const Spacing_repair_input& input, const Frfc_options& options,
                                  std::vector<std::uint8_t>& kept, std::size_t& n_added) {
@@ -310,8 +446,7 @@ std::vector<Vec2> repair_spacing(const Spacing_repair_input& input, const Frfc_o
   for (std::size_t r = 0; r < n; ++r) {
     const std::size_t p = visit(by_id, r);
     if (!(repair_ratio > 0) || position_of[p] < 0 || !(delta[p] < 1)) continue;
-    const double target = repair_ratio * delta[p] * nn[p];
-    if (nn2[p] > target * target) {
+    if (nn2[p] > repair_target2(repair_ratio, delta[p], nn[p])) {
       is_needy[p] = 1;
       needy.push_back(static_cast<Index>(p));
     }
@@ -326,61 +461,36 @@ std::vector<Vec2> repair_spacing(const Spacing_repair_input& input, const Frfc_o
     }
   }
   std::sort(on_segments.begin(), on_segments.end());
-  Delaunay added_dt;  // every point added here (segment or interior)
-  Delaunay::Vertex_handle hint;
-  auto nearest2 = [&](const Vec2& x) {
-    double best = tree.squared_nearest(x);
-    if (added_dt.number_of_vertices() > 0) {
-      const Point_2 q = to_cgal(x);
-      hint = added_dt.nearest_vertex(q, hint == Delaunay::Vertex_handle() ? Delaunay::Face_handle() : hint->face());
-      best = std::min(best, CGAL::squared_distance(q, hint->point()));
-    }
-    return best;
-  };
+  Added_points<Delaunay> added_points;  // every point added here (segment or interior)
   std::array<Ring_candidate, kRingDirections> ring;
+  std::vector<Vec2> candidates;
+  std::vector<double> kept2;
+  std::vector<Index> segment_of;  // per candidate: its centre index, or -1 (a ring candidate inside)
   for (Index p : needy) {
-    // re-check: an earlier repair may have served p
-    const double target = repair_ratio * delta[p] * nn[p];
-    double d2 = nn2[p];
-    if (added_dt.number_of_vertices() > 0) {
-      const Point_2 q = to_cgal(mesh.points[p]);
-      d2 = std::min(d2, CGAL::squared_distance(q, added_dt.nearest_vertex(q)->point()));
-    }
-    if (d2 <= target * target) continue;
-    Index best_segment = -1;
-    Vec2 best_point{0.0, 0.0};
-    bool found = false;
-    double best_d2 = 0;
+    candidates.clear();
+    segment_of.clear();
     for (auto it = std::lower_bound(on_segments.begin(), on_segments.end(), std::pair<Index, Index>{p, -1});
          it != on_segments.end() && it->first == p; ++it) {
-      const Index c = it->second;
-      const double e2 = nearest2(centers[c]);
-      if (e2 > best_d2) {
-        best_d2 = e2;
-        best_segment = c;
-        best_point = centers[c];
-        found = true;
-      }
+      candidates.push_back(centers[it->second]);
+      segment_of.push_back(it->second);
     }
     const int count = ring_candidates_of(mesh, fans, f, reach, seed, static_cast<std::size_t>(p), ring);
     for (int k = 0; k < count; ++k) {
-      const Vec2& x = ring[k].x;
-      const double e2 = nearest2(x);
-      if (e2 > best_d2) {
-        best_d2 = e2;
-        best_segment = -1;
-        best_point = x;
-        found = true;
-      }
+      candidates.push_back(ring[k].x);
+      segment_of.push_back(-1);
     }
-    if (!found) continue;
-    if (best_segment >= 0) kept[best_segment] = 1;
-    else added.push_back(best_point);
-    added_dt.insert(to_cgal(best_point));
+    kept2.resize(candidates.size());
+    for (std::size_t k = 0; k < candidates.size(); ++k) kept2[k] = tree.squared_nearest(candidates[k]);
+    const int best = repair_choice(mesh.points[p], repair_target2(repair_ratio, delta[p], nn[p]), nn2[p], candidates,
+                                   kept2, added_points);
+    if (best < 0) continue;
+    if (segment_of[best] >= 0) kept[segment_of[best]] = 1;
+    else added.push_back(candidates[best]);
+    added_points.insert(candidates[best]);
     ++n_added;
   }
   repair_gaps(mesh, fans, delta, nn, gap_repair_ratio, options.refine_gap_ratio, seed, input.demoted, kept, tree,
-              threads, added_dt, added, n_added);
+              threads, added_points.dt, added, n_added);
   return added;
 }
 

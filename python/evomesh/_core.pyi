@@ -264,7 +264,7 @@ def part_segment_candidates(
     options: FrfcOptions,
     settled: ArrayLike | None = None,
     spacing: SpacingFunction | None = None,
-) -> tuple[NDArray[np.float64], NDArray[np.int64], NDArray[np.uint8]]: ...
+) -> tuple[NDArray[np.float64], NDArray[np.int64], NDArray[np.uint8], NDArray[np.int64]]: ...
 def part_interior_candidates(
     part: dict[str, Any],
     delta: ArrayLike,
@@ -286,6 +286,38 @@ def part_candidate_radii(
     parent: ArrayLike,
     demoted: ArrayLike | None = None,
 ) -> NDArray[np.float64]: ...
+def part_ring_candidates(
+    part: dict[str, Any], f: ArrayLike, options: FrfcOptions, points: ArrayLike
+) -> tuple[NDArray[np.float64], NDArray[np.int64], NDArray[np.uint8]]: ...
+def repair_targets(repair_ratio: float, delta: ArrayLike, nn: ArrayLike) -> NDArray[np.float64]: ...
+def repair_kept_distances(kept: ArrayLike, queries: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]: ...
+def repair_decisions(
+    at: ArrayLike,
+    target2: ArrayLike,
+    nn2: ArrayLike,
+    xadj: ArrayLike,
+    candidates: ArrayLike,
+    kept2: ArrayLike,
+    added: ArrayLike,
+) -> NDArray[np.int64]: ...
+def part_gap_candidates(
+    part: dict[str, Any], points: ArrayLike, delta: ArrayLike, nn: ArrayLike, seed: int
+) -> tuple[NDArray[np.float64], NDArray[np.uint8], NDArray[np.uint8]]: ...
+def gap_targets(
+    delta: ArrayLike, nn: ArrayLike, demoted: ArrayLike, kept: ArrayLike, gap_ratio: float, refine_ratio: float
+) -> NDArray[np.float64]: ...
+def gap_decisions(
+    at: ArrayLike,
+    delta: ArrayLike,
+    nn: ArrayLike,
+    demoted: ArrayLike,
+    directions: ArrayLike,
+    inside: ArrayLike,
+    kept2: ArrayLike,
+    gap_ratio: float,
+    refine_ratio: float,
+    added: ArrayLike,
+) -> NDArray[np.int64]: ...
 def hilbert_keys(ix: ArrayLike, iy: ArrayLike, order: int) -> NDArray[np.int64]: ...
 def part_curve_kinds(part: dict[str, Any]) -> NDArray[np.uint8]: ...
 def part_project_segment_candidates(

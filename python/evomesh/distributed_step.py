@@ -17,6 +17,8 @@ gathering it. The packing's stages, each the serial one on a rank's part:
 5. Interior candidates of the owned triangles (streams keyed by triangle id,
    clipping from the stored rotation, as serial), their radii, second pass with
    the first pass's kept spheres forced.
+6. The spacing repair (distributed_repair): the needy R-points, then the gap
+   repair's open points, each decided by its owner in rounds, as serial.
 
 Then (:func:`step`) the constraint pieces along the chains, the distributed
 constrained Delaunay triangulation and the output in the serial order;
@@ -24,9 +26,9 @@ constrained Delaunay triangulation and the output in the serial order;
 adds size requests and the rebalance.
 
 Supported options: all of FRFC's (within_domain, ring candidates, demotion,
-settled and coarse skipping, adaptive cells, the cheap radius) except the spacing
-repair and the quality pass, which are refused by name; curved boundaries
-(``geometry``) too.
+settled and coarse skipping, adaptive cells, the cheap radius, the spacing
+repair with repair_ratio, gap_repair_ratio and refine_gap_ratio) except the
+quality pass, which is refused by name; curved boundaries (``geometry``) too.
 """
 
 from __future__ import annotations
@@ -38,6 +40,7 @@ import numpy as np
 from . import _core, _halo
 from .distributed import DistributedMesh, _collective, _exchange, _mpi
 from .distributed_packing import lexical_first_mis
+from .distributed_repair import gap_repair, spacing_repair
 from .distributed_spacing import DistributedSpacing, boundary_flags, delta_from_size, segment_skeleton
 from .geometry import as_geometry
 
@@ -54,15 +57,13 @@ _DRAW_BITS = 20
 _RING_TIE = _INTERIOR_TIE + (1 << 61)
 _RING_BITS = 3  # (kRingDirections = 6 directions)
 _DEFERRED_KEY = _RING_TIE + (1 << 60)
+# The spacing repair's points inside: (1 << 60) + 2 id + (0 for a needy
+# point's ring candidate, 1 for a gap point), the id its input point's (< 2^59;
+# a needy point's ring candidate is regenerated at the undemoted reach, so it
+# may lie elsewhere than the packing's candidate of its direction: a key of its
+# own). Their output order comes from the order keys (_pack).
+_REPAIR_TIE = 1 << 60
 _KIND = dict(_core.POINT_KINDS)  # PointKind's values
-
-
-def _unsupported(options: Any) -> list[str]:
-    """What of `options` the distributed packing does not do yet."""
-    out = []
-    if options.repair_ratio > 0 or options.gap_repair_ratio > 0 or options.refine_gap_ratio > 0:
-        out.append("spacing repair (repair_ratio, gap_repair_ratio, refine_gap_ratio)")
-    return out
 
 
 def _global_rank(comm: Any, keys: np.ndarray) -> np.ndarray:
@@ -220,12 +221,11 @@ def _pack(dmesh: DistributedMesh, delta: Any, options: Any, stats: dict[str, Any
         if not isinstance(options, _core.FrfcOptions):
             raise TypeError(f"options must be evomesh FrfcOptions, got {type(options).__name__}")
         options.validate()
-        missing = _unsupported(options)
-        if missing:
-            raise ValueError("not yet on a DistributedMesh: " + ", ".join(missing))
         fans = [name for name, on in (("demote_ratio > 0", options.demote_ratio > 0),
                                       ("skip_settled", options.skip_settled),
-                                      ("ring_samples", options.ring_samples)) if on]
+                                      ("ring_samples", options.ring_samples),
+                                      ("the gap repair", options.gap_repair_ratio > 0 or
+                                       options.refine_gap_ratio > 0)) if on]
         if fans and dmesh.halo_rings < 1:
             # (they read every owned point's whole fan of triangles, which ring 1 holds)
             raise ValueError(", ".join(fans) + " on a DistributedMesh need a halo of at least one ring of "
@@ -277,8 +277,8 @@ def _pack(dmesh: DistributedMesh, delta: Any, options: Any, stats: dict[str, Any
         asking = part["segments"][(asks_segment != 0) & (owner_of_segment == comm.rank)]
         n_asking += len(asking)
         seg_graph = _grid_graph(comm, spacing, part, f_part, asking)
-    seg_xy, seg_parent, seg_class = _core.part_segment_candidates(part, values["delta"], f_part, options, settled,
-                                                                  seg_graph)
+    seg_xy, seg_parent, seg_class, seg_ring_owner = _core.part_segment_candidates(
+        part, values["delta"], f_part, options, settled, seg_graph)
     del seg_graph
     # Every rank samples every segment, exactly on its own (the adaptive grids
     # of the others' may ask f where this rank's graph is not exact): each
@@ -291,6 +291,13 @@ def _pack(dmesh: DistributedMesh, delta: Any, options: Any, stats: dict[str, Any
     first_local = np.searchsorted(seg_parent, seg_parent[take], side="left")
     position = seg_start[seg_parent[take]] + (take - first_local)
     seg_xy, seg_parent, seg_class = seg_xy[take], seg_parent[take], seg_class[take]
+    # The segment ring candidates (few: two per R-point on a segment), replicated
+    # for the spacing repair: their R-point's owner decides on them.
+    ringed = np.flatnonzero(np.asarray(seg_ring_owner)[take] >= 0)
+    segment_ring = np.zeros(len(ringed), dtype=[("position", "<i8"), ("x", "<f8"), ("y", "<f8"), ("owner", "<i8")])
+    segment_ring["position"], segment_ring["x"], segment_ring["y"] = position[ringed], seg_xy[ringed, 0], \
+        seg_xy[ringed, 1]
+    segment_ring["owner"] = part["point_gids"][np.asarray(seg_ring_owner)[take][ringed]]
     seg_radius = radii_of(seg_xy, seg_parent, True)
     deferred = classes[own] == _core.PACKING_CLASS_NEW  # (demoted inside: class_new)
     first_inputs = np.flatnonzero(~deferred)
@@ -352,7 +359,8 @@ def _pack(dmesh: DistributedMesh, delta: Any, options: Any, stats: dict[str, Any
 
     def check_ties() -> None:
         if (len(draw) and (draw.max() >= 1 << _DRAW_BITS or tri_gid[:n_grid].max() >= 1 << (61 - _DRAW_BITS))) \
-                or (len(ring_gid) and ring_gid.max() >= 1 << (60 - _RING_BITS)):
+                or (len(ring_gid) and ring_gid.max() >= 1 << (60 - _RING_BITS)) \
+                or (n_owned and owned_gids.max() >= 1 << 59):
             raise ValueError("too many candidates in one triangle, or triangle or point ids too large, for packing "
                              "ties")
         if deferred.any() and np.isin(owned_gids[deferred], spoints["gid"]).any():
@@ -375,27 +383,66 @@ def _pack(dmesh: DistributedMesh, delta: Any, options: Any, stats: dict[str, Any
     kept2 = lexical_first_mis(comm, centres2, radii2, kinds2, ties2, forced2, stats=second, check_ties=False)
     points = centres2[kept2]
     keys = ties2[kept2]
+    # The serial output lists the deferred input points it keeps after the interior candidates.
+    late_kept = np.flatnonzero(kept2[len(keep): len(keep) + len(late)]) + len(keep)
+    keys[np.searchsorted(np.flatnonzero(kept2), late_kept)] += _DEFERRED_KEY
+    kept_inputs = np.sort(np.concatenate([owned_gids[first_inputs[kept[:n_first_inputs]]],
+                                          owned_gids[late[kept2[len(keep): len(keep) + len(late)]]]]))
+
     if geometry is not None and len(on_curve):
         # (the kept segment candidates are forced in the second pass: all kept)
         rows = np.flatnonzero((keys >= _SEGMENT_TIE) & (keys < _INTERIOR_TIE))  # (in tie order)
         points = points.copy()
         points[rows[np.searchsorted(keys[rows], _SEGMENT_TIE + position[on_curve])]] = projected
-    # The serial output lists the deferred input points it keeps after the interior candidates.
-    late_kept = np.flatnonzero(kept2[len(keep): len(keep) + len(late)]) + len(keep)
-    keys[np.searchsorted(np.flatnonzero(kept2), late_kept)] += _DEFERRED_KEY
-    input_gid = np.where(keys < _SEGMENT_TIE, keys, np.where(keys >= _DEFERRED_KEY, keys - _DEFERRED_KEY, -1))
-    kept_inputs = np.sort(np.concatenate([owned_gids[first_inputs[kept[:n_first_inputs]]],
-                                          owned_gids[late[kept2[len(keep): len(keep) + len(late)]]]]))
+
+    # The spacing repair (distributed_repair), on the kept centres before any
+    # projection. Its points come last in the serial output: the segment
+    # candidates it keeps (by position, after the deferred input points), then
+    # the interior ring candidates it adds (by their R-points' ids): order keys
+    # (1, position) and (2, R-point id) after (0, key) for the others.
+    repair: dict = {}
+    repaired = spacing_repair(comm, part, f_part, options, own, owned_gids, dmesh.owned_points,
+                              np.isin(owned_gids, kept_inputs), owned_delta, spacing.nn, centres2[kept2],
+                              np.concatenate(comm.allgather(segment_ring)), stats=repair)
+    flipped = np.concatenate(comm.allgather(repaired["segment_positions"]))
+    flip = np.flatnonzero(np.isin(position, flipped))  # (on this rank's segments)
+    flip_xy = seg_xy[flip]
+    if geometry is not None:
+        # (moved onto their curves as the other kept segment candidates)
+        def project_flipped() -> tuple[np.ndarray, float]:
+            if not len(flip):
+                return flip_xy, 0.0
+            args = (seg_parent[flip], seg_radius[flip])
+            once, first_move = _core.part_project_segment_candidates(part, flip_xy, *args)
+            twice, second_move = _core.part_project_segment_candidates(part, once, *args)
+            return np.asarray(twice), max(float(first_move), float(second_move))
+
+        flip_xy, move = _collective(comm, project_flipped)
+        curve_move = max(curve_move, float(comm.allreduce(move, op=MPI.MAX)))
+    # Then the gap repair (after all of the above: order keys (3, input point id)).
+    gaps = gap_repair(comm, dmesh, part, options, own, owned_gids, dmesh.owned_points, owned_delta, spacing.nn,
+                      demoted[own] if demoted is not None else np.zeros(n_owned, np.uint8), centres2[kept2],
+                      repaired["added"], stats=repair)
+    ring_keys = _REPAIR_TIE + (repaired["gids"] << 1)
+    points = np.concatenate([points, flip_xy, repaired["points"], gaps["points"]])
+    order_keys = np.concatenate([np.column_stack([np.zeros(len(keys), np.int64), keys]),
+                                 np.column_stack([np.ones(len(flip), np.int64), position[flip]]),
+                                 np.column_stack([np.full(len(ring_keys), 2, np.int64), repaired["gids"]]),
+                                 np.column_stack([np.full(len(gaps["gids"]), 3, np.int64), gaps["gids"]])])
+    keys = np.concatenate([keys, _SEGMENT_TIE + position[flip], ring_keys,
+                           _REPAIR_TIE + (gaps["gids"] << 1) + 1]).astype(np.int64)
+    input_gid = np.where(keys < _REPAIR_TIE, keys, np.where(keys >= _DEFERRED_KEY, keys - _DEFERRED_KEY, -1))
     if stats is not None:
         stats.update(step1=step1, first_pass_rounds=first["rounds"], second_pass_rounds=second["rounds"],
                      segment_candidates=comm.allreduce(len(take), op=MPI.SUM),
                      interior_candidates=comm.allreduce(len(in_xy), op=MPI.SUM),
                      demoted_points=comm.allreduce(int(np.count_nonzero(deferred)), op=MPI.SUM),
-                     asking_grids=comm.allreduce(n_asking, op=MPI.SUM),
+                     asking_grids=comm.allreduce(n_asking, op=MPI.SUM), repair=repair,
                      bytes=step1["bytes"] + first["bytes_halo"] + first["bytes_states"] + second["bytes_halo"]
                      + second["bytes_states"])
-    return dict(points=points, keys=keys, input_gid=input_gid, part=part, at_held=at_held, skeleton=skeleton,
-                all_segment_parent=all_parent, kept_segment_candidates=position[kept[n_first_inputs:]],
+    return dict(points=points, keys=keys, order_keys=order_keys, input_gid=input_gid, part=part, at_held=at_held,
+                skeleton=skeleton, all_segment_parent=all_parent,
+                kept_segment_candidates=np.concatenate([position[kept[n_first_inputs:]], position[flip]]),
                 kept_inputs=kept_inputs, spacing=spacing, forced_corner=forced[own] == 1, f_part=f_part,
                 demoted=demoted, settled=settled, curve_move=curve_move)
 
@@ -563,7 +610,7 @@ def step(dmesh: DistributedMesh, delta: Any, options: Any = None, *, stats: dict
     pieces, piece_boundary, piece_tags = keys[share], boundary[share].astype(bool), tags[share]
 
     # The triangulation, each triangle on the rank of its least id.
-    points, point_keys = packed["points"], packed["keys"]
+    points, point_keys, order_keys = packed["points"], packed["keys"], packed["order_keys"]
     cdt: dict = {}
     from .distributed_triangulation import _lookup, constrained_delaunay
 
@@ -575,7 +622,7 @@ def step(dmesh: DistributedMesh, delta: Any, options: Any = None, *, stats: dict
         # triangle: dropped, as serial (fit_to_curves).
         used = _used(comm, point_keys, triangles)
         dropped = int(comm.allreduce(int((~used).sum()), op=MPI.SUM))
-        points, point_keys, old = points[used], point_keys[used], old[used]
+        points, point_keys, order_keys, old = points[used], point_keys[used], order_keys[used], old[used]
 
     # The output mesh from the ranks' pieces: the points they kept, their
     # triangles' and pieces' vertices looked up by id.
@@ -588,18 +635,20 @@ def step(dmesh: DistributedMesh, delta: Any, options: Any = None, *, stats: dict
     mine["required"][is_old] = dmesh.required[: dmesh.n_owned][at_old]
     # Kinds as the serial step gives them: a kept input point keeps its own, a
     # new point on a segment is a boundary point, one inside a sampled point.
-    mine["kind"] = np.where(point_keys < _INTERIOR_TIE, _KIND["BOUNDARY"], _KIND["SAMPLED"])
+    mine["kind"] = np.where((point_keys >= _SEGMENT_TIE) & (point_keys < _INTERIOR_TIE), _KIND["BOUNDARY"],
+                            _KIND["SAMPLED"])
     assert dmesh.kind is not None  # (checked above)
     was = dmesh.kind[: dmesh.n_owned][at_old]
     # (kept_point_kind, step.hpp: a forced corner is a corner, a sampled point of an earlier step a Steiner point)
     mine["kind"][is_old] = np.where(packed["forced_corner"][at_old], _KIND["CORNER"],
                                     np.where(was == _KIND["SAMPLED"], _KIND["STEINER"], was))
-    # Output ids: the keys' order is the serial output's point order (kept input
-    # points by input id, then segment candidates, then interior candidates), so
-    # a point's id is its key's rank; a triangle's is the rank of its vertex ids
+    # Output ids: the order keys' order is the serial output's point order (kept
+    # input points by input id, then segment candidates, then interior
+    # candidates, then the spacing repair's points), so a point's id is its
+    # order key's rank; a triangle's is the rank of its vertex ids
     # rotated to the least first (the serial canonical order); a segment's is the
     # piece's position in the pieces' list (chain order, as serial).
-    mine["id"] = _global_rank(comm, point_keys[:, None])
+    mine["id"] = _global_rank(comm, order_keys)
     wanted = np.unique(np.concatenate([point_keys, triangles.reshape(-1), pieces.reshape(-1)]))
     found = _collective(comm, _lookup, comm, mine, wanted, "point")
     ids = found["id"]
@@ -717,11 +766,9 @@ def evolve_distributed(dmesh: DistributedMesh, delta: Any = None, *, size: Any =
             if not isinstance(o, _core.FrfcOptions):
                 raise TypeError(f"options must be evomesh FrfcOptions, got {type(o).__name__}")
             o.validate()
-        missing = _unsupported(o) + (["the quality pass"] if o.quality else [])
-        if missing:
-            raise ValueError("not yet on a DistributedMesh: " + ", ".join(missing) + "; the distributed step "
-                             "does all of FRFC but the spacing repair and the quality pass: set repair_ratio = "
-                             "gap_repair_ratio = refine_gap_ratio = 0 and quality=False (or pass "
+        if o.quality:
+            raise ValueError("not yet on a DistributedMesh: the quality pass; the distributed step does all of "
+                             "FRFC but the quality pass: set quality=False (or pass "
                              "options=evomesh.FrfcOptions.paper())")
         return o
 

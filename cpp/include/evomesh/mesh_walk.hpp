@@ -33,7 +33,9 @@ class Mesh_walk {
   // the straight line v -> x without crossing a segment or the boundary, or -1
   // (x outside the domain, behind a constraint, on an edge or a vertex seen from
   // v, or more than `max_steps` triangles away). Exact orientation predicates.
-  Index locate_from(Index v, const Vec2& x, int max_steps = 64) const;
+  // `left` (optional) is set when the walk ends at an edge with one triangle
+  // that is no segment: the border of a part of a mesh (see cast).
+  Index locate_from(Index v, const Vec2& x, int max_steps = 64, bool* left = nullptr) const;
 
  private:
   static std::uint64_t key(Index a, Index b) {
