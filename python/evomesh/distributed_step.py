@@ -185,6 +185,27 @@ def _grid_graph(comm: Any, spacing: DistributedSpacing, part: dict, f_part: np.n
     return spacing._graph_at(centre, "sites_received", reach=1.01 * (f_min + 4.0 * r))
 
 
+def _onto_curves(comm: Any, part: dict, xy: np.ndarray, parent: np.ndarray, radius: np.ndarray,
+                 rows: np.ndarray) -> tuple[np.ndarray, float]:
+    """The kept candidates xy[rows] on the part's segments `parent[rows]` moved
+    onto their curves (those of curved tags; the part holds the geometry), and
+    the largest move over all ranks. Twice: the serial FRFC projects them
+    before triangulating and fit_to_curves projects them again after (a
+    projection need not be idempotent to the last bit). Collective."""
+    MPI = _mpi()
+
+    def project() -> tuple[np.ndarray, float]:
+        if not len(rows):
+            return xy[rows], 0.0
+        args = (parent[rows], radius[rows])
+        once, first_move = _core.part_project_segment_candidates(part, xy[rows], *args)
+        twice, second_move = _core.part_project_segment_candidates(part, once, *args)
+        return np.asarray(twice), max(float(first_move), float(second_move))
+
+    moved, largest = _collective(comm, project)
+    return moved, float(comm.allreduce(largest, op=MPI.MAX))
+
+
 def packing(dmesh: DistributedMesh, delta: Any, options: Any = None, *, stats: dict[str, Any] | None = None
             ) -> tuple[np.ndarray, np.ndarray]:
     """The kept points of one FRFC step on a distributed mesh: this rank's share
@@ -319,17 +340,7 @@ def _pack(dmesh: DistributedMesh, delta: Any, options: Any, stats: dict[str, Any
     on_curve = np.flatnonzero(kept[n_first_inputs:])
     curve_move = 0.0
     if geometry is not None:
-        def project() -> tuple[np.ndarray, float]:
-            xy = seg_xy[on_curve]
-            if not len(xy):
-                return xy, 0.0
-            args = (seg_parent[on_curve], seg_radius[on_curve])
-            once, first_move = _core.part_project_segment_candidates(part, xy, *args)
-            twice, second_move = _core.part_project_segment_candidates(part, once, *args)
-            return np.asarray(twice), max(float(first_move), float(second_move))
-
-        projected, curve_move = _collective(comm, project)
-        curve_move = float(comm.allreduce(curve_move, op=MPI.MAX))
+        projected, curve_move = _onto_curves(comm, part, seg_xy, seg_parent, seg_radius, on_curve)
 
     # Second pass: the deferred input points and the interior candidates of the owned triangles.
     sampled = np.concatenate([np.ones(len(dmesh.triangles), np.uint8), np.zeros(len(dmesh.halo_triangles), np.uint8)])
@@ -407,18 +418,9 @@ def _pack(dmesh: DistributedMesh, delta: Any, options: Any, stats: dict[str, Any
     flipped = np.concatenate(comm.allgather(repaired["segment_positions"]))
     flip = np.flatnonzero(np.isin(position, flipped))  # (on this rank's segments)
     flip_xy = seg_xy[flip]
-    if geometry is not None:
-        # (moved onto their curves as the other kept segment candidates)
-        def project_flipped() -> tuple[np.ndarray, float]:
-            if not len(flip):
-                return flip_xy, 0.0
-            args = (seg_parent[flip], seg_radius[flip])
-            once, first_move = _core.part_project_segment_candidates(part, flip_xy, *args)
-            twice, second_move = _core.part_project_segment_candidates(part, once, *args)
-            return np.asarray(twice), max(float(first_move), float(second_move))
-
-        flip_xy, move = _collective(comm, project_flipped)
-        curve_move = max(curve_move, float(comm.allreduce(move, op=MPI.MAX)))
+    if geometry is not None:  # (moved onto their curves as the other kept segment candidates)
+        flip_xy, move = _onto_curves(comm, part, seg_xy, seg_parent, seg_radius, flip)
+        curve_move = max(curve_move, move)
     # Then the gap repair (after all of the above: order keys (3, input point id)).
     gaps = gap_repair(comm, dmesh, part, options, own, owned_gids, dmesh.owned_points, owned_delta, spacing.nn,
                       demoted[own] if demoted is not None else np.zeros(n_owned, np.uint8), centres2[kept2],
