@@ -72,7 +72,7 @@ def test_sampling_that_asks_f_gives_the_same_bits_on_any_number_of_threads():
 # share of the cores). Seen from the process's threads in /proc (Linux), in a
 # fresh process whose default is 8 threads.
 _WATCH = r"""
-import json, os, sys, threading, warnings
+import json, os, sys, threading, time, warnings
 import numpy as np
 sys.path.insert(0, sys.argv[1])
 import evomesh
@@ -110,6 +110,11 @@ for threads in (1, 2):
                 now_running = {t for t, (state, _) in now.items() if state == "R"}
                 peak[0] = max(peak[0], len(now_running & running))
                 running = now_running
+                # a millisecond between samples: the watcher does not take a core from
+                # the step (a step thread it preempts waits runnable, "R" too), and
+                # "running in two samples in a row" spans a millisecond, not a few
+                # microseconds of a thread's start-up or hand-over
+                time.sleep(0.001)
         watcher = threading.Thread(target=watch)
         watcher.start()
         new = evomesh.evolve(mesh, delta, method=method, threads=threads)
