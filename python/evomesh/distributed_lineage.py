@@ -180,11 +180,13 @@ def step_lineage(old: Any, new: Any, spacing: Any, outside: float = 0.0) -> Dist
         parent = np.full(n_owned, -1, dtype=np.int64)
         barycentric = np.zeros((n_owned, 3))
         if len(queries) and held.n_triangles:
-            fallback = None
-            if outside > 0:
-                fallback, distance = _nearest_triangles(held.points, held.triangles, queries)
+            found, weights = _core.part_parent_triangles(held.points, held.triangles, held.gid, queries)
+            missed = np.flatnonzero(found < 0)
+            if outside > 0 and len(missed):  # (only the few points outside the old polygon)
+                fallback, distance = _nearest_triangles(held.points, held.triangles, queries[missed])
                 fallback[distance > outside] = -1
-            found, weights = _core.part_parent_triangles(held.points, held.triangles, held.gid, queries, fallback)
+                found[missed], weights[missed] = _core.part_parent_triangles(
+                    held.points, held.triangles, held.gid, queries[missed], fallback)
             hit = found >= 0
             parent[located[hit]] = held.gid[found[hit]]
             barycentric[located[hit]] = weights[hit]
