@@ -446,8 +446,6 @@ def test_gather_of_an_invalid_mesh_raises_on_every_rank():
 def test_evolve_on_a_distributed_mesh_says_what_it_does_not_do_yet():
     mesh = unit_square_mesh(300)
     d = evomesh.DistributedMesh.scatter(mesh if RANK == 0 else None, COMM)
-    with pytest.raises(ValueError, match="FrfcOptions.paper"):
-        evomesh.evolve(d, 1.0)  # the recommended options: rings, repair, quality pass
     with pytest.raises(ValueError, match="method='drfc'"):
         evomesh.evolve(d, 1.0, method="drfc")
     with pytest.raises(ValueError, match="displacement="):

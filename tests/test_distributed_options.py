@@ -61,7 +61,7 @@ def _mesh(name: str) -> evomesh.Mesh:
 def _options(option: str, seed: int) -> _core.FrfcOptions:
     """The paper's options with one of the serial step's recommended options
     turned on, or ("all") the recommended options less the spacing repair
-    (tests/test_distributed_repair.py) and the quality pass (not on ranks)."""
+    (tests/test_distributed_repair.py) and the quality pass (tests/test_distributed_quality.py)."""
     if option == "all":
         o = _core.FrfcOptions.recommended()
         o.quality = False
@@ -219,12 +219,7 @@ def test_still_refused() -> None:
     thin = DistributedMesh.scatter(_mesh("L-shape") if RANK == 0 else None, COMM, halo_rings=0)
     with pytest.raises(ValueError, match="halo_rings=0"):
         evomesh.evolve(thin, np.ones(thin.n_owned), options=_options("ring", 0))
-    dmesh = DistributedMesh.scatter(_mesh("L-shape") if RANK == 0 else None, COMM)
     options = _options("all", 0)
     options.gap_repair_ratio = 1.1  # (its walks start in each point's fan; the repair: test_distributed_repair.py)
     with pytest.raises(ValueError, match="the gap repair on a DistributedMesh need a halo"):
         evomesh.evolve(thin, np.ones(thin.n_owned), options=options)
-    options = _options("all", 0)
-    options.quality = True
-    with pytest.raises(ValueError, match="quality pass"):
-        evomesh.evolve(dmesh, np.ones(dmesh.n_owned), options=options)

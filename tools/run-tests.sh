@@ -53,6 +53,6 @@ if [ "${EVOMESH_SKIP_MPI_TESTS:-0}" != 1 ]; then
       tests/test_distributed_packing.py tests/test_distributed_triangulation.py tests/test_distributed_spacing.py \
       tests/test_distributed_step.py tests/test_distributed_curves.py tests/test_distributed_rebalance.py \
       tests/test_distributed_transfer.py tests/test_distributed_lineage.py tests/test_distributed_options.py \
-      tests/test_distributed_repair.py
+      tests/test_distributed_repair.py tests/test_distributed_quality.py
   done
 fi

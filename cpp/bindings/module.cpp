@@ -1507,6 +1507,91 @@ PYBIND11_MODULE(_core, m) {
       py::arg("points"), py::arg("pieces"), py::arg("boundary"));
 
   m.def(
+      "triangulate_selection",
+      [](const Float_array& points, const Byte_array& kind, const Byte_array& required, const Byte_array& fresh,
+         const Int_array& pieces, const Byte_array& boundary, const Int_array& piece_tags, const Frfc_options& options,
+         const std::optional<Int_array>& curved_tags, double corner_angle,
+         const std::optional<py::function>& project, const std::vector<std::size_t>& batches) {
+        Selection selected;
+        selected.mesh.points = to_points(points);
+        const std::size_t n = selected.mesh.points.size();
+        selected.mesh.kind = to_kinds(kind);
+        if (selected.mesh.kind.size() != n) throw Input_error("kind: one value per point");
+        selected.mesh.required = to_vector<std::uint8_t>(required);
+        if (!selected.mesh.required.empty() && selected.mesh.required.size() != n) {
+          throw Input_error("required: one flag per point, or none");
+        }
+        // Origins: a kept input point's is its selection index, a new point's
+        // -2 - its index (negative: new to the curve fit, which projects the
+        // new points on curves again).
+        const auto is_new = to_vector<std::uint8_t>(fresh);
+        if (is_new.size() != n) throw Input_error("fresh: one flag per point");
+        selected.origin.resize(n);
+        for (std::size_t i = 0; i < n; ++i) {
+          selected.origin[i] = is_new[i] ? -2 - static_cast<Index>(i) : static_cast<Index>(i);
+        }
+        auto cp = to_constraint_pieces(pieces, boundary, n);
+        const auto tags = to_vector<std::int64_t>(piece_tags);
+        if (tags.size() != cp.size()) throw Input_error("piece_tags: one tag per piece");
+        for (std::size_t k = 0; k < cp.size(); ++k) {
+          if (cp[k].a == cp[k].b) throw Input_error("a piece joins a point to itself");
+          cp[k].tag = tags[k];
+        }
+        options.validate();
+        const auto geometry = to_geometry(curved_tags, corner_angle, project);
+        const Quality_options quality = options.quality_settings();
+        Evolve_result result;
+        std::vector<Index> piece_of;
+        {
+          py::gil_scoped_release release;
+          // The step's early triangulation (frfc_stages.hpp Early_start): the
+          // same batches give the same insertion history, which the serial
+          // quality pass's last bits follow (it is not a function of the set).
+          Early_triangulation early;
+          const bool batched = options.quality && !geometry && !batches.empty();
+          if (batched) {
+            std::size_t at = 0;
+            for (std::size_t b = 0; b < batches.size(); ++b) {
+              const std::size_t end = std::min(n, at + batches[b]);
+              const std::vector<Vec2> batch(selected.mesh.points.begin() + static_cast<std::ptrdiff_t>(at),
+                                            selected.mesh.points.begin() + static_cast<std::ptrdiff_t>(end));
+              if (b == 0) early.insert_first(batch);
+              else early.insert_more(batch);
+              at = end;
+            }
+          }
+          triangulate_selection(std::move(selected), cp, options.quality ? &quality : nullptr, result,
+                                batched ? &early : nullptr, geometry.get());
+          for (Index& o : result.origin) {
+            if (o <= -2) o = -2 - o;  // (the selection index of every selected point; -1: inserted)
+          }
+          piece_of = segment_pieces(result.mesh, cp, result.origin);
+        }
+        py::dict out;
+        out["points"] = points_array(result.mesh.points);
+        out["kind"] = kinds_array(result.mesh.kind);
+        out["triangles"] = rows_array<3>(result.mesh.triangles);
+        out["segments"] = rows_array<2>(result.mesh.segments);
+        out["segment_is_boundary"] = vector_array(result.mesh.segment_is_boundary);
+        out["segment_piece"] = to_array(std::vector<std::int64_t>(piece_of.begin(), piece_of.end()));
+        out["selection_index"] = to_array(std::vector<std::int64_t>(result.origin.begin(), result.origin.end()));
+        out["curve_reach"] = result.curve_reach;
+        py::dict stats;
+        for (const auto& [name, value] : result.stats) stats[py::str(name)] = value;
+        out["stats"] = stats;
+        return out;
+      },
+      py::arg("points"), py::arg("kind"), py::arg("required"), py::arg("fresh"), py::arg("pieces"),
+      py::arg("boundary"), py::arg("piece_tags"), py::arg("options"), py::arg("curved_tags") = py::none(), py::arg("corner_angle") = 0.0,
+      py::arg("project") = py::none(), py::arg("batches") = std::vector<std::size_t>(),
+      "The step's last stage on a selection (step.hpp triangulate_selection): the quality pass when "
+      "options.quality (else the constrained Delaunay triangulation), then the curve fit with a geometry. "
+      "`fresh`: the points that are new (no input point). `batches`: the sizes of the step's early triangulation batches (the quality pass's history; no geometry). "
+      "{'points', 'kind', 'triangles', 'segments', 'segment_is_boundary', 'segment_piece' (the piece each "
+      "segment is part of), 'selection_index' (-1: inserted), 'curve_reach', 'stats'}. The distributed step "
+      "runs it on its root for the quality pass (distributed_step._quality_on_root).");
+
+  m.def(
       "convex_hull_vertices",
       [](const Float_array& points) {
         auto pts = to_points(points);

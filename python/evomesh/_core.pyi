@@ -5,7 +5,7 @@ like of the right shape is accepted. Returned arrays are new numpy arrays of
 the dtypes given here; indices are int64, flags and point kinds uint8.
 """
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from typing import Any, ClassVar, TypedDict
 
 import numpy as np
@@ -442,6 +442,22 @@ def quality_triangulate(
     quality_rounds: bool = ...,
 ) -> dict[str, Any]:
     """The quality pass alone (Section 6; in rounds with quality_rounds=True, issue 29)."""
+
+def triangulate_selection(
+    points: ArrayLike,
+    kind: ArrayLike,
+    required: ArrayLike,
+    fresh: ArrayLike,
+    pieces: ArrayLike,
+    boundary: ArrayLike,
+    piece_tags: ArrayLike,
+    options: FrfcOptions,
+    curved_tags: ArrayLike | None = ...,
+    corner_angle: float = ...,
+    project: Callable[..., Any] | None = ...,
+    batches: Sequence[int] = ...,
+) -> dict[str, Any]:
+    """The step's last stage on a selection (quality pass or CDT, curve fit); the distributed step's root."""
 
 class SupermeshResult(TypedDict):
     """What :func:`supermesh` returns (a plain dict at run time)."""

@@ -33,6 +33,7 @@ quality pass, which is refused by name; curved boundaries (``geometry``) too.
 
 from __future__ import annotations
 
+import time
 from typing import Any, Callable
 
 import numpy as np
@@ -186,21 +187,24 @@ def _grid_graph(comm: Any, spacing: DistributedSpacing, part: dict, f_part: np.n
 
 
 def _onto_curves(comm: Any, part: dict, xy: np.ndarray, parent: np.ndarray, radius: np.ndarray,
-                 rows: np.ndarray) -> tuple[np.ndarray, float]:
+                 rows: np.ndarray, times: int) -> tuple[np.ndarray, float]:
     """The kept candidates xy[rows] on the part's segments `parent[rows]` moved
     onto their curves (those of curved tags; the part holds the geometry), and
-    the largest move over all ranks. Twice: the serial FRFC projects them
+    the largest move over all ranks. `times`: 2 without the quality pass, whose
+    root runs the serial fit_to_curves itself (1): the serial FRFC projects them
     before triangulating and fit_to_curves projects them again after (a
     projection need not be idempotent to the last bit). Collective."""
     MPI = _mpi()
 
     def project() -> tuple[np.ndarray, float]:
+        moved, largest = xy[rows], 0.0
         if not len(rows):
-            return xy[rows], 0.0
+            return moved, largest
         args = (parent[rows], radius[rows])
-        once, first_move = _core.part_project_segment_candidates(part, xy[rows], *args)
-        twice, second_move = _core.part_project_segment_candidates(part, once, *args)
-        return np.asarray(twice), max(float(first_move), float(second_move))
+        for _ in range(times):
+            moved, move = _core.part_project_segment_candidates(part, moved, *args)
+            largest = max(largest, float(move))
+        return np.asarray(moved), largest
 
     moved, largest = _collective(comm, project)
     return moved, float(comm.allreduce(largest, op=MPI.MAX))
@@ -253,6 +257,7 @@ def _pack(dmesh: DistributedMesh, delta: Any, options: Any, stats: dict[str, Any
                              "triangles (halo_rings=1, the default); this one has halo_rings=0")
 
     _collective(comm, check)
+    projections = 1 if options.quality else 2  # (_onto_curves)
     step1: dict = {}
     spacing = DistributedSpacing(dmesh, delta, within_domain=options.within_domain, stats=step1, geometry=geometry)
     n_owned = dmesh.n_owned
@@ -340,7 +345,7 @@ def _pack(dmesh: DistributedMesh, delta: Any, options: Any, stats: dict[str, Any
     on_curve = np.flatnonzero(kept[n_first_inputs:])
     curve_move = 0.0
     if geometry is not None:
-        projected, curve_move = _onto_curves(comm, part, seg_xy, seg_parent, seg_radius, on_curve)
+        projected, curve_move = _onto_curves(comm, part, seg_xy, seg_parent, seg_radius, on_curve, projections)
 
     # Second pass: the deferred input points and the interior candidates of the owned triangles.
     sampled = np.concatenate([np.ones(len(dmesh.triangles), np.uint8), np.zeros(len(dmesh.halo_triangles), np.uint8)])
@@ -419,7 +424,7 @@ def _pack(dmesh: DistributedMesh, delta: Any, options: Any, stats: dict[str, Any
     flip = np.flatnonzero(np.isin(position, flipped))  # (on this rank's segments)
     flip_xy = seg_xy[flip]
     if geometry is not None:  # (moved onto their curves as the other kept segment candidates)
-        flip_xy, move = _onto_curves(comm, part, seg_xy, seg_parent, seg_radius, flip)
+        flip_xy, move = _onto_curves(comm, part, seg_xy, seg_parent, seg_radius, flip, projections)
         curve_move = max(curve_move, move)
     # Then the gap repair (after all of the above: order keys (3, input point id)).
     gaps = gap_repair(comm, dmesh, part, options, own, owned_gids, dmesh.owned_points, owned_delta, spacing.nn,
@@ -585,14 +590,12 @@ def step(dmesh: DistributedMesh, delta: Any, options: Any = None, *, stats: dict
         options = _core.FrfcOptions.paper()
 
     def check() -> None:
-        if isinstance(options, _core.FrfcOptions) and options.quality:
-            raise ValueError("not yet on a DistributedMesh: the quality pass (quality=False, or "
-                             "FrfcOptions.paper())")
         if dmesh.kind is None:
             raise ValueError("the step needs the points' kinds: give kind= to DistributedMesh.from_local "
                              "(scatter and a step's output have them)")
 
     _collective(comm, check)
+    input_kind = np.asarray(dmesh.kind)  # (restore_origins reads the input's own kinds)
     if geometry is not None:
         dmesh = with_curve_kinds(dmesh, geometry)
     packed = _pack(dmesh, delta, options, stats, geometry)
@@ -611,8 +614,13 @@ def step(dmesh: DistributedMesh, delta: Any, options: Any = None, *, stats: dict
     share = np.flatnonzero(np.arange(len(keys)) % comm.size == comm.rank)
     pieces, piece_boundary, piece_tags = keys[share], boundary[share].astype(bool), tags[share]
 
-    # The triangulation, each triangle on the rank of its least id.
     points, point_keys, order_keys = packed["points"], packed["keys"], packed["order_keys"]
+    if options.quality:
+        # The quality pass: on the root (the serial last stage, on the gathered selection).
+        return _quality_on_root(dmesh, packed, options, geometry, keys, boundary, tags, kept_inputs, input_kind,
+                                stats)
+
+    # The triangulation, each triangle on the rank of its least id.
     cdt: dict = {}
     from .distributed_triangulation import _lookup, constrained_delaunay
 
@@ -637,13 +645,7 @@ def step(dmesh: DistributedMesh, delta: Any, options: Any = None, *, stats: dict
     mine["required"][is_old] = dmesh.required[: dmesh.n_owned][at_old]
     # Kinds as the serial step gives them: a kept input point keeps its own, a
     # new point on a segment is a boundary point, one inside a sampled point.
-    mine["kind"] = np.where((point_keys >= _SEGMENT_TIE) & (point_keys < _INTERIOR_TIE), _KIND["BOUNDARY"],
-                            _KIND["SAMPLED"])
-    assert dmesh.kind is not None  # (checked above)
-    was = dmesh.kind[: dmesh.n_owned][at_old]
-    # (kept_point_kind, step.hpp: a forced corner is a corner, a sampled point of an earlier step a Steiner point)
-    mine["kind"][is_old] = np.where(packed["forced_corner"][at_old], _KIND["CORNER"],
-                                    np.where(was == _KIND["SAMPLED"], _KIND["STEINER"], was))
+    mine["kind"] = _selected_kinds(dmesh, packed, point_keys, old)
     # Output ids: the order keys' order is the serial output's point order (kept
     # input points by input id, then segment candidates, then interior
     # candidates, then the spacing repair's points), so a point's id is its
@@ -671,20 +673,58 @@ def step(dmesh: DistributedMesh, delta: Any, options: Any = None, *, stats: dict
         on_curve = np.isin(piece_tags, np.asarray(geometry.tags, dtype=np.int64))
         length = np.hypot(*(xy[ends[on_curve, 1]] - xy[ends[on_curve, 0]]).T) if on_curve.any() else np.zeros(1)
         reach = float(comm.allreduce(max(float(length.max()), 2 * packed["curve_move"]), op=MPI.MAX))
-    triangle_tags = _carried_triangle_tags(dmesh, xy[local[:, 0]], xy[local[:, 1]], xy[local[:, 2]], reach)
     segments = np.searchsorted(found["gid"], pieces).reshape(-1, 2)
-    segment_gids = share
-    same = _input_order(dmesh, len(point_keys), mine["id"], mine["origin"], tri_ids, ids[segments],
-                        piece_boundary)
+    out, same = _output(dmesh, packed, found, ids, local, tri_ids, triangle_gids, segments, share, piece_tags,
+                        piece_boundary, len(point_keys), mine["id"], mine["origin"], reach)
+    if stats is not None:
+        stats.update(cdt=cdt, pieces=len(keys), triangles=comm.allreduce(len(triangles), op=MPI.SUM),
+                     unchanged=same)
+        if geometry is not None:
+            stats.update(curve_points_dropped_outside=dropped, curve_reach=reach)
+    return out
+
+
+def _selected_kinds(dmesh: DistributedMesh, packed: dict, point_keys: np.ndarray, old: np.ndarray) -> np.ndarray:
+    """The kinds of this rank's kept points as the serial selection gives them:
+    a kept input point keeps its own, a new point on a segment is a boundary
+    point, one inside a sampled point."""
+    kind = np.where((point_keys >= _SEGMENT_TIE) & (point_keys < _INTERIOR_TIE), _KIND["BOUNDARY"],
+                    _KIND["SAMPLED"]).astype(np.uint8)
+    is_old = old >= 0
+    at_old = np.searchsorted(dmesh.global_ids[: dmesh.n_owned], old[is_old])
+    assert dmesh.kind is not None  # (checked by step)
+    was = dmesh.kind[: dmesh.n_owned][at_old]
+    # (kept_point_kind, step.hpp: a forced corner is a corner, a sampled point of an earlier step a Steiner point)
+    kind[is_old] = np.where(packed["forced_corner"][at_old], _KIND["CORNER"],
+                            np.where(was == _KIND["SAMPLED"], _KIND["STEINER"], was))
+    return kind
+
+
+def _output(dmesh: DistributedMesh, packed: dict, found: np.ndarray, ids: np.ndarray, local: np.ndarray,
+            tri_ids: np.ndarray, triangle_gids: np.ndarray, segments: np.ndarray, segment_gids: np.ndarray,
+            segment_tags: np.ndarray, segment_boundary: np.ndarray, n_owned: int, owned_ids: np.ndarray,
+            owned_origin: np.ndarray, reach: float) -> tuple[DistributedMesh, bool]:
+    """The step's DistributedMesh from this rank's part of the output: `found`
+    (_OUT_POINT rows of the points its triangles and segments use, and its own;
+    `ids` their output ids), its triangles (`local` rows into `found`, stored
+    least id first; `tri_ids` as ids) with their global ids, its segments
+    (rows into `found`) with global ids, tags and boundary flags, and the ids
+    and origins of the `n_owned` points it owns; triangle tags carried from the
+    old mesh (a centroid up to `reach` outside it: the nearest old triangle),
+    the input's order when the step returned its input, and the lineage.
+    Returns the mesh and whether the step returned its input. Collective."""
+    comm = dmesh.comm
+    xy = np.column_stack([found["x"], found["y"]])
+    triangle_tags = _carried_triangle_tags(dmesh, xy[local[:, 0]], xy[local[:, 1]], xy[local[:, 2]], reach)
+    same = _input_order(dmesh, n_owned, owned_ids, owned_origin, tri_ids, ids[segments], segment_boundary)
     if same is not None:
         # The step returned its input: the input's triangle and segment order and rotations (as serial).
         by_id = np.argsort(ids, kind="stable")
         triangle_gids, local = same[0][:, 0], by_id[np.searchsorted(ids[by_id], same[0][:, 1:])]
         segment_gids, segments = same[1][:, 0], by_id[np.searchsorted(ids[by_id], same[1][:, 1:3])]
-        piece_tags = same[1][:, 3]
+        segment_tags = same[1][:, 3]
     out = DistributedMesh.from_local(
-        np.column_stack([found["x"], found["y"]]), local, ids, comm, owners=found["owner"],
-        segments=segments, segment_tags=piece_tags,
+        xy, local, ids, comm, owners=found["owner"], segments=segments, segment_tags=segment_tags,
         required=found["required"].astype(bool), origin=found["origin"], kind=found["kind"],
         tag_names=dict(dmesh.tag_names), triangle_global_ids=triangle_gids, segment_global_ids=segment_gids,
         triangle_tags=triangle_tags)
@@ -694,12 +734,169 @@ def step(dmesh: DistributedMesh, delta: Any, options: Any = None, *, stats: dict
     object.__setattr__(out, "_trusted", True)
     from .distributed_lineage import step_lineage  # (where the output's points lie in dmesh)
     object.__setattr__(out, "lineage", step_lineage(dmesh, out, packed["spacing"], reach))
+    return out, same is not None
+
+
+# A kept point on its way to the root's quality pass (_quality_on_root).
+_SELECTED = np.dtype([("order0", "<i8"), ("order1", "<i8"), ("x", "<f8"), ("y", "<f8"), ("key", "<i8"),
+                      ("kind", "u1"), ("required", "u1"), ("origin", "<i8"), ("rank", "<i4")])
+# An input point the packing dropped (restore_origins).
+_DROPPED = np.dtype([("x", "<f8"), ("y", "<f8"), ("gid", "<i8"), ("kind", "u1")])
+
+
+def _quality_on_root(dmesh: DistributedMesh, packed: dict, options: Any, geometry: Any, keys: np.ndarray,
+                     boundary: np.ndarray, tags: np.ndarray, kept_inputs: np.ndarray, input_kind: np.ndarray,
+                     stats: dict[str, Any] | None) -> DistributedMesh:
+    """The step's last stage with the quality pass (docs/distributed-step.md
+    3.11): the kept points (in the serial output order: their order keys) and
+    the pieces go to rank 0, which runs the serial triangulate_selection on
+    them (the quality pass, and the curve fit with a geometry), gives the
+    output points that stand where a dropped input point stood its origin
+    (restore_origins), and sends each rank the points it owns (kept points
+    stay where they were kept, a new point goes to a rank of its triangles),
+    the triangles of its least ids and the segments of its least ends. The
+    serial pass is one global sequence (docs 3.6): its result, here, is the
+    serial step's, bit for bit, on any number of ranks; the root holds the
+    output's points and triangulation for that stage. Collective."""
+    comm = dmesh.comm
+    root = 0
+    points, point_keys, order_keys, old = packed["points"], packed["keys"], packed["order_keys"], packed["input_gid"]
+    rows = np.zeros(len(points), dtype=_SELECTED)
+    rows["order0"], rows["order1"] = order_keys[:, 0], order_keys[:, 1]
+    rows["x"], rows["y"], rows["key"], rows["origin"], rows["rank"] = points[:, 0], points[:, 1], point_keys, old, \
+        comm.rank
+    rows["kind"] = _selected_kinds(dmesh, packed, point_keys, old)
+    is_old = old >= 0
+    owned_gids = dmesh.global_ids[: dmesh.n_owned]
+    rows["required"][is_old] = dmesh.required[: dmesh.n_owned][np.searchsorted(owned_gids, old[is_old])]
+    gone = np.flatnonzero(~np.isin(owned_gids, kept_inputs))
+    dropped = np.zeros(len(gone), dtype=_DROPPED)
+    dropped["x"], dropped["y"] = dmesh.points[gone, 0], dmesh.points[gone, 1]
+    dropped["gid"] = owned_gids[gone]
+    dropped["kind"] = input_kind[gone]
+    selected = comm.gather(rows, root=root)
+    dropped_all = comm.gather(dropped, root=root)
+
+    def work() -> Any:
+        if comm.rank != root:
+            return None
+        begin = time.perf_counter()
+        packages, summary = _root_stage(comm.size, np.concatenate(selected), np.concatenate(dropped_all), options,
+                                        geometry, keys, boundary, tags)
+        summary["root_seconds"] = time.perf_counter() - begin
+        summary["bytes"] = sum(len(a) for a in selected) * _SELECTED.itemsize + \
+            sum(len(a) for a in dropped_all) * _DROPPED.itemsize + \
+            sum(sum(v.nbytes for v in package.values()) for package in packages)
+        return packages, summary
+
+    done = _collective(comm, work)
+    mine = comm.scatter(done[0] if comm.rank == root else None, root=root)
+    summary = comm.bcast(done[1] if comm.rank == root else None, root=root)
+    found = mine["points"]
+    ids = found["id"]
+    local = np.searchsorted(ids, mine["triangles"]).reshape(-1, 3)
+    segments = np.searchsorted(ids, mine["segments"]).reshape(-1, 2)
+    own = found["owner"] == comm.rank
+    out, same = _output(dmesh, packed, found, ids, local, mine["triangles"], mine["triangle_gids"], segments,
+                        mine["segment_gids"], mine["segment_tags"], mine["segment_boundary"],
+                        int(own.sum()), ids[own], found["origin"][own], summary["curve_reach"])
+    from .mesh_quality import _warn_quality
+
+    _warn_quality(summary["stats"], stacklevel=5)
     if stats is not None:
-        stats.update(cdt=cdt, pieces=len(keys), triangles=comm.allreduce(len(triangles), op=MPI.SUM),
-                     unchanged=same is not None)
+        stats.update(quality=summary["stats"], quality_on_root=True, pieces=len(keys),
+                     triangles=summary["triangles"], unchanged=same, root_points=summary["points"],
+                     root_seconds=summary["root_seconds"], root_bytes=summary["bytes"])
         if geometry is not None:
-            stats.update(curve_points_dropped_outside=dropped, curve_reach=reach)
+            stats.update(curve_points_dropped_outside=int(summary["stats"].get("curve_points_dropped_outside", 0)),
+                         curve_reach=summary["curve_reach"])
     return out
+
+
+def _root_stage(size: int, sel: np.ndarray, dropped: np.ndarray, options: Any, geometry: Any, keys: np.ndarray,
+                boundary: np.ndarray, tags: np.ndarray) -> tuple[list[dict], dict]:
+    """_quality_on_root's work on the root: the serial last stage on the
+    gathered selection, and each rank's share of its output."""
+    sel = sel[np.lexsort((sel["order1"], sel["order0"]))]  # the serial selection's order
+    by_key = np.argsort(sel["key"], kind="stable")
+    at = np.searchsorted(sel["key"], keys, sorter=by_key)
+    pieces = by_key[np.minimum(at, len(sel) - 1)] if len(sel) else at
+    if len(sel) == 0 or (sel["key"][pieces] != keys).any():
+        raise RuntimeError("the quality pass: a piece's end is no kept point (an internal error)")
+    extra = geometry._core_arguments() if geometry is not None else {}
+    # The serial step's early triangulation batches (frfc_stages.hpp Early_start):
+    # the first pass's kept points (input points and segment candidates), then
+    # the second pass's (interior candidates, deferred input points), then the
+    # spacing repair's. The serial quality pass follows the insertion history.
+    first = (sel["order0"] == 0) & (sel["key"] < _INTERIOR_TIE)
+    late = (sel["order0"] == 0) & (sel["key"] >= _INTERIOR_TIE)
+    batches = [int(first.sum()), int(late.sum()), int(len(sel) - first.sum() - late.sum())]
+    res = _core.triangulate_selection(np.column_stack([sel["x"], sel["y"]]), sel["kind"], sel["required"],
+                                      (sel["origin"] < 0).astype(np.uint8), pieces, boundary.astype(np.uint8),
+                                      np.asarray(tags, dtype=np.int64), options, batches=batches, **extra)
+    index = res["selection_index"]
+    xy, kind = res["points"], res["kind"]
+    n = len(xy)
+    new = index < 0
+    of = np.maximum(index, 0)
+    origin = np.where(new, -1, sel["origin"][of])
+    owner = np.where(new, -1, sel["rank"][of]).astype(np.int64)
+    required = np.where(new, 0, sel["required"][of]).astype(np.uint8)
+    # restore_origins (step.cpp): an output point without origin at exactly the
+    # coordinates of a dropped input point, on a segment or not as it was, is that point.
+    restored = 0
+    fresh = np.flatnonzero(origin < 0)
+    if len(fresh) and len(dropped):
+        pair = np.dtype([("x", "<f8"), ("y", "<f8")])
+        table = np.zeros(len(dropped), dtype=pair)
+        table["x"], table["y"] = dropped["x"] + 0.0, dropped["y"] + 0.0  # (-0.0 == 0.0)
+        order = np.argsort(table, order=("x", "y"))
+        table = table[order]
+        ask = np.zeros(len(fresh), dtype=pair)
+        ask["x"], ask["y"] = xy[fresh, 0] + 0.0, xy[fresh, 1] + 0.0
+        at = np.minimum(np.searchsorted(table, ask), len(table) - 1)
+        hit = table[at] == ask
+        was = dropped["kind"][order[at]]
+        on_segment = np.isin(kind[fresh], [_KIND["CORNER"], _KIND["BOUNDARY"]])
+        hit &= np.isin(was, [_KIND["CORNER"], _KIND["BOUNDARY"]]) == on_segment
+        origin[fresh[hit]] = dropped["gid"][order[at[hit]]]
+        kind[fresh[hit]] = np.where(was[hit] == _KIND["SAMPLED"], _KIND["STEINER"], was[hit])
+        restored = int(hit.sum())
+    # The triangles least id first, in the canonical order (rows sorted).
+    tri = res["triangles"]
+    roll = np.argmin(tri, axis=1)
+    tri = np.take_along_axis(tri, (roll[:, None] + np.arange(3)[None, :]) % 3, axis=1)
+    order = np.lexsort((tri[:, 2], tri[:, 1], tri[:, 0]))
+    tri = tri[order]
+    # A new point goes to a rank that owns a vertex of one of its triangles.
+    while (owner < 0).any():
+        corner = owner[tri]
+        known = corner.max(axis=1)
+        unknown = (corner < 0) & (known >= 0)[:, None]
+        if not unknown.any():
+            owner[owner < 0] = 0
+            break
+        owner[tri[unknown]] = np.broadcast_to(known[:, None], corner.shape)[unknown]
+    seg = res["segments"]
+    seg_tags = np.asarray(tags, dtype=np.int64)[res["segment_piece"]] if len(seg) else np.zeros(0, np.int64)
+    seg_boundary = res["segment_is_boundary"].astype(bool)
+    table = np.zeros(n, dtype=_OUT_POINT)
+    table["gid"] = table["id"] = np.arange(n)
+    table["x"], table["y"], table["owner"], table["required"], table["origin"], table["kind"] = \
+        xy[:, 0], xy[:, 1], owner, required, origin, kind
+    tri_rank = owner[tri[:, 0]]
+    seg_rank = owner[seg.min(axis=1)] if len(seg) else np.zeros(0, np.int64)
+    packages = []
+    for rank in range(size):
+        t = np.flatnonzero(tri_rank == rank)
+        s = np.flatnonzero(seg_rank == rank)
+        used = np.unique(np.concatenate([np.flatnonzero(owner == rank), tri[t].reshape(-1), seg[s].reshape(-1)]))
+        packages.append(dict(points=table[used], triangles=tri[t], triangle_gids=t.astype(np.int64),
+                             segments=seg[s], segment_gids=s.astype(np.int64), segment_tags=seg_tags[s],
+                             segment_boundary=seg_boundary[s]))
+    stats = dict(res["stats"])
+    stats["restored_points"] = restored
+    return packages, dict(stats=stats, curve_reach=float(res["curve_reach"]), triangles=len(tri), points=n)
 
 
 def _carried_triangle_tags(old: DistributedMesh, a: np.ndarray, b: np.ndarray, c: np.ndarray,
@@ -768,10 +965,6 @@ def evolve_distributed(dmesh: DistributedMesh, delta: Any = None, *, size: Any =
             if not isinstance(o, _core.FrfcOptions):
                 raise TypeError(f"options must be evomesh FrfcOptions, got {type(o).__name__}")
             o.validate()
-        if o.quality:
-            raise ValueError("not yet on a DistributedMesh: the quality pass; the distributed step does all of "
-                             "FRFC but the quality pass: set quality=False (or pass "
-                             "options=evomesh.FrfcOptions.paper())")
         return o
 
     o = _collective(comm, check)

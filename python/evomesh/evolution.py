@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import copy
 import numbers
-import warnings
 from typing import Any
 
 import numpy as np
@@ -12,6 +11,7 @@ import numpy as np
 from evomesh import _core
 from evomesh.geometry import as_geometry
 from evomesh.mesh import Lineage, Mesh, PointKind, check_boundary_not_pinched, check_mesh_limits
+from evomesh.mesh_quality import QualityWarning, _warn_quality
 from evomesh.motion import after_step, step_input
 from evomesh.spacing_function import _require_mesh, as_delta, delta_from_size
 
@@ -139,11 +139,12 @@ def evolve(mesh: Mesh, delta: Any = None, *, size: Any = None, method: str = "fr
         evolve with delta over its owned points, a scalar, or a function of the
         owned coordinates) is stepped on its ranks without gathering it and
         returns a DistributedMesh whose ``gather()`` is this function's result
-        on the gathered mesh, bit for bit, on any number of ranks; for now with
-        the paper's FRFC options (``options=FrfcOptions.paper()``, optionally
-        ``within_domain=True``), with delta or size and curved boundaries
-        (``geometry``; evomesh.distributed_step); tags, required points and
-        origin come along, and a step that returns its input keeps its order.
+        on the gathered mesh, bit for bit, on any number of ranks, with any
+        FRFC options, delta or size and curved boundaries (``geometry``;
+        evomesh.distributed_step); tags, required points, origin and the
+        lineage come along, and a step that returns its input keeps its order.
+        The quality pass (with ``quality``, the default) runs on rank 0 on the
+        gathered kept points and pieces (docs/distributed-step.md 3.11).
     delta : array_like, shape (n,), or a scalar
         Per-point factor, relative to the current spacing: the new spacing
         (nearest-neighbour distance) at p is about delta(p) nn_M(p); < 1
@@ -494,15 +495,6 @@ def evolve(mesh: Mesh, delta: Any = None, *, size: Any = None, method: str = "fr
     return new if motion is None else after_step(old, motion, new)
 
 
-class QualityWarning(UserWarning):
-    """A step did not meet its angle goal: the quality pass could not run on the
-    selected points (its mesher failed on near-degenerate geometry; the step
-    returned their plain constrained Delaunay triangulation,
-    ``stats["quality_failed"] == 1``), or it stopped at its bound on inserted
-    points (``stats["quality_capped"] == 1``, small input angles or unresolved
-    features). The step's mesh is valid either way."""
-
-
 def _wrap(result: dict[str, Any], old: Mesh | None = None) -> Mesh:
     # Every output satisfies the limits Mesh() puts on inputs, or the step fails
     # here, saying why (issue 9: a square of side 1e-70 refined step after step).
@@ -523,22 +515,7 @@ def _wrap(result: dict[str, Any], old: Mesh | None = None) -> Mesh:
                 "float64 resolves at these coordinates; rescale the mesh (or translate it towards the origin) or "
                 "refine less"
             ) from None
-    if result["stats"].get("quality_failed"):
-        warnings.warn(
-            "the quality pass failed on this step's points (near-degenerate geometry); the step kept their plain "
-            f"constrained Delaunay triangulation (min angle {result['stats'].get('min_angle', float('nan')):.3g} deg)",
-            QualityWarning,
-            stacklevel=3,
-        )
-    if result["stats"].get("quality_capped"):
-        warnings.warn(
-            "the quality pass stopped at its bound on inserted points before every angle met min_angle (smallest "
-            f"angle {result['stats'].get('min_angle', float('nan')):.3g} deg, near ({result['stats'].get('min_angle_x', 0):.6g}, "
-            f"{result['stats'].get('min_angle_y', 0):.6g})): the domain has small input angles or features the "
-            "spacing does not resolve; refine there, or raise quality_max_fraction / quality_max_extra",
-            QualityWarning,
-            stacklevel=3,
-        )
+    _warn_quality(result["stats"], stacklevel=4)
     if unchanged:
         assert old is not None
         return _wrap_unchanged(result, old)

@@ -2,8 +2,9 @@
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass, field
-from typing import Callable
+from typing import Any, Callable
 
 import numpy as np
 
@@ -140,3 +141,32 @@ def integral_inverse_square(
         values = 1.0 / np.asarray(f(x.reshape(-1, 2)), dtype=np.float64) ** 2
         total += float((values.reshape(len(q), -1).mean(axis=1) * areas[start : start + chunk]).sum())
     return total
+
+
+class QualityWarning(UserWarning):
+    """A step did not meet its angle goal: the quality pass could not run on the
+    selected points (its mesher failed on near-degenerate geometry; the step
+    returned their plain constrained Delaunay triangulation,
+    ``stats["quality_failed"] == 1``), or it stopped at its bound on inserted
+    points (``stats["quality_capped"] == 1``, small input angles or unresolved
+    features). The step's mesh is valid either way."""
+
+
+def _warn_quality(stats: dict[str, Any], stacklevel: int) -> None:
+    """The QualityWarning a step's stats call for (serial and distributed steps)."""
+    if stats.get("quality_failed"):
+        warnings.warn(
+            "the quality pass failed on this step's points (near-degenerate geometry); the step kept their plain "
+            f"constrained Delaunay triangulation (min angle {stats.get('min_angle', float('nan')):.3g} deg)",
+            QualityWarning,
+            stacklevel=stacklevel,
+        )
+    if stats.get("quality_capped"):
+        warnings.warn(
+            "the quality pass stopped at its bound on inserted points before every angle met min_angle (smallest "
+            f"angle {stats.get('min_angle', float('nan')):.3g} deg, near ({stats.get('min_angle_x', 0):.6g}, "
+            f"{stats.get('min_angle_y', 0):.6g})): the domain has small input angles or features the "
+            "spacing does not resolve; refine there, or raise quality_max_fraction / quality_max_extra",
+            QualityWarning,
+            stacklevel=stacklevel,
+        )

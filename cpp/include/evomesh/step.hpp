@@ -183,6 +183,14 @@ void triangulate_selection(Selection selected, const std::vector<Constraint_piec
                            const Quality_options* quality, Evolve_result& result,
                            Early_triangulation* early = nullptr, const Boundary_geometry* geometry = nullptr);
 
+// For every segment of `mesh` (triangulate_selection's result), the index in
+// `pieces` of the constraint piece it is part of: the quality pass and the
+// curve fit split pieces at the points they insert, which have
+// selection_index -1 (the others: their index in the selection the pieces
+// refer to). std::logic_error if a segment is on no piece (a bug).
+std::vector<Index> segment_pieces(const Mesh_arrays& mesh, const std::vector<Constraint_piece>& pieces,
+                                  const std::vector<Index>& selection_index);
+
 
 // The old mesh's walker for finish_step, built on the other thread while the
 // step triangulates (it reads only the input mesh; the quality pass is CGAL's
