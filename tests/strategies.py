@@ -98,6 +98,19 @@ def crack_mesh(n: int) -> evomesh.Mesh:
                         segment_tags=np.full(len(row) - 1, 7))
 
 
+def holes_mesh() -> evomesh.Mesh:
+    """A plate with two holes and a few interior points required."""
+    from evomesh.meshgen import polygon_mesh
+
+    mesh = polygon_mesh([[(0, 0), (3, 0), (3, 2), (0, 2)], [(0.5, 0.5), (0.5, 1.5), (1.2, 1.5), (1.2, 0.5)],
+                         [(1.8, 0.5), (1.8, 1.5), (2.5, 1.5), (2.5, 0.5)]], 0.17)
+    required = np.zeros(mesh.n_points, bool)
+    inside = np.flatnonzero(mesh.kind == int(evomesh.PointKind.ORIGINAL))
+    required[inside[:: max(len(inside) // 5, 1)]] = True
+    return evomesh.Mesh(mesh.points, mesh.triangles, mesh.segments, segment_tags=mesh.segment_tags,
+                        required=required)
+
+
 def _random_cloud(rng: np.random.Generator, layout: str, n: int) -> np.ndarray:
     if layout == "uniform":
         return rng.random((n, 2))

@@ -20,7 +20,7 @@ import pytest
 import evomesh
 from evomesh import _core
 from evomesh.meshgen import HOLE_TAG, OUTER_TAG, disc_with_hole_mesh, polygon_mesh
-from strategies import crack_mesh
+from strategies import crack_mesh, holes_mesh
 
 MPI = pytest.importorskip("mpi4py.MPI")
 from evomesh import DistributedMesh  # noqa: E402
@@ -34,20 +34,9 @@ _ARRAYS = ("points", "triangles", "segments", "segment_tags", "segment_is_bounda
 _DISC = evomesh.BoundaryGeometry({OUTER_TAG: evomesh.Circle((0, 0), 1.0), HOLE_TAG: evomesh.Circle((0, 0), 0.35)})
 
 
-def _holes() -> evomesh.Mesh:
-    """A plate with two holes and a few interior points required."""
-    mesh = polygon_mesh([[(0, 0), (3, 0), (3, 2), (0, 2)], [(0.5, 0.5), (0.5, 1.5), (1.2, 1.5), (1.2, 0.5)],
-                         [(1.8, 0.5), (1.8, 1.5), (2.5, 1.5), (2.5, 0.5)]], 0.17)
-    required = np.zeros(mesh.n_points, bool)
-    inside = np.flatnonzero(mesh.kind == int(evomesh.PointKind.ORIGINAL))
-    required[inside[:: max(len(inside) // 5, 1)]] = True
-    return evomesh.Mesh(mesh.points, mesh.triangles, mesh.segments, segment_tags=mesh.segment_tags,
-                        required=required)
-
-
 _DOMAINS = {
     "L-shape": lambda: polygon_mesh([[(0, 0), (2, 0), (2, 1), (1, 1), (1, 2), (0, 2)]], 0.13),
-    "two holes": _holes,
+    "two holes": holes_mesh,
     "crack": lambda: crack_mesh(17),
 }
 _MESHES: dict = {}

@@ -293,6 +293,36 @@ std::size_t drop_unused_points(Evolve_result& result) {
 
 }  // namespace
 
+Segments_at_points::Segments_at_points(const Mesh_arrays& mesh)
+    : xadj(mesh.points.size() + 1, 0), adj(2 * mesh.segments.size()) {
+  for (const auto& e : mesh.segments) {
+    ++xadj[e[0] + 1];
+    ++xadj[e[1] + 1];
+  }
+  for (std::size_t v = 0; v < mesh.points.size(); ++v) xadj[v + 1] += xadj[v];
+  std::vector<Index> fill(xadj.begin(), xadj.end() - 1);
+  for (std::size_t s = 0; s < mesh.segments.size(); ++s) {
+    adj[fill[mesh.segments[s][0]]++] = static_cast<Index>(s);
+    adj[fill[mesh.segments[s][1]]++] = static_cast<Index>(s);
+  }
+}
+
+Index Segments_at_points::walk(const Mesh_arrays& mesh, const std::vector<Index>& selection_index, Index v, Index s,
+                               std::vector<Index>& walked, std::vector<Index>* inside) const {
+  auto other = [&](Index t, Index u) { return mesh.segments[t][0] == u ? mesh.segments[t][1] : mesh.segments[t][0]; };
+  walked.assign(1, s);
+  Index w = other(s, v);
+  while (selection_index[w] < 0) {
+    if (xadj[w + 1] - xadj[w] != 2) throw std::logic_error("a point inserted in a constraint piece is off it");
+    if (inside) inside->push_back(w);
+    const Index s0 = adj[xadj[w]], s1 = adj[xadj[w] + 1];
+    s = s0 == s ? s1 : s0;
+    walked.push_back(s);
+    w = other(s, w);
+  }
+  return w;
+}
+
 namespace {
 
 // One round of fit_to_curves: what it did, and the tag of every output segment.
@@ -317,19 +347,8 @@ Fit_round fit_once(const Boundary_geometry& geometry, const std::vector<Constrai
     return (static_cast<std::uint64_t>(std::min(a, b)) << 32) ^ static_cast<std::uint64_t>(std::max(a, b));
   };
   for (const auto& piece : pieces) piece_of[key(piece.a, piece.b)] = &piece;
-  std::vector<Index> xadj(n + 1, 0), adj(2 * mesh.segments.size());
-  for (const auto& e : mesh.segments) {
-    ++xadj[e[0] + 1];
-    ++xadj[e[1] + 1];
-  }
-  for (std::size_t v = 0; v < n; ++v) xadj[v + 1] += xadj[v];
-  {
-    std::vector<Index> fill(xadj.begin(), xadj.end() - 1);
-    for (std::size_t s = 0; s < mesh.segments.size(); ++s) {
-      adj[fill[mesh.segments[s][0]]++] = static_cast<Index>(s);
-      adj[fill[mesh.segments[s][1]]++] = static_cast<Index>(s);
-    }
-  }
+  const Segments_at_points at(mesh);
+  const std::vector<Index>&xadj = at.xadj, &adj = at.adj;
   auto other = [&](Index s, Index v) { return mesh.segments[s][0] == v ? mesh.segments[s][1] : mesh.segments[s][0]; };
   // Points the step created: those of the selection that are new, and those the
   // quality pass inserted on segments (inside pieces, two segments each).
@@ -343,17 +362,8 @@ Fit_round fit_once(const Boundary_geometry& geometry, const std::vector<Constrai
     if (selection_index[v] < 0) continue;
     for (Index a = xadj[v]; a < xadj[v + 1]; ++a) {
       // follow the piece from v through inserted points to the next selected point
-      Index prev = static_cast<Index>(v), s = adj[a], w = other(s, prev);
-      std::vector<Index> inside, walked{s};
-      while (selection_index[w] < 0) {
-        if (xadj[w + 1] - xadj[w] != 2) throw std::logic_error("fit_to_curves: an inserted point off a piece");
-        inside.push_back(w);
-        const Index s0 = adj[xadj[w]], s1 = adj[xadj[w] + 1];
-        s = s0 == s ? s1 : s0;
-        walked.push_back(s);
-        prev = w;
-        w = other(s, prev);
-      }
+      std::vector<Index> inside, walked;
+      const Index w = at.walk(mesh, selection_index, static_cast<Index>(v), adj[a], walked, &inside);
       if (selection_index[w] < static_cast<Index>(selection_index[v])) continue;  // walked from the other end
       const auto found = piece_of.find(key(selection_index[v], selection_index[w]));
       if (found == piece_of.end()) throw std::logic_error("fit_to_curves: a segment on no constraint piece");

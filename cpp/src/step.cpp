@@ -248,37 +248,14 @@ std::vector<Index> segment_pieces(const Mesh_arrays& mesh, const std::vector<Con
     return (static_cast<std::uint64_t>(std::min(a, b)) << 32) ^ static_cast<std::uint64_t>(std::max(a, b));
   };
   for (std::size_t k = 0; k < pieces.size(); ++k) piece_of.emplace(key(pieces[k].a, pieces[k].b), static_cast<Index>(k));
-  // The segments at every point (CSR).
-  std::vector<Index> xadj(n + 1, 0), adj(2 * mesh.segments.size());
-  for (const auto& e : mesh.segments) {
-    ++xadj[e[0] + 1];
-    ++xadj[e[1] + 1];
-  }
-  for (std::size_t v = 0; v < n; ++v) xadj[v + 1] += xadj[v];
-  {
-    std::vector<Index> fill(xadj.begin(), xadj.end() - 1);
-    for (std::size_t s = 0; s < mesh.segments.size(); ++s) {
-      adj[fill[mesh.segments[s][0]]++] = static_cast<Index>(s);
-      adj[fill[mesh.segments[s][1]]++] = static_cast<Index>(s);
-    }
-  }
-  auto other = [&](Index s, Index v) { return mesh.segments[s][0] == v ? mesh.segments[s][1] : mesh.segments[s][0]; };
+  const Segments_at_points at(mesh);
   std::vector<Index> piece(mesh.segments.size(), -1);
   std::vector<Index> walked;
   for (std::size_t v = 0; v < n; ++v) {
     if (selection_index[v] < 0) continue;
-    for (Index a = xadj[v]; a < xadj[v + 1]; ++a) {
+    for (Index a = at.xadj[v]; a < at.xadj[v + 1]; ++a) {
       // Along the piece from v, through inserted points, to the next selected point.
-      Index prev = static_cast<Index>(v), s = adj[a], w = other(s, prev);
-      walked.assign(1, s);
-      while (selection_index[w] < 0) {
-        if (xadj[w + 1] - xadj[w] != 2) throw std::logic_error("segment_pieces: an inserted point off a piece");
-        const Index s0 = adj[xadj[w]], s1 = adj[xadj[w] + 1];
-        s = s0 == s ? s1 : s0;
-        walked.push_back(s);
-        prev = w;
-        w = other(s, prev);
-      }
+      const Index w = at.walk(mesh, selection_index, static_cast<Index>(v), at.adj[a], walked);
       if (selection_index[w] < selection_index[v]) continue;  // (walked from the other end)
       const auto found = piece_of.find(key(selection_index[v], selection_index[w]));
       if (found == piece_of.end()) throw std::logic_error("segment_pieces: a segment on no constraint piece");

@@ -39,6 +39,19 @@ struct Evolve_result;
 struct Constraint_piece;
 struct Quality_options;
 
+// The segments at every point of a mesh (the segments at v are adj[xadj[v]] ..
+// adj[xadj[v + 1] - 1]), for walks along constraint pieces.
+struct Segments_at_points {
+  std::vector<Index> xadj, adj;
+  explicit Segments_at_points(const Mesh_arrays& mesh);
+  // From point v along segment s, through the points with selection_index -1
+  // (inserted inside a piece: two segments each, else std::logic_error), to
+  // the next selected point, which is returned; `walked` gets the segments
+  // passed and `inside` (if given) the inserted points.
+  Index walk(const Mesh_arrays& mesh, const std::vector<Index>& selection_index, Index v, Index s,
+             std::vector<Index>& walked, std::vector<Index>* inside = nullptr) const;
+};
+
 // The step's input with the kinds of points on curved chains taken from the
 // geometry (corners only where it turns by more than corner_angle, at tag
 // changes and at required points), and a zero tag on every segment when it had
