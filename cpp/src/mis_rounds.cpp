@@ -1,5 +1,7 @@
 #include "evomesh/mis_rounds.hpp"
 
+#include "evomesh/detail/kept_sphere_tree.hpp"
+
 #include <algorithm>
 #include <cmath>
 #include <limits>
@@ -163,93 +165,57 @@ void check_spheres(const std::vector<Vec2>& centers, const std::vector<double>& 
 
 }  // namespace
 
-namespace {
-
-std::uint64_t cell_key(std::int64_t ix, std::int64_t iy) {
-  return (static_cast<std::uint64_t>(ix) << 32) ^ static_cast<std::uint64_t>(iy & 0xffffffff);
-}
-
-}  // namespace
-
 Mis_part::Mis_part(const std::vector<Vec2>& centers, const std::vector<double>& radii, const std::vector<Index>& order,
                    const std::vector<std::uint8_t>& owned)
-    : centers_(centers), radii_(radii), order_(order), owned_(owned), reported_(centers.size(), 0) {
+    : radii_(radii), owned_(owned), reported_(centers.size(), 0) {
   const std::size_t n = centers.size();
   if (radii.size() != n || order.size() != n || owned.size() != n) {
     throw Input_error("Mis_part: centers, radii, order and owned must have one entry per sphere");
   }
   ranks_of(order, "Mis_part");
   check_spheres(centers, radii, "Mis_part");
-  std::map<int, double> largest;  // octave -> its largest radius
-  for (double r : radii) {
-    auto& l = largest[std::ilogb(r)];
-    l = std::max(l, r);
-  }
-  std::map<int, std::uint32_t> index;
-  for (const auto& [octave, reach] : largest) {
-    index[octave] = static_cast<std::uint32_t>(grids_.size());
-    Grid g;
-    g.octave = octave;
-    g.reach = reach;
-    g.side = 2 * reach;
-    grids_.push_back(std::move(g));
-  }
-  grid_of_.resize(n);
-  for (std::size_t i = 0; i < n; ++i) {
-    grid_of_[i] = index[std::ilogb(radii[i])];
-    undecided_ += owned[i] != 0;
-  }
+  tree_ = std::make_unique<detail::Kept_sphere_tree>(centers, radii, std::vector<Index>(order), /*threads=*/1);
+  for (std::size_t i = 0; i < n; ++i) undecided_ += owned[i] != 0;
 }
 
-// The rule of a round for sphere s against the earlier spheres in the grids
-// (in or undecided ones: out ones are never put there): out if one of them
-// conflicts and is in, else undecided if one conflicts, else in.
-std::uint8_t Mis_part::decide(Index s, const std::vector<std::uint8_t>& state) const {
-  const Vec2& c = centers_[s];
-  const double r = radii_[s];
-  bool waits = false;
-  for (const Grid& g : grids_) {
-    if (g.cells.empty()) continue;
-    const double reach = r + g.reach;
-    const std::int64_t x0 = cell_of(c[0] - reach, g.side), x1 = cell_of(c[0] + reach, g.side);
-    const std::int64_t y0 = cell_of(c[1] - reach, g.side), y1 = cell_of(c[1] + reach, g.side);
-    const auto visit = [&](const std::vector<Index>& members) {
-      for (Index t : members) {
-        // (packing.cpp's leaf_conflicts, operation for operation: symmetric in s and t)
-        const double ex = centers_[t][0] - c[0], ey = centers_[t][1] - c[1], sum = r + radii_[t];
-        if (!(ex * ex + ey * ey < sum * sum)) continue;
-        if (state[t] == in) return true;
-        waits = true;
-      }
-      return false;
-    };
-    // (a larger sphere over a grid of small ones: when the range holds more
-    // cells than the grid has occupied, every occupied cell is visited instead)
-    const double range = (static_cast<double>(x1 - x0) + 1) * (static_cast<double>(y1 - y0) + 1);
-    if (range > static_cast<double>(g.cells.size())) {
-      for (const auto& cell : g.cells) {
-        if (visit(cell.second)) return out;
-      }
-      continue;
-    }
-    for (std::int64_t ix = x0; ix <= x1; ++ix) {
-      for (std::int64_t iy = y0; iy <= y1; ++iy) {
-        const auto it = g.cells.find(cell_key(ix, iy));
-        if (it != g.cells.end() && visit(it->second)) return out;
-      }
-    }
+Mis_part::Mis_part(Mis_part&&) noexcept = default;
+Mis_part& Mis_part::operator=(Mis_part&&) noexcept = default;
+Mis_part::~Mis_part() = default;
+
+// The rule of a round for the sphere at `position` against the earlier
+// spheres in the tree (in ones kept, undecided ones pending; out ones are
+// never put there): out if a kept one conflicts, else undecided if a pending
+// one does, else in.
+std::uint8_t Mis_part::decide(std::size_t position) const {
+  std::size_t hit = detail::Kept_sphere_tree::kNone;
+  detail::Kept_sphere_tree::Met met;
+  if (!tree_->conflicting_kept_or_pending(position, hit, met)) {
+    // (more pending conflicts than the query lists: undecided unless a kept one conflicts)
+    return tree_->conflicting_kept(position) != detail::Kept_sphere_tree::kNone ? out : unknown;
   }
-  return waits ? unknown : in;
+  if (hit != detail::Kept_sphere_tree::kNone) return out;
+  return met.size > 0 ? unknown : in;
 }
 
 std::vector<Index> Mis_part::sweep(std::vector<std::uint8_t>& state) {
-  if (state.size() != centers_.size()) throw Input_error("Mis_part::sweep: one state per sphere");
-  for (Grid& g : grids_) g.cells.clear();
+  const std::size_t n = radii_.size();
+  if (state.size() != n) throw Input_error("Mis_part::sweep: one state per sphere");
+  detail::Kept_sphere_tree& tree = *tree_;
+  tree.reset();
+  // Pending spheres are the undecided ones: the largest of their radii bounds
+  // the pruning of the pending search (Kept_sphere_tree::set_pending_radius).
+  double pending = -1;
+  for (std::size_t i = 0; i < n; ++i) {
+    if (state[i] == unknown) pending = std::max(pending, radii_[i]);
+  }
+  tree.set_pending_radius(pending);
   std::vector<Index> decided;
   undecided_ = 0;
-  for (const Index s : order_) {
+  for (std::size_t k = 0; k < tree.n_visits(); ++k) {
+    const std::size_t position = tree.visit(k);
+    const auto s = static_cast<Index>(tree.sphere_at(position));
     if (owned_[s]) {
-      if (state[s] == unknown) state[s] = decide(s, state);
+      if (state[s] == unknown) state[s] = decide(position);
       if (state[s] == unknown) {
         ++undecided_;
       } else if (!reported_[s]) {
@@ -257,10 +223,8 @@ std::vector<Index> Mis_part::sweep(std::vector<std::uint8_t>& state) {
         decided.push_back(s);
       }
     }
-    if (state[s] != out) {
-      Grid& g = grids_[grid_of_[s]];
-      g.cells[cell_key(cell_of(centers_[s][0], g.side), cell_of(centers_[s][1], g.side))].push_back(s);
-    }
+    if (state[s] == in) tree.keep(position);
+    else if (state[s] == unknown) tree.mark_pending(position);
   }
   return decided;
 }

@@ -10,12 +10,16 @@
 
 #include <cstddef>
 #include <cstdint>
-#include <unordered_map>
+#include <memory>
 #include <vector>
 
 #include "evomesh/types.hpp"
 
 namespace evomesh {
+
+namespace detail {
+class Kept_sphere_tree;
+}
 
 struct Mis_rounds {
   std::vector<std::uint8_t> kept;       // equal to lexical_first_mis(centers, radii, order, n_forced)
@@ -64,6 +68,9 @@ class Mis_part {
   // lexical_first_mis_in_rounds for bad arrays.
   Mis_part(const std::vector<Vec2>& centers, const std::vector<double>& radii, const std::vector<Index>& order,
            const std::vector<std::uint8_t>& owned);
+  Mis_part(Mis_part&&) noexcept;
+  Mis_part& operator=(Mis_part&&) noexcept;
+  ~Mis_part();
   // One round's sweep over the undecided own spheres; `state` (one per sphere:
   // unknown, in or out; forced ones in) is updated. Returns the own spheres
   // decided since the last sweep (forced ones in the first), in the order.
@@ -71,24 +78,16 @@ class Mis_part {
   std::size_t undecided() const { return undecided_; }
 
  private:
-  // The sweep walks the global order and keeps, in one grid per octave of
-  // radius, the spheres it has passed that are in or undecided (no conflict
-  // lists: a candidate overlaps dozens of others, and the kept ones form a
-  // packing); a sphere is decided against the earlier ones in the grids.
-  struct Grid {
-    int octave = 0;
-    double side = 0;   // twice the octave's largest radius
-    double reach = 0;  // the octave's largest radius
-    std::unordered_map<std::uint64_t, std::vector<Index>> cells;
-  };
-  std::uint8_t decide(Index s, const std::vector<std::uint8_t>& state) const;
-  std::vector<Vec2> centers_;
+  // The sweep walks the global order and keeps, in the kd-tree of the
+  // serial packing (detail/kept_sphere_tree.hpp), the spheres it has passed
+  // that are in ("kept") or undecided ("pending"); a sphere is decided against
+  // those, the earlier ones (no conflict lists: a candidate overlaps dozens of
+  // others, and the kept ones form a packing).
+  std::uint8_t decide(std::size_t position) const;
+  std::unique_ptr<detail::Kept_sphere_tree> tree_;
   std::vector<double> radii_;
-  std::vector<Index> order_;
   std::vector<std::uint8_t> owned_;
   std::vector<std::uint8_t> reported_;
-  std::vector<std::uint32_t> grid_of_;
-  std::vector<Grid> grids_;
   std::size_t undecided_ = 0;
 };
 
