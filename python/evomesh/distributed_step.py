@@ -281,7 +281,17 @@ def _pack(dmesh: DistributedMesh, delta: Any, options: Any, stats: dict[str, Any
 
     def radii_of(xy: np.ndarray, parent: np.ndarray, on_segment: bool) -> np.ndarray:
         """The candidates' sphere radii (collective unless cheap: f from a graph exact at them)."""
-        graph = None if cheap else spacing.graph_for(xy)
+        graph = None
+        if not cheap:
+            # The sites that can attain f at x lie within f(x) of x, and f(x) <=
+            # f(v) + |x - v| at every vertex v of x's parent (f is 1-Lipschitz, and
+            # exact at every point of the part): a bound without asking a graph for
+            # f at every candidate (a larger reach only fetches a superset).
+            corners = np.asarray(part["segments"] if on_segment else part["triangles"])[parent]
+            gap = part["points"][corners] - xy[:, None, :]
+            bound = (f_part[corners] + np.hypot(gap[..., 0], gap[..., 1])).min(axis=1, initial=np.inf)
+            graph = spacing._graph_at(np.ascontiguousarray(xy, dtype=np.float64), "sites_received",
+                                      reach=bound * (1 + 16 * np.finfo(np.float64).eps))
         if not len(xy) or (graph is None and not cheap):
             return np.zeros(0)
         return _core.part_candidate_radii(part, f_part, graph, options, on_segment, xy, parent, demoted)
