@@ -1,20 +1,24 @@
 """A time loop on MPI ranks that never gathers the mesh (issue 29).
 
 A front (a circle) moves across a plate with two holes; every step refines
-near it and coarsens elsewhere (FRFC, the paper's options), on every rank at
-once, and carries a field along with the conservative transfer. Rank 0 makes
-the first mesh and scatters it; after that each rank only holds its part.
+near it and coarsens elsewhere (FRFC, the paper's options; --quality: the
+recommended ones, with the quality pass), on every rank at once, and carries a
+field along with the conservative transfer. Rank 0 makes the first mesh and scatters it; after that
+each rank only holds its part.
 
     mpiexec -n 4 python examples/distributed_time_loop.py --points 20000 --steps 6
+    mpiexec -n 4 python examples/distributed_time_loop.py --quality   # smallest angle 30 degrees
 
 Each step prints the global number of points, the balance (largest owned
 count over the mean), the smallest angle, and the integral of the field
-before and after the transfer (equal up to rounding). The distributed step is
-the paper's FRFC for now: without the quality pass, angles are the packing's
-(small ones where the spacing changes fast, as in the serial step with
-quality=False).
+before and after the transfer (equal up to rounding). Without the quality
+pass the angles are the packing's (small ones where the spacing changes fast,
+as in the serial step with quality=False); with --quality the pass runs on
+rank 0, which then holds the kept points and their triangulation for that
+stage (docs/distributed-step.md 3.11).
 The meshes equal the serial loop's, step by step, on any number of ranks
-(tests/test_distributed_step.py checks that on 1-7 ranks).
+(tests/test_distributed_step.py and tests/test_distributed_quality.py check
+that on 1-7 ranks).
 """
 
 from __future__ import annotations
@@ -64,6 +68,8 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--points", type=int, default=20000)
     parser.add_argument("--steps", type=int, default=6)
+    parser.add_argument("--quality", action="store_true",
+                        help="the recommended options, with the quality pass (on rank 0)")
     args = parser.parse_args()
     comm = MPI.COMM_WORLD
     area = 6.0 - 2 * 0.6
@@ -71,7 +77,7 @@ def main() -> None:
     mesh = polygon_mesh(PLATE, h) if comm.rank == 0 else None
     dmesh = evomesh.DistributedMesh.scatter(mesh, comm)  # the only time one rank holds the whole mesh
     del mesh
-    options = evomesh.FrfcOptions.paper()
+    options = evomesh.FrfcOptions.recommended() if args.quality else evomesh.FrfcOptions.paper()
     u = np.exp(-((dmesh.owned_points[:, 0] - 1.5) ** 2 + (dmesh.owned_points[:, 1] - 1.0) ** 2))
     if comm.rank == 0:
         print(f"ranks {comm.size}")
