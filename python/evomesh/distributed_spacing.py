@@ -158,7 +158,7 @@ class DistributedSpacing:
     """
 
     def __init__(self, dmesh: DistributedMesh, delta: Any, *, within_domain: bool = True,
-                 stats: dict[str, Any] | None = None, geometry: Any = None):
+                 stats: dict[str, Any] | None = None, geometry: Any = None, prefetch: bool = False):
         if not isinstance(dmesh, DistributedMesh):
             raise TypeError(f"dmesh must be an evomesh.DistributedMesh, got {type(dmesh).__name__}")
         comm = dmesh.comm
@@ -204,7 +204,23 @@ class DistributedSpacing:
         ask = d > 1
         ask[grew] = True
         which = np.flatnonzero(ask)
-        value = self._evaluate(dmesh.owned_points[which], "sites_received")
+        if prefetch and comm.allreduce(n_owned > 0, op=MPI.LAND):
+            # One fetch for f at the asking points and for a step's candidates
+            # later: a candidate x in an owned triangle or on an owned segment
+            # with an owned vertex p needs the sites within f(x) <= f(p) + |x - p|
+            # of x, so within f(p) + 2 e(p) of p (e(p): p's longest edge), and
+            # f(p) <= w(p), or f over the held sites (both upper bounds). The
+            # later queries then rarely bring a site the graph lacks, and the
+            # graph is built twice rather than once per query batch.
+            owned_xy = np.ascontiguousarray(dmesh.owned_points, dtype=np.float64)
+            upper = weight.copy()
+            if len(which):
+                upper[which] = np.minimum(upper[which], self._held_graph().evaluate(owned_xy[which])[0])
+            reach = (upper + 2 * _longest_edges(dmesh)) * (1 + 16 * np.finfo(np.float64).eps)
+            graph = self._graph_at(owned_xy, "sites_received", reach=reach)
+            value = np.asarray(graph.evaluate(owned_xy[which])[0]) if len(which) else np.zeros(0)
+        else:
+            value = self._evaluate(dmesh.owned_points[which], "sites_received")
         f[which] = np.minimum(value, weight[which])
         self.f = f
         for a in (self.nn, self.weight, self.f):
@@ -397,11 +413,7 @@ class DistributedSpacing:
         n_owned = dmesh.n_owned
         held_xy = np.ascontiguousarray(dmesh.points, dtype=np.float64)
         x = np.ascontiguousarray(x, dtype=np.float64).reshape(-1, 2)
-        if self._graph_cache is None and len(held_xy):
-            order = np.argsort(dmesh.global_ids, kind="stable")
-            self._cache_gids, self._cache_xy = dmesh.global_ids[order], held_xy[order]
-            self._cache_weight = np.asarray(self._held_weight)[order]
-            self._graph_cache = self._graph(self._cache_gids, self._cache_xy, self._cache_weight)
+        self._held_graph()
         # The bound: the caller's reach, or f over the sites of the graph so far (true sites: an upper bound).
         if reach is not None:
             bound = reach
@@ -422,6 +434,17 @@ class DistributedSpacing:
             self._cache_gids = gids[order]
             self._cache_xy = np.concatenate([self._cache_xy, np.column_stack([got["x"][take], got["y"][take]])])[order]
             self._cache_weight = np.concatenate([self._cache_weight, got["w"][take]])[order]
+            self._graph_cache = self._graph(self._cache_gids, self._cache_xy, self._cache_weight)
+        return self._graph_cache
+
+    def _held_graph(self) -> Any:
+        """The graph cache, built over the held sites on first use (None: no site held)."""
+        dmesh = self._dmesh
+        if self._graph_cache is None and len(dmesh.points):
+            order = np.argsort(dmesh.global_ids, kind="stable")
+            self._cache_gids = dmesh.global_ids[order]
+            self._cache_xy = np.ascontiguousarray(dmesh.points, dtype=np.float64)[order]
+            self._cache_weight = np.asarray(self._held_weight)[order]
             self._graph_cache = self._graph(self._cache_gids, self._cache_xy, self._cache_weight)
         return self._graph_cache
 
@@ -453,6 +476,18 @@ class DistributedSpacing:
         q = _collective(comm, check)
         return self._evaluate(q, "sites_received")
 
+
+
+def _longest_edges(dmesh: DistributedMesh) -> np.ndarray:
+    """Per owned point, its longest edge over the held triangles (0 without one)."""
+    triangles = np.concatenate([dmesh.triangles, dmesh.halo_triangles]).reshape(-1, 3)
+    longest = np.zeros(len(dmesh.points))
+    for k in range(3):
+        a, b = triangles[:, k], triangles[:, (k + 1) % 3]
+        length = np.hypot(*(dmesh.points[a] - dmesh.points[b]).T)
+        np.maximum.at(longest, a, length)
+        np.maximum.at(longest, b, length)
+    return longest[: dmesh.n_owned]
 
 
 def _star_any(dmesh: DistributedMesh, flag: np.ndarray, include_self: bool) -> np.ndarray:

@@ -259,7 +259,8 @@ def _pack(dmesh: DistributedMesh, delta: Any, options: Any, stats: dict[str, Any
     _collective(comm, check)
     projections = 1 if options.quality else 2  # (_onto_curves)
     step1: dict = {}
-    spacing = DistributedSpacing(dmesh, delta, within_domain=options.within_domain, stats=step1, geometry=geometry)
+    spacing = DistributedSpacing(dmesh, delta, within_domain=options.within_domain, stats=step1, geometry=geometry,
+                                 prefetch=True)
     n_owned = dmesh.n_owned
     owned_delta = _collective(comm, spacing._check_delta, delta)
     held_f = dmesh.exchange_halo(spacing.f)
