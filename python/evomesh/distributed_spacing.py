@@ -135,6 +135,12 @@ class DistributedSpacing:
         a curved tag the local feature size is also capped where the chain
         turns (as serial). The kinds of `dmesh` must already be the geometry's
         (the step sets them: distributed_step.with_curve_kinds).
+    prefetch : bool, default False
+        Also fetch, with the sites for f at the points, those that f at any
+        point of an owned triangle or segment can need (within f(p) + 2 e(p)
+        of each owned point p, e(p) its longest edge): later queries there
+        (a step's candidates) then rarely rebuild the graph. The answers are
+        the same either way.
 
     Attributes
     ----------
