@@ -264,6 +264,19 @@ std::vector<std::uint8_t> settled_points(const Mesh_arrays& mesh, const std::vec
   return settled;
 }
 
+std::vector<std::uint8_t> unsampled_triangles(const Mesh_arrays& mesh, const std::vector<double>& delta,
+                                              const std::vector<std::uint8_t>& settled, const Frfc_options& options) {
+  std::vector<std::uint8_t> skip;
+  if (!options.skip_coarse && !options.skip_settled) return skip;
+  skip.resize(mesh.triangles.size());
+  for (std::size_t t = 0; t < mesh.triangles.size(); ++t) {
+    const auto& tri = mesh.triangles[t];
+    skip[t] = (options.skip_coarse && delta[tri[0]] > 1 && delta[tri[1]] > 1 && delta[tri[2]] > 1) ||
+              (options.skip_settled && settled[tri[0]] && settled[tri[1]] && settled[tri[2]]);
+  }
+  return skip;
+}
+
 Candidates segment_candidates(const Mesh_arrays& mesh, const std::vector<double>& delta, const std::vector<double>& f,
                               const std::vector<Segment_chain>& chains, const Frfc_options& options,
                               const Spacing_queries* queries, const std::vector<std::uint8_t>* settled_given) {
@@ -303,45 +316,34 @@ Candidates interior_candidates(const Mesh_arrays& mesh, const Triangle_fans& fan
                                const std::vector<std::uint8_t>* quiet, const Spacing_queries* queries,
                                const std::vector<std::uint8_t>* settled_given,
                                const std::vector<std::uint8_t>* ring_from, std::vector<Index>* ring_point) {
-  std::vector<std::uint8_t> skip;
-  if (options.skip_coarse) {
-    skip.resize(mesh.triangles.size());
-    for (std::size_t t = 0; t < mesh.triangles.size(); ++t) {
-      const auto& tri = mesh.triangles[t];
-      skip[t] = delta[tri[0]] > 1 && delta[tri[1]] > 1 && delta[tri[2]] > 1;
-    }
-  }
-  if (options.skip_settled) {
-    // Why a step is idempotent on its own output (issue 27). Let M be the
-    // output of a step, and step again with delta = 1 (or with a size= request
-    // that M meets: delta_from_size gives exactly 1 there). At every point p,
-    // f(p) = nn_M(p) (Lemma 3.1), and nn_M(p) is an edge of p (the nearest
-    // neighbour is a Delaunay neighbour; M is a constrained Delaunay
-    // triangulation with non-encroached segments), so every point is settled
-    // (settled_points) and:
-    // 1. no candidate: every triangle and segment is skipped here, and ring
-    //    candidates exist only around points with delta < 1;
-    // 2. every point is kept: spheres B(p, s f(p) / 2) with s <= 1 are pairwise
-    //    disjoint (s nn(p) / 2 + s nn(q) / 2 <= |p - q|), nothing else is
-    //    packed, and none is demoted (nn = f is below demote_ratio f);
-    // 3. no repair: the spacing repair serves points with delta < 1, and the
-    //    gap repair's distance at a kept point with delta = 1 is that of its
-    //    nearest other output point, nn(p) <= gap_repair_ratio nn(p);
-    // 4. the same points with the same constraint pieces (the segments between
-    //    consecutive kept chain points: M's segments) have the same constrained
-    //    Delaunay triangulation, M up to cocircular ties, in which the quality
-    //    pass finds no crowded segment and, when M met min_angle, no triangle
-    //    to split.
-    // So the step returns M's points, every one kept. The paper's sampling
-    // (skip_settled = false) offers samples wherever a sphere fits between
-    // the old ones: in M's larger triangles, a few per thousand points a step.
-    const auto settled = settled_given != nullptr ? *settled_given : settled_points(mesh, delta, f);
-    skip.resize(mesh.triangles.size(), 0);
-    for (std::size_t t = 0; t < mesh.triangles.size(); ++t) {
-      const auto& tri = mesh.triangles[t];
-      skip[t] = skip[t] || (settled[tri[0]] && settled[tri[1]] && settled[tri[2]]);
-    }
-  }
+  // options.skip_settled (unsampled_triangles) is why a step is idempotent on
+  // its own output (issue 27). Let M be the
+  // output of a step, and step again with delta = 1 (or with a size= request
+  // that M meets: delta_from_size gives exactly 1 there). At every point p,
+  // f(p) = nn_M(p) (Lemma 3.1), and nn_M(p) is an edge of p (the nearest
+  // neighbour is a Delaunay neighbour; M is a constrained Delaunay
+  // triangulation with non-encroached segments), so every point is settled
+  // (settled_points) and:
+  // 1. no candidate: every triangle and segment is skipped here, and ring
+  //    candidates exist only around points with delta < 1;
+  // 2. every point is kept: spheres B(p, s f(p) / 2) with s <= 1 are pairwise
+  //    disjoint (s nn(p) / 2 + s nn(q) / 2 <= |p - q|), nothing else is
+  //    packed, and none is demoted (nn = f is below demote_ratio f);
+  // 3. no repair: the spacing repair serves points with delta < 1, and the
+  //    gap repair's distance at a kept point with delta = 1 is that of its
+  //    nearest other output point, nn(p) <= gap_repair_ratio nn(p);
+  // 4. the same points with the same constraint pieces (the segments between
+  //    consecutive kept chain points: M's segments) have the same constrained
+  //    Delaunay triangulation, M up to cocircular ties, in which the quality
+  //    pass finds no crowded segment and, when M met min_angle, no triangle
+  //    to split.
+  // So the step returns M's points, every one kept. The paper's sampling
+  // (skip_settled = false) offers samples wherever a sphere fits between
+  // the old ones: in M's larger triangles, a few per thousand points a step.
+  std::vector<std::uint8_t> settled;
+  if (options.skip_settled && settled_given == nullptr) settled = settled_points(mesh, delta, f);
+  std::vector<std::uint8_t> skip =
+      unsampled_triangles(mesh, delta, settled_given != nullptr ? *settled_given : settled, options);
   if (quiet != nullptr) {
     if (skip.empty()) skip = *quiet;
     else for (std::size_t t = 0; t < skip.size(); ++t) skip[t] = skip[t] || (*quiet)[t];

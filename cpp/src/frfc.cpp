@@ -1,6 +1,7 @@
 #include "evomesh/frfc.hpp"
 
 #include <algorithm>
+#include <chrono>
 #include <memory>
 #include <optional>
 #include <string>
@@ -232,7 +233,7 @@ class Whole_mesh final : public Step_scope {
   // (alive with the Apollonius graph during the sampling, the triangulation set the step's peak memory)
   bool starts_triangulation_early() const override { return false; }
   std::vector<std::uint8_t> quiet_triangles(const Mesh_arrays&, const Packing&, const std::vector<std::uint8_t>&,
-                                            Stage_timer&) override {
+                                            const std::vector<std::uint8_t>&, Stage_timer&) override {
     return {};
   }
   void sampled(const Mesh_arrays&, const std::vector<std::uint8_t>&) override {}
@@ -296,7 +297,12 @@ Evolve_result frfc_over_scope(const Mesh_arrays& input, const Mesh_arrays& mesh,
   check_sample_budget(
       estimate_sample_count(mesh, f, options.cell_factor, options.max_samples, options.adaptive_cells, queries),
       options.max_samples, "sampling");
-  Candidates on_segments = segment_candidates(mesh, delta, f, chains, options, queries);
+  // Points whose request is the spacing they have (candidates.hpp): no grid
+  // samples on a segment or in a triangle with every vertex settled.
+  const std::vector<std::uint8_t> settled =
+      options.skip_settled ? settled_points(mesh, delta, f) : std::vector<std::uint8_t>();
+  const std::vector<std::uint8_t>* settled_flags = options.skip_settled ? &settled : nullptr;
+  Candidates on_segments = segment_candidates(mesh, delta, f, chains, options, queries, settled_flags);
   const std::size_t n_seg = on_segments.size();
   timer.lap("sampling");
   candidate_radii(mesh, scope.segment_radii(mesh, f, on_segments, timer), f, demoted, options, /*on_segment=*/true,
@@ -319,9 +325,10 @@ Evolve_result frfc_over_scope(const Mesh_arrays& input, const Mesh_arrays& mesh,
       cover = cover_discs(mesh, f, packing.radius, packing.kept, packing.blocker, options.radius_scale,
                           options.radius == Radius_rule::interpolated);
     }
-    const std::vector<std::uint8_t> quiet = scope.quiet_triangles(mesh, packing, demoted, timer);
+    const std::vector<std::uint8_t> quiet =
+        scope.quiet_triangles(mesh, packing, demoted, unsampled_triangles(mesh, delta, settled, options), timer);
     inside = interior_candidates(mesh, *fans, delta, f, demoted, cover, options, n_drawn,
-                                 quiet.empty() ? nullptr : &quiet, queries);
+                                 quiet.empty() ? nullptr : &quiet, queries, settled_flags);
     scope.sampled(mesh, quiet);
   }
   release_free_memory(context);  // the sampling threads' blocks
@@ -383,7 +390,9 @@ Evolve_result frfc_over_scope(const Mesh_arrays& input, const Mesh_arrays& mesh,
   std::optional<Old_mesh_start> old_mesh;
   if (fans) old_mesh.emplace(input, /*threads=*/0, std::move(fans));
   else old_mesh.emplace(input, /*threads=*/0);
+  const auto waited = std::chrono::steady_clock::now();
   early->wait();
+  const double wait_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - waited).count();
   release_free_memory(context);
   const bool early_started = options.quality && !mesh.geometry;
   triangulate_selection(std::move(selection), pieces, options.quality ? &quality : nullptr, result,
@@ -392,6 +401,10 @@ Evolve_result frfc_over_scope(const Mesh_arrays& input, const Mesh_arrays& mesh,
   timer.lap(options.quality ? "quality" : "cdt");
   finish_step(input, result, timer, &*old_mesh, scope.reusable_nn(spacing));
   scope.add_counts(result.stats);
+  // (not "seconds_" stages: the batches run beside the others; the quality
+  // stage includes the wait for them)
+  result.stats.emplace_back("early_triangulation_insert_seconds", early->insert_seconds);
+  result.stats.emplace_back("early_triangulation_wait_seconds", wait_seconds);
   add_step_counts(result, {{"n_input_points", n},
                            {"n_segment_samples", n_seg},
                            {"n_interior_samples", n_interior},

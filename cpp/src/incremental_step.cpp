@@ -194,10 +194,14 @@ struct Mark_sites {
 // r_v, R the circumradius (below).
 // Every bound carries the slack kSlack and the
 // rounding of the coordinates, far above the rounding of the packing's tests.
+// Triangles in `unsampled` (unsampled_triangles: every vertex settled, say)
+// draw no grid samples at all: quiet without the test. On a step's own output
+// that is most triangles outside the change.
 std::vector<std::uint8_t> quiet_triangles(const Mesh_arrays& mesh, const Point_grid& grid,
                                           const std::vector<double>& weight, const std::vector<double>& radius,
                                           const std::vector<std::uint8_t>& kept,
-                                          const std::vector<std::uint8_t>& demoted, double radius_scale,
+                                          const std::vector<std::uint8_t>& demoted,
+                                          const std::vector<std::uint8_t>& unsampled, double radius_scale,
                                           double magnitude, int threads) {
   const std::size_t m = mesh.triangles.size();
   const std::size_t n = mesh.points.size();
@@ -218,6 +222,10 @@ std::vector<std::uint8_t> quiet_triangles(const Mesh_arrays& mesh, const Point_g
   constexpr std::size_t kBlock = 1 << 14;
   parallel_for((m + kBlock - 1) / kBlock, threads, [&](std::size_t b) {
     for (std::size_t t = b * kBlock; t < std::min(m, (b + 1) * kBlock); ++t) {
+      if (!unsampled.empty() && unsampled[t]) {  // no sample to reject: quiet as it is
+        quiet[t] = 1;
+        continue;
+      }
       const Triangle& tri = mesh.triangles[t];
       const Vertex &va = V[tri[0]], &vb = V[tri[1]], &vc = V[tri[2]];
       const double r_min = std::min({va.radius, vb.radius, vc.radius});
@@ -590,8 +598,9 @@ class Changed_region final : public Step_scope {
   bool starts_triangulation_early() const override { return true; }
 
   std::vector<std::uint8_t> quiet_triangles(const Mesh_arrays& mesh, const Packing& packing,
-                                            const std::vector<std::uint8_t>& demoted, Stage_timer& timer) override {
-    auto quiet = evomesh::quiet_triangles(mesh, *grid_, weight_, packing.radius, packing.kept, demoted,
+                                            const std::vector<std::uint8_t>& demoted,
+                                            const std::vector<std::uint8_t>& unsampled, Stage_timer& timer) override {
+    auto quiet = evomesh::quiet_triangles(mesh, *grid_, weight_, packing.radius, packing.kept, demoted, unsampled,
                                           options_.radius_scale, magnitude_, /*threads=*/0);
     timer.lap("incremental_quiet");
     return quiet;

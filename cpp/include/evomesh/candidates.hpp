@@ -64,6 +64,13 @@ int ring_candidates_of(const Mesh_arrays& mesh, const Triangle_fans& fans, const
 std::vector<std::uint8_t> settled_points(const Mesh_arrays& mesh, const std::vector<double>& delta,
                                          const std::vector<double>& f);
 
+// Triangles that draw no grid samples whatever the packing does: with
+// options.skip_coarse those whose three vertices coarsen (delta > 1), with
+// options.skip_settled those whose three vertices are settled (`settled`:
+// settled_points, or a rank's flags); empty when neither option is on.
+std::vector<std::uint8_t> unsampled_triangles(const Mesh_arrays& mesh, const std::vector<double>& delta,
+                                              const std::vector<std::uint8_t>& settled, const Frfc_options& options);
+
 // Candidates on segments: grid samples, then (options.ring_samples) one ring
 // candidate each way from every R-point, merged in so that each segment's list
 // stays sorted along it, then snapped to straight chains. Radii not yet set.

@@ -45,8 +45,8 @@ bool incremental_applies(const Mesh_arrays& mesh, const std::vector<double>& del
 // same Input_error with the same message (the same estimate).
 // Adds the stats "incremental_step" (1; the full step's is 0),
 // "incremental_region_points" (points of triangles sampled or of spheres
-// packed), "incremental_quiet_triangles" and "incremental_sites" (sites of the
-// Apollonius graphs).
+// packed), "incremental_quiet_triangles" (triangles not sampled: settled or
+// certified quiet) and "incremental_sites" (sites of the Apollonius graphs).
 Evolve_result incremental_frfc(const Mesh_arrays& mesh, const std::vector<double>& delta,
                                const Frfc_options& options, const Step_context& context);
 inline Evolve_result incremental_frfc(const Mesh_arrays& mesh, const std::vector<double>& delta,

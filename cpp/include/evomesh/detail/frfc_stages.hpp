@@ -2,6 +2,7 @@
 // shares with the full one. Internal: include from .cpp files only.
 #pragma once
 
+#include <chrono>
 #include <cstdint>
 #include <vector>
 
@@ -57,6 +58,10 @@ struct Early_start {
   Background work, late_work, rest_work;
   bool started = false;
   bool on_thread = false;
+  // Seconds the three batches took (on the second thread; written by the
+  // batches, read after wait()): the part of the step that follows the
+  // triangulation's insertion history (docs/distributed-step.md 2.5).
+  double insert_seconds = 0;
   Early_start(const Early_start&) = delete;  // the background work holds `this`
   Early_start& operator=(const Early_start&) = delete;
   Early_start(const Packing& packing, const Frfc_options& options, bool curved) {
@@ -67,7 +72,7 @@ struct Early_start {
     }
     started = true;
     on_thread = resolve_threads(0) > 1;  // (under the outline's Thread_limit)
-    work.start([this]() { triangulation.insert_first(points); }, on_thread);
+    work.start([this]() { timed([&] { triangulation.insert_first(points); }); }, on_thread);
   }
   // `n_first_range`: input points and segment candidates (n + n_seg), whose
   // kept ones after the first pass (the deferred input points) follow the
@@ -83,7 +88,7 @@ struct Early_start {
     late_work.start(
         [this]() {
           work.wait();  // the first batch (rethrows its error here, then from late_work)
-          triangulation.insert_more(late_points);
+          timed([&] { triangulation.insert_more(late_points); });
         },
         on_thread);
   }
@@ -102,7 +107,7 @@ struct Early_start {
     rest_work.start(
         [this]() {
           late_work.wait();
-          triangulation.insert_more(rest_points);
+          timed([&] { triangulation.insert_more(rest_points); });
         },
         on_thread);
   }
@@ -114,6 +119,14 @@ struct Early_start {
     points = std::vector<Vec2>();
     late_points = std::vector<Vec2>();
     rest_points = std::vector<Vec2>();
+  }
+
+ private:
+  template <class Insert>
+  void timed(Insert insert) {
+    const auto begin = std::chrono::steady_clock::now();
+    insert();
+    insert_seconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - begin).count();
   }
 };
 
