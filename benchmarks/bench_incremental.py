@@ -25,7 +25,16 @@ For every fraction, ``--repeats`` alternating runs of
   the incremental run's ``quality`` + ``parent_map`` seconds + evolve's time
   outside the core. The triangulation itself runs on the second thread beside
   the packing (in both paths), so its time is given apart: one plain
-  ``constrained_delaunay`` of the output,
+  ``constrained_delaunay`` of the output;
+* "history-bound": the full step's own seconds for the work that follows the
+  triangulation's insertion history with the default (serial) quality pass:
+  the three batches of its early triangulation (every selected point;
+  ``early_triangulation_insert_seconds``) and the pass's insertions
+  (constraint pieces and off-centres; ``quality_insert_seconds``). The serial
+  pass computes each off-centre in the face's stored rotation, which follows
+  that history, so a step with the same bits must do this work as the full step
+  does it, one insertion after another: it bounds any such step's wall time
+  from below (docs/distributed-step.md 2.5),
 
 and the medians, with the ratios taken run by run.
 
@@ -145,7 +154,15 @@ def run(n: int, repeats: int, evidence: bool, fractions: tuple[float, ...] = FRA
             cdt = time.perf_counter() - t
             # the whole-mesh stages of the incremental run (the same code as the full step's)
             floor = s.get("seconds_quality", 0.0) + s.get("seconds_parent_map", 0.0) + (wall_fast - s["seconds_total"])
+            # What follows the triangulation's insertion history with the default (serial)
+            # quality pass, and so must run as the full step runs it for the same bits:
+            # the early triangulation's batches (all points) and the pass's insertions.
+            # The full step's own seconds for it (sequential work: a lower bound on any
+            # bit-identical step's wall time).
+            history = full.stats.get("early_triangulation_insert_seconds", 0.0) + full.stats.get(
+                "quality_insert_seconds", 0.0)
             samples.append({"full": wall_full, "incremental": wall_fast, "ratio": wall_fast / wall_full,
+                            "history": history, "history_ratio": history / wall_full,
                             "cpu_ratio": cpu_fast / cpu_full,
                             "floor": floor, "floor_ratio": floor / wall_full, "cdt": cdt, "cdt_ratio": cdt / wall_full})
             if r == 0:
@@ -160,7 +177,8 @@ def run(n: int, repeats: int, evidence: bool, fractions: tuple[float, ...] = FRA
         print(f"{mesh.n_points:>9} {100 * fraction:>5.0f}% band {row['band_points']:>8} changed {100 * changed:6.2f}% "
               f"region {100 * region:6.2f}% | full {med['full']:7.2f} s  incremental {med['incremental']:7.2f} s  "
               f"ratio {med['ratio']:.3f} (CPU {med['cpu_ratio']:.3f}) | floor {med['floor']:6.2f} s ({med['floor_ratio']:.2f}), cdt "
-              f"{med['cdt']:5.2f} s ({med['cdt_ratio']:.2f}) | same bits, "
+              f"{med['cdt']:5.2f} s ({med['cdt_ratio']:.2f}), history-bound {med['history']:5.2f} s "
+              f"({med['history_ratio']:.3f}) | same bits, "
               f"{'incremental' if taken else 'full (declined)'}", flush=True)
         print("   incremental stages:", {k: round(v, 3) for k, v in stages.items()}, flush=True)
         # (the first run's stages over the median full step: where the incremental step's time goes)
@@ -171,15 +189,16 @@ def run(n: int, repeats: int, evidence: bool, fractions: tuple[float, ...] = FRA
 def markdown(rows: list[dict]) -> str:
     lines = [
         "| points | band | points changed | region (sampled/packed) | full step (s) | incremental (s) "
-        "| **incremental / full** | path | whole-mesh stages (s) | / full | CDT of the output (s) | / full |",
-        "|---:|---:|---:|---:|---:|---:|---:|---|---:|---:|---:|---:|",
+        "| **incremental / full** | path | whole-mesh stages (s) | / full | CDT of the output (s) | / full "
+        "| history-bound (s) | / full |",
+        "|---:|---:|---:|---:|---:|---:|---:|---|---:|---:|---:|---:|---:|---:|",
     ]
     for r in rows:
         lines.append(
             f"| {r['n']:,} | {100 * r['fraction']:.0f} % | {100 * r['points_changed']:.2f} % "
             f"| {100 * r['region']:.1f} % | {r['full']:.2f} | {r['incremental']:.2f} | **{r['ratio']:.3f}** "
             f"| {'incremental' if r['taken'] else 'full (declined)'} | {r['floor']:.2f} | {r['floor_ratio']:.2f} "
-            f"| {r['cdt']:.2f} | {r['cdt_ratio']:.2f} |"
+            f"| {r['cdt']:.2f} | {r['cdt_ratio']:.2f} | {r['history']:.2f} | {r['history_ratio']:.3f} |"
         )
     return "\n".join(lines)
 

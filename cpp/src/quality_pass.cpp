@@ -1,6 +1,7 @@
 #include "evomesh/quality_pass.hpp"
 
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <limits>
 #include <stdexcept>
@@ -136,12 +137,18 @@ Refined_mesh quality_pass(Cdt& cdt, const std::vector<Vertex_handle>& handles, c
                           const std::vector<Vec2>& points, const std::vector<Point_kind>& kind,
                           const std::vector<Constraint_piece>& pieces, const Quality_options& options,
                           const std::vector<std::uint8_t>& pinned) {
+  using Clock = std::chrono::steady_clock;
+  const auto seconds_since = [](Clock::time_point begin) {
+    return std::chrono::duration<double>(Clock::now() - begin).count();
+  };
+  const auto constraints_begin = Clock::now();
   try {
     for (const auto& piece : pieces) cdt.insert_constraint(handles[piece.a], handles[piece.b]);
   } catch (const Cdt::Intersection_of_constraints_exception&) {
     throw crossing_pieces_error();
   }
   Refinement_report report;
+  report.insert_seconds = seconds_since(constraints_begin);
   std::vector<std::uint8_t> removed(points.size(), 0);
   std::vector<std::pair<Vertex_handle, Vertex_handle>> crowded;
   const bool rounds = options.quality_rounds;
@@ -158,6 +165,7 @@ Refined_mesh quality_pass(Cdt& cdt, const std::vector<Vertex_handle>& handles, c
   double budget = options.max_inserted_fraction * static_cast<double>(points.size()) + options.max_inserted_extra;
   if (!mesher.has_small_angles()) budget += feature_allowance(cdt, points.size(), rounds);
   const auto limit = static_cast<std::size_t>(std::max(0.0, budget));
+  const auto refine_begin = Clock::now();
   if (rounds) {
     const Rounds_report r = mesher.run_in_rounds(limit, kMaxQualityRounds);
     report.n_inserted = r.n_inserted;
@@ -169,6 +177,7 @@ Refined_mesh quality_pass(Cdt& cdt, const std::vector<Vertex_handle>& handles, c
     run_mesher(mesher, limit, report);
     report.rounds = 1;
   }
+  report.insert_seconds += seconds_since(refine_begin);
   Refined_mesh result = extract(cdt, handles, points, kind, removed, scaling);
   result.f.clear();
   result.report.n_inserted = report.n_inserted;
@@ -178,6 +187,7 @@ Refined_mesh quality_pass(Cdt& cdt, const std::vector<Vertex_handle>& handles, c
   result.report.capped = report.capped;
   result.report.stalled = report.stalled;
   result.report.round_limit = report.round_limit;
+  result.report.insert_seconds = report.insert_seconds;
   return result;
 }
 

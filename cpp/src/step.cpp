@@ -206,6 +206,7 @@ void triangulate_selection(Selection selected, const std::vector<Constraint_piec
       stats.emplace_back("quality_crowded_segments", static_cast<double>(report.n_crowded_segments));
       stats.emplace_back("quality_capped", report.capped ? 1.0 : 0.0);
       stats.emplace_back("quality_points_outside", static_cast<double>(report.n_inserted_outside));
+      stats.emplace_back("quality_insert_seconds", report.insert_seconds);
       if (quality->quality_rounds) {
         stats.emplace_back("quality_rounds", static_cast<double>(report.rounds));
         stats.emplace_back("quality_stalled", report.stalled ? 1.0 : 0.0);

@@ -18,6 +18,10 @@ struct Refinement_report {
   bool capped = false;                     // stopped by the bound on inserted points
   bool stalled = false;                    // quality_rounds: a round inserted nothing with work left
   bool round_limit = false;                // quality_rounds: stopped by the cap on rounds with work left
+  // The quality pass: seconds of its insertions into the triangulation (the
+  // constraint pieces, then the refinement's points), which follow the
+  // triangulation's history; not the set-up scans or the extraction.
+  double insert_seconds = 0;
 };
 
 // Points of a refined triangulation: the input points that remain, in input order,
