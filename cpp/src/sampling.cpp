@@ -392,15 +392,29 @@ double estimate_sample_count(const Mesh_arrays& mesh, const std::vector<double>&
   // cells sample_triangle_blocks uses (the same queries).
   constexpr double kCountCells = kQueryCells;
   constexpr double kMaxCellsPerSide = 0x1.0p50;  // dyadic indices stay exact in int64 and double
+  // The fine grids' sizes in parallel blocks (NaN: a side beyond
+  // kMaxCellsPerSide), then the sum in triangle order as before, with its early
+  // returns: the same estimate for any thread count.
+  const std::size_t m = mesh.triangles.size();
+  std::vector<double> fine_cells(m);
+  constexpr std::size_t kBlock = 1 << 14;
+  parallel_for((m + kBlock - 1) / kBlock, /*threads=*/0, [&](std::size_t b) {
+    for (std::size_t t = b * kBlock; t < std::min(m, (b + 1) * kBlock); ++t) {
+      const Triangle_grid g = triangle_grid(mesh, vertex_f, mesh.triangles[t], cell_factor);
+      fine_cells[t] = g.fx <= kMaxCellsPerSide && g.fy <= kMaxCellsPerSide ? g.cells()
+                                                                            : std::numeric_limits<double>::quiet_NaN();
+    }
+  });
   double total = 0;
   std::vector<Dyadic_cell> cells;
-  for (const auto& t : mesh.triangles) {
-    const Triangle_grid g = triangle_grid(mesh, vertex_f, t, cell_factor);
-    if (!(g.fx <= kMaxCellsPerSide && g.fy <= kMaxCellsPerSide)) return std::numeric_limits<double>::infinity();
-    const double fine = g.cells();
+  for (std::size_t ti = 0; ti < m; ++ti) {
+    const double fine = fine_cells[ti];
+    if (std::isnan(fine)) return std::numeric_limits<double>::infinity();
     if (!adaptive || fine <= kCountCells) {
       total += fine;
     } else {
+      const Triangle& t = mesh.triangles[ti];
+      const Triangle_grid g = triangle_grid(mesh, vertex_f, t, cell_factor);
       cells.clear();
       const bool complete = triangle_cells(mesh, vertex_f, t, g, cell_factor, limit - total, adaptive, queries, cells);
       total += static_cast<double>(cells.size());
