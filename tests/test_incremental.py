@@ -320,3 +320,111 @@ def test_one_point_at_tiny_delta_takes_no_more_memory_than_the_full_step():
         pytest.skip("no memory statistics on this platform (EVOMESH_STAGE_PROFILE reads /proc)")
     # Resident memory is mostly the interpreter's here; 5 % is its noise, the old path was 20x.
     assert fast["peak_mib"] <= 1.05 * full["peak_mib"], (fast["peak_mib"], full["peak_mib"])
+
+
+# Issue 29: without the quality pass the incremental step updates the input's
+# triangulation where it changed (cpp/src/triangulation_update.cpp) instead of
+# building it whole, and certifies the result (every piece an edge, every other
+# edge strictly Delaunay), or builds it whole: the same bits either way.
+
+def _declined(result: evomesh.Mesh) -> int:
+    return int(result.stats["triangulation_update_declined"])
+
+
+@given(
+    n=st.integers(300, 2500),
+    mesh_seed=st.integers(0, 3),
+    center=st.tuples(st.floats(0.1, 0.9), st.floats(0.1, 0.9)),
+    radius=st.floats(0.05, 0.5),
+    width=st.floats(0.02, 0.1),
+    amplitude=st.sampled_from([0.3, 0.5, 0.7]),
+    seed=st.integers(0, 2**16),
+    paper=st.booleans(),
+)
+def test_without_the_quality_pass_the_updated_triangulation_is_the_full_steps(n, mesh_seed, center, radius, width,
+                                                                                amplitude, seed, paper):
+    options = {"options": evomesh.FrfcOptions.paper()} if paper else {"quality": False}
+    mesh = _stepped_mesh(n, mesh_seed)
+    delta = _front_delta(mesh, center, radius, width, amplitude)
+    fast = _check_same_step(mesh, delta, seed, **options)
+    if _taken(fast):
+        # A step's output is a constrained Delaunay triangulation without ties: the
+        # update is certified unless its cavity is too large to pay.
+        assert _declined(fast) in (0, 3)
+        if _declined(fast) == 0:
+            assert fast.stats["triangulation_update_cavity_triangles"] <= 0.25 * mesh.n_triangles
+
+
+@given(
+    mesh=meshes(max_side=14),
+    center=st.tuples(st.floats(0.0, 1.0), st.floats(0.0, 1.0)),
+    radius=st.floats(0.1, 0.6),
+    width=st.floats(0.05, 0.2),
+    amplitude=st.sampled_from([0.4, 0.8]),
+    seed=st.integers(0, 2**16),
+)
+def test_without_the_quality_pass_raw_meshes_and_lattices_match_the_full_step(mesh, center, radius, width,
+                                                                              amplitude, seed):
+    # Exact lattices are full of cocircular ties: there the certificate fails and
+    # the triangulation is built whole; holes and notches bound the cavity.
+    lo, hi = mesh.points.min(axis=0), mesh.points.max(axis=0)
+    unit = (mesh.points - lo) / (hi - lo)
+    d = np.hypot(unit[:, 0] - center[0], unit[:, 1] - center[1]) - radius
+    delta = np.where(np.abs(d) < width, 1.0 - amplitude * np.sin(np.pi * d / width), 1.0)
+    _check_same_step(mesh, delta, seed, quality=False)
+
+
+@pytest.mark.parametrize("shape", ["hole", "notch", "crack"])
+def test_the_updated_triangulation_keeps_holes_reflex_corners_and_cracks(shape):
+    if shape == "crack":
+        base = grid_mesh(31, 31, jitter=0.0)
+        p = np.asarray(base.points)
+        on_line = np.flatnonzero(np.isclose(p[:, 1], 0.5) & (p[:, 0] > 0.25) & (p[:, 0] < 0.75))
+        on_line = on_line[np.argsort(p[on_line, 0])]
+        base = evomesh.Mesh(p, base.triangles, np.c_[on_line[:-1], on_line[1:]])
+    else:
+        base = grid_mesh(31, 31, jitter=0.0, hole=shape == "hole", notch=shape == "notch")
+    # (a step with the quality pass takes the lattice's exact ties away)
+    mesh = evolve_quietly(base, np.full(base.n_points, 0.8), 0)
+    declined = []
+    for step in range(3):
+        x = mesh.points[:, 0]
+        delta = np.where(np.abs(x - (0.2 + 0.25 * step)) < 0.08, 0.6, 1.0)
+        fast = _check_same_step(mesh, delta, step, quality=False)
+        assert _taken(fast)
+        declined.append(_declined(fast))
+        mesh = fast
+    assert declined == [0, 0, 0]
+
+
+def _flip_one_edge(mesh: evomesh.Mesh) -> evomesh.Mesh:
+    """The mesh with one interior edge flipped: a valid triangulation that is not Delaunay."""
+    tri = np.asarray(mesh.triangles).copy()
+    p = mesh.points
+    segments = {tuple(sorted(e)) for e in np.asarray(mesh.segments).tolist()}
+    owner = {}
+    for t, (a, b, c) in enumerate(tri.tolist()):
+        for u, v, w in ((a, b, c), (b, c, a), (c, a, b)):
+            owner[(u, v)] = (t, w)
+    centre = np.argmin(np.hypot(p[:, 0] - 0.7, p[:, 1] - 0.7))
+    for (u, v), (t, w) in sorted(owner.items(), key=lambda item: item[0][0] != centre):
+        if (v, u) not in owner or tuple(sorted((u, v))) in segments:
+            continue
+        s, z = owner[(v, u)]
+
+        def ccw(a, b, c):
+            return (p[b, 0] - p[a, 0]) * (p[c, 1] - p[a, 1]) - (p[b, 1] - p[a, 1]) * (p[c, 0] - p[a, 0]) > 0
+
+        if ccw(w, u, z) and ccw(z, v, w):  # the quad is convex: flip u-v to w-z
+            tri[t] = (w, u, z)
+            tri[s] = (z, v, w)
+            return evomesh.Mesh(p, tri, mesh.segments)
+    raise AssertionError("no edge to flip")
+
+
+def test_an_input_that_is_not_delaunay_is_triangulated_whole():
+    mesh = _flip_one_edge(_stepped_mesh(1500, 0))
+    delta = _front_delta(mesh, (0.25, 0.25), 0.1, 0.05, 0.5)  # (the flipped edge is far from the change)
+    fast = _check_same_step(mesh, delta, 2, quality=False)
+    assert _taken(fast)
+    assert _declined(fast) == 6

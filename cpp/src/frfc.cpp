@@ -395,8 +395,11 @@ Evolve_result frfc_over_scope(const Mesh_arrays& input, const Mesh_arrays& mesh,
   const double wait_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - waited).count();
   release_free_memory(context);
   const bool early_started = options.quality && !mesh.geometry;
+  std::optional<std::vector<Triangle>> triangles;
+  if (!options.quality && !mesh.geometry) triangles = scope.triangulation(selection, pieces, *old_mesh, result.stats);
   triangulate_selection(std::move(selection), pieces, options.quality ? &quality : nullptr, result,
-                        early_started ? &early->triangulation : nullptr, mesh.geometry.get());
+                        early_started ? &early->triangulation : nullptr, mesh.geometry.get(),
+                        triangles ? &*triangles : nullptr);
   release_free_memory(context);
   timer.lap(options.quality ? "quality" : "cdt");
   finish_step(input, result, timer, &*old_mesh, scope.reusable_nn(spacing));

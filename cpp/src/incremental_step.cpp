@@ -18,6 +18,7 @@
 #include "evomesh/sampling.hpp"
 #include "evomesh/spacing.hpp"
 #include "evomesh/spacing_repair.hpp"
+#include "evomesh/triangulation_update.hpp"
 
 namespace evomesh {
 
@@ -29,6 +30,9 @@ using namespace frfc_stages;
 // The step declines (the full one runs) when delta != 1 at more than this share
 // of the points: there the full step is as fast.
 constexpr double kMaxActiveShare = 0.5;
+// The triangulation is updated (not built whole) while its cavity holds at most
+// this share of the input triangles: beyond, building it whole is as fast.
+constexpr double kMaxCavityShare = 0.25;
 
 // Relative slack of every distance bound below: far above rounding, so a bound
 // computed in floating point still holds for the exact value it stands for.
@@ -634,6 +638,20 @@ class Changed_region final : public Step_scope {
     second_pass_near(mesh, inside, safe_, *grid_, magnitude_, packing, n_packed_second_);
     safe_ = std::vector<std::uint8_t>();
     grid_.reset();
+  }
+  // Without the quality pass: the input's triangulation updated where the step
+  // changed it (triangulation_update.hpp), or nullopt where that is not certified.
+  std::optional<std::vector<Triangle>> triangulation(const Selection& selection,
+                                                     const std::vector<Constraint_piece>& pieces,
+                                                     Old_mesh_start& old_mesh,
+                                                     std::vector<std::pair<std::string, double>>& stats) override {
+    old_mesh.work.wait();
+    Triangulation_update_report report;
+    auto triangles = updated_constrained_delaunay(*old_mesh.walker, selection.mesh.points, pieces, selection.origin,
+                                                  kMaxCavityShare, report);
+    stats.emplace_back("triangulation_update_declined", static_cast<double>(report.declined));
+    stats.emplace_back("triangulation_update_cavity_triangles", static_cast<double>(report.n_cavity_triangles));
+    return triangles;
   }
   // (the walker takes them: the step's peak is the quality pass, the same in both scopes)
   bool keeps_fans() const override { return true; }

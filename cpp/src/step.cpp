@@ -172,7 +172,7 @@ Spacing_queries spacing_queries(const Spacing_function& function) {
 
 void triangulate_selection(Selection selected, const std::vector<Constraint_piece>& pieces,
                            const Quality_options* quality, Evolve_result& result, Early_triangulation* early,
-                           const Boundary_geometry* geometry) {
+                           const Boundary_geometry* geometry, std::vector<Triangle>* triangles) {
   auto& stats = result.stats;
   Mesh_arrays& mesh = selected.mesh;
   // CGAL's triangulations assume these (a piece from a point to itself, or out
@@ -184,6 +184,7 @@ void triangulate_selection(Selection selected, const std::vector<Constraint_piec
     }
   }
   std::vector<Index> selection_index;  // of every output point, -1: inserted by the quality pass
+  const Quality_options* const quality_given = quality;  // (a failed pass falls back to the plain CDT)
   if (quality != nullptr) {
     // CGAL's mesher checks its own invariants (these files are built with CGAL's
     // assertions on, see CMakeLists.txt); on near-degenerate input it can fail
@@ -218,7 +219,8 @@ void triangulate_selection(Selection selected, const std::vector<Constraint_piec
     }
   }
   if (quality == nullptr) {
-    mesh.triangles = constrained_delaunay(mesh.points, pieces);
+    mesh.triangles = triangles != nullptr && quality_given == nullptr ? std::move(*triangles)
+                                                                      : constrained_delaunay(mesh.points, pieces);
     for (const auto& piece : pieces) {
       mesh.segments.push_back({piece.a, piece.b});
       mesh.segment_is_boundary.push_back(piece.boundary);

@@ -334,8 +334,13 @@ def evolve(mesh: Mesh, delta: Any = None, *, size: Any = None, method: str = "fr
             Apollonius graph holds only the sites near the points where f is
             asked, triangles whose samples the packing certainly rejects are not
             sampled, the packing and the spacing repair run near spheres whose
-            fate is not certain; cpp/include/evomesh/incremental_step.hpp). The
-            output is the full algorithm's, bit for bit; only ``stats`` differ
+            fate is not certain; cpp/include/evomesh/incremental_step.hpp).
+            Without the quality pass (``quality=False``, the paper's options)
+            the triangulation is the input's, updated in the cavity where points
+            came and went, and certified (every piece an edge, every other edge
+            strictly Delaunay) or else built whole
+            (``triangulation_update_declined``: 0 when updated). The output is
+            the full algorithm's, bit for bit; only ``stats`` differ
             (``incremental_region_points``, ``incremental_quiet_triangles``, ...
             when it was used). Not used with ``geometry``. False: always the
             full algorithm.

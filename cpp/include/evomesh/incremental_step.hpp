@@ -47,6 +47,10 @@ bool incremental_applies(const Mesh_arrays& mesh, const std::vector<double>& del
 // "incremental_region_points" (points of triangles sampled or of spheres
 // packed), "incremental_quiet_triangles" (triangles not sampled: settled or
 // certified quiet) and "incremental_sites" (sites of the Apollonius graphs).
+// Without the quality pass the triangulation is the input's, updated
+// (updated_constrained_delaunay, triangulation_update.hpp): stats
+// "triangulation_update_declined" (0: updated; else why it was built whole)
+// and "triangulation_update_cavity_triangles".
 Evolve_result incremental_frfc(const Mesh_arrays& mesh, const std::vector<double>& delta,
                                const Frfc_options& options, const Step_context& context);
 inline Evolve_result incremental_frfc(const Mesh_arrays& mesh, const std::vector<double>& delta,

@@ -61,10 +61,15 @@ class Old_mesh_walker {
   // around holes and re-entrant corners, where a walk is blocked.
   Index search(Index t, const Vec2& q) const;
 
- private:
   // The triangle across edge k (t[k] -> t[k + 1]) of t, -1 on the boundary.
   Index across(Index t, int k) const;
+  // Calls visit(t) for every old triangle t at old point v.
+  template <class Visit>
+  void for_each_triangle_at(Index v, Visit visit) const {
+    for (auto f = fans_.xadj[v]; f < fans_.xadj[v + 1]; ++f) visit(static_cast<Index>(fans_.adj[f]));
+  }
 
+ private:
   double outside_;
   const Mesh_arrays& mesh_;
   const std::vector<Vec2>& P_;

@@ -178,10 +178,13 @@ inline Point_kind kept_point_kind(Point_kind kind, bool forced_corner, bool from
 // result.origin and adds the pass's counts and the smallest angle to result.stats.
 // With a `geometry`, new points on curved pieces are then moved onto their
 // curves (fit_to_curves); result.curve_reach says how far outside the input's
-// domain that may put them.
+// domain that may put them. `triangles` (without `quality`): the constrained
+// Delaunay triangulation of the points and pieces, when the caller has it
+// already (updated_constrained_delaunay).
 void triangulate_selection(Selection selected, const std::vector<Constraint_piece>& pieces,
                            const Quality_options* quality, Evolve_result& result,
-                           Early_triangulation* early = nullptr, const Boundary_geometry* geometry = nullptr);
+                           Early_triangulation* early = nullptr, const Boundary_geometry* geometry = nullptr,
+                           std::vector<Triangle>* triangles = nullptr);
 
 // For every segment of `mesh` (triangulate_selection's result), the index in
 // `pieces` of the constraint piece it is part of: the quality pass and the

@@ -14,6 +14,7 @@
 #pragma once
 
 #include <cstdint>
+#include <optional>
 #include <string>
 #include <utility>
 #include <vector>
@@ -79,6 +80,16 @@ class Step_scope {
                                                  const Candidates& inside, detail::Stage_timer& timer) = 0;
   // Every f query is answered: the graphs go.
   virtual void spacing_done() = 0;
+  // Step 6 without the quality pass: the constrained Delaunay triangulation of
+  // the selection (constrained_delaunay's array), when the scope can give it
+  // for less than building it whole; nullopt: build it whole. `old_mesh`: the
+  // input's walker (started, not waited for).
+  virtual std::optional<std::vector<Triangle>> triangulation(const Selection& /*selection*/,
+                                                             const std::vector<Constraint_piece>& /*pieces*/,
+                                                             Old_mesh_start& /*old_mesh*/,
+                                                             std::vector<std::pair<std::string, double>>& /*stats*/) {
+    return std::nullopt;
+  }
   // The second pass: deferred input points and interior candidates (frfc_stages::second_packing_pass);
   // `inside` may be emptied.
   virtual void second_pass(const Mesh_arrays& mesh, Candidates& inside, frfc_stages::Packing& packing) = 0;

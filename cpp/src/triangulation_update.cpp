@@ -1,0 +1,317 @@
+#include "evomesh/triangulation_update.hpp"
+
+#include <algorithm>
+#include <atomic>
+#include <cstdint>
+#include <unordered_map>
+#include <unordered_set>
+#include <utility>
+
+#include "evomesh/detail/spatial_order.hpp"
+#include "evomesh/kernel.hpp"
+#include "evomesh/parallel.hpp"
+#include "evomesh/triangulation.hpp"
+
+namespace evomesh {
+
+namespace {
+
+enum Declined : int { kUpdated = 0, kOrigins = 1, kNotLocated = 2, kTooLarge = 3, kFlood = 4, kMissing = 5, kNotDelaunay = 6 };
+
+std::uint64_t edge_key(Index a, Index b) {
+  const auto lo = static_cast<std::uint64_t>(std::min(a, b)), hi = static_cast<std::uint64_t>(std::max(a, b));
+  return (lo << 32) | hi;
+}
+
+// > 0: d strictly inside the circle through the counter-clockwise a, b, c; 0 on it; < 0 outside (exact).
+int in_circle(const Vec2& a, const Vec2& b, const Vec2& c, const Vec2& d) {
+  return static_cast<int>(CGAL::side_of_oriented_circle(to_cgal(a), to_cgal(b), to_cgal(c), to_cgal(d)));
+}
+
+}  // namespace
+
+std::optional<std::vector<Triangle>> updated_constrained_delaunay(const Old_mesh_walker& old_mesh,
+                                                                  const std::vector<Vec2>& points,
+                                                                  const std::vector<Constraint_piece>& pieces,
+                                                                  const std::vector<Index>& origin,
+                                                                  double max_cavity_share,
+                                                                  Triangulation_update_report& report) {
+  const Mesh_arrays& input = old_mesh.mesh();
+  const std::vector<Vec2>& P = input.points;
+  const std::vector<Triangle>& T = input.triangles;
+  const std::size_t n_in = P.size(), m_in = T.size(), n = points.size();
+  auto decline = [&report](int why) -> std::optional<std::vector<Triangle>> {
+    report.declined = why;
+    return std::nullopt;
+  };
+  if (origin.size() != n || m_in == 0 || n < 3) return decline(kOrigins);
+
+  // 1. Output index of every input point (-1: dropped); kept points unmoved.
+  std::vector<Index> new_of(n_in, -1);
+  std::vector<Index> fresh;  // output indices of the new points
+  for (std::size_t j = 0; j < n; ++j) {
+    const Index o = origin[j];
+    if (o < 0) {
+      fresh.push_back(static_cast<Index>(j));
+      continue;
+    }
+    if (static_cast<std::size_t>(o) >= n_in || new_of[o] >= 0 || points[j] != P[o]) return decline(kOrigins);
+    new_of[o] = static_cast<Index>(j);
+  }
+
+  // 2. The cavity: input triangles with a dropped vertex, and every triangle
+  // whose closed circumdisc holds a new point, found by a search from the new
+  // point's triangle across edges that are not input segments (the conflict
+  // zone of an insertion into a constrained Delaunay triangulation is connected
+  // that way) and across an edge the point lies on (a segment it splits).
+  std::vector<std::uint8_t> cavity(m_in, 0);
+  for (std::size_t t = 0; t < m_in; ++t) {
+    for (Index v : T[t]) cavity[t] |= new_of[v] < 0;
+  }
+  std::unordered_set<std::uint64_t> input_segments;
+  input_segments.reserve(2 * input.segments.size());
+  for (const Edge& e : input.segments) input_segments.insert(edge_key(e[0], e[1]));
+  std::vector<Vec2> fresh_points(fresh.size());
+  for (std::size_t k = 0; k < fresh.size(); ++k) fresh_points[k] = points[fresh[k]];
+  const std::vector<std::uint32_t> order = detail::hilbert_grid_permutation(fresh_points.data(), fresh_points.size());
+  std::vector<Index> stack;
+  std::vector<Index> seen_at(m_in, -1);  // the new point (position in `order`) that last visited a triangle
+  Index at = old_mesh.triangle_at(T[0][0]);
+  for (std::size_t r = 0; r < order.size(); ++r) {
+    const Vec2& x = fresh_points[order[r]];
+    std::size_t steps = 0;
+    const Index start = old_mesh.walk(at, x, r, steps);
+    if (start < 0) return decline(kNotLocated);
+    at = start;
+    stack.assign(1, start);
+    seen_at[start] = static_cast<Index>(r);
+    while (!stack.empty()) {
+      const Index t = stack.back();
+      stack.pop_back();
+      cavity[t] = 1;
+      const Triangle& tri = T[t];
+      for (int k = 0; k < 3; ++k) {
+        const Index u = old_mesh.across(t, k);
+        if (u < 0 || seen_at[u] == static_cast<Index>(r)) continue;
+        const Index a = tri[k], b = tri[(k + 1) % 3];
+        const bool on_edge = orientation(P[a], P[b], x) == 0 && t == start;
+        if (!on_edge && input_segments.count(edge_key(a, b)) != 0) continue;
+        const Triangle& other = T[u];
+        if (!on_edge && in_circle(P[other[0]], P[other[1]], P[other[2]], x) < 0) continue;
+        seen_at[u] = static_cast<Index>(r);
+        stack.push_back(u);
+      }
+    }
+  }
+  seen_at = std::vector<Index>();
+  std::size_t n_cavity = 0;
+  for (std::uint8_t c : cavity) n_cavity += c;
+  report.n_cavity_triangles = n_cavity;
+  if (static_cast<double>(n_cavity) > max_cavity_share * static_cast<double>(m_in)) return decline(kTooLarge);
+
+  // 3. The cavity's points (local indices) and constraints: its boundary edges
+  // (a kept triangle on the right, the cavity on the left), and the pieces
+  // between cavity points that are not an edge of a kept triangle.
+  std::vector<Index> local_of(n, -1);
+  std::vector<Index> global_of;  // output index of every local point
+  auto local = [&](Index j) {
+    if (local_of[j] < 0) {
+      local_of[j] = static_cast<Index>(global_of.size());
+      global_of.push_back(j);
+    }
+    return local_of[j];
+  };
+  for (Index j : fresh) local(j);
+  struct Boundary_edge {
+    Index kept;  // the kept input triangle on its right
+    int side;    // its edge there: T[kept][side] -> T[kept][side + 1]
+  };
+  std::vector<Boundary_edge> rim;
+  std::unordered_set<std::uint64_t> kept_edges;  // output-index keys of kept triangles' edges at the cavity
+  for (std::size_t t = 0; t < m_in; ++t) {
+    if (!cavity[t]) continue;
+    for (int k = 0; k < 3; ++k) {
+      const Index v = T[t][k];
+      if (new_of[v] >= 0) local(new_of[v]);
+      const Index u = old_mesh.across(static_cast<Index>(t), k);
+      if (u < 0 || cavity[u]) continue;
+      // (the kept side's edge runs the other way)
+      const Index a = T[t][k], b = T[t][(k + 1) % 3];
+      const Triangle& other = T[u];
+      const int side = other[0] == b ? 0 : other[1] == b ? 1 : 2;
+      if (other[(side + 1) % 3] != a) return decline(kFlood);
+      rim.push_back({u, side});
+      kept_edges.insert(edge_key(new_of[a], new_of[b]));
+    }
+  }
+  std::vector<Vec2> local_points(global_of.size());
+  for (std::size_t l = 0; l < global_of.size(); ++l) local_points[l] = points[global_of[l]];
+  report.n_cavity_points = local_points.size();
+  // Pieces of the output: which edges they are, and whether they bound the domain.
+  std::unordered_map<std::uint64_t, bool> piece_boundary;
+  piece_boundary.reserve(2 * pieces.size());
+  for (const auto& piece : pieces) piece_boundary.emplace(edge_key(piece.a, piece.b), piece.boundary);
+  std::vector<Constraint_piece> local_pieces;
+  std::unordered_set<std::uint64_t> stops;  // local keys the flood does not cross: the cavity's and domain's borders
+  for (const Boundary_edge& e : rim) {
+    const Triangle& tri = T[e.kept];
+    const Index a = local_of[new_of[tri[(e.side + 1) % 3]]], b = local_of[new_of[tri[e.side]]];
+    local_pieces.push_back({a, b, true});
+    stops.insert(edge_key(a, b));
+  }
+  std::vector<std::uint64_t> cavity_pieces;  // output keys of the pieces in the cavity
+  // Whether input points ia and ib are the ends of an edge of a kept input triangle.
+  const auto kept_edge_between = [&](Index ia, Index ib) {
+    bool found = false;
+    old_mesh.for_each_triangle_at(ia, [&](Index u) {
+      const Triangle& tri = T[u];
+      found = found || (!cavity[u] && (tri[0] == ib || tri[1] == ib || tri[2] == ib));
+    });
+    return found;
+  };
+  // The same for output points a and b.
+  const auto kept_input_edge = [&](Index a, Index b) {
+    return origin[a] >= 0 && origin[b] >= 0 && kept_edge_between(origin[a], origin[b]);
+  };
+  for (const auto& piece : pieces) {
+    const Index a = local_of[piece.a], b = local_of[piece.b];
+    if (a < 0 || b < 0) {
+      // (away from the cavity a piece must be a kept triangle's edge already)
+      if (!kept_input_edge(piece.a, piece.b)) return decline(kMissing);
+      continue;
+    }
+    const std::uint64_t key = edge_key(piece.a, piece.b);
+    if (kept_edges.count(key) != 0) continue;  // on the rim: a constraint already
+    // An edge of a kept triangle away from the cavity (a segment between two
+    // cavity points that stayed): not the cavity's.
+    if (kept_input_edge(piece.a, piece.b)) continue;
+    local_pieces.push_back({a, b, piece.boundary});
+    cavity_pieces.push_back(key);
+    if (piece.boundary) stops.insert(edge_key(a, b));
+  }
+
+  // 4. The local triangulation; the cavity is what the rim's and the domain
+  // boundary's inner sides reach without crossing them.
+  const Local_triangulation lt = local_constrained_delaunay(local_points, local_pieces);
+  const std::size_t n_faces = lt.triangles.size();
+  std::vector<std::uint8_t> inside(n_faces, 0);
+  std::vector<Index> flood;
+  for (std::size_t f = 0; f < n_faces; ++f) {
+    if (lt.seed[f] & 2) continue;
+    if (lt.seed[f] & 1) {
+      // (an interior piece seeds both of its sides: only the rim and the domain
+      // boundary's left sides are the cavity's for sure)
+      bool bounded = false;
+      for (int k = 0; k < 3; ++k) {
+        const Triangle& tri = lt.triangles[f];
+        if ((lt.constrained[f] >> k & 1) && stops.count(edge_key(tri[(k + 1) % 3], tri[(k + 2) % 3])) != 0) {
+          bounded = true;
+        }
+      }
+      if (bounded) {
+        inside[f] = 1;
+        flood.push_back(static_cast<Index>(f));
+      }
+    }
+  }
+  while (!flood.empty()) {
+    const Index f = flood.back();
+    flood.pop_back();
+    const Triangle& tri = lt.triangles[f];
+    for (int k = 0; k < 3; ++k) {
+      const bool stop = (lt.constrained[f] >> k & 1) && stops.count(edge_key(tri[(k + 1) % 3], tri[(k + 2) % 3])) != 0;
+      if (stop) continue;
+      const Index g = lt.neighbour[f][k];
+      if (g < 0 || (lt.seed[g] & 2)) return decline(kFlood);  // out of the hull, or out of the domain
+      if (inside[g]) continue;
+      inside[g] = 1;
+      flood.push_back(g);
+    }
+  }
+
+  // 5. Certificates. Every rim edge and piece in the cavity is an edge of an
+  // inside face, on the right side for the rim; faces inside that meet across
+  // an edge that is not a piece are strictly Delaunay.
+  std::unordered_map<std::uint64_t, std::pair<Index, int>> inside_edges;  // local key -> (face, k) for the rim's side
+  std::size_t n_inside = 0;
+  for (std::size_t f = 0; f < n_faces; ++f) {
+    if (!inside[f]) continue;
+    ++n_inside;
+    const Triangle& tri = lt.triangles[f];
+    for (int k = 0; k < 3; ++k) {
+      const Index a = tri[(k + 1) % 3], b = tri[(k + 2) % 3];
+      if (stops.count(edge_key(a, b)) != 0 || (lt.constrained[f] >> k & 1)) {
+        inside_edges[edge_key(a, b)] = {static_cast<Index>(f), k};
+      }
+      if (lt.constrained[f] >> k & 1) continue;
+      const Index g = lt.neighbour[f][k];
+      if (g < static_cast<Index>(f)) continue;  // each edge once (g inside: see the flood)
+      const Triangle& o = lt.triangles[g];
+      const Index d = o[0] != a && o[0] != b ? o[0] : o[1] != a && o[1] != b ? o[1] : o[2];
+      if (in_circle(local_points[tri[0]], local_points[tri[1]], local_points[tri[2]], local_points[d]) >= 0) {
+        return decline(kNotDelaunay);
+      }
+    }
+  }
+  for (const Boundary_edge& e : rim) {
+    const Triangle& tri = T[e.kept];
+    const Index ga = new_of[tri[(e.side + 1) % 3]], gb = new_of[tri[e.side]];
+    const auto found = inside_edges.find(edge_key(local_of[ga], local_of[gb]));
+    if (found == inside_edges.end()) return decline(kMissing);
+    const auto [f, k] = found->second;
+    const Triangle& face = lt.triangles[f];
+    // the face must have it as (ga -> gb) (the cavity on its left), and its
+    // third point outside the kept triangle's circle unless the edge is a piece
+    if (global_of[face[(k + 1) % 3]] != ga || global_of[face[(k + 2) % 3]] != gb) return decline(kMissing);
+    if (piece_boundary.count(edge_key(ga, gb)) != 0) continue;
+    if (in_circle(P[tri[0]], P[tri[1]], P[tri[2]], local_points[face[k]]) >= 0) return decline(kNotDelaunay);
+  }
+  for (std::uint64_t key : cavity_pieces) {
+    const Index a = static_cast<Index>(key >> 32), b = static_cast<Index>(key & 0xffffffffu);
+    if (inside_edges.count(edge_key(local_of[a], local_of[b])) == 0) return decline(kMissing);
+  }
+  // The kept triangles among themselves: strictly Delaunay across every edge
+  // that is not an input segment (a kept segment is a piece of the output: its
+  // chain points stayed and no new point lies on it), checked in parallel blocks.
+  std::atomic<bool> delaunay{true};
+  constexpr std::size_t kBlock = 1 << 14;
+  parallel_for((m_in + kBlock - 1) / kBlock, /*threads=*/0, [&](std::size_t blk) {
+    for (std::size_t t = blk * kBlock; t < std::min(m_in, (blk + 1) * kBlock) && delaunay.load(std::memory_order_relaxed);
+         ++t) {
+      if (cavity[t]) continue;
+      const Triangle& tri = T[t];
+      for (int k = 0; k < 3; ++k) {
+        const Index u = old_mesh.across(static_cast<Index>(t), k);
+        if (u < static_cast<Index>(t) || cavity[u]) continue;
+        const Index a = tri[k], b = tri[(k + 1) % 3];
+        if (input_segments.count(edge_key(a, b)) != 0) continue;
+        const Triangle& o = T[u];
+        const Index d = o[0] != a && o[0] != b ? o[0] : o[1] != a && o[1] != b ? o[1] : o[2];
+        if (in_circle(P[tri[0]], P[tri[1]], P[tri[2]], P[d]) >= 0) delaunay = false;
+      }
+    }
+  });
+  if (!delaunay) return decline(kNotDelaunay);
+  // (and those segments are pieces indeed)
+  for (const Edge& e : input.segments) {
+    if (kept_edge_between(e[0], e[1]) && piece_boundary.count(edge_key(new_of[e[0]], new_of[e[1]])) == 0) {
+      return decline(kMissing);
+    }
+  }
+
+  // 6. The kept triangles (renumbered) and the cavity's, in canonical order.
+  std::vector<Triangle> triangles;
+  triangles.reserve(m_in - n_cavity + n_inside);
+  for (std::size_t t = 0; t < m_in; ++t) {
+    if (!cavity[t]) triangles.push_back({new_of[T[t][0]], new_of[T[t][1]], new_of[T[t][2]]});
+  }
+  for (std::size_t f = 0; f < n_faces; ++f) {
+    if (!inside[f]) continue;
+    const Triangle& tri = lt.triangles[f];
+    triangles.push_back({global_of[tri[0]], global_of[tri[1]], global_of[tri[2]]});
+  }
+  canonical_triangle_order(n, triangles);
+  return triangles;
+}
+
+}  // namespace evomesh
