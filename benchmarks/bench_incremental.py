@@ -74,10 +74,24 @@ FRACTIONS = (0.0, 0.01, 0.05, 0.2, 1.0)
 SELECTION_STAGES = ("nn", "apollonius", "spacing_at_points", "sampling", "sample_radii", "lfmis", "spacing_repair")
 
 
+# The step's options (--options): evolve's defaults, or without the quality pass
+# (recommended less the pass; the paper's), where the incremental step updates the
+# triangulation instead of building it whole.
+OPTIONS: dict = {}
+
+
+def options_named(name: str) -> dict:
+    if name == "paper":
+        return {"options": evomesh.FrfcOptions.paper()}
+    if name == "no-quality":
+        return {"quality": False}
+    return {}
+
+
 def stepped_mesh(n: int) -> evomesh.Mesh:
-    """The output of one step on the quasi-uniform unit_square_mesh (not timed)."""
+    """The output of one step on the quasi-uniform unit_square_mesh (not timed), with the bench's options."""
     grid = evomesh.unit_square_mesh(n, seed=0)
-    return evomesh.evolve(grid, np.ones(grid.n_points), seed=0)
+    return evomesh.evolve(grid, np.ones(grid.n_points), seed=0, **OPTIONS)
 
 
 def front_delta(mesh: evomesh.Mesh, fraction: float) -> tuple[np.ndarray, np.ndarray]:
@@ -142,10 +156,10 @@ def run(n: int, repeats: int, evidence: bool, fractions: tuple[float, ...] = FRA
             # alternate the two paths; the ratio of each pair is measured in the same run
             # (CPU: the process's, both threads; steadier than wall time on a shared machine)
             t, c = time.perf_counter(), time.process_time()
-            full = evomesh.evolve(mesh, delta, seed=1, incremental=False)
+            full = evomesh.evolve(mesh, delta, seed=1, incremental=False, **OPTIONS)
             wall_full, cpu_full = time.perf_counter() - t, time.process_time() - c
             t, c = time.perf_counter(), time.process_time()
-            fast = evomesh.evolve(mesh, delta, seed=1, incremental=True)
+            fast = evomesh.evolve(mesh, delta, seed=1, incremental=True, **OPTIONS)
             wall_fast, cpu_fast = time.perf_counter() - t, time.process_time() - c
             assert_same(full, fast)
             s = fast.stats
@@ -169,6 +183,8 @@ def run(n: int, repeats: int, evidence: bool, fractions: tuple[float, ...] = FRA
                 changed = 1.0 - len({tuple(p) for p in mesh.points} & {tuple(p) for p in full.points}) / mesh.n_points
                 taken = "incremental_quiet_triangles" in fast.stats
                 region = fast.stats.get("incremental_region_points", float(mesh.n_points)) / mesh.n_points
+                # (without the quality pass: 0 when the triangulation was updated, not built whole)
+                update = fast.stats.get("triangulation_update_declined")
                 stages = {k[8:]: v for k, v in fast.stats.items() if k.startswith("seconds_")}
         med = {k: statistics.median(x[k] for x in samples) for k in samples[0]}
         row = {"n": mesh.n_points, "fraction": fraction, "band_points": int(band.sum()), "points_changed": changed,
@@ -180,7 +196,8 @@ def run(n: int, repeats: int, evidence: bool, fractions: tuple[float, ...] = FRA
               f"{med['cdt']:5.2f} s ({med['cdt_ratio']:.2f}), history-bound {med['history']:5.2f} s "
               f"({med['history_ratio']:.3f}) | same bits, "
               f"{'incremental' if taken else 'full (declined)'}", flush=True)
-        print("   incremental stages:", {k: round(v, 3) for k, v in stages.items()}, flush=True)
+        print("   incremental stages:", {k: round(v, 3) for k, v in stages.items()},
+              "" if update is None else f"triangulation update declined: {update:g}", flush=True)
         # (the first run's stages over the median full step: where the incremental step's time goes)
         print("   stage / full step:", {k: round(v / med["full"], 3) for k, v in stages.items() if k != "total"}, flush=True)
     return rows
@@ -276,6 +293,8 @@ def main() -> None:
     parser.add_argument("--fractions", default=",".join(str(f) for f in FRACTIONS),
                         help="band widths as fractions of the square (default: %(default)s)")
     parser.add_argument("--order-evidence", action="store_true")
+    parser.add_argument("--options", choices=["recommended", "no-quality", "paper"], default="recommended",
+                        help="the step's options: evolve's defaults, less the quality pass, or the paper's")
     parser.add_argument("--one-point", action="store_true", help="the one-point table (issue 27) instead")
     parser.add_argument("--one-point-worker", help=argparse.SUPPRESS)
     args = parser.parse_args()
@@ -286,6 +305,7 @@ def main() -> None:
         for size in args.sizes.split(","):
             run_one_point(int(float(size)), args.repeats)
         return
+    OPTIONS.update(options_named(args.options))
     rows = []
     for size in args.sizes.split(","):
         rows += run(int(float(size)), args.repeats, args.order_evidence,

@@ -1,6 +1,7 @@
 #include "evomesh/incremental_step.hpp"
 
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <limits>
 #include <memory>
@@ -645,12 +646,18 @@ class Changed_region final : public Step_scope {
                                                      const std::vector<Constraint_piece>& pieces,
                                                      Old_mesh_start& old_mesh,
                                                      std::vector<std::pair<std::string, double>>& stats) override {
+    const auto waited = std::chrono::steady_clock::now();
     old_mesh.work.wait();
+    stats.emplace_back("triangulation_update_wait_seconds",
+                       std::chrono::duration<double>(std::chrono::steady_clock::now() - waited).count());
     Triangulation_update_report report;
     auto triangles = updated_constrained_delaunay(*old_mesh.walker, selection.mesh.points, pieces, selection.origin,
                                                   kMaxCavityShare, report);
     stats.emplace_back("triangulation_update_declined", static_cast<double>(report.declined));
     stats.emplace_back("triangulation_update_cavity_triangles", static_cast<double>(report.n_cavity_triangles));
+    stats.emplace_back("triangulation_update_locate_seconds", report.locate_seconds);
+    stats.emplace_back("triangulation_update_local_seconds", report.local_seconds);
+    stats.emplace_back("triangulation_update_certify_seconds", report.certify_seconds);
     return triangles;
   }
   // (the walker takes them: the step's peak is the quality pass, the same in both scopes)

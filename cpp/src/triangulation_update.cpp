@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <atomic>
+#include <chrono>
 #include <cstdint>
 #include <unordered_map>
 #include <unordered_set>
@@ -40,6 +41,12 @@ std::optional<std::vector<Triangle>> updated_constrained_delaunay(const Old_mesh
   const std::vector<Vec2>& P = input.points;
   const std::vector<Triangle>& T = input.triangles;
   const std::size_t n_in = P.size(), m_in = T.size(), n = points.size();
+  using Clock = std::chrono::steady_clock;
+  auto lap = [last = Clock::now()](double& seconds) mutable {
+    const auto now = Clock::now();
+    seconds += std::chrono::duration<double>(now - last).count();
+    last = now;
+  };
   auto decline = [&report](int why) -> std::optional<std::vector<Triangle>> {
     report.declined = why;
     return std::nullopt;
@@ -107,6 +114,7 @@ std::optional<std::vector<Triangle>> updated_constrained_delaunay(const Old_mesh
   std::size_t n_cavity = 0;
   for (std::uint8_t c : cavity) n_cavity += c;
   report.n_cavity_triangles = n_cavity;
+  lap(report.locate_seconds);
   if (static_cast<double>(n_cavity) > max_cavity_share * static_cast<double>(m_in)) return decline(kTooLarge);
 
   // 3. The cavity's points (local indices) and constraints: its boundary edges
@@ -229,6 +237,7 @@ std::optional<std::vector<Triangle>> updated_constrained_delaunay(const Old_mesh
     }
   }
 
+  lap(report.local_seconds);
   // 5. Certificates. Every rim edge and piece in the cavity is an edge of an
   // inside face, on the right side for the rim; faces inside that meet across
   // an edge that is not a piece are strictly Delaunay.
@@ -311,6 +320,7 @@ std::optional<std::vector<Triangle>> updated_constrained_delaunay(const Old_mesh
     triangles.push_back({global_of[tri[0]], global_of[tri[1]], global_of[tri[2]]});
   }
   canonical_triangle_order(n, triangles);
+  lap(report.certify_seconds);
   return triangles;
 }
 
