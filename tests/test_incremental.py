@@ -70,15 +70,35 @@ def _front_delta(mesh: evomesh.Mesh, center, radius: float, width: float, amplit
     return np.where(band, 1.0 - amplitude * np.sin(np.pi * d / width), 1.0)
 
 
-@given(
-    n=st.integers(300, 2500),
-    mesh_seed=st.integers(0, 3),
-    center=st.tuples(st.floats(0.1, 0.9), st.floats(0.1, 0.9)),
-    radius=st.floats(0.05, 0.5),
-    width=st.floats(0.02, 0.1),
-    amplitude=st.sampled_from([0.3, 0.5, 0.7]),
-    seed=st.integers(0, 2**16),
-)
+# Random circular fronts on stepped meshes, and on raw meshes (strategies.meshes).
+STEPPED_FRONTS = {
+    "n": st.integers(300, 2500),
+    "mesh_seed": st.integers(0, 3),
+    "center": st.tuples(st.floats(0.1, 0.9), st.floats(0.1, 0.9)),
+    "radius": st.floats(0.05, 0.5),
+    "width": st.floats(0.02, 0.1),
+    "amplitude": st.sampled_from([0.3, 0.5, 0.7]),
+    "seed": st.integers(0, 2**16),
+}
+RAW_FRONTS = {
+    "mesh": meshes(max_side=14),
+    "center": st.tuples(st.floats(0.0, 1.0), st.floats(0.0, 1.0)),
+    "radius": st.floats(0.1, 0.6),
+    "width": st.floats(0.05, 0.2),
+    "amplitude": st.sampled_from([0.4, 0.8]),
+    "seed": st.integers(0, 2**16),
+}
+
+
+def _raw_front_delta(mesh: evomesh.Mesh, center, radius: float, width: float, amplitude: float) -> np.ndarray:
+    """_front_delta in the mesh's bounding box scaled to the unit square."""
+    lo, hi = mesh.points.min(axis=0), mesh.points.max(axis=0)
+    unit = (mesh.points - lo) / (hi - lo)
+    d = np.hypot(unit[:, 0] - center[0], unit[:, 1] - center[1]) - radius
+    return np.where(np.abs(d) < width, 1.0 - amplitude * np.sin(np.pi * d / width), 1.0)
+
+
+@given(**STEPPED_FRONTS)
 def test_random_fronts_on_stepped_meshes_match_the_full_step(n, mesh_seed, center, radius, width, amplitude, seed):
     mesh = _stepped_mesh(n, mesh_seed)
     delta = _front_delta(mesh, center, radius, width, amplitude)
@@ -92,22 +112,11 @@ def test_random_fronts_on_stepped_meshes_match_the_full_step(n, mesh_seed, cente
         assert not _taken(fast)
 
 
-@given(
-    mesh=meshes(max_side=14),
-    center=st.tuples(st.floats(0.0, 1.0), st.floats(0.0, 1.0)),
-    radius=st.floats(0.1, 0.6),
-    width=st.floats(0.05, 0.2),
-    amplitude=st.sampled_from([0.4, 0.8]),
-    seed=st.integers(0, 2**16),
-)
+@given(**RAW_FRONTS)
 def test_random_fronts_on_raw_meshes_match_the_full_step(mesh, center, radius, width, amplitude, seed):
     # Raw meshes (grids, holes, reflex corners, exact lattices, tiny and large scales): the
     # certificates decide, the output must not depend on the path.
-    lo, hi = mesh.points.min(axis=0), mesh.points.max(axis=0)
-    unit = (mesh.points - lo) / (hi - lo)
-    d = np.hypot(unit[:, 0] - center[0], unit[:, 1] - center[1]) - radius
-    delta = np.where(np.abs(d) < width, 1.0 - amplitude * np.sin(np.pi * d / width), 1.0)
-    _check_same_step(mesh, delta, seed)
+    _check_same_step(mesh, _raw_front_delta(mesh, center, radius, width, amplitude), seed)
 
 
 @pytest.mark.parametrize(
@@ -135,16 +144,20 @@ def test_options_match_the_full_step(options):
         assert _taken(fast)
 
 
+def _shape_mesh(shape: str, side: int) -> evomesh.Mesh:
+    """A side x side grid of the unit square with a hole, a notch, or a crack along y = 0.5 (0.25 < x < 0.75)."""
+    if shape != "crack":
+        return grid_mesh(side, side, jitter=0.0, hole=shape == "hole", notch=shape == "notch")
+    base = grid_mesh(side, side, jitter=0.0)
+    p = np.asarray(base.points)
+    on_line = np.flatnonzero(np.isclose(p[:, 1], 0.5) & (p[:, 0] > 0.25) & (p[:, 0] < 0.75))
+    on_line = on_line[np.argsort(p[on_line, 0])]
+    return evomesh.Mesh(p, base.triangles, np.c_[on_line[:-1], on_line[1:]])
+
+
 @pytest.mark.parametrize("shape", ["hole", "notch", "crack"])
 def test_holes_reflex_corners_and_interior_constraints(shape):
-    if shape == "crack":
-        base = grid_mesh(25, 25, jitter=0.0)
-        p = np.asarray(base.points)
-        on_line = np.flatnonzero(np.isclose(p[:, 1], 0.5) & (p[:, 0] > 0.25) & (p[:, 0] < 0.75))
-        on_line = on_line[np.argsort(p[on_line, 0])]
-        mesh = evomesh.Mesh(p, base.triangles, np.c_[on_line[:-1], on_line[1:]])
-    else:
-        mesh = grid_mesh(25, 25, jitter=0.0, hole=shape == "hole", notch=shape == "notch")
+    mesh = _shape_mesh(shape, 25)
     for step in range(3):
         x = mesh.points[:, 0]
         band = np.abs(x - (0.2 + 0.25 * step)) < 0.08
@@ -331,16 +344,7 @@ def _declined(result: evomesh.Mesh) -> int:
     return int(result.stats["triangulation_update_declined"])
 
 
-@given(
-    n=st.integers(300, 2500),
-    mesh_seed=st.integers(0, 3),
-    center=st.tuples(st.floats(0.1, 0.9), st.floats(0.1, 0.9)),
-    radius=st.floats(0.05, 0.5),
-    width=st.floats(0.02, 0.1),
-    amplitude=st.sampled_from([0.3, 0.5, 0.7]),
-    seed=st.integers(0, 2**16),
-    paper=st.booleans(),
-)
+@given(paper=st.booleans(), **STEPPED_FRONTS)
 def test_without_the_quality_pass_the_updated_triangulation_is_the_full_steps(n, mesh_seed, center, radius, width,
                                                                                 amplitude, seed, paper):
     options = {"options": evomesh.FrfcOptions.paper()} if paper else {"quality": False}
@@ -355,35 +359,17 @@ def test_without_the_quality_pass_the_updated_triangulation_is_the_full_steps(n,
             assert fast.stats["triangulation_update_cavity_triangles"] <= 0.25 * mesh.n_triangles
 
 
-@given(
-    mesh=meshes(max_side=14),
-    center=st.tuples(st.floats(0.0, 1.0), st.floats(0.0, 1.0)),
-    radius=st.floats(0.1, 0.6),
-    width=st.floats(0.05, 0.2),
-    amplitude=st.sampled_from([0.4, 0.8]),
-    seed=st.integers(0, 2**16),
-)
+@given(**RAW_FRONTS)
 def test_without_the_quality_pass_raw_meshes_and_lattices_match_the_full_step(mesh, center, radius, width,
                                                                               amplitude, seed):
     # Exact lattices are full of cocircular ties: there the certificate fails and
     # the triangulation is built whole; holes and notches bound the cavity.
-    lo, hi = mesh.points.min(axis=0), mesh.points.max(axis=0)
-    unit = (mesh.points - lo) / (hi - lo)
-    d = np.hypot(unit[:, 0] - center[0], unit[:, 1] - center[1]) - radius
-    delta = np.where(np.abs(d) < width, 1.0 - amplitude * np.sin(np.pi * d / width), 1.0)
-    _check_same_step(mesh, delta, seed, quality=False)
+    _check_same_step(mesh, _raw_front_delta(mesh, center, radius, width, amplitude), seed, quality=False)
 
 
 @pytest.mark.parametrize("shape", ["hole", "notch", "crack"])
 def test_the_updated_triangulation_keeps_holes_reflex_corners_and_cracks(shape):
-    if shape == "crack":
-        base = grid_mesh(31, 31, jitter=0.0)
-        p = np.asarray(base.points)
-        on_line = np.flatnonzero(np.isclose(p[:, 1], 0.5) & (p[:, 0] > 0.25) & (p[:, 0] < 0.75))
-        on_line = on_line[np.argsort(p[on_line, 0])]
-        base = evomesh.Mesh(p, base.triangles, np.c_[on_line[:-1], on_line[1:]])
-    else:
-        base = grid_mesh(31, 31, jitter=0.0, hole=shape == "hole", notch=shape == "notch")
+    base = _shape_mesh(shape, 31)
     # (a step with the quality pass takes the lattice's exact ties away)
     mesh = evolve_quietly(base, np.full(base.n_points, 0.8), 0)
     declined = []

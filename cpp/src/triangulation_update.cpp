@@ -75,9 +75,16 @@ std::optional<std::vector<Triangle>> updated_constrained_delaunay(const Old_mesh
   for (std::size_t t = 0; t < m_in; ++t) {
     for (Index v : T[t]) cavity[t] |= new_of[v] < 0;
   }
-  std::unordered_set<std::uint64_t> input_segments;
-  input_segments.reserve(2 * input.segments.size());
-  for (const Edge& e : input.segments) input_segments.insert(edge_key(e[0], e[1]));
+  // Input segments as a mask per triangle (bit k: its edge t[k] -> t[k + 1] is one).
+  std::vector<std::uint8_t> segment_mask(m_in, 0);
+  for (const Edge& e : input.segments) {
+    old_mesh.for_each_triangle_at(e[0], [&](Index u) {
+      for (int k = 0; k < 3; ++k) {
+        const Index a = T[u][k], b = T[u][(k + 1) % 3];
+        if ((a == e[0] && b == e[1]) || (a == e[1] && b == e[0])) segment_mask[u] |= static_cast<std::uint8_t>(1u << k);
+      }
+    });
+  }
   std::vector<Vec2> fresh_points(fresh.size());
   for (std::size_t k = 0; k < fresh.size(); ++k) fresh_points[k] = points[fresh[k]];
   const std::vector<std::uint32_t> order = detail::hilbert_grid_permutation(fresh_points.data(), fresh_points.size());
@@ -102,7 +109,7 @@ std::optional<std::vector<Triangle>> updated_constrained_delaunay(const Old_mesh
         if (u < 0 || seen_at[u] == static_cast<Index>(r)) continue;
         const Index a = tri[k], b = tri[(k + 1) % 3];
         const bool on_edge = orientation(P[a], P[b], x) == 0 && t == start;
-        if (!on_edge && input_segments.count(edge_key(a, b)) != 0) continue;
+        if (!on_edge && (segment_mask[t] >> k & 1)) continue;
         const Triangle& other = T[u];
         if (!on_edge && in_circle(P[other[0]], P[other[1]], P[other[2]], x) < 0) continue;
         seen_at[u] = static_cast<Index>(r);
@@ -281,22 +288,36 @@ std::optional<std::vector<Triangle>> updated_constrained_delaunay(const Old_mesh
   }
   // The kept triangles among themselves: strictly Delaunay across every edge
   // that is not an input segment (a kept segment is a piece of the output: its
-  // chain points stayed and no new point lies on it), checked in parallel blocks.
+  // chain points stayed and no new point lies on it). Point by point, in
+  // parallel blocks: at point a, the fan's triangle t with edge a -> b meets
+  // the s with edge b -> a, whose third point is the one after a in s; each
+  // edge is checked at its smaller end.
   std::atomic<bool> delaunay{true};
-  constexpr std::size_t kBlock = 1 << 14;
-  parallel_for((m_in + kBlock - 1) / kBlock, /*threads=*/0, [&](std::size_t blk) {
-    for (std::size_t t = blk * kBlock; t < std::min(m_in, (blk + 1) * kBlock) && delaunay.load(std::memory_order_relaxed);
-         ++t) {
-      if (cavity[t]) continue;
-      const Triangle& tri = T[t];
-      for (int k = 0; k < 3; ++k) {
-        const Index u = old_mesh.across(static_cast<Index>(t), k);
-        if (u < static_cast<Index>(t) || cavity[u]) continue;
-        const Index a = tri[k], b = tri[(k + 1) % 3];
-        if (input_segments.count(edge_key(a, b)) != 0) continue;
-        const Triangle& o = T[u];
-        const Index d = o[0] != a && o[0] != b ? o[0] : o[1] != a && o[1] != b ? o[1] : o[2];
-        if (in_circle(P[tri[0]], P[tri[1]], P[tri[2]], P[d]) >= 0) delaunay = false;
+  constexpr std::size_t kBlock = 1 << 13;
+  parallel_for((n_in + kBlock - 1) / kBlock, /*threads=*/0, [&](std::size_t blk) {
+    struct Corner {
+      Index t;
+      int k;  // a = T[t][k]
+      Index next, prev;
+    };
+    std::vector<Corner> fan;
+    for (std::size_t v = blk * kBlock; v < std::min(n_in, (blk + 1) * kBlock) && delaunay.load(std::memory_order_relaxed);
+         ++v) {
+      const Index a = static_cast<Index>(v);
+      fan.clear();
+      old_mesh.for_each_triangle_at(a, [&](Index u) {
+        const Triangle& tri = T[u];
+        const int k = tri[0] == a ? 0 : tri[1] == a ? 1 : 2;
+        fan.push_back({u, k, tri[(k + 1) % 3], tri[(k + 2) % 3]});
+      });
+      for (const Corner& c : fan) {
+        if (c.next < a || cavity[c.t] || (segment_mask[c.t] >> c.k & 1)) continue;
+        for (const Corner& o : fan) {
+          if (o.prev != c.next) continue;
+          const Triangle& tri = T[c.t];
+          if (!cavity[o.t] && in_circle(P[tri[0]], P[tri[1]], P[tri[2]], P[o.next]) >= 0) delaunay = false;
+          break;
+        }
       }
     }
   });
