@@ -330,35 +330,17 @@ std::optional<std::vector<Triangle>> updated_constrained_delaunay(const Old_mesh
   }
 
   // 6. The kept triangles (renumbered) and the cavity's, in canonical order.
-  // The kept ones of an input in canonical order whose kept points keep their
-  // order (a step's) are in it already: then a merge with the cavity's, else
-  // the whole sort.
-  std::vector<Triangle> kept;
-  kept.reserve(m_in - n_cavity);
-  bool in_order = true;
+  std::vector<Triangle> triangles;
+  triangles.reserve(m_in - n_cavity + n_inside);
   for (std::size_t t = 0; t < m_in; ++t) {
-    if (cavity[t]) continue;
-    const Triangle tri{new_of[T[t][0]], new_of[T[t][1]], new_of[T[t][2]]};
-    in_order = in_order && least_index_first(tri) == tri && (kept.empty() || kept.back() < tri);
-    kept.push_back(tri);
+    if (!cavity[t]) triangles.push_back({new_of[T[t][0]], new_of[T[t][1]], new_of[T[t][2]]});
   }
-  std::vector<Triangle> added;
-  added.reserve(n_inside);
   for (std::size_t f = 0; f < n_faces; ++f) {
     if (!inside[f]) continue;
     const Triangle& tri = lt.triangles[f];
-    added.push_back({global_of[tri[0]], global_of[tri[1]], global_of[tri[2]]});
+    triangles.push_back({global_of[tri[0]], global_of[tri[1]], global_of[tri[2]]});
   }
-  std::vector<Triangle> triangles;
-  if (in_order) {
-    canonical_triangle_order(n, added);
-    triangles.resize(kept.size() + added.size());
-    std::merge(kept.begin(), kept.end(), added.begin(), added.end(), triangles.begin());
-  } else {
-    triangles = std::move(kept);
-    triangles.insert(triangles.end(), added.begin(), added.end());
-    canonical_triangle_order(n, triangles);
-  }
+  canonical_triangle_order(n, triangles);
   lap(report.certify_seconds);
   return triangles;
 }
