@@ -232,8 +232,9 @@ class Whole_mesh final : public Step_scope {
   }
   // (alive with the Apollonius graph during the sampling, the triangulation set the step's peak memory)
   bool starts_triangulation_early() const override { return false; }
-  std::vector<std::uint8_t> quiet_triangles(const Mesh_arrays&, const Packing&, const std::vector<std::uint8_t>&,
-                                            const std::vector<std::uint8_t>&, Stage_timer&) override {
+  std::vector<std::uint8_t> quiet_triangles(const Mesh_arrays&, const std::vector<double>&, const Packing&,
+                                            const std::vector<std::uint8_t>&, const std::vector<std::uint8_t>&,
+                                            Stage_timer&) override {
     return {};
   }
   void sampled(const Mesh_arrays&, const std::vector<std::uint8_t>&) override {}
@@ -325,8 +326,7 @@ Evolve_result frfc_over_scope(const Mesh_arrays& input, const Mesh_arrays& mesh,
       cover = cover_discs(mesh, f, packing.radius, packing.kept, packing.blocker, options.radius_scale,
                           options.radius == Radius_rule::interpolated);
     }
-    const std::vector<std::uint8_t> quiet =
-        scope.quiet_triangles(mesh, packing, demoted, unsampled_triangles(mesh, delta, settled, options), timer);
+    const std::vector<std::uint8_t> quiet = scope.quiet_triangles(mesh, delta, packing, demoted, settled, timer);
     inside = interior_candidates(mesh, *fans, delta, f, demoted, cover, options, n_drawn,
                                  quiet.empty() ? nullptr : &quiet, queries, settled_flags);
     scope.sampled(mesh, quiet);

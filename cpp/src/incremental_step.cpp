@@ -602,11 +602,12 @@ class Changed_region final : public Step_scope {
   // (the scope's graphs are small)
   bool starts_triangulation_early() const override { return true; }
 
-  std::vector<std::uint8_t> quiet_triangles(const Mesh_arrays& mesh, const Packing& packing,
-                                            const std::vector<std::uint8_t>& demoted,
-                                            const std::vector<std::uint8_t>& unsampled, Stage_timer& timer) override {
-    auto quiet = evomesh::quiet_triangles(mesh, *grid_, weight_, packing.radius, packing.kept, demoted, unsampled,
-                                          options_.radius_scale, magnitude_, /*threads=*/0);
+  std::vector<std::uint8_t> quiet_triangles(const Mesh_arrays& mesh, const std::vector<double>& delta,
+                                            const Packing& packing, const std::vector<std::uint8_t>& demoted,
+                                            const std::vector<std::uint8_t>& settled, Stage_timer& timer) override {
+    auto quiet = evomesh::quiet_triangles(mesh, *grid_, weight_, packing.radius, packing.kept, demoted,
+                                          unsampled_triangles(mesh, delta, settled, options_), options_.radius_scale,
+                                          magnitude_, /*threads=*/0);
     timer.lap("incremental_quiet");
     return quiet;
   }

@@ -67,11 +67,13 @@ class Step_scope {
   // (frfc_stages::Early_start) rather than once the scope's graphs are freed.
   virtual bool starts_triangulation_early() const = 0;
   // Triangles whose samples the packing certainly rejects (not sampled); empty: none.
-  // `unsampled` (unsampled_triangles; empty: none) draw no samples anyway: the
-  // scope may call them quiet without a certificate.
-  virtual std::vector<std::uint8_t> quiet_triangles(const Mesh_arrays& mesh, const frfc_stages::Packing& packing,
+  // `settled` (settled_points; empty without options.skip_settled): triangles
+  // that draw no samples anyway (unsampled_triangles) the scope may call quiet
+  // without a certificate.
+  virtual std::vector<std::uint8_t> quiet_triangles(const Mesh_arrays& mesh, const std::vector<double>& delta,
+                                                    const frfc_stages::Packing& packing,
                                                     const std::vector<std::uint8_t>& demoted,
-                                                    const std::vector<std::uint8_t>& unsampled,
+                                                    const std::vector<std::uint8_t>& settled,
                                                     detail::Stage_timer& timer) = 0;
   // After the interior sampling (`quiet` as quiet_triangles returned it).
   virtual void sampled(const Mesh_arrays& mesh, const std::vector<std::uint8_t>& quiet) = 0;
