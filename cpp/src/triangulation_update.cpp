@@ -142,7 +142,6 @@ std::optional<std::vector<Triangle>> updated_constrained_delaunay(const Old_mesh
     int side;    // its edge there: T[kept][side] -> T[kept][side + 1]
   };
   std::vector<Boundary_edge> rim;
-  std::unordered_set<std::uint64_t> kept_edges;  // output-index keys of kept triangles' edges at the cavity
   for (std::size_t t = 0; t < m_in; ++t) {
     if (!cavity[t]) continue;
     for (int k = 0; k < 3; ++k) {
@@ -156,16 +155,15 @@ std::optional<std::vector<Triangle>> updated_constrained_delaunay(const Old_mesh
       const int side = other[0] == b ? 0 : other[1] == b ? 1 : 2;
       if (other[(side + 1) % 3] != a) return decline(kFlood);
       rim.push_back({u, side});
-      kept_edges.insert(edge_key(new_of[a], new_of[b]));
     }
   }
   std::vector<Vec2> local_points(global_of.size());
   for (std::size_t l = 0; l < global_of.size(); ++l) local_points[l] = points[global_of[l]];
   report.n_cavity_points = local_points.size();
-  // Pieces of the output: which edges they are, and whether they bound the domain.
-  std::unordered_map<std::uint64_t, bool> piece_boundary;
-  piece_boundary.reserve(2 * pieces.size());
-  for (const auto& piece : pieces) piece_boundary.emplace(edge_key(piece.a, piece.b), piece.boundary);
+  // The output's pieces, as edges.
+  std::unordered_set<std::uint64_t> piece_keys;
+  piece_keys.reserve(2 * pieces.size());
+  for (const auto& piece : pieces) piece_keys.insert(edge_key(piece.a, piece.b));
   std::vector<Constraint_piece> local_pieces;
   std::unordered_set<std::uint64_t> stops;  // local keys the flood does not cross: the cavity's and domain's borders
   for (const Boundary_edge& e : rim) {
@@ -174,7 +172,7 @@ std::optional<std::vector<Triangle>> updated_constrained_delaunay(const Old_mesh
     local_pieces.push_back({a, b, true});
     stops.insert(edge_key(a, b));
   }
-  std::vector<std::uint64_t> cavity_pieces;  // output keys of the pieces in the cavity
+  std::vector<std::uint64_t> cavity_pieces;  // local keys of the pieces in the cavity
   // Whether input points ia and ib are the ends of an edge of a kept input triangle.
   const auto kept_edge_between = [&](Index ia, Index ib) {
     bool found = false;
@@ -195,13 +193,11 @@ std::optional<std::vector<Triangle>> updated_constrained_delaunay(const Old_mesh
       if (!kept_input_edge(piece.a, piece.b)) return decline(kMissing);
       continue;
     }
-    const std::uint64_t key = edge_key(piece.a, piece.b);
-    if (kept_edges.count(key) != 0) continue;  // on the rim: a constraint already
-    // An edge of a kept triangle away from the cavity (a segment between two
-    // cavity points that stayed): not the cavity's.
+    // An edge of a kept triangle: on the rim (a constraint already), or away
+    // from the cavity (a segment between two cavity points that stayed).
     if (kept_input_edge(piece.a, piece.b)) continue;
     local_pieces.push_back({a, b, piece.boundary});
-    cavity_pieces.push_back(key);
+    cavity_pieces.push_back(edge_key(a, b));
     if (piece.boundary) stops.insert(edge_key(a, b));
   }
 
@@ -209,6 +205,11 @@ std::optional<std::vector<Triangle>> updated_constrained_delaunay(const Old_mesh
   // boundary's inner sides reach without crossing them.
   const Local_triangulation lt = local_constrained_delaunay(local_points, local_pieces);
   const std::size_t n_faces = lt.triangles.size();
+  // Whether edge k of face f (opposite corner k) is on the rim or the domain's boundary.
+  const auto stop_edge = [&](std::size_t f, int k) {
+    const Triangle& tri = lt.triangles[f];
+    return (lt.constrained[f] >> k & 1) && stops.count(edge_key(tri[(k + 1) % 3], tri[(k + 2) % 3])) != 0;
+  };
   std::vector<std::uint8_t> inside(n_faces, 0);
   std::vector<Index> flood;
   for (std::size_t f = 0; f < n_faces; ++f) {
@@ -216,14 +217,7 @@ std::optional<std::vector<Triangle>> updated_constrained_delaunay(const Old_mesh
     if (lt.seed[f] & 1) {
       // (an interior piece seeds both of its sides: only the rim and the domain
       // boundary's left sides are the cavity's for sure)
-      bool bounded = false;
-      for (int k = 0; k < 3; ++k) {
-        const Triangle& tri = lt.triangles[f];
-        if ((lt.constrained[f] >> k & 1) && stops.count(edge_key(tri[(k + 1) % 3], tri[(k + 2) % 3])) != 0) {
-          bounded = true;
-        }
-      }
-      if (bounded) {
+      if (stop_edge(f, 0) || stop_edge(f, 1) || stop_edge(f, 2)) {
         inside[f] = 1;
         flood.push_back(static_cast<Index>(f));
       }
@@ -232,10 +226,8 @@ std::optional<std::vector<Triangle>> updated_constrained_delaunay(const Old_mesh
   while (!flood.empty()) {
     const Index f = flood.back();
     flood.pop_back();
-    const Triangle& tri = lt.triangles[f];
     for (int k = 0; k < 3; ++k) {
-      const bool stop = (lt.constrained[f] >> k & 1) && stops.count(edge_key(tri[(k + 1) % 3], tri[(k + 2) % 3])) != 0;
-      if (stop) continue;
+      if (stop_edge(static_cast<std::size_t>(f), k)) continue;
       const Index g = lt.neighbour[f][k];
       if (g < 0 || (lt.seed[g] & 2)) return decline(kFlood);  // out of the hull, or out of the domain
       if (inside[g]) continue;
@@ -248,7 +240,7 @@ std::optional<std::vector<Triangle>> updated_constrained_delaunay(const Old_mesh
   // 5. Certificates. Every rim edge and piece in the cavity is an edge of an
   // inside face, on the right side for the rim; faces inside that meet across
   // an edge that is not a piece are strictly Delaunay.
-  std::unordered_map<std::uint64_t, std::pair<Index, int>> inside_edges;  // local key -> (face, k) for the rim's side
+  std::unordered_map<std::uint64_t, std::pair<Index, int>> inside_edges;  // constrained: local key -> (face, k)
   std::size_t n_inside = 0;
   for (std::size_t f = 0; f < n_faces; ++f) {
     if (!inside[f]) continue;
@@ -256,10 +248,10 @@ std::optional<std::vector<Triangle>> updated_constrained_delaunay(const Old_mesh
     const Triangle& tri = lt.triangles[f];
     for (int k = 0; k < 3; ++k) {
       const Index a = tri[(k + 1) % 3], b = tri[(k + 2) % 3];
-      if (stops.count(edge_key(a, b)) != 0 || (lt.constrained[f] >> k & 1)) {
+      if (lt.constrained[f] >> k & 1) {  // (the rim and the domain boundary are constraints too)
         inside_edges[edge_key(a, b)] = {static_cast<Index>(f), k};
+        continue;
       }
-      if (lt.constrained[f] >> k & 1) continue;
       const Index g = lt.neighbour[f][k];
       if (g < static_cast<Index>(f)) continue;  // each edge once (g inside: see the flood)
       const Triangle& o = lt.triangles[g];
@@ -279,12 +271,11 @@ std::optional<std::vector<Triangle>> updated_constrained_delaunay(const Old_mesh
     // the face must have it as (ga -> gb) (the cavity on its left), and its
     // third point outside the kept triangle's circle unless the edge is a piece
     if (global_of[face[(k + 1) % 3]] != ga || global_of[face[(k + 2) % 3]] != gb) return decline(kMissing);
-    if (piece_boundary.count(edge_key(ga, gb)) != 0) continue;
+    if (piece_keys.count(edge_key(ga, gb)) != 0) continue;
     if (in_circle(P[tri[0]], P[tri[1]], P[tri[2]], local_points[face[k]]) >= 0) return decline(kNotDelaunay);
   }
   for (std::uint64_t key : cavity_pieces) {
-    const Index a = static_cast<Index>(key >> 32), b = static_cast<Index>(key & 0xffffffffu);
-    if (inside_edges.count(edge_key(local_of[a], local_of[b])) == 0) return decline(kMissing);
+    if (inside_edges.count(key) == 0) return decline(kMissing);
   }
   // The kept triangles among themselves: strictly Delaunay across every edge
   // that is not an input segment (a kept segment is a piece of the output: its
@@ -324,7 +315,7 @@ std::optional<std::vector<Triangle>> updated_constrained_delaunay(const Old_mesh
   if (!delaunay) return decline(kNotDelaunay);
   // (and those segments are pieces indeed)
   for (const Edge& e : input.segments) {
-    if (kept_edge_between(e[0], e[1]) && piece_boundary.count(edge_key(new_of[e[0]], new_of[e[1]])) == 0) {
+    if (kept_edge_between(e[0], e[1]) && piece_keys.count(edge_key(new_of[e[0]], new_of[e[1]])) == 0) {
       return decline(kMissing);
     }
   }
