@@ -633,3 +633,46 @@ def test_refused_step_reports_a_sane_sample_count():
     assert done.returncode == 0, done.stderr[-2000:]
     assert "too much refinement" in done.stdout
     assert "-" not in done.stdout.split("about")[1].split("points")[0]
+
+
+@pytest.mark.parametrize("first", [0, 32767, 32768, 70001, 99999])
+def test_triangle_limit_checks_find_the_first_hit_over_parallel_blocks(first):
+    # _core.first_inverted_triangle / first_flat_triangles scan the caller's arrays
+    # in parallel blocks of 2^15 triangles: the first hit over all blocks, as numpy
+    # finds it (check_mesh_limits and Mesh() raise on that index).
+    from evomesh import _core
+    from evomesh.mesh import _MIN_HEIGHT_ULPS, _MIN_RELATIVE_HEIGHT, _flatness
+
+    rng = np.random.default_rng(first)
+    m = 150_000
+    points = rng.random((3 * m, 2))
+    triangles = np.arange(3 * m).reshape(m, 3)
+    d1, d2 = points[triangles[:, 1]] - points[triangles[:, 0]], points[triangles[:, 2]] - points[triangles[:, 0]]
+    area = d1[:, 0] * d2[:, 1] - d1[:, 1] * d2[:, 0]
+    triangles[area < 0] = triangles[area < 0][:, ::-1]  # every triangle counter-clockwise
+    height, longest, _ = _flatness(points, triangles)
+    keep = height >= 1e-3 * longest
+    triangles = triangles[keep][: first + 30_000]
+    assert len(triangles) > first
+    flipped = triangles.copy()
+    later = rng.choice(np.arange(first, len(triangles)), size=5)
+    flipped[np.concatenate([[first], later])] = flipped[np.concatenate([[first], later])][:, ::-1]
+    assert _core.first_inverted_triangle(points, triangles) == -1
+    assert _core.first_inverted_triangle(points, flipped) == first
+    flat = triangles.copy()
+    flat[first, 2] = flat[first, 0]  # zero height (a repeated vertex): thin and coarse
+    a = _core.first_flat_triangles(points, flat, _MIN_RELATIVE_HEIGHT, _MIN_HEIGHT_ULPS)
+    assert tuple(a) == (first, first)
+    assert tuple(_core.first_flat_triangles(points, triangles, _MIN_RELATIVE_HEIGHT, _MIN_HEIGHT_ULPS)) == (-1, -1)
+
+
+@pytest.mark.parametrize("bad", [3, -1, 2**40])
+def test_triangle_limit_checks_refuse_indices_out_of_range(bad):
+    from evomesh import _core
+
+    points = np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]])
+    triangles = np.array([[0, 1, 2]] * 40_000 + [[0, 1, bad]])
+    with pytest.raises(ValueError, match="out of range"):
+        _core.first_inverted_triangle(points, triangles)
+    with pytest.raises(ValueError, match="out of range"):
+        _core.first_flat_triangles(points, triangles, 1e-10, 1024)

@@ -522,9 +522,12 @@ PYBIND11_MODULE(_core, m) {
   m.def(
       "first_inverted_triangle",
       [](const Float_array& points, const Int_array& triangles) {
-        auto [pts, tris] = to_points_and_triangles(points, triangles);
-        py::gil_scoped_release release;
-        return first_inverted_triangle(pts, tris);
+        require_shape(points, 2, "points");
+        require_shape(triangles, 3, "triangles");
+        py::gil_scoped_release release;  // (the arrays stay alive: the caller holds them)
+        return first_inverted_triangle(reinterpret_cast<const Vec2*>(points.data()), static_cast<std::size_t>(points.shape(0)),
+                                       reinterpret_cast<const Triangle*>(triangles.data()),
+                                       static_cast<std::size_t>(triangles.shape(0)));
       },
       py::arg("points"), py::arg("triangles"),
       "The first triangle with zero or negative area in floating point, -1 for none (check_mesh_limits).");
@@ -532,11 +535,15 @@ PYBIND11_MODULE(_core, m) {
   m.def(
       "first_flat_triangles",
       [](const Float_array& points, const Int_array& triangles, double min_relative_height, double min_height_ulps) {
-        auto [pts, tris] = to_points_and_triangles(points, triangles);
+        require_shape(points, 2, "points");
+        require_shape(triangles, 3, "triangles");
         std::array<Index, 2> first;
         {
           py::gil_scoped_release release;
-          first = first_flat_triangles(pts, tris, min_relative_height, min_height_ulps);
+          first = first_flat_triangles(reinterpret_cast<const Vec2*>(points.data()), static_cast<std::size_t>(points.shape(0)),
+                                       reinterpret_cast<const Triangle*>(triangles.data()),
+                                       static_cast<std::size_t>(triangles.shape(0)), min_relative_height,
+                                       min_height_ulps);
         }
         return py::make_tuple(first[0], first[1]);
       },

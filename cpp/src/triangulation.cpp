@@ -9,6 +9,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <limits>
 #include <string>
 
@@ -18,6 +19,7 @@
 #include "evomesh/detail/spatial_order.hpp"
 #include "evomesh/detail/static_kd_tree.hpp"
 #include "evomesh/kernel.hpp"
+#include "evomesh/parallel.hpp"
 
 namespace evomesh {
 
@@ -472,16 +474,57 @@ void check_planar_mesh(const std::vector<Vec2>& points, const std::vector<Triang
   }
 }
 
-std::array<Index, 2> first_flat_triangles(const std::vector<Vec2>& points, const std::vector<Triangle>& triangles,
+namespace {
+
+// The checks below run over blocks of triangles in parallel; each block keeps
+// its first hit of every kind, and the least over blocks is the first overall
+// (the same for any thread count). Indices are checked as they are read.
+constexpr std::size_t kLimitBlock = std::size_t{1} << 15;
+
+template <std::size_t K, class Hit>
+std::array<Index, K> first_triangles_where(const Vec2* points, std::size_t n, const Triangle* triangles, std::size_t m,
+                                           Hit hit) {
+  const std::size_t blocks = (m + kLimitBlock - 1) / kLimitBlock;
+  std::vector<std::array<Index, K>> first(blocks);
+  std::vector<char> out_of_range(blocks, 0);
+  parallel_for(blocks, /*threads=*/0, [&](std::size_t b) {
+    std::array<Index, K> mine;
+    mine.fill(-1);
+    for (std::size_t t = b * kLimitBlock; t < std::min(m, (b + 1) * kLimitBlock); ++t) {
+      const Triangle& tri = triangles[t];
+      if (static_cast<std::uint64_t>(tri[0]) >= n || static_cast<std::uint64_t>(tri[1]) >= n ||
+          static_cast<std::uint64_t>(tri[2]) >= n) {
+        out_of_range[b] = 1;
+        break;
+      }
+      const std::array<bool, K> is = hit(points[tri[0]], points[tri[1]], points[tri[2]]);
+      for (std::size_t k = 0; k < K; ++k) {
+        if (is[k] && mine[k] < 0) mine[k] = static_cast<Index>(t);
+      }
+    }
+    first[b] = mine;
+  });
+  for (char bad : out_of_range) {
+    if (bad) throw Input_error("triangles has a point index out of range [0, " + std::to_string(n) + ")");
+  }
+  std::array<Index, K> out;
+  out.fill(-1);
+  for (const auto& f : first) {
+    for (std::size_t k = 0; k < K; ++k) {
+      if (out[k] < 0) out[k] = f[k];
+    }
+  }
+  return out;
+}
+
+}  // namespace
+
+std::array<Index, 2> first_flat_triangles(const Vec2* points, std::size_t n, const Triangle* triangles, std::size_t m,
                                           double min_relative_height, double min_height_ulps) {
   // The arithmetic of Python's _check_not_flat, operation for operation (no
   // fused multiply-add on the default x86-64 target), so both decide alike.
   const double eps = std::numeric_limits<double>::epsilon();
-  std::array<Index, 2> first{-1, -1};
-  for (std::size_t t = 0; t < triangles.size() && first[0] < 0; ++t) {
-    const Vec2& p0 = points[static_cast<std::size_t>(triangles[t][0])];
-    const Vec2& p1 = points[static_cast<std::size_t>(triangles[t][1])];
-    const Vec2& p2 = points[static_cast<std::size_t>(triangles[t][2])];
+  return first_triangles_where<2>(points, n, triangles, m, [&](const Vec2& p0, const Vec2& p1, const Vec2& p2) {
     const double e0x = p1[0] - p0[0], e0y = p1[1] - p0[1];
     const double e1x = p2[0] - p1[0], e1y = p2[1] - p1[1];
     const double e2x = p0[0] - p2[0], e2y = p0[1] - p2[1];
@@ -493,10 +536,8 @@ std::array<Index, 2> first_flat_triangles(const std::vector<Vec2>& points, const
     const double reach = std::max({std::abs(p0[0]), std::abs(p0[1]), std::abs(p1[0]), std::abs(p1[1]),
                                    std::abs(p2[0]), std::abs(p2[1])});
     const double rounding = eps * reach;
-    if (height < min_relative_height * longest) first[0] = static_cast<Index>(t);
-    if (first[1] < 0 && height < min_height_ulps * rounding) first[1] = static_cast<Index>(t);
-  }
-  return first;
+    return std::array<bool, 2>{height < min_relative_height * longest, height < min_height_ulps * rounding};
+  });
 }
 
 std::array<Index, 2> first_pinched_boundary(const std::vector<Vec2>& points, const std::vector<Edge>& boundary,
@@ -572,17 +613,13 @@ std::array<Index, 2> first_pinched_boundary(const std::vector<Vec2>& points, con
   return {-1, -1};
 }
 
-Index first_inverted_triangle(const std::vector<Vec2>& points, const std::vector<Triangle>& triangles) {
+Index first_inverted_triangle(const Vec2* points, std::size_t n, const Triangle* triangles, std::size_t m) {
   // Python's check_mesh_limits, operation for operation (as first_flat_triangles).
-  for (std::size_t t = 0; t < triangles.size(); ++t) {
-    const Vec2& p0 = points[static_cast<std::size_t>(triangles[t][0])];
-    const Vec2& p1 = points[static_cast<std::size_t>(triangles[t][1])];
-    const Vec2& p2 = points[static_cast<std::size_t>(triangles[t][2])];
+  return first_triangles_where<1>(points, n, triangles, m, [](const Vec2& p0, const Vec2& p1, const Vec2& p2) {
     const double d1x = p1[0] - p0[0], d1y = p1[1] - p0[1];
     const double d2x = p2[0] - p0[0], d2y = p2[1] - p0[1];
-    if (!(d1x * d2y - d1y * d2x > 0)) return static_cast<Index>(t);
-  }
-  return -1;
+    return std::array<bool, 1>{!(d1x * d2y - d1y * d2x > 0)};
+  })[0];
 }
 
 Input_error crossing_pieces_error() {
@@ -593,8 +630,20 @@ Input_error crossing_pieces_error() {
 }
 
 // The canonical order (triangulation.hpp): a counting sort on the first
-// index, O(n + m), then each bucket's few triangles.
+// index, O(n + m), then each bucket's few triangles. An array already in it
+// (a triangulation's output that a step passes on) costs one scan.
 std::vector<Index> canonical_triangle_order(std::size_t n_points, std::vector<Triangle>& triangles) {
+  const bool in_order = [&triangles] {
+    for (std::size_t k = 0; k < triangles.size(); ++k) {
+      if (least_index_first(triangles[k]) != triangles[k] || (k > 0 && !(triangles[k - 1] < triangles[k]))) return false;
+    }
+    return true;
+  }();
+  if (in_order) {
+    std::vector<Index> identity(triangles.size());
+    for (std::size_t k = 0; k < identity.size(); ++k) identity[k] = static_cast<Index>(k);
+    return identity;
+  }
   std::vector<std::size_t> start(n_points + 1, 0);
   for (Triangle& t : triangles) {
     t = least_index_first(t);

@@ -101,10 +101,11 @@ void check_planar_mesh_cdt(const std::vector<Vec2>& points, const std::vector<Tr
 // numpy does there: for each triangle the height (twice its area over its
 // longest edge) against min_relative_height times the longest edge ("thin") and
 // against min_height_ulps units of rounding of its largest coordinate
-// ("coarse"). Returns the first thin and the first coarse triangle, -1 for none
-// (the search stops at the first thin one).
-std::array<Index, 2> first_flat_triangles(const std::vector<Vec2>& points, const std::vector<Triangle>& triangles,
-                                          double min_relative_height, double min_height_ulps);
+// ("coarse"). Returns the first thin and the first coarse triangle, -1 for none.
+// On the caller's arrays (n points, m triangles; no copy), in parallel blocks;
+// Input_error for a point index out of range.
+std::array<Index, 2> first_flat_triangles(const Vec2* points, std::size_t n, const Triangle* triangles,
+                                          std::size_t m, double min_relative_height, double min_height_ulps);
 
 // Where the domain nearly touches itself across its outside: the first boundary
 // edge (index into `boundary`) and the corner (a point with corner[v] != 0 on
@@ -125,8 +126,9 @@ std::array<Index, 2> first_pinched_boundary(const std::vector<Vec2>& points, con
                                             const std::vector<char>& corner, double min_ulps);
 
 // The first triangle whose signed area (floating point, as Mesh's check in
-// Python) is not positive, -1 for none.
-Index first_inverted_triangle(const std::vector<Vec2>& points, const std::vector<Triangle>& triangles);
+// Python) is not positive, -1 for none. As first_flat_triangles: the caller's
+// arrays, parallel blocks, Input_error for an index out of range.
+Index first_inverted_triangle(const Vec2* points, std::size_t n, const Triangle* triangles, std::size_t m);
 
 // Orients every triangle counter-clockwise (exact predicate); throws Input_error
 // for a zero-area triangle. Returns the number of triangles flipped.
