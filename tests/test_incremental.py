@@ -372,15 +372,21 @@ def test_the_updated_triangulation_keeps_holes_reflex_corners_and_cracks(shape):
     base = _shape_mesh(shape, 31)
     # (a step with the quality pass takes the lattice's exact ties away)
     mesh = evolve_quietly(base, np.full(base.n_points, 0.8), 0)
-    declined = []
+    declined, checked = [], []
     for step in range(3):
         x = mesh.points[:, 0]
         delta = np.where(np.abs(x - (0.2 + 0.25 * step)) < 0.08, 0.6, 1.0)
         fast = _check_same_step(mesh, delta, step, quality=False)
         assert _taken(fast)
         declined.append(_declined(fast))
+        checked.append(int(fast.stats["triangulation_update_checked_kept_edges"]))
+        # an updated triangulation is certified, and the next step inherits that
+        # for the edges it keeps (the same bits as the full step, checked above)
+        assert fast._delaunay and fast.stats["triangulation_certified"] == 1
         mesh = fast
     assert declined == [0, 0, 0]
+    # the first input was built whole (with the quality pass): its edges are checked once
+    assert checked == [1, 0, 0]
 
 
 def _flip_one_edge(mesh: evomesh.Mesh) -> evomesh.Mesh:
@@ -410,7 +416,9 @@ def _flip_one_edge(mesh: evomesh.Mesh) -> evomesh.Mesh:
 
 def test_an_input_that_is_not_delaunay_is_triangulated_whole():
     mesh = _flip_one_edge(_stepped_mesh(1500, 0))
+    assert not mesh._delaunay  # a user's mesh is never taken as certified
     delta = _front_delta(mesh, (0.25, 0.25), 0.1, 0.05, 0.5)  # (the flipped edge is far from the change)
     fast = _check_same_step(mesh, delta, 2, quality=False)
     assert _taken(fast)
     assert _declined(fast) == 6
+    assert not fast._delaunay  # built whole: not certified

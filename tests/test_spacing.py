@@ -107,6 +107,43 @@ def test_bad_delta_shape_and_queries():
         evomesh.spacing("not a mesh", 1.0)
 
 
+@settings(max_examples=8, deadline=None)
+@given(st.integers(0, 10_000), st.booleans(), st.booleans())
+def test_a_strip_of_sites_is_split_across_its_length(seed, vertical, certified):
+    """Sites in a thin strip (a changed band's): the first split cuts across the
+    strip's length, so its halo stays thin and the graph is built in parts (two:
+    a second cut along the strip would make thick halos); the answers are those
+    of one graph (spacing.cpp). (Cut along the strip first, it stayed one graph.)"""
+    from evomesh import _core
+
+    rng = np.random.default_rng(seed)
+    across, along = 12, 400
+    i, j = np.meshgrid(np.arange(across), np.arange(along))
+    sites = np.column_stack([i.ravel(), j.ravel()]).astype(float) / along
+    sites += rng.uniform(-0.3, 0.3, sites.shape) / along
+    if not vertical:
+        sites = sites[:, ::-1].copy()
+    nn = cKDTree(sites).query(sites, k=2)[0][:, 1]
+    weights = rng.uniform(0.1, 1.0, len(sites)) * nn
+    one = _core.SpacingFunction(sites, weights)
+    split = _core.SpacingFunction(sites, weights, min_sites_per_part=len(sites) // 5)
+    assert one.n_parts == 1 and split.n_parts == 2
+    lo, hi = sites.min(axis=0), sites.max(axis=0)
+    long_axis = 1 if vertical else 0
+    cut = np.median(sites[:, long_axis])
+    on_cut = rng.uniform(lo, hi, (300, 2))
+    on_cut[:, long_axis] = cut
+    x = np.r_[rng.uniform(lo, hi, (1000, 2)), sites[::7], rng.uniform(-2, 3, (200, 2)), on_cut]
+    f1, s1 = one.evaluate(x, certified=certified)
+    f4, s4 = split.evaluate(x, certified=certified)
+    expected = brute_force_f(sites, weights, x)
+    assert np.all(np.abs(f4 - expected) <= 1e-12 * expected)
+    assert np.all(np.abs(f4 - f1) <= 1e-12 * f1)
+    assert np.array_equal(weights[s4] + np.linalg.norm(x - sites[s4], axis=1), f4)
+    if certified:
+        assert np.array_equal(s1, s4)
+
+
 @settings(max_examples=12, deadline=None)
 @given(st.integers(0, 10_000), st.sampled_from([0.3, 1.0, 2.0]), st.booleans())
 def test_partitioned_apollonius_graphs_answer_like_one_graph(seed, delta_max, certified):

@@ -411,8 +411,9 @@ void bind_step(py::module_& m, const char* name,
                      std::optional<Int_array> curved_tags, double corner_angle, std::optional<py::function> project,
                      std::optional<Float_array> nn, std::optional<Int_array> nn_grew,
                      std::optional<Int_array> point_gids, std::optional<Int_array> triangle_gids,
-                     std::optional<Int_array> segment_keys) {
+                     std::optional<Int_array> segment_keys, bool strictly_delaunay) {
         Mesh_arrays mesh = to_mesh(points, triangles, segments, segment_is_boundary, kind);
+        mesh.strictly_delaunay = strictly_delaunay;
         add_labels(mesh, segment_tags, triangle_tags, required);
         add_known_nn(mesh, nn, nn_grew);
         add_global_ids(mesh, point_gids, triangle_gids, segment_keys);
@@ -432,7 +433,7 @@ void bind_step(py::module_& m, const char* name,
       py::arg("curved_tags") = py::none(), py::arg("corner_angle") = kDefaultCornerAngle,
       py::arg("project") = py::none(), py::arg("nn") = py::none(), py::arg("nn_grew") = py::none(),
       py::arg("point_gids") = py::none(), py::arg("triangle_gids") = py::none(), py::arg("segment_keys") = py::none(),
-      doc);
+      py::arg("strictly_delaunay") = false, doc);
 }
 
 PYBIND11_MODULE(_core, m) {

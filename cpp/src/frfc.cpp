@@ -397,6 +397,9 @@ Evolve_result frfc_over_scope(const Mesh_arrays& input, const Mesh_arrays& mesh,
   const bool early_started = options.quality && !mesh.geometry;
   std::optional<std::vector<Triangle>> triangles;
   if (!options.quality && !mesh.geometry) triangles = scope.triangulation(selection, pieces, *old_mesh, result.stats);
+  // An updated triangulation is certified strictly Delaunay (the next step's
+  // update then checks only what it changes); one built whole is not checked.
+  const bool certified = triangles.has_value();
   triangulate_selection(std::move(selection), pieces, options.quality ? &quality : nullptr, result,
                         early_started ? &early->triangulation : nullptr, mesh.geometry.get(),
                         triangles ? &*triangles : nullptr);
@@ -404,6 +407,7 @@ Evolve_result frfc_over_scope(const Mesh_arrays& input, const Mesh_arrays& mesh,
   timer.lap(options.quality ? "quality" : "cdt");
   finish_step(input, result, timer, &*old_mesh, scope.reusable_nn(spacing));
   scope.add_counts(result.stats);
+  result.stats.emplace_back("triangulation_certified", certified ? 1.0 : 0.0);
   // (not "seconds_" stages: the batches run beside the others; the quality
   // stage includes the wait for them)
   result.stats.emplace_back("early_triangulation_insert_seconds", early->insert_seconds);

@@ -659,6 +659,7 @@ class Changed_region final : public Step_scope {
     stats.emplace_back("triangulation_update_locate_seconds", report.locate_seconds);
     stats.emplace_back("triangulation_update_local_seconds", report.local_seconds);
     stats.emplace_back("triangulation_update_certify_seconds", report.certify_seconds);
+    stats.emplace_back("triangulation_update_checked_kept_edges", report.checked_kept_edges ? 1.0 : 0.0);
     return triangles;
   }
   // (the walker takes them: the step's peak is the quality pass, the same in both scopes)

@@ -280,8 +280,12 @@ struct Spacing_function::Impl {
   std::vector<std::int64_t> ids;  // global ids of the sites (empty: their indices)
   double shift = 0.0;
   double halo = 0.0;
-  // Cell of x: part (x < split_x ? 0 : 1) * (y splits) ...
+  // Cell of a point: the first split is along coordinate `axis` (the longer
+  // side of the sites' box, so that a strip of sites splits across its length
+  // and the halos stay thin), the second along the other in each half:
+  // part (c[axis] < split_x ? 0 : 1) * 2 + (c[1 - axis] < split_y[side] ? 0 : 1).
   int n_parts = 1;
+  int axis = 0;
   double split_x = 0;
   double split_y[2] = {0, 0};
   struct Part {
@@ -294,9 +298,10 @@ struct Spacing_function::Impl {
 
   int part_of(double x, double y) const {
     if (n_parts == 1) return 0;
-    const int side = x < split_x ? 0 : 1;
+    const double first = axis == 0 ? x : y, second = axis == 0 ? y : x;
+    const int side = first < split_x ? 0 : 1;
     if (n_parts == 2) return side;
-    return 2 * side + (y < split_y[side] ? 0 : 1);
+    return 2 * side + (second < split_y[side] ? 0 : 1);
   }
 };
 
@@ -437,15 +442,23 @@ Spacing_function::Spacing_function(const std::vector<Vec2>& sites, const std::ve
   std::vector<std::vector<std::size_t>> members;
   std::vector<std::array<double, 4>> cells(1);  // lo_x, lo_y, hi_x, hi_y
   int n_parts = n >= 4 * min_sites_per_part ? 4 : n >= 2 * min_sites_per_part ? 2 : 1;
+  if (n_parts > 1) {
+    double lo[2] = {sites[0][0], sites[0][1]}, hi[2] = {sites[0][0], sites[0][1]};
+    for (const Vec2& s : sites) {
+      for (int c = 0; c < 2; ++c) lo[c] = std::min(lo[c], s[c]), hi[c] = std::max(hi[c], s[c]);
+    }
+    impl.axis = hi[1] - lo[1] > hi[0] - lo[0] ? 1 : 0;  // (a square: x first, as always)
+  }
+  const int a = impl.axis, b = 1 - impl.axis;
   while (n_parts > 1) {
     std::vector<double> xs(n);
-    for (std::size_t i = 0; i < n; ++i) xs[i] = sites[i][0];
+    for (std::size_t i = 0; i < n; ++i) xs[i] = sites[i][a];
     impl.split_x = median_of(std::move(xs));
     if (n_parts == 4) {
       for (int side = 0; side < 2; ++side) {
         std::vector<double> ys;
         for (std::size_t i = 0; i < n; ++i) {
-          if ((sites[i][0] < impl.split_x ? 0 : 1) == side) ys.push_back(sites[i][1]);
+          if ((sites[i][a] < impl.split_x ? 0 : 1) == side) ys.push_back(sites[i][b]);
         }
         impl.split_y[side] = ys.empty() ? 0.0 : median_of(std::move(ys));
       }
@@ -465,8 +478,9 @@ Spacing_function::Spacing_function(const std::vector<Vec2>& sites, const std::ve
     for (int k = 0; k < n_parts && balanced; ++k) {
       auto& cell = cells[k];
       const int side = n_parts == 2 ? k : k / 2;
-      (side == 0 ? cell[2] : cell[0]) = impl.split_x;
-      if (n_parts == 4) (k % 2 == 0 ? cell[3] : cell[1]) = impl.split_y[side];
+      // (cell: lo_x, lo_y, hi_x, hi_y; the first split along a, the second along b)
+      (side == 0 ? cell[2 + a] : cell[a]) = impl.split_x;
+      if (n_parts == 4) (k % 2 == 0 ? cell[2 + b] : cell[b]) = impl.split_y[side];
       for (std::size_t i = 0; i < n; ++i) {
         if (impl.part_of(sites[i][0], sites[i][1]) == k) members[k].push_back(i);
       }

@@ -495,7 +495,8 @@ def evolve(mesh: Mesh, delta: Any = None, *, size: Any = None, method: str = "fr
         raise ValueError("geometry (curved boundaries) is supported by method='frfc' only")
     core = _core.frfc if method == "frfc" else _core.drfc
     result = core(mesh.points, mesh.triangles, mesh.segments, mesh.segment_is_boundary.astype(np.uint8), mesh.kind, d, o,
-                  **mesh._labels(), **mesh._known_nn(), **({} if g is None else g._core_arguments()))
+                  **mesh._labels(), **mesh._known_nn(), **({} if g is None else g._core_arguments()),
+                  strictly_delaunay=mesh._delaunay)
     new = _wrap(result, mesh)
     return new if motion is None else after_step(old, motion, new)
 
@@ -547,6 +548,7 @@ def _wrap(result: dict[str, Any], old: Mesh | None = None) -> Mesh:
         result.get("required"),
         nn_grew,
         tag_names=None if old is None else old.tag_names,  # the tags are the input's: so are their names
+        delaunay=result["stats"].get("triangulation_certified") == 1,
     )
 
 
@@ -594,7 +596,8 @@ def _wrap_unchanged(result: dict[str, Any], old: Mesh) -> Mesh:
     kind = old.kind if np.array_equal(result["kind"], old.kind) else result["kind"]
     return Mesh._trusted(old.points, old.triangles, old.segments, old.segment_is_boundary, kind, result["origin"],
                          dict(result["stats"]), lineage, nn, old.segment_tags, old.triangle_tags, old.required, nn_grew,
-                         tag_names=old.tag_names)
+                         tag_names=old.tag_names,
+                         delaunay=old._delaunay or result["stats"].get("triangulation_certified") == 1)
 
 
 def delaunay_refine(mesh: Mesh, delta: Any, *, min_angle: float = 20.0, max_samples: float = 5e7,

@@ -298,7 +298,7 @@ class Mesh:
     """
 
     __slots__ = ("points", "triangles", "segments", "segment_is_boundary", "kind", "origin", "stats", "lineage", "_nn",
-                 "_nn_grew", "segment_tags", "triangle_tags", "required", "tag_names")
+                 "_nn_grew", "segment_tags", "triangle_tags", "required", "tag_names", "_delaunay")
 
     points: np.ndarray
     triangles: np.ndarray
@@ -381,8 +381,15 @@ class Mesh:
                      tri_tags, req, tag_names=names)
 
     def _assign(self, points, triangles, segments, segment_is_boundary, kind, origin, stats, lineage, nn,
-                segment_tags=None, triangle_tags=None, required=None, nn_grew=None, tag_names=None) -> None:
+                segment_tags=None, triangle_tags=None, required=None, nn_grew=None, tag_names=None,
+                delaunay=False) -> None:
         set_ = object.__setattr__
+        # The step that made these (immutable) arrays certified its triangles the
+        # constrained Delaunay triangulation of the points and segments, every other
+        # edge strictly locally Delaunay (stat "triangulation_certified"): the next
+        # step's changed-region update inherits that for the edges it keeps
+        # (cpp/include/evomesh/triangulation_update.hpp). False when not known.
+        set_(self, "_delaunay", bool(delaunay))
         set_(self, "points", _frozen(np.asarray(points, dtype=np.float64)))
         set_(self, "triangles", _frozen(np.asarray(triangles, dtype=np.int64)))
         set_(self, "segments", _frozen(np.asarray(segments, dtype=np.int64).reshape(-1, 2)))
@@ -409,11 +416,11 @@ class Mesh:
     @classmethod
     def _trusted(cls, points, triangles, segments, segment_is_boundary, kind, origin, stats=None, lineage=None,
                  nn=None, segment_tags=None, triangle_tags=None, required=None, nn_grew=None,
-                 tag_names=None) -> "Mesh":
+                 tag_names=None, delaunay=False) -> "Mesh":
         """Wrap arrays that evomesh itself produced (already valid); no checks."""
         mesh = cls.__new__(cls)
         mesh._assign(points, triangles, segments, segment_is_boundary, kind, origin, stats or {}, lineage, nn,
-                     segment_tags, triangle_tags, required, nn_grew, tag_names)
+                     segment_tags, triangle_tags, required, nn_grew, tag_names, delaunay)
         return mesh
 
     def _labels(self) -> dict[str, Any]:

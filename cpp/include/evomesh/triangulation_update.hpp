@@ -27,6 +27,8 @@ struct Triangulation_update_report {
   // Seconds: locating the new points and finding the cavity; its local
   // triangulation and flood; the certificates and the output.
   double locate_seconds = 0, local_seconds = 0, certify_seconds = 0;
+  // The edges between kept triangles were checked (not inherited from the input's certificate).
+  bool checked_kept_edges = false;
 };
 
 // constrained_delaunay(points, pieces), the same array, or nullopt (report.declined
@@ -40,7 +42,10 @@ struct Triangulation_update_report {
 // then certified: every piece is an edge, and every edge that is not a piece is
 // strictly locally Delaunay (checked on every edge, kept ones included, with
 // exact predicates), so it is the unique constrained Delaunay triangulation of
-// the points and pieces, which constrained_delaunay returns. Declines when the
+// the points and pieces, which constrained_delaunay returns. An edge between two
+// kept triangles joins the same four points as in the input, so where the input
+// says it is strictly Delaunay (Mesh_arrays::strictly_delaunay: a step certified
+// it) those edges are not checked again, and the check costs O(c), not O(m). Declines when the
 // cavity holds more than `max_cavity_share` of the input triangles. O(m) checks
 // and walks plus O(c log c) for a cavity of c triangles.
 std::optional<std::vector<Triangle>> updated_constrained_delaunay(const Old_mesh_walker& old_mesh,

@@ -74,6 +74,13 @@ struct Mesh_arrays {
   // holds them. Used when the step measures nn within the domain.
   std::vector<double> nn_within_domain;
   std::vector<Index> nn_grew;
+  // Optional, a step's input only (false: not known): the triangles are the
+  // constrained Delaunay triangulation of the points and segments with every
+  // edge that is not a segment strictly locally Delaunay (exact predicates), as
+  // a step certified it for its own output (stat "triangulation_certified"; the
+  // Python Mesh keeps that for the arrays it cannot change). The changed-region
+  // step then checks only the edges its update touches (triangulation_update.hpp).
+  bool strictly_delaunay = false;
   // Optional, a step's input only (empty: the array positions): global ids
   // (issue 29, docs/distributed-step.md section 2.2), one per point, triangle
   // and segment, distinct within each array. The step keys by them what it
