@@ -383,6 +383,7 @@ def frfc(
     point_gids: ArrayLike | None = None,  # global ids (issue 29): None = the array positions
     triangle_gids: ArrayLike | None = None,
     segment_keys: ArrayLike | None = None,
+    strictly_delaunay: bool = False,  # the triangles certified strictly Delaunay by a step (Mesh._delaunay)
 ) -> EvolveResult:
     """Functional-Refining-Functional-Coarsening (Section 3.2): one step; returns a dict of arrays and stats."""
 
@@ -405,6 +406,7 @@ def drfc(
     point_gids: ArrayLike | None = None,  # global ids (issue 29): None = the array positions
     triangle_gids: ArrayLike | None = None,
     segment_keys: ArrayLike | None = None,
+    strictly_delaunay: bool = False,
 ) -> EvolveResult:
     """Delaunay-Refining-Functional-Coarsening (Section 5); returns the same dict as frfc."""
 
