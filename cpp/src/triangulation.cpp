@@ -630,37 +630,71 @@ Input_error crossing_pieces_error() {
 }
 
 // The canonical order (triangulation.hpp): a counting sort on the first
-// index, O(n + m), then each bucket's few triangles. An array already in it
-// (a triangulation's output that a step passes on) costs one scan.
+// index, O(n + m), then each bucket's few triangles. An array already in that
+// order (a triangulation's output that a step passes on) costs one scan, and one
+// with a few triangles out of place (a step's kept triangles, renumbered where a
+// few points moved in the point order) two scans and a merge: the triangles out
+// of place are set aside, sorted and merged back; else the counting sort.
 std::vector<Index> canonical_triangle_order(std::size_t n_points, std::vector<Triangle>& triangles) {
-  const bool in_order = [&triangles] {
-    for (std::size_t k = 0; k < triangles.size(); ++k) {
-      if (least_index_first(triangles[k]) != triangles[k] || (k > 0 && !(triangles[k - 1] < triangles[k]))) return false;
+  const std::size_t m = triangles.size();
+  std::size_t descents = 0;
+  for (std::size_t k = 0; k < m; ++k) {
+    triangles[k] = least_index_first(triangles[k]);
+    descents += k > 0 && !(triangles[k - 1] < triangles[k]);
+  }
+  std::vector<Index> order(m);
+  if (descents == 0) {
+    for (std::size_t k = 0; k < m; ++k) order[k] = static_cast<Index>(k);
+    return order;
+  }
+  auto apply = [&triangles](const std::vector<Index>& by) {
+    std::vector<Triangle> sorted(by.size());
+    for (std::size_t k = 0; k < by.size(); ++k) sorted[k] = triangles[by[k]];
+    triangles = std::move(sorted);
+  };
+  if (descents <= m / 256) {
+    // One pass keeps an increasing run `in_place` and sets aside what does not
+    // fit: an element below the run's last takes off the few (at most
+    // kLookBack) larger ones before it, which were displaced forward, or is set
+    // aside itself when more are larger (it was displaced backward).
+    constexpr std::size_t kLookBack = 16;
+    std::vector<Index> in_place, out_of_place;
+    in_place.reserve(m);
+    for (std::size_t k = 0; k < m; ++k) {
+      const Triangle& t = triangles[k];
+      std::size_t larger = 0;
+      while (larger < in_place.size() && larger <= kLookBack && t < triangles[in_place[in_place.size() - 1 - larger]]) {
+        ++larger;
+      }
+      if (larger > kLookBack) {
+        out_of_place.push_back(static_cast<Index>(k));
+        continue;
+      }
+      for (; larger > 0; --larger) {
+        out_of_place.push_back(in_place.back());
+        in_place.pop_back();
+      }
+      in_place.push_back(static_cast<Index>(k));
     }
-    return true;
-  }();
-  if (in_order) {
-    std::vector<Index> identity(triangles.size());
-    for (std::size_t k = 0; k < identity.size(); ++k) identity[k] = static_cast<Index>(k);
-    return identity;
+    if (out_of_place.size() <= m / 64) {
+      const auto less = [&triangles](Index a, Index b) { return triangles[a] < triangles[b]; };
+      std::sort(out_of_place.begin(), out_of_place.end(), less);
+      std::merge(in_place.begin(), in_place.end(), out_of_place.begin(), out_of_place.end(), order.begin(), less);
+      apply(order);
+      return order;
+    }
   }
   std::vector<std::size_t> start(n_points + 1, 0);
-  for (Triangle& t : triangles) {
-    t = least_index_first(t);
-    ++start[static_cast<std::size_t>(t[0]) + 1];
-  }
+  for (const Triangle& t : triangles) ++start[static_cast<std::size_t>(t[0]) + 1];
   for (std::size_t v = 0; v < n_points; ++v) start[v + 1] += start[v];
-  std::vector<Index> order(triangles.size());
   std::vector<std::size_t> next(start.begin(), start.end() - 1);
-  for (std::size_t k = 0; k < triangles.size(); ++k) order[next[static_cast<std::size_t>(triangles[k][0])]++] = static_cast<Index>(k);
+  for (std::size_t k = 0; k < m; ++k) order[next[static_cast<std::size_t>(triangles[k][0])]++] = static_cast<Index>(k);
   for (std::size_t v = 0; v < n_points; ++v) {
     if (start[v + 1] - start[v] < 2) continue;
     std::sort(order.begin() + static_cast<std::ptrdiff_t>(start[v]), order.begin() + static_cast<std::ptrdiff_t>(start[v + 1]),
               [&](Index a, Index b) { return triangles[a] < triangles[b]; });
   }
-  std::vector<Triangle> sorted(triangles.size());
-  for (std::size_t k = 0; k < order.size(); ++k) sorted[k] = triangles[order[k]];
-  triangles = std::move(sorted);
+  apply(order);
   return order;
 }
 

@@ -323,25 +323,49 @@ std::optional<std::vector<Triangle>> updated_constrained_delaunay(const Old_mesh
     }
   }
 
-  // 6. The kept triangles (renumbered) and the cavity's, in canonical order:
-  // each part sorted, then merged. The kept part is in that order already (one
-  // scan) when the input was (a step's output) and the step kept its points'
-  // relative order; else it is sorted too.
-  std::vector<Triangle> kept, fresh_triangles;
-  kept.reserve(m_in - n_cavity);
-  fresh_triangles.reserve(n_inside);
-  for (std::size_t t = 0; t < m_in; ++t) {
-    if (!cavity[t]) kept.push_back({new_of[T[t][0]], new_of[T[t][1]], new_of[T[t][2]]});
-  }
+  // 6. The kept triangles (renumbered) and the cavity's, in canonical order.
+  // The kept ones come in the input's order, canonical when the input is a
+  // step's output, and a step keeps its points' relative order but for a few
+  // (demoted points go after the others): one pass keeps the increasing run of
+  // them in place and sets aside what does not fit (an element below the run's
+  // last takes off the few larger ones before it, displaced forward, or is set
+  // aside itself, displaced backward); the set-aside and the cavity's are sorted
+  // and merged in from the back. Many set aside (an input in another order): the
+  // counting sort of canonical_triangle_order.
+  std::vector<Triangle> triangles;
+  triangles.reserve(m_in - n_cavity + n_inside);
+  std::vector<Triangle> rest;
+  rest.reserve(n_inside);
   for (std::size_t f = 0; f < n_faces; ++f) {
     if (!inside[f]) continue;
     const Triangle& tri = lt.triangles[f];
-    fresh_triangles.push_back({global_of[tri[0]], global_of[tri[1]], global_of[tri[2]]});
+    rest.push_back(least_index_first({global_of[tri[0]], global_of[tri[1]], global_of[tri[2]]}));
   }
-  canonical_triangle_order(n, kept);
-  canonical_triangle_order(n, fresh_triangles);
-  std::vector<Triangle> triangles(kept.size() + fresh_triangles.size());
-  std::merge(kept.begin(), kept.end(), fresh_triangles.begin(), fresh_triangles.end(), triangles.begin());
+  constexpr std::size_t kLookBack = 16;
+  for (std::size_t t = 0; t < m_in; ++t) {
+    if (cavity[t]) continue;
+    const Triangle x = least_index_first({new_of[T[t][0]], new_of[T[t][1]], new_of[T[t][2]]});
+    std::size_t larger = 0;
+    while (larger < triangles.size() && larger <= kLookBack && x < triangles[triangles.size() - 1 - larger]) ++larger;
+    if (larger > kLookBack) {
+      rest.push_back(x);
+      continue;
+    }
+    for (; larger > 0; --larger) {
+      rest.push_back(triangles.back());
+      triangles.pop_back();
+    }
+    triangles.push_back(x);
+  }
+  if (rest.size() > n_inside + (m_in - n_cavity) / 16) {
+    triangles.insert(triangles.end(), rest.begin(), rest.end());
+    canonical_triangle_order(n, triangles);
+  } else {
+    std::sort(rest.begin(), rest.end());
+    std::size_t i = triangles.size(), j = rest.size(), k = i + j;
+    triangles.resize(k);
+    while (j > 0) triangles[--k] = i > 0 && rest[j - 1] < triangles[i - 1] ? triangles[--i] : rest[--j];
+  }
   lap(report.certify_seconds);
   return triangles;
 }

@@ -1,5 +1,6 @@
 // The domain of constrained_delaunay (a square with a square hole), and the
 // corner decisions of classify_points / runs_straight_through.
+#include <set>
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -375,8 +376,81 @@ void check_angle_rule_floor(double gap, bool refined) {
   }
 }
 
+// canonical_triangle_order: triangles in order, a few out of place, renumbered
+// where a point moved to the end of the point order, and shuffled all give the
+// reference order (each rotated to its least index, sorted), with `order` the
+// input position of every output triangle.
+void check_canonical_order_fast_paths() {
+  std::mt19937_64 rng(7);
+  const std::size_t n = 6000, m = 40000;
+  std::vector<Triangle> base;
+  {
+    std::set<Triangle> seen;
+    std::uniform_int_distribution<Index> pick(0, static_cast<Index>(n) - 1);
+    while (base.size() < m) {
+      Triangle t{pick(rng), pick(rng), pick(rng)};
+      if (t[0] == t[1] || t[1] == t[2] || t[0] == t[2]) continue;
+      if (seen.insert(least_index_first(t)).second) base.push_back(t);
+    }
+  }
+  auto reference = [](std::vector<Triangle> t) {
+    for (Triangle& x : t) x = least_index_first(x);
+    std::sort(t.begin(), t.end());
+    return t;
+  };
+  const std::vector<Triangle> sorted = reference(base);
+  std::vector<std::pair<std::string, std::vector<Triangle>>> cases;
+  cases.emplace_back("in order", sorted);
+  for (std::size_t moved : {1, 5, 60, 400}) {
+    std::vector<Triangle> t = sorted;
+    for (std::size_t k = 0; k < moved; ++k) {  // move one triangle to another position
+      const std::size_t from = rng() % t.size(), to = rng() % t.size();
+      const Triangle x = t[from];
+      t.erase(t.begin() + static_cast<std::ptrdiff_t>(from));
+      t.insert(t.begin() + static_cast<std::ptrdiff_t>(to), x);
+    }
+    cases.emplace_back(std::to_string(moved) + " moved", t);
+  }
+  {  // a block of points (indices 100-179) renumbered last, as a step puts its demoted points after the others
+    std::vector<Triangle> t = sorted;
+    for (Triangle& x : t) {
+      for (Index& v : x) v = v >= 100 && v < 180 ? static_cast<Index>(n) - 80 + (v - 100) : v >= 180 ? v - 80 : v;
+    }
+    cases.emplace_back("block last", t);
+  }
+  {  // a few triangles displaced backward and a few forward, in runs
+    std::vector<Triangle> t = sorted;
+    std::rotate(t.begin() + 1000, t.begin() + 1030, t.begin() + 9000);
+    std::rotate(t.begin() + 20000, t.begin() + 29990, t.begin() + 30000);
+    cases.emplace_back("runs displaced", t);
+  }
+  for (Index p : {Index{0}, Index{17}, Index{2999}}) {  // point p renumbered last, the rest shifted down
+    std::vector<Triangle> t = sorted;
+    for (Triangle& x : t) {
+      for (Index& v : x) v = v == p ? static_cast<Index>(n) - 1 : v > p ? v - 1 : v;
+    }
+    cases.emplace_back("point " + std::to_string(p) + " last", t);
+  }
+  {
+    std::vector<Triangle> t = base;
+    std::shuffle(t.begin(), t.end(), rng);
+    cases.emplace_back("shuffled", t);
+  }
+  for (const auto& [name, input] : cases) {
+    std::vector<Triangle> t = input;
+    const std::vector<Index> order = canonical_triangle_order(n, t);
+    CHECK(t == reference(input)) << name;
+    bool positions = order.size() == t.size();
+    for (std::size_t k = 0; k < order.size() && positions; ++k) {
+      positions = least_index_first(input[static_cast<std::size_t>(order[k])]) == t[k];
+    }
+    CHECK(positions) << name << ": order names the input position of each output triangle";
+  }
+}
+
 int main() {
   return evomesh_test::run([] {
+    check_canonical_order_fast_paths();
     check_angle_rule_floor(1e-9, true);
     check_angle_rule_floor(1e-12, false);
     check_planarity_cases();
