@@ -42,6 +42,14 @@ Command (tables in benchmarks/README.md, "Issue 13 goal 2: cost follows the chan
 
     .venv/bin/python benchmarks/bench_incremental.py --sizes 1e5,1e6 --repeats 3 --order-evidence
 
+``--loop`` (issue 29): the same comparison in a time loop, where the input is
+what the previous step of the loop returned (a step's own output: its
+triangles in canonical order and, without the quality pass, certified strictly
+Delaunay, which the next update inherits): the 5 % band at x = 0.3 evolves the
+stepped mesh (not timed), then the timed step moves the band to x = 0.6::
+
+    .venv/bin/python benchmarks/bench_incremental.py --loop --sizes 1e5,1e6 --repeats 5 --options no-quality
+
 ``--one-point`` (issue 27, section 3): delta = 1 except at the point nearest the
 centre (1e-6: refine there, 1e3: coarsen there), and for comparison the 5 % front
 band above. Each path runs in a fresh process
@@ -220,6 +228,47 @@ def markdown(rows: list[dict]) -> str:
     return "\n".join(lines)
 
 
+def band_at(mesh: evomesh.Mesh, x0: float, w: float = 0.05) -> np.ndarray:
+    """delta of the front band [x0, x0 + w) (as front_delta) on any mesh."""
+    x = mesh.points[:, 0]
+    inside = (x >= x0) & (x < x0 + w)
+    return np.where(inside, 1.0 - 0.5 * np.sin(2 * np.pi * (x - x0) / w), 1.0)
+
+
+def run_loop(n: int, repeats: int) -> dict:
+    """The 5 % band moved along a time loop: full and incremental steps on the loop's
+    previous output, alternating, asserted equal; medians of the run-by-run ratios."""
+    mesh = stepped_mesh(n)
+    previous = evomesh.evolve(mesh, band_at(mesh, 0.3), seed=1, **OPTIONS)  # the loop's last step (not timed)
+    delta = band_at(previous, 0.6)
+    samples, stages = [], {}
+    for _ in range(repeats):
+        t, c = time.perf_counter(), time.process_time()
+        full = evomesh.evolve(previous, delta, seed=2, incremental=False, **OPTIONS)
+        wall_full, cpu_full = time.perf_counter() - t, time.process_time() - c
+        t, c = time.perf_counter(), time.process_time()
+        fast = evomesh.evolve(previous, delta, seed=2, incremental=True, **OPTIONS)
+        wall_fast, cpu_fast = time.perf_counter() - t, time.process_time() - c
+        assert_same(full, fast)
+        samples.append({"full": wall_full, "incremental": wall_fast, "ratio": wall_fast / wall_full,
+                        "cpu_ratio": cpu_fast / cpu_full})
+        for k, v in fast.stats.items():
+            if k.startswith("seconds_") and k != "seconds_total":
+                stages.setdefault(k[8:], []).append(v / wall_full)
+        stages.setdefault("outside the core", []).append((wall_fast - fast.stats["seconds_total"]) / wall_full)
+    med = {k: statistics.median(x[k] for x in samples) for k in samples[0]}
+    update = fast.stats.get("triangulation_update_declined")
+    inherited = fast.stats.get("triangulation_update_checked_kept_edges") == 0
+    runs = ", ".join(f"{x['ratio']:.3f}" for x in samples)
+    print(f"{previous.n_points:>9} loop, 5% band | full {med['full']:6.2f} s  incremental {med['incremental']:6.2f} s  "
+          f"ratio {med['ratio']:.3f} (CPU {med['cpu_ratio']:.3f}; runs {runs})"
+          f" | same bits"
+          + ("" if update is None else f" | update declined {update:g}, kept edges {'inherited' if inherited else 'checked'}"),
+          flush=True)
+    print("   stage / full step (medians):", {k: round(statistics.median(v), 3) for k, v in stages.items()}, flush=True)
+    return {"n": previous.n_points, **med}
+
+
 ONE_POINT_CASES = (("point", 1e-6), ("point", 1e3), ("band", 0.05))
 
 
@@ -296,6 +345,7 @@ def main() -> None:
     parser.add_argument("--options", choices=["recommended", "no-quality", "paper"], default="recommended",
                         help="the step's options: evolve's defaults, less the quality pass, or the paper's")
     parser.add_argument("--one-point", action="store_true", help="the one-point table (issue 27) instead")
+    parser.add_argument("--loop", action="store_true", help="the 5 %% band in a time loop (the input a step's output)")
     parser.add_argument("--one-point-worker", help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.one_point_worker:
@@ -306,6 +356,10 @@ def main() -> None:
             run_one_point(int(float(size)), args.repeats)
         return
     OPTIONS.update(options_named(args.options))
+    if args.loop:
+        for size in args.sizes.split(","):
+            run_loop(int(float(size)), args.repeats)
+        return
     rows = []
     for size in args.sizes.split(","):
         rows += run(int(float(size)), args.repeats, args.order_evidence,
