@@ -43,6 +43,10 @@ def _check_same_step(mesh: evomesh.Mesh, delta: np.ndarray, seed: int = 1, **opt
     for name in LINEAGE:
         a, b = getattr(full.lineage, name), getattr(fast.lineage, name)
         assert np.array_equal(a, b), f"lineage.{name} differs"
+    # the output's nn (within the domain), which the next step reads: the
+    # incremental step takes it from what changed
+    assert np.array_equal(full.nn_spacing, fast.nn_spacing), "nn_spacing differs"
+    assert np.array_equal(full._nn_grew, fast._nn_grew), "nn grew at other points"
     assert "incremental_quiet_triangles" not in full.stats
     return fast
 
@@ -422,3 +426,25 @@ def test_an_input_that_is_not_delaunay_is_triangulated_whole():
     assert _taken(fast)
     assert _declined(fast) == 6
     assert not fast._delaunay  # built whole: not certified
+
+
+def test_the_updated_triangulation_keeps_nn_within_a_thin_slot():
+    # A slot 0.02 wide: points on its two walls are nearest across it, outside
+    # the domain, so their nn within the domain grows (the shortest edge). The
+    # band refines below the slot only: points above it keep their triangles
+    # while their Euclidean nn shrinks. The output's nn within the domain (what
+    # the next step reads) must be the full step's, where the update reuses the
+    # input's for points whose triangles and nn did not change.
+    from evomesh.meshgen import polygon_mesh
+
+    loop = [(0, 0), (1, 0), (1, 0.49), (0.4, 0.49), (0.4, 0.51), (1, 0.51), (1, 1), (0, 1)]
+    base = polygon_mesh([loop], 0.03)
+    mesh = evolve_quietly(base, np.ones(base.n_points), 0, quality=False)
+    assert len(mesh._nn_grew) > 0
+    for step in range(3):
+        x, y = mesh.points[:, 0], mesh.points[:, 1]
+        delta = np.where((y < 0.49) & (y > 0.40) & (np.abs(x - (0.55 + 0.15 * step)) < 0.1), 0.5, 1.0)
+        fast = _check_same_step(mesh, delta, step, quality=False)
+        assert _taken(fast) and _declined(fast) == 0
+        assert len(fast._nn_grew) > 0
+        mesh = fast

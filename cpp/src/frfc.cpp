@@ -405,7 +405,7 @@ Evolve_result frfc_over_scope(const Mesh_arrays& input, const Mesh_arrays& mesh,
                         triangles ? &*triangles : nullptr);
   release_free_memory(context);
   timer.lap(options.quality ? "quality" : "cdt");
-  finish_step(input, result, timer, &*old_mesh, scope.reusable_nn(spacing));
+  finish_step(input, result, timer, &*old_mesh, scope.reusable_nn(spacing), scope.same_fans());
   scope.add_counts(result.stats);
   result.stats.emplace_back("triangulation_certified", certified ? 1.0 : 0.0);
   // (not "seconds_" stages: the batches run beside the others; the quality

@@ -653,7 +653,8 @@ class Changed_region final : public Step_scope {
                        std::chrono::duration<double>(std::chrono::steady_clock::now() - waited).count());
     Triangulation_update_report report;
     auto triangles = updated_constrained_delaunay(*old_mesh.walker, selection.mesh.points, pieces, selection.origin,
-                                                  kMaxCavityShare, report);
+                                                  kMaxCavityShare, report, &same_fans_);
+    if (!triangles) same_fans_.clear();
     stats.emplace_back("triangulation_update_declined", static_cast<double>(report.declined));
     stats.emplace_back("triangulation_update_cavity_triangles", static_cast<double>(report.n_cavity_triangles));
     stats.emplace_back("triangulation_update_locate_seconds", report.locate_seconds);
@@ -662,6 +663,7 @@ class Changed_region final : public Step_scope {
     stats.emplace_back("triangulation_update_checked_kept_edges", report.checked_kept_edges ? 1.0 : 0.0);
     return triangles;
   }
+  const std::vector<std::uint8_t>* same_fans() const override { return same_fans_.empty() ? nullptr : &same_fans_; }
   // (the walker takes them: the step's peak is the quality pass, the same in both scopes)
   bool keeps_fans() const override { return true; }
   // The input's Euclidean nn is the step's nn except where it grew within the domain.
@@ -689,16 +691,27 @@ class Changed_region final : public Step_scope {
   template <class Parents>
   Restricted_spacing near_candidates(const Mesh_arrays& mesh, const std::vector<double>& f,
                                      const Candidates& candidates, const std::vector<Parents>& parents) const {
-    Mark_sites marks(*grid_, mesh.points, weight_, magnitude_);
-    for (std::size_t j = 0; j < candidates.size(); ++j) {
-      const Vec2& x = candidates.samples.points[j];
-      double u = std::numeric_limits<double>::infinity();
-      for (Index v : parents[candidates.samples.parent[j]]) {
-        u = std::min(u, f[v] + std::sqrt(squared_distance(x, mesh.points[v])));
+    // In parallel chunks, each with its own flags, or-ed (the same marks in any order).
+    const std::size_t count = candidates.size();
+    const std::size_t chunks =
+        std::clamp<std::size_t>(count / 4096, 1, static_cast<std::size_t>(std::max(1, resolve_threads(0))));
+    std::vector<Mark_sites> marks;
+    marks.reserve(chunks);
+    for (std::size_t c = 0; c < chunks; ++c) marks.emplace_back(*grid_, mesh.points, weight_, magnitude_);
+    parallel_for(chunks, 0, [&](std::size_t c) {
+      for (std::size_t j = count * c / chunks; j < count * (c + 1) / chunks; ++j) {
+        const Vec2& x = candidates.samples.points[j];
+        double u = std::numeric_limits<double>::infinity();
+        for (Index v : parents[candidates.samples.parent[j]]) {
+          u = std::min(u, f[v] + std::sqrt(squared_distance(x, mesh.points[v])));
+        }
+        marks[c].near(x, u);
       }
-      marks.near(x, u);
+    });
+    for (std::size_t c = 1; c < chunks; ++c) {
+      for (std::size_t i = 0; i < marks[0].marked.size(); ++i) marks[0].marked[i] |= marks[c].marked[i];
     }
-    return Restricted_spacing(mesh.points, weight_, marks.marked);
+    return Restricted_spacing(mesh.points, weight_, marks[0].marked);
   }
 
   const Frfc_options& options_;
@@ -709,6 +722,7 @@ class Changed_region final : public Step_scope {
   Spacing_queries graded_queries_;
   std::vector<std::uint8_t> safe_;  // old points no earlier sphere can reject (safe_old_points)
   std::vector<double> euclidean_nn_;
+  std::vector<std::uint8_t> same_fans_;  // triangulation()'s, when it updated the input's
   std::size_t n_sites_ = 0, n_hidden_ = 0, n_filtered_ = 0, n_quiet_ = 0, n_region_ = 0;
   std::size_t n_packed_first_ = 0, n_packed_second_ = 0;
 };

@@ -4,6 +4,7 @@
 #include <array>
 #include <cmath>
 #include <limits>
+#include <stdexcept>
 
 #include "evomesh/boundary_geometry.hpp"
 #include "evomesh/candidates.hpp"
@@ -13,7 +14,7 @@
 namespace evomesh {
 
 std::vector<std::uint8_t> keep_within_domain(const std::vector<Vec2>& points, const std::vector<Triangle>& triangles,
-                                             std::vector<double>& nn) {
+                                             std::vector<double>& nn, const std::vector<std::uint8_t>* known) {
   // A point changes where its shortest edge (the least std::hypot of its edges)
   // exceeds nn * (1 + kRounding). The edge of least squared length decides that
   // for almost every point with one hypot: the least hypot is at most that edge's,
@@ -22,36 +23,51 @@ std::vector<std::uint8_t> keep_within_domain(const std::vector<Vec2>& points, co
   // the definition says: the same bits as computing it everywhere.
   const std::size_t n = points.size();
   constexpr double kRounding = 4 * std::numeric_limits<double>::epsilon();
-  // Squared edge lengths in parallel blocks (the reads of the points), the
-  // shortest edge of every point in one pass.
-  std::vector<std::array<double, 3>> squared_length(triangles.size());
   constexpr std::size_t kBlock = 1 << 14;
-  parallel_for((triangles.size() + kBlock - 1) / kBlock, 0, [&](std::size_t block) {
-    for (std::size_t t = block * kBlock; t < std::min(triangles.size(), (block + 1) * kBlock); ++t) {
-      for (int k = 0; k < 3; ++k) {
-        const Index a = triangles[t][k], b = triangles[t][(k + 1) % 3];
-        const double dx = points[b][0] - points[a][0], dy = points[b][1] - points[a][1];
-        squared_length[t][k] = dx * dx + dy * dy;
-      }
-    }
-  });
-  // Each worker owns a range of points and scans every edge for them (ties keep
-  // the first edge in triangle order, as one pass would).
   std::vector<double> least(n, std::numeric_limits<double>::infinity());
-  std::vector<Index> other(n, -1);
-  const std::size_t n_owners = std::clamp<std::size_t>(static_cast<std::size_t>(resolve_threads(0)), 1, 8);
-  parallel_for(n_owners, 0, [&](std::size_t owner) {
-    const Index lo = static_cast<Index>(n * owner / n_owners), hi = static_cast<Index>(n * (owner + 1) / n_owners);
-    for (std::size_t t = 0; t < triangles.size(); ++t) {
+  std::vector<Index> other(n, -1);  // (stays -1 at the known points: nothing to decide there)
+  if (known != nullptr && known->size() != n) throw std::logic_error("keep_within_domain: one known flag per point");
+  if (known != nullptr) {
+    // The shortest edge of every other point, in one pass in triangle order.
+    for (const Triangle& t : triangles) {
       for (int k = 0; k < 3; ++k) {
-        const Index a = triangles[t][k], b = triangles[t][(k + 1) % 3];
-        const double squared = squared_length[t][k];
-        if (a >= lo && a < hi && squared < least[a]) least[a] = squared, other[a] = b;
-        if (b >= lo && b < hi && squared < least[b]) least[b] = squared, other[b] = a;
+        const Index a = t[k], b = t[(k + 1) % 3];
+        const bool open_a = !(*known)[a], open_b = !(*known)[b];
+        if (!open_a && !open_b) continue;
+        const double dx = points[b][0] - points[a][0], dy = points[b][1] - points[a][1];
+        const double squared = dx * dx + dy * dy;
+        if (open_a && squared < least[a]) least[a] = squared, other[a] = b;
+        if (open_b && squared < least[b]) least[b] = squared, other[b] = a;
       }
     }
-  });
-  squared_length = {};
+  } else {
+    // Squared edge lengths in parallel blocks (the reads of the points), the
+    // shortest edge of every point in one pass.
+    std::vector<std::array<double, 3>> squared_length(triangles.size());
+    parallel_for((triangles.size() + kBlock - 1) / kBlock, 0, [&](std::size_t block) {
+      for (std::size_t t = block * kBlock; t < std::min(triangles.size(), (block + 1) * kBlock); ++t) {
+        for (int k = 0; k < 3; ++k) {
+          const Index a = triangles[t][k], b = triangles[t][(k + 1) % 3];
+          const double dx = points[b][0] - points[a][0], dy = points[b][1] - points[a][1];
+          squared_length[t][k] = dx * dx + dy * dy;
+        }
+      }
+    });
+    // Each worker owns a range of points and scans every edge for them (ties keep
+    // the first edge in triangle order, as one pass would).
+    const std::size_t n_owners = std::clamp<std::size_t>(static_cast<std::size_t>(resolve_threads(0)), 1, 8);
+    parallel_for(n_owners, 0, [&](std::size_t owner) {
+      const Index lo = static_cast<Index>(n * owner / n_owners), hi = static_cast<Index>(n * (owner + 1) / n_owners);
+      for (std::size_t t = 0; t < triangles.size(); ++t) {
+        for (int k = 0; k < 3; ++k) {
+          const Index a = triangles[t][k], b = triangles[t][(k + 1) % 3];
+          const double squared = squared_length[t][k];
+          if (a >= lo && a < hi && squared < least[a]) least[a] = squared, other[a] = b;
+          if (b >= lo && b < hi && squared < least[b]) least[b] = squared, other[b] = a;
+        }
+      }
+    });
+  }
   // `least` becomes the least hypot where it is needed exactly, else stays unused.
   std::vector<std::uint8_t> exact(n, 0);
   parallel_for((n + kBlock - 1) / kBlock, 0, [&](std::size_t block) {

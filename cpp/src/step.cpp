@@ -359,7 +359,7 @@ bool adopt_input_order(const Mesh_arrays& input, Evolve_result& result) {
 }  // namespace
 
 void finish_step(const Mesh_arrays& input, Evolve_result& result, detail::Stage_timer& timer, Old_mesh_start* start,
-                 const std::vector<double>* input_nn) {
+                 const std::vector<double>* input_nn, const std::vector<std::uint8_t>* same_fans) {
   result.stats.emplace_back("restored_points", static_cast<double>(restore_origins(input, result)));
   const bool unchanged = adopt_input_order(input, result);
   if (!unchanged) canonical_triangle_order(result.mesh.points.size(), result.mesh.triangles);
@@ -378,14 +378,25 @@ void finish_step(const Mesh_arrays& input, Evolve_result& result, detail::Stage_
   Background output_nn;
   double nn_seconds = 0;
   output_nn.start(
-      [&result, &nn_seconds, &input, input_nn]() {
+      [&result, &nn_seconds, &input, input_nn, same_fans]() {
         const auto begin = std::chrono::steady_clock::now();
         try {
           std::vector<double> nn = input_nn ? nn_spacing_after_change(input.points, *input_nn, result.mesh.points,
                                                                       result.mesh.triangles, result.origin)
                                             : nn_spacing(result.mesh.points);
           std::vector<double> within = nn;
-          const auto grew = keep_within_domain(result.mesh.points, result.mesh.triangles, within);
+          // Known: a kept point with the input's fan and the input's nn, which did
+          // not grow within the domain there (input_nn is NaN where it grew).
+          std::vector<std::uint8_t> known;
+          if (input_nn != nullptr && same_fans != nullptr && same_fans->size() == nn.size()) {
+            known.assign(nn.size(), 0);
+            for (std::size_t i = 0; i < nn.size(); ++i) {
+              const Index o = result.origin[i];
+              known[i] = (*same_fans)[i] && o >= 0 && nn[i] == (*input_nn)[static_cast<std::size_t>(o)];
+            }
+          }
+          const auto grew = keep_within_domain(result.mesh.points, result.mesh.triangles, within,
+                                               known.empty() ? nullptr : &known);
           for (std::size_t i = 0; i < grew.size(); ++i) {
             if (!grew[i]) continue;
             result.output_nn_grew.push_back(static_cast<Index>(i));

@@ -36,7 +36,8 @@ std::optional<std::vector<Triangle>> updated_constrained_delaunay(const Old_mesh
                                                                   const std::vector<Constraint_piece>& pieces,
                                                                   const std::vector<Index>& origin,
                                                                   double max_cavity_share,
-                                                                  Triangulation_update_report& report) {
+                                                                  Triangulation_update_report& report,
+                                                                  std::vector<std::uint8_t>* same_fan) {
   const Mesh_arrays& input = old_mesh.mesh();
   const std::vector<Vec2>& P = input.points;
   const std::vector<Triangle>& T = input.triangles;
@@ -365,6 +366,14 @@ std::optional<std::vector<Triangle>> updated_constrained_delaunay(const Old_mesh
     std::size_t i = triangles.size(), j = rest.size(), k = i + j;
     triangles.resize(k);
     while (j > 0) triangles[--k] = i > 0 && rest[j - 1] < triangles[i - 1] ? triangles[--i] : rest[--j];
+  }
+  if (same_fan != nullptr) {
+    same_fan->assign(n, 0);
+    for (std::size_t j = 0; j < n; ++j) (*same_fan)[j] = origin[j] >= 0;
+    for (std::size_t f = 0; f < n_faces; ++f) {
+      if (!inside[f]) continue;
+      for (Index v : lt.triangles[f]) (*same_fan)[static_cast<std::size_t>(global_of[v])] = 0;
+    }
   }
   lap(report.certify_seconds);
   return triangles;

@@ -26,9 +26,13 @@ namespace evomesh {
 // a point's shortest edge is longer than nn beyond rounding, its nearest point is
 // not an edge neighbour (in a constrained Delaunay triangulation: hidden behind
 // a constraint) and nn becomes that edge's length. Returns which points changed.
-// O(m).
+// O(m). `known` (optional, one flag per point): points whose answer is known to
+// be "unchanged" (a changed-region step's kept points whose fan and nn are the
+// input's, where nn did not grow): left as they are, and only the edges at the
+// others are measured (the same arithmetic and edge order, so the same bits).
 std::vector<std::uint8_t> keep_within_domain(const std::vector<Vec2>& points, const std::vector<Triangle>& triangles,
-                                             std::vector<double>& nn);
+                                             std::vector<double>& nn,
+                                             const std::vector<std::uint8_t>* known = nullptr);
 
 // An upper bound on the spacing the domain carries at every point, +infinity
 // where nothing is found below `limit[v]` (the spacing asked for there):

@@ -225,9 +225,13 @@ struct Old_mesh_start {
 // as "parent_map") and the step's total time; the walker from `start` if given.
 // `input_nn`, if given: nn_spacing of the input points (NaN where unknown), for
 // the output's nn from what the step changed (nn_spacing_after_change; kept
-// points must not have moved).
+// points must not have moved). `same_fans`, if given with `input_nn`: the
+// output points whose triangles are the input's (Step_scope::same_fans); where
+// also their nn is the input's (and did not grow), nn within the domain is the
+// input's too, and keep_within_domain measures only the others.
 void finish_step(const Mesh_arrays& input, Evolve_result& result, detail::Stage_timer& timer,
-                 Old_mesh_start* start = nullptr, const std::vector<double>* input_nn = nullptr);
+                 Old_mesh_start* start = nullptr, const std::vector<double>* input_nn = nullptr,
+                 const std::vector<std::uint8_t>* same_fans = nullptr);
 
 // Appends the counts (name, value) to result.stats, then the output's point and
 // triangle counts.

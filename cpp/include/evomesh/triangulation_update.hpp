@@ -47,12 +47,15 @@ struct Triangulation_update_report {
 // says it is strictly Delaunay (Mesh_arrays::strictly_delaunay: a step certified
 // it) those edges are not checked again, and the check costs O(c), not O(m). Declines when the
 // cavity holds more than `max_cavity_share` of the input triangles. O(m) checks
-// and walks plus O(c log c) for a cavity of c triangles.
+// and walks plus O(c log c) for a cavity of c triangles. `same_fan` (optional):
+// when updated, 1 for every output point whose triangles are all kept (an input
+// point that no cavity triangle has: its fan is the input's), else 0.
 std::optional<std::vector<Triangle>> updated_constrained_delaunay(const Old_mesh_walker& old_mesh,
                                                                   const std::vector<Vec2>& points,
                                                                   const std::vector<Constraint_piece>& pieces,
                                                                   const std::vector<Index>& origin,
                                                                   double max_cavity_share,
-                                                                  Triangulation_update_report& report);
+                                                                  Triangulation_update_report& report,
+                                                                  std::vector<std::uint8_t>* same_fan = nullptr);
 
 }  // namespace evomesh

@@ -100,6 +100,10 @@ class Step_scope {
   virtual bool keeps_fans() const = 0;
   // nn_M of the input points that finish_step may reuse for the output's nn (NaN: unknown); null: none.
   virtual const std::vector<double>* reusable_nn(const Scope_spacing& spacing) = 0;
+  // After triangulation(): 1 for every output point whose triangles are the
+  // input's (kept, with no triangle of the change), for finish_step's nn within
+  // the domain (keep_within_domain's `known`); null: not known.
+  virtual const std::vector<std::uint8_t>* same_fans() const { return nullptr; }
   // The scope's own counts, appended to the step's stats.
   virtual void add_counts(std::vector<std::pair<std::string, double>>& stats) const = 0;
 };
