@@ -427,17 +427,34 @@ void second_pass_near(const Mesh_arrays& mesh, const Candidates& inside, const s
   const double absolute = 1e-12 * magnitude;
   std::vector<std::uint8_t> forced_member(n_first, 0);
   for (std::size_t c = 0; c < n_first; ++c) forced_member[c] = packing.kept[c] && (c >= n || !safe[c]);
-  auto add_near = [&](const Vec2& x, double reach) {
-    grid.visit_within(x, reach * (1 + kSlack) + absolute, [&](Index p) { forced_member[p] = packing.kept[p]; });
-  };
-  for (std::size_t k = 0; k < n_deferred; ++k) add_near(centers[k], 2 * radii[k]);
-  for (std::size_t j = 0; j < inside.size(); ++j) {
-    const Vec2& x = inside.samples.points[j];
-    double to_vertex = std::numeric_limits<double>::infinity();
-    for (Index v : mesh.triangles[inside.samples.parent[j]]) {
-      to_vertex = std::min(to_vertex, std::sqrt(squared_distance(x, mesh.points[v])));
+  // The kept spheres near the deferred points and the candidates, in parallel
+  // chunks (each its own flags, or-ed: the same members in any order).
+  const std::size_t n_near = n_deferred + inside.size();
+  const std::size_t chunks =
+      std::clamp<std::size_t>(n_near / 4096, 1, static_cast<std::size_t>(std::max(1, resolve_threads(0))));
+  std::vector<std::vector<std::uint8_t>> near(chunks, std::vector<std::uint8_t>(n_first, 0));
+  parallel_for(chunks, 0, [&](std::size_t c) {
+    auto add_near = [&](const Vec2& x, double reach) {
+      grid.visit_within(x, reach * (1 + kSlack) + absolute, [&](Index p) { near[c][p] = 1; });
+    };
+    for (std::size_t k = n_near * c / chunks; k < n_near * (c + 1) / chunks; ++k) {
+      if (k < n_deferred) {
+        add_near(centers[k], 2 * radii[k]);
+        continue;
+      }
+      const std::size_t j = k - n_deferred;
+      const Vec2& x = inside.samples.points[j];
+      double to_vertex = std::numeric_limits<double>::infinity();
+      for (Index v : mesh.triangles[inside.samples.parent[j]]) {
+        to_vertex = std::min(to_vertex, std::sqrt(squared_distance(x, mesh.points[v])));
+      }
+      add_near(x, 2 * inside.radius[j] + to_vertex);
     }
-    add_near(x, 2 * inside.radius[j] + to_vertex);
+  });
+  for (const auto& flags : near) {
+    for (std::size_t p = 0; p < n_first; ++p) {
+      if (flags[p]) forced_member[p] = packing.kept[p];
+    }
   }
   std::vector<Vec2> all_centers;
   std::vector<double> all_radii;
