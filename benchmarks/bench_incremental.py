@@ -150,6 +150,21 @@ def assert_same(full: evomesh.Mesh, fast: evomesh.Mesh) -> None:
     assert np.array_equal(full.nn_spacing, fast.nn_spacing), "nn_spacing"
 
 
+def timed_pair(mesh: evomesh.Mesh, delta: np.ndarray, seed: int) -> tuple[evomesh.Mesh, evomesh.Mesh, dict]:
+    """The full and the incremental step on the same input, one after the other,
+    asserted equal: both results, wall and CPU seconds (CPU: the process's, both
+    threads; steadier than wall time on a shared machine)."""
+    t, c = time.perf_counter(), time.process_time()
+    full = evomesh.evolve(mesh, delta, seed=seed, incremental=False, **OPTIONS)
+    wall_full, cpu_full = time.perf_counter() - t, time.process_time() - c
+    t, c = time.perf_counter(), time.process_time()
+    fast = evomesh.evolve(mesh, delta, seed=seed, incremental=True, **OPTIONS)
+    wall_fast, cpu_fast = time.perf_counter() - t, time.process_time() - c
+    assert_same(full, fast)
+    return full, fast, {"full": wall_full, "incremental": wall_fast, "ratio": wall_fast / wall_full,
+                        "cpu_ratio": cpu_fast / cpu_full}
+
+
 def run(n: int, repeats: int, evidence: bool, fractions: tuple[float, ...] = FRACTIONS) -> list[dict]:
     t0 = time.perf_counter()
     mesh = stepped_mesh(n)
@@ -162,14 +177,8 @@ def run(n: int, repeats: int, evidence: bool, fractions: tuple[float, ...] = FRA
         samples = []
         for r in range(repeats):
             # alternate the two paths; the ratio of each pair is measured in the same run
-            # (CPU: the process's, both threads; steadier than wall time on a shared machine)
-            t, c = time.perf_counter(), time.process_time()
-            full = evomesh.evolve(mesh, delta, seed=1, incremental=False, **OPTIONS)
-            wall_full, cpu_full = time.perf_counter() - t, time.process_time() - c
-            t, c = time.perf_counter(), time.process_time()
-            fast = evomesh.evolve(mesh, delta, seed=1, incremental=True, **OPTIONS)
-            wall_fast, cpu_fast = time.perf_counter() - t, time.process_time() - c
-            assert_same(full, fast)
+            full, fast, pair = timed_pair(mesh, delta, 1)
+            wall_full, wall_fast = pair["full"], pair["incremental"]
             s = fast.stats
             t = time.perf_counter()
             _core.constrained_delaunay(full.points, full.segments, full.segment_is_boundary.astype(np.uint8))
@@ -185,7 +194,7 @@ def run(n: int, repeats: int, evidence: bool, fractions: tuple[float, ...] = FRA
                 "quality_insert_seconds", 0.0)
             samples.append({"full": wall_full, "incremental": wall_fast, "ratio": wall_fast / wall_full,
                             "history": history, "history_ratio": history / wall_full,
-                            "cpu_ratio": cpu_fast / cpu_full,
+                            "cpu_ratio": pair["cpu_ratio"],
                             "floor": floor, "floor_ratio": floor / wall_full, "cdt": cdt, "cdt_ratio": cdt / wall_full})
             if r == 0:
                 changed = 1.0 - len({tuple(p) for p in mesh.points} & {tuple(p) for p in full.points}) / mesh.n_points
@@ -243,15 +252,9 @@ def run_loop(n: int, repeats: int) -> dict:
     delta = band_at(previous, 0.6)
     samples, stages = [], {}
     for _ in range(repeats):
-        t, c = time.perf_counter(), time.process_time()
-        full = evomesh.evolve(previous, delta, seed=2, incremental=False, **OPTIONS)
-        wall_full, cpu_full = time.perf_counter() - t, time.process_time() - c
-        t, c = time.perf_counter(), time.process_time()
-        fast = evomesh.evolve(previous, delta, seed=2, incremental=True, **OPTIONS)
-        wall_fast, cpu_fast = time.perf_counter() - t, time.process_time() - c
-        assert_same(full, fast)
-        samples.append({"full": wall_full, "incremental": wall_fast, "ratio": wall_fast / wall_full,
-                        "cpu_ratio": cpu_fast / cpu_full})
+        full, fast, pair = timed_pair(previous, delta, 2)
+        wall_full, wall_fast = pair["full"], pair["incremental"]
+        samples.append(pair)
         for k, v in fast.stats.items():
             if k.startswith("seconds_") and k != "seconds_total":
                 stages.setdefault(k[8:], []).append(v / wall_full)
