@@ -10,7 +10,9 @@
 #include <cstdlib>
 #include <cstring>
 #include <optional>
+#include <type_traits>
 #include <unordered_map>
+#include <vector>
 
 #include "evomesh/boundary_geometry.hpp"
 #include "evomesh/candidates.hpp"
@@ -245,36 +247,52 @@ void add_known_nn(Mesh_arrays& mesh, const std::optional<Float_array>& nn, const
   }
 }
 
+// A read-only numpy array over an immutable bytes object holding a copy of
+// `data` (count elements of T, the given shape): what Python's Mesh keeps
+// (mesh.py, _frozen, takes such an array as it is instead of copying it again).
+template <class T>
+py::array frozen_array(const T* data, std::size_t count, const std::vector<py::ssize_t>& shape) {
+  static_assert(std::is_arithmetic_v<T>, "frozen_array: elements of a numeric dtype");
+  const auto bytes = static_cast<py::ssize_t>(count * sizeof(T));
+  py::object owner = py::reinterpret_steal<py::object>(PyBytes_FromStringAndSize(nullptr, bytes));
+  if (!owner) throw py::error_already_set();
+  if (count != 0) std::memcpy(PyBytes_AS_STRING(owner.ptr()), data, static_cast<std::size_t>(bytes));
+  py::array flat = py::module_::import("numpy").attr("frombuffer")(owner, py::dtype::of<T>());
+  return flat.attr("reshape")(py::tuple(py::cast(shape)));
+}
+
 // The arrays of a mesh and the input index of every point (-1 for a new one).
 py::dict mesh_dict(const Mesh_arrays& mesh, const std::vector<Index>& origin) {
   py::dict out;
   if (!mesh.segment_tags.empty()) out["segment_tags"] = vector_array(mesh.segment_tags);
   if (!mesh.triangle_tags.empty()) out["triangle_tags"] = vector_array(mesh.triangle_tags);
   if (!mesh.required.empty()) out["required"] = vector_array(mesh.required);
-  out["points"] = points_array(mesh.points);
-  out["triangles"] = rows_array<3>(mesh.triangles);
-  out["segments"] = rows_array<2>(mesh.segments);
+  // (read-only, over bytes: the arrays a Mesh keeps; see frozen_array)
+  out["points"] = frozen_array(reinterpret_cast<const double*>(mesh.points.data()), mesh.points.size() * 2,
+                               {static_cast<py::ssize_t>(mesh.points.size()), py::ssize_t{2}});
+  out["triangles"] = frozen_array(reinterpret_cast<const Index*>(mesh.triangles.data()), mesh.triangles.size() * 3,
+                                  {static_cast<py::ssize_t>(mesh.triangles.size()), py::ssize_t{3}});
+  out["segments"] = frozen_array(reinterpret_cast<const Index*>(mesh.segments.data()), mesh.segments.size() * 2,
+                                 {static_cast<py::ssize_t>(mesh.segments.size()), py::ssize_t{2}});
   out["segment_is_boundary"] = vector_array(mesh.segment_is_boundary);
   out["kind"] = kinds_array(mesh.kind);
-  out["origin"] = vector_array(origin);
+  out["origin"] = frozen_array(origin.data(), origin.size(), {static_cast<py::ssize_t>(origin.size())});
   return out;
 }
 
 py::dict evolve_result_dict(const Evolve_result& r) {
   py::dict out = mesh_dict(r.mesh, r.origin);
-  out["input_f"] = vector_array(r.input_f);
-  out["input_nn"] = vector_array(r.input_nn);
+  out["input_f"] = frozen_array(r.input_f.data(), r.input_f.size(), {static_cast<py::ssize_t>(r.input_f.size())});
+  out["input_nn"] = frozen_array(r.input_nn.data(), r.input_nn.size(), {static_cast<py::ssize_t>(r.input_nn.size())});
   if (!r.output_nn.empty()) {
     out["output_nn"] = vector_array(r.output_nn);
     out["output_nn_grew"] = vector_array(r.output_nn_grew);
     out["output_nn_grown"] = vector_array(r.output_nn_grown);
   }
-  out["parent_triangle"] = vector_array(r.parents.triangle);
-  Float_array bary({static_cast<py::ssize_t>(r.parents.barycentric.size()), py::ssize_t{3}});
-  if (!r.parents.barycentric.empty()) {
-    std::memcpy(bary.mutable_data(), r.parents.barycentric.data(), r.parents.barycentric.size() * sizeof(r.parents.barycentric[0]));
-  }
-  out["barycentric"] = bary;
+  out["parent_triangle"] = frozen_array(r.parents.triangle.data(), r.parents.triangle.size(),
+                                        {static_cast<py::ssize_t>(r.parents.triangle.size())});
+  out["barycentric"] = frozen_array(reinterpret_cast<const double*>(r.parents.barycentric.data()), r.parents.barycentric.size() * 3,
+                                    {static_cast<py::ssize_t>(r.parents.barycentric.size()), py::ssize_t{3}});
   py::dict stats;
   for (const auto& s : r.stats) stats[py::str(s.first)] = s.second;
   out["stats"] = stats;
