@@ -653,31 +653,12 @@ std::vector<Index> canonical_triangle_order(std::size_t n_points, std::vector<Tr
     triangles = std::move(sorted);
   };
   if (descents <= m / 256) {
-    // One pass keeps an increasing run `in_place` and sets aside what does not
-    // fit: an element below the run's last takes off the few (at most
-    // kLookBack) larger ones before it, which were displaced forward, or is set
-    // aside itself when more are larger (it was displaced backward).
-    constexpr std::size_t kLookBack = 16;
+    // One pass keeps an increasing run in place and sets aside what does not fit.
+    const auto less = [&triangles](Index a, Index b) { return triangles[a] < triangles[b]; };
     std::vector<Index> in_place, out_of_place;
     in_place.reserve(m);
-    for (std::size_t k = 0; k < m; ++k) {
-      const Triangle& t = triangles[k];
-      std::size_t larger = 0;
-      while (larger < in_place.size() && larger <= kLookBack && t < triangles[in_place[in_place.size() - 1 - larger]]) {
-        ++larger;
-      }
-      if (larger > kLookBack) {
-        out_of_place.push_back(static_cast<Index>(k));
-        continue;
-      }
-      for (; larger > 0; --larger) {
-        out_of_place.push_back(in_place.back());
-        in_place.pop_back();
-      }
-      in_place.push_back(static_cast<Index>(k));
-    }
+    for (std::size_t k = 0; k < m; ++k) detail::extend_increasing_run(in_place, out_of_place, static_cast<Index>(k), less);
     if (out_of_place.size() <= m / 64) {
-      const auto less = [&triangles](Index a, Index b) { return triangles[a] < triangles[b]; };
       std::sort(out_of_place.begin(), out_of_place.end(), less);
       std::merge(in_place.begin(), in_place.end(), out_of_place.begin(), out_of_place.end(), order.begin(), less);
       apply(order);

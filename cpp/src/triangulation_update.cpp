@@ -4,6 +4,7 @@
 #include <atomic>
 #include <chrono>
 #include <cstdint>
+#include <functional>
 #include <unordered_map>
 #include <unordered_set>
 #include <utility>
@@ -328,10 +329,8 @@ std::optional<std::vector<Triangle>> updated_constrained_delaunay(const Old_mesh
   // The kept ones come in the input's order, canonical when the input is a
   // step's output, and a step keeps its points' relative order but for a few
   // (demoted points go after the others): one pass keeps the increasing run of
-  // them in place and sets aside what does not fit (an element below the run's
-  // last takes off the few larger ones before it, displaced forward, or is set
-  // aside itself, displaced backward); the set-aside and the cavity's are sorted
-  // and merged in from the back. Many set aside (an input in another order): the
+  // them in place and sets aside what does not fit (detail::extend_increasing_run);
+  // the set-aside and the cavity's are sorted and merged in from the back. Many set aside (an input in another order): the
   // counting sort of canonical_triangle_order.
   std::vector<Triangle> triangles;
   triangles.reserve(m_in - n_cavity + n_inside);
@@ -342,21 +341,10 @@ std::optional<std::vector<Triangle>> updated_constrained_delaunay(const Old_mesh
     const Triangle& tri = lt.triangles[f];
     rest.push_back(least_index_first({global_of[tri[0]], global_of[tri[1]], global_of[tri[2]]}));
   }
-  constexpr std::size_t kLookBack = 16;
   for (std::size_t t = 0; t < m_in; ++t) {
     if (cavity[t]) continue;
     const Triangle x = least_index_first({new_of[T[t][0]], new_of[T[t][1]], new_of[T[t][2]]});
-    std::size_t larger = 0;
-    while (larger < triangles.size() && larger <= kLookBack && x < triangles[triangles.size() - 1 - larger]) ++larger;
-    if (larger > kLookBack) {
-      rest.push_back(x);
-      continue;
-    }
-    for (; larger > 0; --larger) {
-      rest.push_back(triangles.back());
-      triangles.pop_back();
-    }
-    triangles.push_back(x);
+    detail::extend_increasing_run(triangles, rest, x, std::less<Triangle>());
   }
   if (rest.size() > n_inside + (m_in - n_cavity) / 16) {
     triangles.insert(triangles.end(), rest.begin(), rest.end());

@@ -24,6 +24,32 @@ namespace evomesh {
 // O(n + m). Returns the order applied (new position -> old), for arrays
 // aligned with the triangles.
 std::vector<Index> canonical_triangle_order(std::size_t n_points, std::vector<Triangle>& triangles);
+namespace detail {
+
+// One step of sorting a sequence that is almost in order (a few items displaced
+// forward or backward, also in short runs): x joins the increasing `run`, and
+// what does not fit goes to `aside` (to be sorted and merged back). An x below
+// the run's last takes off the few (at most kLookBack) larger items before it,
+// which were displaced forward, or goes aside itself when more are larger (it
+// was displaced backward). Amortised O(1); the run stays strictly increasing.
+template <class T, class Less>
+void extend_increasing_run(std::vector<T>& run, std::vector<T>& aside, const T& x, Less less) {
+  constexpr std::size_t kLookBack = 16;
+  std::size_t larger = 0;
+  while (larger < run.size() && larger <= kLookBack && less(x, run[run.size() - 1 - larger])) ++larger;
+  if (larger > kLookBack) {
+    aside.push_back(x);
+    return;
+  }
+  for (; larger > 0; --larger) {
+    aside.push_back(run.back());
+    run.pop_back();
+  }
+  run.push_back(x);
+}
+
+}  // namespace detail
+
 // A triangle rotated to start at its least point index (orientation kept).
 inline Triangle least_index_first(Triangle t) {
   while (t[0] > t[1] || t[0] > t[2]) t = {t[1], t[2], t[0]};
