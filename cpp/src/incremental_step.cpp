@@ -160,6 +160,21 @@ class Restricted_spacing {
   std::size_t n_sites_ = 0;
 };
 
+// Flags over n items set by `count` queries, in parallel chunks: chunk(begin,
+// end, flags) answers queries [begin, end) into its own zeroed flags, and the
+// chunks' flags are or-ed (the same flags in any order, for any thread count).
+template <class Chunk>
+std::vector<std::uint8_t> flags_in_chunks(std::size_t count, std::size_t n, Chunk chunk) {
+  const std::size_t chunks =
+      std::clamp<std::size_t>(count / 4096, 1, static_cast<std::size_t>(std::max(1, resolve_threads(0))));
+  std::vector<std::vector<std::uint8_t>> flags(chunks, std::vector<std::uint8_t>(n, 0));
+  parallel_for(chunks, 0, [&](std::size_t c) { chunk(count * c / chunks, count * (c + 1) / chunks, flags[c]); });
+  for (std::size_t c = 1; c < chunks; ++c) {
+    for (std::size_t i = 0; i < n; ++i) flags[0][i] |= flags[c][i];
+  }
+  return std::move(flags[0]);
+}
+
 // Marks the sites whose cone can attain f at query points (Restricted_spacing):
 // near(x, u) for a bound u with w_c + |x - c| <= u for the site c attaining f at
 // every query it stands for (at x itself: u >= f(x)) marks the sites c with w_c
@@ -429,15 +444,12 @@ void second_pass_near(const Mesh_arrays& mesh, const Candidates& inside, const s
   for (std::size_t c = 0; c < n_first; ++c) forced_member[c] = packing.kept[c] && (c >= n || !safe[c]);
   // The kept spheres near the deferred points and the candidates, in parallel
   // chunks (each its own flags, or-ed: the same members in any order).
-  const std::size_t n_near = n_deferred + inside.size();
-  const std::size_t chunks =
-      std::clamp<std::size_t>(n_near / 4096, 1, static_cast<std::size_t>(std::max(1, resolve_threads(0))));
-  std::vector<std::vector<std::uint8_t>> near(chunks, std::vector<std::uint8_t>(n_first, 0));
-  parallel_for(chunks, 0, [&](std::size_t c) {
+  const auto near = flags_in_chunks(n_deferred + inside.size(), n_first, [&](std::size_t begin, std::size_t end,
+                                                                            std::vector<std::uint8_t>& flags) {
     auto add_near = [&](const Vec2& x, double reach) {
-      grid.visit_within(x, reach * (1 + kSlack) + absolute, [&](Index p) { near[c][p] = 1; });
+      grid.visit_within(x, reach * (1 + kSlack) + absolute, [&](Index p) { flags[p] = 1; });
     };
-    for (std::size_t k = n_near * c / chunks; k < n_near * (c + 1) / chunks; ++k) {
+    for (std::size_t k = begin; k < end; ++k) {
       if (k < n_deferred) {
         add_near(centers[k], 2 * radii[k]);
         continue;
@@ -451,10 +463,8 @@ void second_pass_near(const Mesh_arrays& mesh, const Candidates& inside, const s
       add_near(x, 2 * inside.radius[j] + to_vertex);
     }
   });
-  for (const auto& flags : near) {
-    for (std::size_t p = 0; p < n_first; ++p) {
-      if (flags[p]) forced_member[p] = packing.kept[p];
-    }
+  for (std::size_t p = 0; p < n_first; ++p) {
+    if (near[p]) forced_member[p] = packing.kept[p];
   }
   std::vector<Vec2> all_centers;
   std::vector<double> all_radii;
@@ -708,27 +718,20 @@ class Changed_region final : public Step_scope {
   template <class Parents>
   Restricted_spacing near_candidates(const Mesh_arrays& mesh, const std::vector<double>& f,
                                      const Candidates& candidates, const std::vector<Parents>& parents) const {
-    // In parallel chunks, each with its own flags, or-ed (the same marks in any order).
-    const std::size_t count = candidates.size();
-    const std::size_t chunks =
-        std::clamp<std::size_t>(count / 4096, 1, static_cast<std::size_t>(std::max(1, resolve_threads(0))));
-    std::vector<Mark_sites> marks;
-    marks.reserve(chunks);
-    for (std::size_t c = 0; c < chunks; ++c) marks.emplace_back(*grid_, mesh.points, weight_, magnitude_);
-    parallel_for(chunks, 0, [&](std::size_t c) {
-      for (std::size_t j = count * c / chunks; j < count * (c + 1) / chunks; ++j) {
+    const auto marked = flags_in_chunks(candidates.size(), mesh.points.size(), [&](std::size_t begin, std::size_t end,
+                                                                                 std::vector<std::uint8_t>& flags) {
+      Mark_sites marks(*grid_, mesh.points, weight_, magnitude_);
+      for (std::size_t j = begin; j < end; ++j) {
         const Vec2& x = candidates.samples.points[j];
         double u = std::numeric_limits<double>::infinity();
         for (Index v : parents[candidates.samples.parent[j]]) {
           u = std::min(u, f[v] + std::sqrt(squared_distance(x, mesh.points[v])));
         }
-        marks[c].near(x, u);
+        marks.near(x, u);
       }
+      flags = std::move(marks.marked);
     });
-    for (std::size_t c = 1; c < chunks; ++c) {
-      for (std::size_t i = 0; i < marks[0].marked.size(); ++i) marks[0].marked[i] |= marks[c].marked[i];
-    }
-    return Restricted_spacing(mesh.points, weight_, marks[0].marked);
+    return Restricted_spacing(mesh.points, weight_, marked);
   }
 
   const Frfc_options& options_;
