@@ -254,6 +254,8 @@ class Whole_mesh final : public Step_scope {
   // (alive with the packing after the repair, they would add to the peak)
   bool keeps_fans() const override { return false; }
   const std::vector<double>* reusable_nn(const Scope_spacing&) override { return nullptr; }
+  // (the graph of every site, the candidates of the whole mesh: hundreds of MiB at 1e6)
+  bool releases_memory_between_stages() const override { return true; }
   void add_counts(std::vector<std::pair<std::string, double>>& stats) const override {
     stats.emplace_back("n_hidden_sites", static_cast<double>(n_hidden_));
     stats.emplace_back("n_filtered_sites", static_cast<double>(n_filtered_));
@@ -280,6 +282,10 @@ Evolve_result frfc_over_scope(const Mesh_arrays& input, const Mesh_arrays& mesh,
   Stage_timer timer(result.stats, context.profile);
   // Every stage runs its loops under this limit (parallel_for(..., 0, ...)).
   const Thread_limit thread_limit(context.threads);
+  // The context's memory policy, where the scope's stages free enough for it to pay.
+  const auto release_free_memory = [&context, &scope] {
+    if (scope.releases_memory_between_stages()) frfc_stages::release_free_memory(context);
+  };
   // Memory (issue 13): what a stage leaves behind goes as soon as nothing reads it.
 
   // Step 1: nn_M and the spacing function f (Section 3.1), within the domain.
@@ -331,7 +337,7 @@ Evolve_result frfc_over_scope(const Mesh_arrays& input, const Mesh_arrays& mesh,
                                  quiet.empty() ? nullptr : &quiet, queries, settled_flags);
     scope.sampled(mesh, quiet);
   }
-  release_free_memory(context);  // the sampling threads' blocks
+  release_free_memory();  // the sampling threads' blocks
   timer.lap("sampling");
   candidate_radii(mesh, scope.interior_radii(mesh, f, inside, timer), f, demoted, options, /*on_segment=*/false,
                   inside);
@@ -342,7 +348,7 @@ Evolve_result frfc_over_scope(const Mesh_arrays& input, const Mesh_arrays& mesh,
   }
   const std::size_t n_interior = inside.size();
   scope.spacing_done();  // the candidates' radii were the graphs' last use
-  release_free_memory(context);
+  release_free_memory();
   // The quality pass's triangulation of the first pass's points starts on the
   // second thread (unless the scope started it already) beside the second pass
   // when that is small, else after it: its tree of every candidate (about 36
@@ -350,12 +356,12 @@ Evolve_result frfc_over_scope(const Mesh_arrays& input, const Mesh_arrays& mesh,
   if (!early && inside.size() + packing.deferred.size() <= n) early.emplace(packing, options, mesh.geometry != nullptr);
   scope.second_pass(mesh, inside, packing);
   inside = Candidates();
-  release_free_memory(context);
+  release_free_memory();
   if (!early) early.emplace(packing, options, mesh.geometry != nullptr);
   early->insert_late(packing, n, n + n_seg);
   const std::size_t n_candidates = packing.centers.size();
   drop_rejected_candidates(n + n_seg, packing);
-  release_free_memory(context);
+  release_free_memory();
   timer.lap("lfmis");
 
   // The spacing repair (spacing_repair.hpp), when asked for and ring candidates were offered.
@@ -393,7 +399,7 @@ Evolve_result frfc_over_scope(const Mesh_arrays& input, const Mesh_arrays& mesh,
   const auto waited = std::chrono::steady_clock::now();
   early->wait();
   const double wait_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - waited).count();
-  release_free_memory(context);
+  release_free_memory();
   const bool early_started = options.quality && !mesh.geometry;
   std::optional<std::vector<Triangle>> triangles;
   if (!options.quality && !mesh.geometry) triangles = scope.triangulation(selection, pieces, *old_mesh, result.stats);
@@ -403,7 +409,7 @@ Evolve_result frfc_over_scope(const Mesh_arrays& input, const Mesh_arrays& mesh,
   triangulate_selection(std::move(selection), pieces, options.quality ? &quality : nullptr, result,
                         early_started ? &early->triangulation : nullptr, mesh.geometry.get(),
                         triangles ? &*triangles : nullptr);
-  release_free_memory(context);
+  release_free_memory();
   timer.lap(options.quality ? "quality" : "cdt");
   finish_step(input, result, timer, &*old_mesh, scope.reusable_nn(spacing), scope.same_fans());
   scope.add_counts(result.stats);

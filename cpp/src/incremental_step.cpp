@@ -701,6 +701,9 @@ class Changed_region final : public Step_scope {
     }
     return &euclidean_nn_;
   }
+  // (its graphs and candidates are the change's: trimming between stages cost
+  // 0.1-0.25 s of page faults at 1e6 for a peak within 2 % of the trimmed one)
+  bool releases_memory_between_stages() const override { return false; }
   void add_counts(std::vector<std::pair<std::string, double>>& stats) const override {
     stats.emplace_back("n_hidden_sites", static_cast<double>(n_hidden_));
     stats.emplace_back("n_filtered_sites", static_cast<double>(n_filtered_));

@@ -104,6 +104,12 @@ class Step_scope {
   // input's (kept, with no triangle of the change), for finish_step's nn within
   // the domain (keep_within_domain's `known`); null: not known.
   virtual const std::vector<std::uint8_t>* same_fans() const { return nullptr; }
+  // Whether the outline gives free memory back to the system between stages
+  // (when Step_context::release_memory allows): worth it where a stage frees
+  // large blocks (the whole mesh's graphs, its candidates); where the scope's
+  // stages free little, the next stage's fresh pages would cost page faults
+  // for nothing.
+  virtual bool releases_memory_between_stages() const = 0;
   // The scope's own counts, appended to the step's stats.
   virtual void add_counts(std::vector<std::pair<std::string, double>>& stats) const = 0;
 };
