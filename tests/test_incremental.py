@@ -448,3 +448,21 @@ def test_the_updated_triangulation_keeps_nn_within_a_thin_slot():
         assert _taken(fast) and _declined(fast) == 0
         assert len(fast._nn_grew) > 0
         mesh = fast
+
+
+@given(seed=st.integers(0, 2**16), quality=st.booleans())
+def test_random_delta_on_an_exact_lattice_matches_the_full_step(seed, quality):
+    # A binary lattice (spacing 1/16) with random binary delta in a patch: weights
+    # that tie exactly, cones that touch (sites hidden by tangent discs): the
+    # changed region's cone scan (Cone_scan) must decide them as the full step's
+    # Apollonius graph does.
+    mesh = grid_mesh(17, 17)
+    rng = np.random.default_rng(seed)
+    patch = np.abs(mesh.points - rng.uniform(0.2, 0.8, 2)).max(axis=1) < 0.25
+    delta = np.ones(mesh.n_points)
+    delta[patch] = rng.choice([0.5, 1.5, 2.0, 3.0], int(patch.sum()))
+    fast = _check_same_step(mesh, delta, seed, quality=quality)
+    assert _taken(fast)
+    full = evolve_quietly(mesh, delta, seed, incremental=False, quality=quality)
+    # (the case this test is for: the full step's graph hides sites)
+    assert full.stats["n_hidden_sites"] > 0

@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <stdexcept>
 #include <utility>
 
 #include "evomesh/kernel.hpp"
@@ -389,12 +390,25 @@ std::vector<double> input_point_radii(const Mesh_arrays& mesh, const std::vector
 void candidate_radii(const Mesh_arrays& mesh, const Spacing_function& spacing, const std::vector<double>& f,
                      const std::vector<std::uint8_t>& demoted, const Frfc_options& options, bool on_segment,
                      Candidates& candidates) {
+  detail::parallel_resize(candidates.radius, candidates.size());
+  if (options.radius != Radius_rule::cheap) {
+    spacing.evaluate(candidates.samples.points.data(), candidates.size(), candidates.radius.data(), nullptr,
+                     /*threads=*/0, /*certified=*/false);
+  }
+  candidate_radii_from_f(mesh, f, demoted, options, on_segment, candidates);
+}
+
+void candidate_radii_from_f(const Mesh_arrays& mesh, const std::vector<double>& f,
+                            const std::vector<std::uint8_t>& demoted, const Frfc_options& options, bool on_segment,
+                            Candidates& candidates) {
   const Sample_set& samples = candidates.samples;
   const std::size_t m = samples.points.size();
-  detail::parallel_resize(candidates.radius, m);
+  if (candidates.radius.size() != m) {
+    if (options.radius != Radius_rule::cheap) throw std::logic_error("candidate_radii_from_f: f at every candidate");
+    detail::parallel_resize(candidates.radius, m);
+  }
   double* out = candidates.radius.data();
   if (options.radius != Radius_rule::cheap) {
-    spacing.evaluate(samples.points.data(), m, out, nullptr, /*threads=*/0, /*certified=*/false);
     if (options.radius == Radius_rule::interpolated && !demoted.empty()) {
       constexpr std::size_t kBlock = 1 << 16;
       parallel_for((m + kBlock - 1) / kBlock, /*threads=*/0, [&](std::size_t b) {

@@ -221,9 +221,12 @@ class Whole_mesh final : public Step_scope {
     return {std::move(spacing.nn), std::move(spacing.f), {}};
   }
   const Spacing_queries* grid_queries(const Mesh_arrays&, const std::vector<double>&) override { return &queries_; }
-  const Spacing_function& segment_radii(const Mesh_arrays&, const std::vector<double>&, const Candidates&,
-                                        Stage_timer&) override {
-    return *function_;
+  void f_at_candidates(const Mesh_arrays&, const std::vector<double>&, Candidates& candidates, bool,
+                       Stage_timer&) override {
+    // (a floating-point walk to the site the exact settle step starts from: the same answers, faster)
+    detail::parallel_resize(candidates.radius, candidates.size());
+    function_->evaluate(candidates.samples.points.data(), candidates.size(), candidates.radius.data(), nullptr,
+                        /*threads=*/0, /*certified=*/false);
   }
   Packing first_pass(const Mesh_arrays& mesh, const Scope_spacing& spacing, const Candidates& on_segments,
                      const std::vector<std::uint8_t>& forced, std::size_t n_forced,
@@ -238,10 +241,6 @@ class Whole_mesh final : public Step_scope {
     return {};
   }
   void sampled(const Mesh_arrays&, const std::vector<std::uint8_t>&) override {}
-  const Spacing_function& interior_radii(const Mesh_arrays&, const std::vector<double>&, const Candidates&,
-                                         Stage_timer&) override {
-    return *function_;
-  }
   void spacing_done() override {
     n_hidden_ = function_->n_hidden();
     n_filtered_ = function_->n_filtered();
@@ -309,12 +308,15 @@ Evolve_result frfc_over_scope(const Mesh_arrays& input, const Mesh_arrays& mesh,
   const std::vector<std::uint8_t> settled =
       options.skip_settled ? settled_points(mesh, delta, f) : std::vector<std::uint8_t>();
   const std::vector<std::uint8_t>* settled_flags = options.skip_settled ? &settled : nullptr;
+  // The candidates' sphere radii (candidates.hpp) from f at them, as the scope evaluates it.
+  const auto sphere_radii = [&](Candidates& candidates, bool on_segment) {
+    if (options.radius != Radius_rule::cheap) scope.f_at_candidates(mesh, f, candidates, on_segment, timer);
+    candidate_radii_from_f(mesh, f, demoted, options, on_segment, candidates);
+  };
   Candidates on_segments = segment_candidates(mesh, delta, f, chains, options, queries, settled_flags);
   const std::size_t n_seg = on_segments.size();
   timer.lap("sampling");
-  candidate_radii(mesh, scope.segment_radii(mesh, f, on_segments, timer), f, demoted, options, /*on_segment=*/true,
-                  on_segments);
-  scope.segment_radii_done();
+  sphere_radii(on_segments, /*on_segment=*/true);
   timer.lap("sample_radii");
   Packing packing = scope.first_pass(mesh, spacing, on_segments, forced, n_forced, demoted);
   std::optional<Early_start> early;
@@ -339,8 +341,7 @@ Evolve_result frfc_over_scope(const Mesh_arrays& input, const Mesh_arrays& mesh,
   }
   release_free_memory();  // the sampling threads' blocks
   timer.lap("sampling");
-  candidate_radii(mesh, scope.interior_radii(mesh, f, inside, timer), f, demoted, options, /*on_segment=*/false,
-                  inside);
+  sphere_radii(inside, /*on_segment=*/false);
   timer.lap("sample_radii");
   if (options.filter_samples) {
     drop_blocked_candidates(mesh, packing.centers, packing.radius, packing.kept, packing.blocker, /*threads=*/0,

@@ -127,30 +127,35 @@ class Point_grid {
 };
 
 // The Apollonius graph of the sites `marked` (with their weights), for queries
-// at which every site that can attain f is marked. Eq. 3: f(x) = min_c (w_c +
-// |x - c|) with w_c >= 0, so the site c attaining f(x) has w_c + |x - c| = f(x)
-// <= u(x) for any upper bound u; marking every site with w_c + |x - c| <= u(x)
-// for every query x (Mark_sites) keeps the minimising site of every query, so the exact
-// (certified) answers are those of the graph of all sites. The sample radii use
-// a walk in floating point (Spacing_function::evaluate, certified = false) that
-// ends at that same site unless two cones tie up to rounding at the query.
+// at which every site that can attain f is marked: the adaptive grids' queries
+// (grid_queries), which come without a bound of their own (the points' and the
+// candidates' use Cone_scan). Eq. 3: f(x) = min_c (w_c + |x - c|) with w_c >= 0,
+// so the site c attaining f(x) has w_c + |x - c| = f(x) <= u(x) for any upper
+// bound u; marking every site with w_c + |x - c| <= u(x) for every query x
+// (Mark_sites) keeps the minimising site of every query and every site tied with
+// it up to rounding, so the answers are those of the graph of all sites
+// (Spacing_function::evaluate: a function of the sites near x), with the same
+// shift (hidden sites decided alike) and ids (exact ties broken alike).
 class Restricted_spacing {
  public:
   Restricted_spacing(const std::vector<Vec2>& points, const std::vector<double>& weight,
-                     const std::vector<std::uint8_t>& marked) {
+                     const std::vector<std::uint8_t>& marked, double shift, const std::vector<std::int64_t>& ids) {
     std::vector<Vec2> sites;
     std::vector<double> weights;
+    std::vector<std::int64_t> site_ids;
     for (std::size_t i = 0; i < marked.size(); ++i) {
       if (!marked[i]) continue;
       sites.push_back(points[i]);
       weights.push_back(weight[i]);
+      if (!ids.empty()) site_ids.push_back(ids[i]);
     }
     n_sites_ = sites.size();
     if (sites.empty()) {  // no query: a graph that is never asked
       sites.push_back(points[0]);
       weights.push_back(weight[0]);
+      if (!ids.empty()) site_ids.push_back(ids[0]);
     }
-    function_ = std::make_unique<Spacing_function>(sites, weights);
+    function_ = std::make_unique<Spacing_function>(sites, weights, 0, nullptr, &site_ids, shift);
   }
   const Spacing_function& function() const { return *function_; }
   std::size_t n_sites() const { return n_sites_; }
@@ -522,7 +527,7 @@ class Changed_region final : public Step_scope {
   Changed_region(const Mesh_arrays& mesh, const Frfc_options& options)
       : options_(options), magnitude_(coordinate_magnitude(mesh.points)) {}
 
-  // f at the points by Lemma 3.1, from a graph of the sites near the points that need it.
+  // f at the points by Lemma 3.1, from the sites near the points that need it (Cone_scan).
   Scope_spacing spacing(const Mesh_arrays& mesh, const std::vector<double>& delta,
                         const std::vector<Segment_chain>& chains, Stage_timer& timer) override {
     const std::size_t n = mesh.points.size();
@@ -530,6 +535,8 @@ class Changed_region final : public Step_scope {
     weight_ = std::move(weights.weight);
     grid_.emplace(mesh.points);
     grid_->set_weights(weight_);
+    // (the whole step's graph: every point a site, the same shift and ids)
+    cones_.emplace(mesh.points, weight_, &mesh.point_gids);
     std::vector<double> f = weight_;
     std::vector<Index> asked;
     std::vector<std::uint8_t> is_asked(n, 0);
@@ -539,23 +546,15 @@ class Changed_region final : public Step_scope {
         is_asked[i] = 1;
       }
     }
-    // The graph for f at the points: f(p) <= u(p), the least cone of p and its
-    // mesh neighbours at p (spacing_upper_bounds), so the site attaining f(p)
-    // lies within u(p) of p. (u, not w: the weight of a point that coarsens
-    // reaches far, its cone does not win there.) The segment candidates' radii
-    // come from another graph (segment_radii), of the sites near the candidates
-    // there are: most segments get none.
+    // f(p) <= u(p), the least cone of p and its mesh neighbours at p
+    // (spacing_upper_bounds), so the site attaining f(p) has its cone at p
+    // within u(p). (u, not w: the weight of a point that coarsens reaches far,
+    // its cone does not win there.)
     const std::vector<double> u = spacing_upper_bounds(mesh, weight_, is_asked);
-    Mark_sites near_points(*grid_, mesh.points, weight_, magnitude_);
-    for (Index i : asked) near_points.near(mesh.points[i], u[i]);
-    timer.lap("nn");
-    near_points_.emplace(mesh.points, weight_, near_points.marked);
-    timer.lap("apollonius");
-    std::vector<Vec2> at;
-    for (Index i : asked) at.push_back(mesh.points[i]);
-    std::vector<double> value(at.size());
-    near_points_->function().evaluate(at.data(), at.size(), value.data(), nullptr, /*threads=*/0);
-    for (std::size_t k = 0; k < asked.size(); ++k) f[asked[k]] = std::min(value[k], weight_[asked[k]]);
+    scan(mesh, asked.size(), [&](std::size_t k, Vec2& x, double& bound) {
+      x = mesh.points[asked[k]];
+      bound = u[asked[k]];
+    }, [&](std::size_t k, double value) { f[asked[k]] = std::min(value, weight_[asked[k]]); });
     timer.lap("spacing_at_points");
     return {std::move(weights.nn), std::move(f), std::move(weights.evaluate)};
   }
@@ -596,28 +595,30 @@ class Changed_region final : public Step_scope {
       near_graded.near(mesh.points[end], 2 * std::hypot(b[0] - a[0], b[1] - a[1]) + f[end]);
     }
     if (!any) return nullptr;
-    near_graded_.emplace(mesh.points, weight_, near_graded.marked);
+    near_graded_.emplace(mesh.points, weight_, near_graded.marked, cones_->shift(), mesh.point_gids);
     graded_queries_ = spacing_queries(near_graded_->function());
     return &graded_queries_;
   }
 
-  // The segment candidates' graph: x on segment e has f(x) <= f(v) + |x - v| at its
-  // ends v (f is 1-Lipschitz), so the site attaining f(x) lies within that of x.
-  const Spacing_function& segment_radii(const Mesh_arrays& mesh, const std::vector<double>& f,
-                                        const Candidates& on_segments, Stage_timer& timer) override {
-    n_sites_ += near_points_->n_sites();
-    n_hidden_ = near_points_->function().n_hidden();
-    n_filtered_ = near_points_->function().n_filtered();
-    near_points_.reset();  // f at the points was its only use
-    near_segments_.emplace(near_candidates(mesh, f, on_segments, mesh.segments));
-    timer.lap("apollonius");
-    return near_segments_->function();
-  }
-  void segment_radii_done() override {
-    n_sites_ += near_segments_->n_sites();
-    n_hidden_ += near_segments_->function().n_hidden();
-    n_filtered_ += near_segments_->function().n_filtered();
-    near_segments_.reset();
+  // f at the candidates: x drawn on its parent (a segment or a triangle) has
+  // f(x) <= f(v) + |x - v| at the parent's vertices v (f is 1-Lipschitz), so
+  // the site attaining f(x) has its cone at x within that bound.
+  void f_at_candidates(const Mesh_arrays& mesh, const std::vector<double>& f, Candidates& candidates,
+                       bool on_segment, Stage_timer& timer) override {
+    detail::parallel_resize(candidates.radius, candidates.size());
+    const auto bound_at = [&](const auto& parents) {
+      return [&](std::size_t j, Vec2& x, double& bound) {
+        x = candidates.samples.points[j];
+        bound = std::numeric_limits<double>::infinity();
+        for (Index v : parents[candidates.samples.parent[j]]) {
+          bound = std::min(bound, f[v] + std::sqrt(squared_distance(x, mesh.points[v])));
+        }
+      };
+    };
+    const auto store = [&](std::size_t j, double value) { candidates.radius[j] = value; };
+    if (on_segment) scan(mesh, candidates.size(), bound_at(mesh.segments), store);
+    else scan(mesh, candidates.size(), bound_at(mesh.triangles), store);
+    timer.lap("sample_radii");
   }
 
   Packing first_pass(const Mesh_arrays& mesh, const Scope_spacing& spacing, const Candidates& on_segments,
@@ -652,16 +653,11 @@ class Changed_region final : public Step_scope {
     near_graded_.reset();  // its last use
   }
 
-  // The interior candidates' graph: x in triangle t has f(x) <= f(v) + |x - v| at its vertices v.
-  const Spacing_function& interior_radii(const Mesh_arrays& mesh, const std::vector<double>& f,
-                                         const Candidates& inside, Stage_timer& timer) override {
-    near_samples_.emplace(near_candidates(mesh, f, inside, mesh.triangles));
-    weight_ = std::vector<double>();  // the sites' weights: the graphs were their last use
-    n_sites_ += near_samples_->n_sites();
-    timer.lap("apollonius");
-    return near_samples_->function();
+  void spacing_done() override {
+    cones_.reset();
+    weight_ = std::vector<double>();  // the sites' weights: the scans were their last use
   }
-  void spacing_done() override { near_samples_.reset(); }
+
 
   void second_pass(const Mesh_arrays& mesh, Candidates& inside, Packing& packing) override {
     second_pass_near(mesh, inside, safe_, *grid_, magnitude_, packing, n_packed_second_);
@@ -705,48 +701,57 @@ class Changed_region final : public Step_scope {
   // 0.1-0.25 s of page faults at 1e6 for a peak within 2 % of the trimmed one)
   bool releases_memory_between_stages() const override { return false; }
   void add_counts(std::vector<std::pair<std::string, double>>& stats) const override {
-    stats.emplace_back("n_hidden_sites", static_cast<double>(n_hidden_));
-    stats.emplace_back("n_filtered_sites", static_cast<double>(n_filtered_));
     stats.emplace_back("incremental_region_points", static_cast<double>(n_region_));
     stats.emplace_back("incremental_quiet_triangles", static_cast<double>(n_quiet_));
     stats.emplace_back("incremental_packed_first", static_cast<double>(n_packed_first_));
     stats.emplace_back("incremental_packed_second", static_cast<double>(n_packed_second_));
     stats.emplace_back("incremental_sites", static_cast<double>(n_sites_));
+    stats.emplace_back("incremental_cone_scans", static_cast<double>(n_scans_));
+    stats.emplace_back("incremental_scanned_cones", static_cast<double>(n_scanned_));
     stats.emplace_back("incremental_step", 1);
   }
 
  private:
-  // The graph of the sites that can attain f at the candidates: x drawn on its
-  // parent (a segment or a triangle) has f(x) <= f(v) + |x - v| at the parent's vertices v.
-  template <class Parents>
-  Restricted_spacing near_candidates(const Mesh_arrays& mesh, const std::vector<double>& f,
-                                     const Candidates& candidates, const std::vector<Parents>& parents) const {
-    const auto marked = flags_in_chunks(candidates.size(), mesh.points.size(), [&](std::size_t begin, std::size_t end,
-                                                                                 std::vector<std::uint8_t>& flags) {
-      Mark_sites marks(*grid_, mesh.points, weight_, magnitude_);
-      for (std::size_t j = begin; j < end; ++j) {
-        const Vec2& x = candidates.samples.points[j];
-        double u = std::numeric_limits<double>::infinity();
-        for (Index v : parents[candidates.samples.parent[j]]) {
-          u = std::min(u, f[v] + std::sqrt(squared_distance(x, mesh.points[v])));
-        }
-        marks.near(x, u);
+  // f at `count` queries by the cone scan, in parallel chunks: bound_at(k, x,
+  // u) gives query k and a bound u >= f(x) (up to rounding), store(k, f(x)).
+  // Scanned: the sites whose cone at x is within the scan's reach of u, with
+  // this file's slack (as Mark_sites): a superset of what Cone_scan needs.
+  template <class Bound_at, class Store>
+  void scan(const Mesh_arrays& mesh, std::size_t count, Bound_at bound_at, Store store) {
+    constexpr std::size_t kChunk = 4096;
+    const std::size_t chunks = (count + kChunk - 1) / kChunk;
+    std::vector<std::size_t> scanned(chunks, 0);
+    const double absolute = 1e-12 * magnitude_;
+    parallel_for(chunks, 0, [&](std::size_t c) {
+      std::vector<Index> near;
+      for (std::size_t k = c * kChunk; k < std::min(count, (c + 1) * kChunk); ++k) {
+        Vec2 x;
+        double u;
+        bound_at(k, x, u);
+        const double reach = cones_->reach(u) * (1 + kSlack) + absolute;
+        near.clear();
+        grid_->visit_within(x, reach, [&](Index i) {
+          if (weight_[i] + std::sqrt(squared_distance(x, mesh.points[i])) * (1 - kSlack) <= reach) near.push_back(i);
+        });
+        scanned[c] += near.size();
+        store(k, cones_->evaluate(x, near.data(), near.size()));
       }
-      flags = std::move(marks.marked);
     });
-    return Restricted_spacing(mesh.points, weight_, marked);
+    for (std::size_t k : scanned) n_scanned_ += k;
+    n_scans_ += count;
   }
 
   const Frfc_options& options_;
   const double magnitude_;
   std::vector<double> weight_;  // of the sites (Step_weights)
   std::optional<Point_grid> grid_;
-  std::optional<Restricted_spacing> near_points_, near_segments_, near_graded_, near_samples_;
+  std::optional<Cone_scan> cones_;  // f at the points and the candidates
+  std::optional<Restricted_spacing> near_graded_;  // f in the adaptive grids (grid_queries)
   Spacing_queries graded_queries_;
   std::vector<std::uint8_t> safe_;  // old points no earlier sphere can reject (safe_old_points)
   std::vector<double> euclidean_nn_;
   std::vector<std::uint8_t> same_fans_;  // triangulation()'s, when it updated the input's
-  std::size_t n_sites_ = 0, n_hidden_ = 0, n_filtered_ = 0, n_quiet_ = 0, n_region_ = 0;
+  std::size_t n_sites_ = 0, n_scans_ = 0, n_scanned_ = 0, n_quiet_ = 0, n_region_ = 0;
   std::size_t n_packed_first_ = 0, n_packed_second_ = 0;
 };
 

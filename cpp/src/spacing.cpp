@@ -14,6 +14,7 @@
 #include <map>
 #include <numeric>
 #include <optional>
+#include <stdexcept>
 
 #include "evomesh/detail/apollonius_filter.hpp"
 #include "evomesh/detail/point_tree.hpp"
@@ -718,6 +719,89 @@ void Spacing_function::evaluate(const Vec2* queries, std::size_t n, double* f_ou
       if (site_out) site_out[q] = v->index;
     }
   });
+}
+
+}  // namespace evomesh
+
+namespace evomesh {
+
+Cone_scan::Cone_scan(const std::vector<Vec2>& sites, const std::vector<double>& weights,
+                     const std::vector<std::int64_t>* site_ids, double shift)
+    : sites_(sites), weights_(weights), ids_(site_ids != nullptr && !site_ids->empty() ? site_ids : nullptr) {
+  if (sites.empty() || sites.size() != weights.size()) throw Input_error("cone scan: one weight per site, some sites");
+  if (ids_ != nullptr && ids_->size() != sites.size()) throw Input_error("one id per site is required");
+  shift_ = *std::max_element(weights.begin(), weights.end());  // (as Spacing_function's)
+  if (shift != 0) {
+    if (!(shift >= shift_) || !std::isfinite(shift)) {
+      throw Input_error("spacing function: shift must be finite and at least the largest weight");
+    }
+    shift_ = shift;
+  }
+}
+
+double Cone_scan::evaluate(const Vec2& x, const Index* near, std::size_t count, Index* site) const {
+  if (count == 0) throw std::logic_error("Cone_scan::evaluate: no site to scan");
+  // The one formula for f at x given its site (Spacing_function::evaluate's).
+  const auto cone = [&](Index s) {
+    const double dx = x[0] - sites_[s][0];
+    const double dy = x[1] - sites_[s][1];
+    return weights_[s] + std::sqrt(dx * dx + dy * dy);
+  };
+  double best = std::numeric_limits<double>::infinity(), second = best;
+  Index least = near[0];
+  for (std::size_t k = 0; k < count; ++k) {
+    const double value = cone(near[k]);
+    if (value < best) {
+      second = best;
+      best = value;
+      least = near[k];
+    } else {
+      second = std::min(second, value);
+    }
+  }
+  // Spacing_function::evaluate's near_bound: the double cones are within 4 units
+  // of rounding of the exact ones, the shifted weights within half a unit of
+  // `shift`. Nearly always one site is below it: that site is the answer (a site
+  // hiding it would be there too, its cone within rounding of the hidden one's).
+  const double bound = best + 0x1p-48 * (best + shift_);
+  if (!(second <= bound)) {
+    if (site != nullptr) *site = least;
+    return best;
+  }
+  // Sites tied up to rounding: the least visible one by the exact order (ties:
+  // the lowest id), visibility tested against every site within rounding of
+  // them (each hider of a tied site is one, see above).
+  std::vector<Index> tied, hiders;
+  const double wide = bound + 0x1p-48 * (best + shift_);
+  for (std::size_t k = 0; k < count; ++k) {
+    const double value = cone(near[k]);
+    if (value <= bound) tied.push_back(near[k]);
+    if (value <= wide) hiders.push_back(near[k]);
+  }
+  const auto id = [&](Index s) -> std::int64_t { return ids_ == nullptr ? s : (*ids_)[static_cast<std::size_t>(s)]; };
+  std::sort(tied.begin(), tied.end(), [&](Index a, Index b) {
+    const CGAL::Sign s = compare_cones(sites_[a], weights_[a], sites_[b], weights_[b], x);
+    return s == CGAL::NEGATIVE || (s == CGAL::ZERO && id(a) < id(b));
+  });
+  const Ag_traits traits;
+  const auto hides = traits.is_hidden_2_object();
+  for (Index c : tied) {
+    const double wc = shift_ - weights_[c];
+    bool hidden = false;
+    for (Index d : hiders) {
+      const double wd = shift_ - weights_[d];
+      // (exact: CGAL hides c only if W_d >= W_c; dominated_sites)
+      if (d == c || !(wd >= wc)) continue;
+      if (hides(Site_2(Ag_point(sites_[d][0], sites_[d][1]), wd), Site_2(Ag_point(sites_[c][0], sites_[c][1]), wc))) {
+        hidden = true;
+        break;
+      }
+    }
+    if (hidden) continue;
+    if (site != nullptr) *site = c;
+    return cone(c);
+  }
+  throw std::logic_error("Cone_scan::evaluate: every tied site is hidden");
 }
 
 }  // namespace evomesh

@@ -122,6 +122,13 @@ void candidate_radii(const Mesh_arrays& mesh, const Spacing_function& spacing, c
                      const std::vector<std::uint8_t>& demoted, const Frfc_options& options, bool on_segment,
                      Candidates& candidates);
 
+// candidate_radii from f at the candidates, which candidates.radius holds on
+// entry (size() values; unread when options.radius is cheap): where the step
+// evaluates f at them another way than one graph (Step_scope::f_at_candidates).
+void candidate_radii_from_f(const Mesh_arrays& mesh, const std::vector<double>& f,
+                            const std::vector<std::uint8_t>& demoted, const Frfc_options& options, bool on_segment,
+                            Candidates& candidates);
+
 // The sample filter, part 1: one cover disc per input point (see candidates.cpp).
 // kept/blocker: the first packing pass over the input points (indices < n) and
 // segment candidates; radius: the radii of its spheres.

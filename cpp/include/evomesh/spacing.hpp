@@ -2,6 +2,7 @@
 #pragma once
 
 #include <cstddef>
+#include <cstdint>
 #include <memory>
 #include <vector>
 
@@ -89,6 +90,38 @@ class Spacing_function {
  private:
   struct Impl;
   std::unique_ptr<Impl> impl_;
+};
+
+// f(x) from the few sites that can attain it at x, by a direct scan: the answer
+// Spacing_function::evaluate gives with a graph of all the sites (the exact
+// least cone w_c + |x - c| among the visible sites, exact ties to the lowest id,
+// f = w_c + sqrt(dx*dx + dy*dy) in double), provided the scanned sites hold
+// every site whose cone at x is at most reach(u) for some u >= f(x). Visible:
+// not hidden in CGAL's sense (Apollonius_graph_2's Is_hidden_2 on the shifted
+// weights shift - w, as the graph decides): a hidden site is skipped, its hider
+// is scanned too (its cone is within rounding of the hidden one's). For the
+// changed-region step, whose queries each come with such a bound and a handful
+// of sites under it: no graph to build (incremental_step.cpp).
+class Cone_scan {
+ public:
+  // `sites`, `weights`, `site_ids`, `shift`: as Spacing_function's, whose graph
+  // of all the sites this answers like (same shift: 0 is the largest weight).
+  // The vectors are referenced, not copied: they must outlive the scan.
+  Cone_scan(const std::vector<Vec2>& sites, const std::vector<double>& weights,
+            const std::vector<std::int64_t>* site_ids = nullptr, double shift = 0);
+  // What the scanned sites' cones must reach at x, given u >= f(x): u plus
+  // 2^-44 (u + shift), above every rounding the answer depends on.
+  double reach(double u) const { return u + 0x1p-44 * (u + shift_); }
+  // f(x) from the sites near[0, count) (indices into the sites; count >= 1, the
+  // set above); `site` (optional) receives the site attaining it.
+  double evaluate(const Vec2& x, const Index* near, std::size_t count, Index* site = nullptr) const;
+  double shift() const { return shift_; }
+
+ private:
+  const std::vector<Vec2>& sites_;
+  const std::vector<double>& weights_;
+  const std::vector<std::int64_t>* ids_;
+  double shift_ = 0;
 };
 
 }  // namespace evomesh

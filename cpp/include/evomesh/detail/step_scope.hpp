@@ -54,11 +54,12 @@ class Step_scope {
   // f for the adaptive grids that ask it (sampling.hpp, asks_spacing), in the
   // sample budget's estimate and the sampling; null if none asks.
   virtual const Spacing_queries* grid_queries(const Mesh_arrays& mesh, const std::vector<double>& f) = 0;
-  // The graph that answers the segment candidates' radii (f: step 1's, at the
-  // input points); not asked again after segment_radii_done().
-  virtual const Spacing_function& segment_radii(const Mesh_arrays& mesh, const std::vector<double>& f,
-                                                const Candidates& on_segments, detail::Stage_timer& timer) = 0;
-  virtual void segment_radii_done() {}
+  // f at every candidate (the sphere radii's, candidate_radii_from_f), into
+  // candidates.radius, one value each: the segment candidates (on_segment),
+  // then the interior ones; not asked where options.radius is cheap. (f: step
+  // 1's, at the input points.)
+  virtual void f_at_candidates(const Mesh_arrays& mesh, const std::vector<double>& f, Candidates& candidates,
+                               bool on_segment, detail::Stage_timer& timer) = 0;
   // Steps 3-5, first pass: input points and segment candidates (frfc_stages::first_packing_pass).
   virtual frfc_stages::Packing first_pass(const Mesh_arrays& mesh, const Scope_spacing& spacing,
                                           const Candidates& on_segments, const std::vector<std::uint8_t>& forced,
@@ -77,9 +78,6 @@ class Step_scope {
                                                     detail::Stage_timer& timer) = 0;
   // After the interior sampling (`quiet` as quiet_triangles returned it).
   virtual void sampled(const Mesh_arrays& mesh, const std::vector<std::uint8_t>& quiet) = 0;
-  // The graph that answers the interior candidates' radii.
-  virtual const Spacing_function& interior_radii(const Mesh_arrays& mesh, const std::vector<double>& f,
-                                                 const Candidates& inside, detail::Stage_timer& timer) = 0;
   // Every f query is answered: the graphs go.
   virtual void spacing_done() = 0;
   // Step 6 without the quality pass: the constrained Delaunay triangulation of
