@@ -450,19 +450,39 @@ def test_the_updated_triangulation_keeps_nn_within_a_thin_slot():
         mesh = fast
 
 
-@given(seed=st.integers(0, 2**16), quality=st.booleans())
-def test_random_delta_on_an_exact_lattice_matches_the_full_step(seed, quality):
+LATTICE_OPTIONS = {"default": {}, "no-quality": {"quality": False}, "paper": {"options": evomesh.FrfcOptions.paper()}}
+
+
+@given(seed=st.integers(0, 2**16), options=st.sampled_from(sorted(LATTICE_OPTIONS)))
+def test_random_delta_on_an_exact_lattice_matches_the_full_step(seed, options):
     # A binary lattice (spacing 1/16) with random binary delta in a patch: weights
     # that tie exactly, cones that touch (sites hidden by tangent discs): the
     # changed region's cone scan (Cone_scan) must decide them as the full step's
-    # Apollonius graph does.
+    # Apollonius graph does. With the paper's radius f / 2 = nn / 2 every pair of
+    # lattice neighbours touches: the packing's double test decides, and the
+    # changed region's safe points (safe_old_points) must be decided alike.
     mesh = grid_mesh(17, 17)
     rng = np.random.default_rng(seed)
     patch = np.abs(mesh.points - rng.uniform(0.2, 0.8, 2)).max(axis=1) < 0.25
     delta = np.ones(mesh.n_points)
     delta[patch] = rng.choice([0.5, 1.5, 2.0, 3.0], int(patch.sum()))
-    fast = _check_same_step(mesh, delta, seed, quality=quality)
+    fast = _check_same_step(mesh, delta, seed, **LATTICE_OPTIONS[options])
     assert _taken(fast)
-    full = evolve_quietly(mesh, delta, seed, incremental=False, quality=quality)
+    full = evolve_quietly(mesh, delta, seed, incremental=False, **LATTICE_OPTIONS[options])
     # (the case this test is for: the full step's graph hides sites)
     assert full.stats["n_hidden_sites"] > 0
+
+
+@pytest.mark.parametrize("mesh_seed", [0, 1, 2])
+def test_with_the_papers_radius_most_old_points_are_certified_safe(mesh_seed):
+    # The paper's spheres B(p, f / 2) at delta = 1 have radius nn / 2: nearest
+    # neighbours touch, and the packing's double test decides whether they
+    # conflict. The changed region finds those conflicts with the same test
+    # (safe_old_points) and leaves every other old point out of its first pass.
+    options = {"options": evomesh.FrfcOptions.paper()}
+    mesh = _stepped_mesh(3000, mesh_seed)
+    mesh = evolve_quietly(mesh, np.ones(mesh.n_points), 1, **options)
+    fast = _check_same_step(mesh, _front_delta(mesh, (0.4, 0.5), 0.2, 0.05, 0.5), 3, **options)
+    assert _taken(fast)
+    # (without the exact test every old point was packed: at least n_points)
+    assert fast.stats["incremental_packed_first"] < 0.6 * mesh.n_points

@@ -318,18 +318,56 @@ std::vector<std::uint8_t> quiet_triangles(const Mesh_arrays& mesh, const Point_g
   return quiet;
 }
 
-// Old points whose sphere no earlier sphere of the first pass can reject and
-// that reject nothing but spheres they overlap: radius <= nn / 2 (with slack),
-// nn the Euclidean nearest-neighbour distance (not grown within the domain).
-// Two such spheres are disjoint (r_p + r_q <= (nn_p + nn_q) / 2 <= |p - q|), so
-// among old points only the others ("dangerous": delta > 1 with f > nn / 2 s,
-// radius_scale 1, nn grown within the domain) and the candidates can overlap one.
-std::vector<std::uint8_t> safe_old_points(const std::vector<double>& radius, const std::vector<double>& nn,
-                                          const std::vector<std::uint8_t>& evaluate, std::size_t n) {
-  std::vector<std::uint8_t> safe(n, 0);
+// The packing's conflict test (detail/kept_sphere_tree.hpp), the same double expression.
+bool spheres_conflict(const Vec2& a, double ra, const Vec2& b, double rb) {
+  const double ex = a[0] - b[0], ey = a[1] - b[1];
+  const double sum = ra + rb;
+  return ex * ex + ey * ey < sum * sum;
+}
+
+// Reaches below grow by this factor: a safe point's radius may exceed nn / 2 by
+// kSlack (safe_old_points), which the bounds' derivations then carry (below).
+constexpr double kSafeReach = 1 + 4 * kSlack;
+
+// Old points whose sphere conflicts with no other old point's: radius <= (1 +
+// kSlack) nn / 2, nn the Euclidean nearest-neighbour distance (not grown within
+// the domain), and no conflict by the packing's own test. Two spheres with
+// radius <= nn / 2 (1 - kSlack) are disjoint with a margin above rounding (r_p +
+// r_q <= (nn_p + nn_q) / 2 <= |p - q|). The others up to (1 + kSlack) nn / 2 (the
+// paper's radius f / 2 = nn / 2 at delta = 1, where the double test decides
+// between nearest neighbours) are tested against every old point q that can
+// conflict: |p - q| < r_p + r_q needs |p - q| < max(nn_p, nn_q)(1 + kSlack), and
+// when nn_q > nn_p, q's radius is either in the tested band too (the pair is
+// found from q) or below it, and then |p - q| < nn_p (1 + 2 kSlack): each pair
+// is met from a point of the band within (1 + 2 kSlack) of its nn. A pair that
+// conflicts makes both unsafe. So no two safe spheres conflict, and among old
+// points only the unsafe ("dangerous": delta > 1 with f > nn / 2 s, a conflict,
+// nn grown within the domain) and the candidates can conflict with a safe one.
+// A safe p's radius r_p <= (1 + kSlack) |p - v| / 2 for every other point v,
+// which the reaches below cover with kSafeReach.
+std::vector<std::uint8_t> safe_old_points(const std::vector<Vec2>& points, const std::vector<double>& radius,
+                                          const std::vector<double>& nn, const std::vector<std::uint8_t>& evaluate,
+                                          const Point_grid& grid, double magnitude) {
+  const std::size_t n = points.size();
+  std::vector<std::uint8_t> safe(n, 0), tested(n, 0);
   for (std::size_t p = 0; p < n; ++p) {
-    safe[p] = (evaluate.empty() || !evaluate[p]) && radius[p] <= 0.5 * nn[p] * (1 - kSlack);
+    if (!evaluate.empty() && evaluate[p]) continue;
+    safe[p] = radius[p] <= 0.5 * nn[p] * (1 + kSlack);
+    tested[p] = safe[p] && !(radius[p] <= 0.5 * nn[p] * (1 - kSlack));
   }
+  const double absolute = 1e-12 * magnitude;
+  const auto conflicting = flags_in_chunks(n, n, [&](std::size_t begin, std::size_t end, std::vector<std::uint8_t>& flags) {
+    for (std::size_t p = begin; p < end; ++p) {
+      if (!tested[p]) continue;
+      grid.visit_within(points[p], nn[p] * (1 + 2 * kSlack) + absolute, [&](Index q) {
+        if (static_cast<std::size_t>(q) != p && safe[q] && spheres_conflict(points[p], radius[p], points[q], radius[q])) {
+          flags[p] = 1;
+          flags[q] = 1;
+        }
+      });
+    }
+  });
+  for (std::size_t p = 0; p < n; ++p) safe[p] = safe[p] && !conflicting[p];
   return safe;
 }
 
@@ -339,7 +377,8 @@ std::vector<std::uint8_t> safe_old_points(const std::vector<double>& radius, con
 // member) is the MIS of all spheres restricted to it. The set: the forced
 // corners, every segment candidate and dangerous old point, and every safe old
 // point that overlaps one of those. A safe old point p overlapping a sphere d
-// lies within 2 r_d of d when d is an old point (r_p <= nn_p / 2 <= |p - d| / 2)
+// lies within 2 r_d of d when d is an old point (r_p <= nn_p / 2 <= |p - d| / 2;
+// with the (1 + kSlack) of safe_old_points, within kSafeReach of that)
 // and within |e - d| + 2 r_d of d when d is a candidate on a segment with end e
 // (r_p <= |p - e| / 2). Safe old points outside the set overlap nothing earlier:
 // they are kept. Blockers may differ from the full pass's (another kept sphere
@@ -363,11 +402,11 @@ Packing first_pass_near(const Mesh_arrays& mesh, const std::vector<double>& f, c
   }
   const auto segment_classes = on_segments.classes(/*on_segment=*/true);
   std::copy(segment_classes.begin(), segment_classes.end(), classes.begin() + static_cast<std::ptrdiff_t>(n));
-  safe = safe_old_points(packing.radius, nn, evaluate, n);
+  safe = safe_old_points(mesh.points, packing.radius, nn, evaluate, grid, magnitude);
   const double absolute = 1e-12 * magnitude;
   std::vector<std::uint8_t> member(n + n_seg, 0);
   auto add_near = [&](const Vec2& d, double reach) {
-    grid.visit_within(d, reach * (1 + kSlack) + absolute, [&](Index p) { member[p] = 1; });
+    grid.visit_within(d, reach * kSafeReach + absolute, [&](Index p) { member[p] = 1; });
   };
   for (std::size_t i = 0; i < n; ++i) {
     if (safe[i] && !forced[i]) continue;
@@ -425,8 +464,9 @@ Packing first_pass_near(const Mesh_arrays& mesh, const std::vector<double>& f, c
 // kept spheres (forced), those that can overlap a sphere of the pass: every
 // dangerous or segment one, and the safe old points near one: a safe p overlaps
 // B(x, r) only within 2 r + |x - v| of x for any mesh point v != p (r_p <= nn_p
-// / 2 <= |p - v| / 2), v a vertex of x's triangle, or x itself for a deferred
-// old point. The forced spheres' order among themselves does not matter.
+// / 2 <= |p - v| / 2; with safe_old_points' (1 + kSlack), within kSafeReach of
+// that), v a vertex of x's triangle, or x itself for a deferred old point. The
+// forced spheres' order among themselves does not matter.
 void second_pass_near(const Mesh_arrays& mesh, const Candidates& inside, const std::vector<std::uint8_t>& safe,
                       const Point_grid& grid, double magnitude, Packing& packing, std::size_t& n_packed) {
   const std::size_t n = mesh.points.size();
@@ -452,7 +492,7 @@ void second_pass_near(const Mesh_arrays& mesh, const Candidates& inside, const s
   const auto near = flags_in_chunks(n_deferred + inside.size(), n_first, [&](std::size_t begin, std::size_t end,
                                                                             std::vector<std::uint8_t>& flags) {
     auto add_near = [&](const Vec2& x, double reach) {
-      grid.visit_within(x, reach * (1 + kSlack) + absolute, [&](Index p) { flags[p] = 1; });
+      grid.visit_within(x, reach * kSafeReach + absolute, [&](Index p) { flags[p] = 1; });
     };
     for (std::size_t k = begin; k < end; ++k) {
       if (k < n_deferred) {
