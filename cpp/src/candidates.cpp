@@ -1,6 +1,7 @@
 #include "evomesh/candidates.hpp"
 
 #include "evomesh/global_ids.hpp"
+#include "evomesh/detail/sphere_conflict.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -514,7 +515,7 @@ void drop_blocked_candidates(const Mesh_arrays& mesh, const std::vector<Vec2>& c
         const double ex = centers[c][0] - x[0];
         const double ey = centers[c][1] - x[1];
         const double sum = r + radius[c];
-        if (ex * ex + ey * ey < sum * sum) {
+        if (detail::spheres_conflict(ex, ey, sum)) {
           drop[j] = 1;
           break;
         }

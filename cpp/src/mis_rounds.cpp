@@ -1,6 +1,7 @@
 #include "evomesh/mis_rounds.hpp"
 
 #include "evomesh/detail/kept_sphere_tree.hpp"
+#include "evomesh/detail/sphere_conflict.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -94,7 +95,7 @@ Conflict_lists earlier_conflicts(const std::vector<Vec2>& c, const std::vector<d
             if (static_cast<std::size_t>(t) == s || (g.octave == own && static_cast<std::size_t>(t) < s)) continue;
             // (packing.cpp's leaf_conflicts, operation for operation: symmetric in s and t)
             const double ex = c[t][0] - c[s][0], ey = c[t][1] - c[s][1], sum = r[s] + r[t];
-            if (!(ex * ex + ey * ey < sum * sum)) continue;
+            if (!detail::spheres_conflict(ex, ey, sum)) continue;
             if (rank[t] < rank[s]) pairs.emplace_back(static_cast<Index>(s), t);
             else pairs.emplace_back(t, static_cast<Index>(s));
           }

@@ -8,6 +8,7 @@
 #include <vector>
 
 #include "check.hpp"
+#include "evomesh/detail/sphere_conflict.hpp"
 #include "evomesh/packing.hpp"
 #include "sphere_systems.hpp"
 
@@ -18,8 +19,7 @@ namespace {
 
 // The conflict test of packing.hpp: interiors overlap.
 bool conflict(const Vec2& a, double ra, const Vec2& b, double rb) {
-  const double ex = a[0] - b[0], ey = a[1] - b[1], sum = ra + rb;
-  return ex * ex + ey * ey < sum * sum;
+  return evomesh::detail::spheres_conflict(a[0] - b[0], a[1] - b[1], ra + rb);
 }
 
 // The reference: visit in order, keep unless a kept sphere conflicts.

@@ -8,6 +8,7 @@
 #include <vector>
 
 #include "evomesh/detail/bits.hpp"
+#include "evomesh/detail/sphere_conflict.hpp"
 #include "evomesh/detail/static_kd_tree.hpp"
 #include "evomesh/parallel.hpp"
 #include "evomesh/types.hpp"
@@ -147,7 +148,7 @@ class Kept_sphere_tree {
         const double ex = t.x - cx;
         const double ey = t.y - cy;
         const double sum = r + t.radius;
-        if (!(ex * ex + ey * ey < sum * sum)) continue;
+        if (!spheres_conflict(ex, ey, sum)) continue;
         const std::size_t at = begin + static_cast<std::size_t>(bit);
         if ((kept >> bit) & 1) {
           hit = at;
@@ -244,7 +245,7 @@ class Kept_sphere_tree {
       const double ex = s.x - cx;
       const double ey = s.y - cy;
       const double sum = r + s.radius;
-      if (ex * ex + ey * ey < sum * sum) return begin + static_cast<std::size_t>(&s - first);
+      if (spheres_conflict(ex, ey, sum)) return begin + static_cast<std::size_t>(&s - first);
     }
     return kNone;
   }
