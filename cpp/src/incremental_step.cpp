@@ -12,6 +12,7 @@
 
 #include "evomesh/candidates.hpp"
 #include "evomesh/detail/frfc_stages.hpp"
+#include "evomesh/detail/sphere_conflict.hpp"
 #include "evomesh/detail/step_scope.hpp"
 #include "evomesh/global_ids.hpp"
 #include "evomesh/packing.hpp"
@@ -318,13 +319,6 @@ std::vector<std::uint8_t> quiet_triangles(const Mesh_arrays& mesh, const Point_g
   return quiet;
 }
 
-// The packing's conflict test (detail/kept_sphere_tree.hpp), the same double expression.
-bool spheres_conflict(const Vec2& a, double ra, const Vec2& b, double rb) {
-  const double ex = a[0] - b[0], ey = a[1] - b[1];
-  const double sum = ra + rb;
-  return ex * ex + ey * ey < sum * sum;
-}
-
 // Reaches below grow by this factor: a safe point's radius may exceed nn / 2 by
 // kSlack (safe_old_points), which the bounds' derivations then carry (below).
 constexpr double kSafeReach = 1 + 4 * kSlack;
@@ -360,7 +354,7 @@ std::vector<std::uint8_t> safe_old_points(const std::vector<Vec2>& points, const
     for (std::size_t p = begin; p < end; ++p) {
       if (!tested[p]) continue;
       grid.visit_within(points[p], nn[p] * (1 + 2 * kSlack) + absolute, [&](Index q) {
-        if (static_cast<std::size_t>(q) != p && safe[q] && spheres_conflict(points[p], radius[p], points[q], radius[q])) {
+        if (static_cast<std::size_t>(q) != p && safe[q] && detail::spheres_conflict(points[p][0] - points[q][0], points[p][1] - points[q][1], radius[p] + radius[q])) {
           flags[p] = 1;
           flags[q] = 1;
         }
@@ -606,9 +600,11 @@ class Changed_region final : public Step_scope {
   // the same: every query x lies in the bounding box B of its triangle (or on
   // its segment ab), f is 1-Lipschitz, so the site c attaining f(x) has |x - c|
   // <= f(x) <= f(v) + |x - v| for any vertex v: c lies within f(v) + 1.5
-  // diag(B) of B's centre (within 2 |ab| + f(e) of an end e). Triangles that do
-  // not ask never query (their grid has at most kQueryCells fine cells), so the
-  // estimate is the whole mesh's, and so is a refused budget's error.
+  // diag(B) of B's centre (within 2 |ab| + f(e) of an end e); Cone_scan::reach
+  // adds the rounding of the shifted weights, so that every site that can hide
+  // a marked one (the same shift as the whole graph's) is marked too. Triangles
+  // that do not ask never query (their grid has at most kQueryCells fine cells),
+  // so the estimate is the whole mesh's, and so is a refused budget's error.
   const Spacing_queries* grid_queries(const Mesh_arrays& mesh, const std::vector<double>& f) override {
     if (!options_.adaptive_cells) return nullptr;
     Mark_sites near_graded(*grid_, mesh.points, weight_, magnitude_);
@@ -624,7 +620,7 @@ class Changed_region final : public Step_scope {
         f_min = std::min(f_min, f[v]);
       }
       near_graded.near({0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1])},
-                       f_min + 1.5 * std::hypot(hi[0] - lo[0], hi[1] - lo[1]));
+                       cones_->reach(f_min + 1.5 * std::hypot(hi[0] - lo[0], hi[1] - lo[1])));
     }
     for (const Edge& e : mesh.segments) {
       if (!asks_spacing(mesh, f, e, options_.cell_factor)) continue;
@@ -632,7 +628,7 @@ class Changed_region final : public Step_scope {
       const Index end = f[e[0]] <= f[e[1]] ? e[0] : e[1];
       const Vec2& a = mesh.points[e[0]];
       const Vec2& b = mesh.points[e[1]];
-      near_graded.near(mesh.points[end], 2 * std::hypot(b[0] - a[0], b[1] - a[1]) + f[end]);
+      near_graded.near(mesh.points[end], cones_->reach(2 * std::hypot(b[0] - a[0], b[1] - a[1]) + f[end]));
     }
     if (!any) return nullptr;
     near_graded_.emplace(mesh.points, weight_, near_graded.marked, cones_->shift(), mesh.point_gids);

@@ -158,7 +158,10 @@ void check_case(const char* name, std::size_t n, Layout layout, std::size_t min_
 // hidden by tangent discs, and ties broken by ids in another order than the
 // indices; the case must reach the scan's tie path (several sites within
 // rounding) and hidden sites, or it tests nothing there.
-void check_cone_scan(const char* name, bool lattice, bool with_ids, std::uint64_t seed) {
+// far_heavy: lattice weights 0.05 k (not dyadic: sites tie in the reals two
+// steps apart, w_c - w_h = 0.25 = |c - h|, and the shifted weights round) and one
+// far site with the largest weight, so the shift is far above the lattice's.
+void check_cone_scan(const char* name, bool lattice, bool with_ids, std::uint64_t seed, bool far_heavy = false) {
   std::mt19937_64 rng(seed);
   std::uniform_real_distribution<double> u(0.0, 1.0);
   std::vector<Vec2> sites;
@@ -168,7 +171,13 @@ void check_cone_scan(const char* name, bool lattice, bool with_ids, std::uint64_
       for (int j = 0; j < 24; ++j) sites.push_back({0.125 * i, 0.125 * j});
     }
     std::shuffle(sites.begin(), sites.end(), rng);
-    for (std::size_t k = 0; k < sites.size(); ++k) weight.push_back(0.0625 * static_cast<double>(rng() % 7));
+    for (std::size_t k = 0; k < sites.size(); ++k) {
+      weight.push_back(far_heavy ? 0.05 * static_cast<double>(rng() % 13) : 0.0625 * static_cast<double>(rng() % 7));
+    }
+    if (far_heavy) {
+      sites.push_back({50.0, 50.0});
+      weight.push_back(1000.0 / 3.0);
+    }
   } else {
     sites = make_sites(3000, Layout::graded, rng);
     const std::vector<double> nn = nn_spacing(sites);
@@ -183,7 +192,7 @@ void check_cone_scan(const char* name, bool lattice, bool with_ids, std::uint64_
   const Spacing_function graph(sites, weight, 0, nullptr, with_ids ? &ids : nullptr);
   const Cone_scan scan(sites, weight, with_ids ? &ids : nullptr);
   std::vector<Vec2> queries;
-  for (const Vec2& p : sites) queries.push_back(p);
+  for (std::size_t k = 0; k < sites.size() - (far_heavy ? 1 : 0); ++k) queries.push_back(sites[k]);
   for (int k = 0; k < 3000; ++k) {
     if (lattice) {  // lattice points, edge midpoints and centres
       queries.push_back({0.0625 * static_cast<double>(rng() % 48), 0.0625 * static_cast<double>(rng() % 48)});
@@ -252,6 +261,7 @@ int main() {
     check_cone_scan("cone scan, graded", false, false, 9);
     check_cone_scan("cone scan, lattice", true, false, 10);
     check_cone_scan("cone scan, lattice, ids", true, true, 11);
+    check_cone_scan("cone scan, lattice, far shift", true, true, 12, /*far_heavy=*/true);
 
     // Preconditions throw.
     bool threw = false;
