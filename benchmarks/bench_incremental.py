@@ -254,7 +254,10 @@ def run_loop(n: int, repeats: int) -> dict:
     for _ in range(repeats):
         full, fast, pair = timed_pair(previous, delta, 2)
         wall_full, wall_fast = pair["full"], pair["incremental"]
-        samples.append(pair)
+        # (the default serial pass's history-bound work, as in run(): its floor)
+        history = full.stats.get("early_triangulation_insert_seconds", 0.0) + full.stats.get(
+            "quality_insert_seconds", 0.0)
+        samples.append({**pair, "history_ratio": history / wall_full})
         for k, v in fast.stats.items():
             if k.startswith("seconds_") and k != "seconds_total":
                 stages.setdefault(k[8:], []).append(v / wall_full)
@@ -266,6 +269,7 @@ def run_loop(n: int, repeats: int) -> dict:
     print(f"{previous.n_points:>9} loop, 5% band | full {med['full']:6.2f} s  incremental {med['incremental']:6.2f} s  "
           f"ratio {med['ratio']:.3f} (CPU {med['cpu_ratio']:.3f}; runs {runs})"
           f" | same bits"
+          + (f" | history-bound / full {med['history_ratio']:.3f}" if med["history_ratio"] > 0 else "")
           + ("" if update is None else f" | update declined {update:g}, kept edges {'inherited' if inherited else 'checked'}"),
           flush=True)
     print("   stage / full step (medians):", {k: round(statistics.median(v), 3) for k, v in stages.items()}, flush=True)
