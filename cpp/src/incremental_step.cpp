@@ -354,10 +354,9 @@ std::vector<std::uint8_t> safe_old_points(const std::vector<Vec2>& points, const
     for (std::size_t p = begin; p < end; ++p) {
       if (!tested[p]) continue;
       grid.visit_within(points[p], nn[p] * (1 + 2 * kSlack) + absolute, [&](Index q) {
-        if (static_cast<std::size_t>(q) != p && safe[q] && detail::spheres_conflict(points[p][0] - points[q][0], points[p][1] - points[q][1], radius[p] + radius[q])) {
-          flags[p] = 1;
-          flags[q] = 1;
-        }
+        if (static_cast<std::size_t>(q) == p || !safe[q]) return;
+        const double ex = points[p][0] - points[q][0], ey = points[p][1] - points[q][1];
+        if (detail::spheres_conflict(ex, ey, radius[p] + radius[q])) flags[p] = flags[q] = 1;
       });
     }
   });
