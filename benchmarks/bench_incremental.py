@@ -150,6 +150,15 @@ def assert_same(full: evomesh.Mesh, fast: evomesh.Mesh) -> None:
     assert np.array_equal(full.nn_spacing, fast.nn_spacing), "nn_spacing"
 
 
+def history_bound_seconds(full: evomesh.Mesh) -> float:
+    """What follows the triangulation's insertion history with the default (serial)
+    quality pass, and so must run as the full step runs it for the same bits: the
+    early triangulation's batches (all points) and the pass's insertions. The full
+    step's own seconds for it (sequential work: a lower bound on any bit-identical
+    step's wall time; 0 without the pass)."""
+    return full.stats.get("early_triangulation_insert_seconds", 0.0) + full.stats.get("quality_insert_seconds", 0.0)
+
+
 def timed_pair(mesh: evomesh.Mesh, delta: np.ndarray, seed: int) -> tuple[evomesh.Mesh, evomesh.Mesh, dict]:
     """The full and the incremental step on the same input, one after the other,
     asserted equal: both results, wall and CPU seconds (CPU: the process's, both
@@ -185,13 +194,7 @@ def run(n: int, repeats: int, evidence: bool, fractions: tuple[float, ...] = FRA
             cdt = time.perf_counter() - t
             # the whole-mesh stages of the incremental run (the same code as the full step's)
             floor = s.get("seconds_quality", 0.0) + s.get("seconds_parent_map", 0.0) + (wall_fast - s["seconds_total"])
-            # What follows the triangulation's insertion history with the default (serial)
-            # quality pass, and so must run as the full step runs it for the same bits:
-            # the early triangulation's batches (all points) and the pass's insertions.
-            # The full step's own seconds for it (sequential work: a lower bound on any
-            # bit-identical step's wall time).
-            history = full.stats.get("early_triangulation_insert_seconds", 0.0) + full.stats.get(
-                "quality_insert_seconds", 0.0)
+            history = history_bound_seconds(full)
             samples.append({"full": wall_full, "incremental": wall_fast, "ratio": wall_fast / wall_full,
                             "history": history, "history_ratio": history / wall_full,
                             "cpu_ratio": pair["cpu_ratio"],
@@ -254,10 +257,7 @@ def run_loop(n: int, repeats: int) -> dict:
     for _ in range(repeats):
         full, fast, pair = timed_pair(previous, delta, 2)
         wall_full, wall_fast = pair["full"], pair["incremental"]
-        # (the default serial pass's history-bound work, as in run(): its floor)
-        history = full.stats.get("early_triangulation_insert_seconds", 0.0) + full.stats.get(
-            "quality_insert_seconds", 0.0)
-        samples.append({**pair, "history_ratio": history / wall_full})
+        samples.append({**pair, "history_ratio": history_bound_seconds(full) / wall_full})
         for k, v in fast.stats.items():
             if k.startswith("seconds_") and k != "seconds_total":
                 stages.setdefault(k[8:], []).append(v / wall_full)

@@ -350,7 +350,8 @@ std::vector<std::uint8_t> safe_old_points(const std::vector<Vec2>& points, const
     tested[p] = safe[p] && !(radius[p] <= 0.5 * nn[p] * (1 - kSlack));
   }
   const double absolute = 1e-12 * magnitude;
-  const auto conflicting = flags_in_chunks(n, n, [&](std::size_t begin, std::size_t end, std::vector<std::uint8_t>& flags) {
+  const auto conflicting = flags_in_chunks(n, n, [&](std::size_t begin, std::size_t end,
+                                                      std::vector<std::uint8_t>& flags) {
     for (std::size_t p = begin; p < end; ++p) {
       if (!tested[p]) continue;
       grid.visit_within(points[p], nn[p] * (1 + 2 * kSlack) + absolute, [&](Index q) {
