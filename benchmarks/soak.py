@@ -7,8 +7,8 @@ the first half of the run and back in the second; every step is one
 delta = clip(h(d) / nn_M, 0.3, 3), h = h_min in the band growing linearly
 outside it up to h_max. Per step it records points, triangles, min angle,
 spacing ratio, resident memory (current and peak) and seconds, to CSV, and
-plots min angle and points against the step. With ``--issue11`` it also
-records issue 11's figures per step (size n / integral(1/f^2) with f =
+plots min angle and points against the step. With ``--spacing-figures`` it also
+records the spacing figures per step (size n / integral(1/f^2) with f =
 evomesh.spacing(M, delta); the issue's ratio nn_M'(p) / (delta(p) nn_M(p)) over
 the step's input points, p50/p99/max, nn_M' the paper's second nearest output
 point; the share of triangles with an angle below 30 degrees; QualityWarnings
@@ -31,8 +31,8 @@ Usage (from the repository root):
     python benchmarks/soak.py                      # 500 steps, a few minutes
     python benchmarks/soak.py --slanted --out /tmp/soak-slanted   # slanted sides
     python benchmarks/soak.py --steps 40 --out /tmp/soak   # quick look
-    python benchmarks/soak.py --steps 200 --points 20000 --h-min 0.002 --h-max 0.012 --issue11 \
-        --leak-repeats 40      # issue 11, goal 5: the figures at every step
+    python benchmarks/soak.py --steps 200 --points 20000 --h-min 0.002 --h-max 0.012 --spacing-figures \
+        --leak-repeats 40      # the spacing figures at every step
 Outputs: benchmarks/soak.csv, benchmarks/soak.png (or under --out), and a
 Markdown summary on stdout (pasted into benchmarks/SOAK.md). Exit status 1 if
 a check fails.
@@ -54,7 +54,7 @@ import numpy as np
 
 import evomesh
 from evomesh import PointKind
-from evomesh.driver import Driver
+from evomesh.time_loop import Driver
 from evomesh.fronts import LevelSetFront, SpacingLaw
 from evomesh.meshgen import unit_square_mesh
 
@@ -63,17 +63,17 @@ COLUMNS = (
     "step", "front_x", "points", "triangles", "original_pct", "min_angle_deg", "max_radius_edge",
     "spacing_ratio_max", "spacing_ratio_p99", "rss_mb", "peak_rss_mb", "seconds",
 )
-# issue 11's figures (--issue11)
-ISSUE11_COLUMNS = ("n_over_integral", "ratio_p50", "ratio_p99", "ratio_max", "pct_below_30", "pct_below_29_99",
+# the spacing figures (--spacing-figures)
+SPACING_COLUMNS = ("n_over_integral", "ratio_p50", "ratio_p99", "ratio_max", "pct_below_30", "pct_below_29_99",
                   "quality_warnings")
 ISSUE11_GOALS = {"ratio_p99": 1.10, "ratio_max": 1.35, "n_over_integral": 1.8}
 
 
-def issue11_figures(old: evomesh.Mesh, new: evomesh.Mesh, delta: np.ndarray) -> dict[str, float]:
-    """Issue 11's figures of the step old -> new (as benchmarks/issue11.py computes them)."""
+def spacing_figures(old: evomesh.Mesh, new: evomesh.Mesh, delta: np.ndarray) -> dict[str, float]:
+    """The spacing figures of the step old -> new (as benchmarks/spacing_ratios.py computes them)."""
     sys.path.insert(0, str(HERE))
     import peers
-    from issue11 import paper_ratio
+    from spacing_ratios import paper_ratio
 
     f = evomesh.spacing(old, delta)
     m = peers.metrics(old, delta, new.points, new.triangles, f=f)
@@ -157,8 +157,8 @@ def boundary_check(initial: evomesh.Mesh, mesh: evomesh.Mesh) -> dict[str, objec
     }
 
 
-def plot_issue11(rows: list[dict[str, float]], target: float, path: Path) -> None:
-    """Issue 11's figures against the step (--issue11)."""
+def plot_spacing_figures(rows: list[dict[str, float]], target: float, path: Path) -> None:
+    """The spacing figures against the step (--spacing-figures)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -193,7 +193,7 @@ def plot_issue11(rows: list[dict[str, float]], target: float, path: Path) -> Non
     ax.plot(step, [r["seconds"] for r in rows], lw=0.9, color="C5")
     ax.set_ylabel("seconds")
     ax.set_xlabel("step (band front: x = 0 -> 1 -> 0)")
-    fig.suptitle(f"evomesh soak, issue 11 figures: {len(rows)} steps of a sweeping band front")
+    fig.suptitle(f"evomesh soak, spacing figures: {len(rows)} steps of a sweeping band front")
     fig.tight_layout()
     fig.savefig(path, dpi=100)
     plt.close(fig)
@@ -240,8 +240,8 @@ def main(argv=None) -> int:
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--leak-repeats", type=int, default=300,
                         help="measured repetitions of the last step (leak probe), after half as many unmeasured")
-    parser.add_argument("--issue11", action="store_true",
-                        help="also record issue 11's figures per step and summarise them against its goals")
+    parser.add_argument("--spacing-figures", action="store_true",
+                        help="also record the spacing figures per step and summarise them against their goals")
     parser.add_argument("--out", type=Path, default=HERE, help="folder for soak.csv and soak.png")
     args = parser.parse_args(argv)
 
@@ -281,28 +281,28 @@ def main(argv=None) -> int:
             "spacing_ratio_p99": s["spacing_ratio_p99"], "rss_mb": rss_mb(), "peak_rss_mb": peak_rss_mb(),
             "seconds": seconds,
         })
-        if args.issue11:
-            rows[-1].update(issue11_figures(old, step.mesh, step.delta))
+        if args.spacing_figures:
+            rows[-1].update(spacing_figures(old, step.mesh, step.delta))
             rows[-1]["quality_warnings"] = sum(issubclass(w.category, evomesh.QualityWarning) for w in caught)
         del step, old
         if k % 50 == 0:
             r = rows[-1]
             print(f"step {k:4d}: x={r['front_x']:.3f} points={r['points']} min angle={r['min_angle_deg']:.2f} "
                   f"rss={r['rss_mb']:.0f} MiB" + (f" p99={r['ratio_p99']:.3f} max={r['ratio_max']:.3f} "
-                                                 f"n/int={r['n_over_integral']:.3f}" if args.issue11 else ""),
+                                                 f"n/int={r['n_over_integral']:.3f}" if args.spacing_figures else ""),
                   file=sys.stderr, flush=True)
     total = time.perf_counter() - start
 
     args.out.mkdir(parents=True, exist_ok=True)
     csv_path = args.out / "soak.csv"
-    columns = COLUMNS + (ISSUE11_COLUMNS if args.issue11 else ())
+    columns = COLUMNS + (SPACING_COLUMNS if args.spacing_figures else ())
     with open(csv_path, "w", newline="") as f:
         writer = csv.DictWriter(f, fieldnames=columns)
         writer.writeheader()
         for r in rows:
             writer.writerow({c: (f"{r[c]:.6g}" if isinstance(r[c], float) else r[c]) for c in columns})
     png_path = args.out / "soak.png"
-    (plot_issue11 if args.issue11 else plot)(rows, target, png_path)
+    (plot_spacing_figures if args.spacing_figures else plot)(rows, target, png_path)
 
     # --- leak probe: the same step again and again must not grow memory ---
     probe_mesh, probe_delta = driver.mesh, driver.delta(front, float(args.steps))
@@ -350,7 +350,7 @@ def main(argv=None) -> int:
     print(f"`python benchmarks/soak.py --steps {args.steps} --points {args.points}"
           + "".join(f" --{name.replace('_', '-')} {getattr(args, name):g}" for name in ("h_min", "h_max", "band", "grade")
                     if getattr(args, name) != parser.get_default(name))
-          + f"{' --slanted' if args.slanted else ''}{' --issue11' if args.issue11 else ''}"
+          + f"{' --slanted' if args.slanted else ''}{' --spacing-figures' if args.spacing_figures else ''}"
           + (f" --leak-repeats {args.leak_repeats}" if args.leak_repeats != parser.get_default("leak_repeats") else "")
           + "` "
           f"(method {args.method}, threads {args.threads}, seed {args.seed}); {total:.0f} s in total, "
@@ -371,9 +371,9 @@ def main(argv=None) -> int:
     ):
         print(f"| {name} | {fmt.format(values.min())} | {fmt.format(values.max())} | "
               f"{fmt.format(values[0])} | {fmt.format(values[-1])} |")
-    if args.issue11:
+    if args.spacing_figures:
         seconds = np.array([r["seconds"] for r in rows])
-        print("\nIssue 11's figures per step (worst step of each; goals: p99 <= 1.10, max <= 1.35, "
+        print("\nThe spacing figures per step (worst step of each; goals: p99 <= 1.10, max <= 1.35, "
               "n/∫f⁻² <= 1.8, min angle >= 30°):\n")
         print("| figure | worst | at step | median over steps | best | steps meeting the goal |")
         print("|---|---|---|---|---|---|")

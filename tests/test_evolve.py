@@ -162,7 +162,7 @@ def test_spacing_repair_brings_every_kept_r_point_a_neighbour(seed):
         ratio = evomesh.nn_spacing(out)[kept] / (delta[p] * nn[p])
         return ratio[delta[p] < 1].max()
 
-    # (the gap repair of points with delta >= 1 off: it is tested in test_issue11.py)
+    # (the gap repair of points with delta >= 1 off: it is tested in test_spacing_ratios.py)
     repaired = evomesh.evolve(mesh, delta, quality=False, repair_ratio=1.75, gap_repair_ratio=None,
                               refine_gap_ratio=None)
     plain = evomesh.evolve(mesh, delta, quality=False, repair_ratio=None, gap_repair_ratio=None, refine_gap_ratio=None)

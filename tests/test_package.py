@@ -1,5 +1,5 @@
 """The package's structure: an acyclic import graph, no submodule hidden by a
-function, the compatibility module evomesh.driver, the typing marker."""
+function, the typing marker."""
 
 from __future__ import annotations
 
@@ -124,11 +124,6 @@ def test_find_cycle_finds_one():
     assert _find_cycle({"a": {"b"}, "b": set()}) is None
 
 
-def test_nothing_inside_the_package_imports_the_compatibility_module():
-    importers = sorted(m for m, deps in import_graph().items() if "evomesh.driver" in deps)
-    assert importers == []
-
-
 def _packages() -> list[str]:
     return ["evomesh"] + [
         info.name for info in pkgutil.walk_packages(evomesh.__path__, "evomesh.") if info.ispkg
@@ -145,29 +140,6 @@ def test_no_submodule_is_hidden_by_an_attribute():
             )
             module = importlib.import_module(f"{package_name}.{info.name}")
             assert module.__name__ == f"{package_name}.{info.name}"
-
-
-def test_driver_compatibility_module_reexports_the_moved_names():
-    from evomesh import driver, reporting, statistics, time_loop
-    from evomesh.experiments import growing_circle as gc
-
-    homes = {
-        "Step": time_loop,
-        "Run": time_loop,
-        "Driver": time_loop,
-        "run": time_loop,
-        "front_at": time_loop,
-        "step_statistics": statistics,
-        "nn_at": statistics,
-        "STATISTICS_COLUMNS": statistics,
-        "format_table": reporting,
-        "PAPER_TABLE1": reporting,
-        "growing_circle": gc,
-        "GROWING_CIRCLE_DEFAULTS": gc,
-    }
-    assert set(driver.__all__) == set(homes)
-    for name, home in homes.items():
-        assert getattr(driver, name) is getattr(home, name), name
 
 
 def test_public_names_of_the_package_are_kept():

@@ -396,7 +396,7 @@ _SERIES_FILE = re.compile(r"table\.csv|meshes\.pvd|mesh_\d{3,}\.vtu|step_\d{3,}\
 def write_run(run: Run, folder: str | Path, *, figures: bool = True, dpi: int = 110) -> dict[str, Any]:
     """Write the outputs of a :class:`evomesh.Run` into ``folder`` (created).
 
-    - ``table.csv``: the statistics (:data:`evomesh.driver.STATISTICS_COLUMNS`).
+    - ``table.csv``: the statistics (:data:`evomesh.statistics.STATISTICS_COLUMNS`).
     - ``mesh_000.vtu`` (initial) ... ``mesh_NNN.vtu`` and ``meshes.pvd`` (open
       the .pvd in ParaView for the time series; the initial mesh is placed one
       time step before the first step). Per-point data: ``kind``

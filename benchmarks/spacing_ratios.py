@@ -1,4 +1,4 @@
-"""Issue 11's figures: spacing that tracks the request, shape, size.
+"""The spacing figures: spacing that tracks the request, shape, size.
 
 * ``scenarios``: the three cases of compare_peers.py (front, band-coarsen,
   uniform-coarsen) through ``evomesh.evolve(M, delta, seed=0)`` only, with the
@@ -11,8 +11,8 @@
   (median output nn over median input nn, against 0.8 and 0.8^10);
 * ``circle``: the growing-circle experiment (share of original points per step).
 
-    .venv/bin/python benchmarks/issue11.py --size 1e5 [--parts scenarios,uniform,circle]
-    .venv/bin/python benchmarks/issue11.py --size 2e4 --option radius_scale=0.8
+    .venv/bin/python benchmarks/spacing_ratios.py --size 1e5 [--parts scenarios,uniform,circle]
+    .venv/bin/python benchmarks/spacing_ratios.py --size 2e4 --option radius_scale=0.8
 """
 
 from __future__ import annotations

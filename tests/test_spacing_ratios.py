@@ -1,4 +1,4 @@
-"""Issue 11: spacing that tracks the request, shape, and what replacing old points costs."""
+"""Spacing that tracks the request, shape, and what replacing old points costs."""
 
 import numpy as np
 import pytest

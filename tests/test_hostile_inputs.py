@@ -1,4 +1,4 @@
-"""Issue 27, section 4: hostile inputs to the CLI, the files, the tags and the curves."""
+"""Hostile inputs to the CLI, the files, the tags and the curves."""
 
 from __future__ import annotations
 
