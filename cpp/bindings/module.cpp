@@ -293,6 +293,8 @@ py::dict evolve_result_dict(const Evolve_result& r) {
                                         {static_cast<py::ssize_t>(r.parents.triangle.size())});
   out["barycentric"] = frozen_array(reinterpret_cast<const double*>(r.parents.barycentric.data()), r.parents.barycentric.size() * 3,
                                     {static_cast<py::ssize_t>(r.parents.barycentric.size()), py::ssize_t{3}});
+  out["unchanged"] = r.unchanged;
+  out["triangulation_certified"] = r.triangulation_certified;
   py::dict stats;
   for (const auto& s : r.stats) stats[py::str(s.first)] = s.second;
   out["stats"] = stats;

@@ -572,6 +572,7 @@ std::optional<Evolve_result> empty_scope_frfc(const Mesh_arrays& input, const st
   stats.emplace_back("min_angle_x", angle.second[0]);
   stats.emplace_back("min_angle_y", angle.second[1]);
   stats.emplace_back("restored_points", 0.0);
+  result.unchanged = true;
   stats.emplace_back("unchanged", 1.0);
   stats.emplace_back("seconds_total", seconds);
   add_step_counts(result, {{"n_input_points", n}, {"incremental_step", 0}, {"empty_scope", 1}});

@@ -414,6 +414,7 @@ Evolve_result frfc_over_scope(const Mesh_arrays& input, const Mesh_arrays& mesh,
   timer.lap(options.quality ? "quality" : "cdt");
   finish_step(input, result, timer, &*old_mesh, scope.reusable_nn(spacing), scope.same_fans());
   scope.add_counts(result.stats);
+  result.triangulation_certified = certified;
   result.stats.emplace_back("triangulation_certified", certified ? 1.0 : 0.0);
   // (not "seconds_" stages: the batches run beside the others; the quality
   // stage includes the wait for them)

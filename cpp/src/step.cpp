@@ -363,6 +363,7 @@ void finish_step(const Mesh_arrays& input, Evolve_result& result, detail::Stage_
   result.stats.emplace_back("restored_points", static_cast<double>(restore_origins(input, result)));
   const bool unchanged = adopt_input_order(input, result);
   if (!unchanged) canonical_triangle_order(result.mesh.points.size(), result.mesh.triangles);
+  result.unchanged = unchanged;
   result.stats.emplace_back("unchanged", unchanged ? 1.0 : 0.0);
   std::unique_ptr<Old_mesh_walker> walker;
   if (start != nullptr) {

@@ -548,7 +548,7 @@ def _wrap(result: dict[str, Any], old: Mesh | None = None) -> Mesh:
         result.get("required"),
         nn_grew,
         tag_names=None if old is None else old.tag_names,  # the tags are the input's: so are their names
-        delaunay=result["stats"].get("triangulation_certified") == 1,
+        delaunay=bool(result.get("triangulation_certified", False)),
     )
 
 
@@ -557,13 +557,13 @@ _UNCHANGED_ARRAYS = ("points", "triangles", "segments", "segment_is_boundary", "
 
 
 def _is_the_input(result: dict[str, Any], old: Mesh) -> bool:
-    """The step says its output is its input (stats unchanged == 1: the same
+    """The step says its output is its input (its result's ``unchanged``: the same
     points in the same order, the input's triangles and segments, cpp/src/step.cpp
     adopt_input_order) and its arrays are the input's, bit for bit, but for the
     kinds (a step labels the points it sampled as Steiner points when it keeps
     them), with the same corners (what the boundary check reads). O(n)
     comparisons, against the O(n log n) checks they spare."""
-    if result["stats"].get("unchanged") != 1 or not np.array_equal(result["origin"], np.arange(old.n_points)):
+    if not result.get("unchanged", False) or not np.array_equal(result["origin"], np.arange(old.n_points)):
         return False
     kind = np.asarray(result["kind"])
     if kind.shape != old.kind.shape or not np.array_equal(kind == PointKind.CORNER, old.kind == PointKind.CORNER):
@@ -597,7 +597,7 @@ def _wrap_unchanged(result: dict[str, Any], old: Mesh) -> Mesh:
     return Mesh._trusted(old.points, old.triangles, old.segments, old.segment_is_boundary, kind, result["origin"],
                          dict(result["stats"]), lineage, nn, old.segment_tags, old.triangle_tags, old.required, nn_grew,
                          tag_names=old.tag_names,
-                         delaunay=old._delaunay or result["stats"].get("triangulation_certified") == 1)
+                         delaunay=old._delaunay or bool(result.get("triangulation_certified", False)))
 
 
 def delaunay_refine(mesh: Mesh, delta: Any, *, min_angle: float = 20.0, max_samples: float = 5e7,

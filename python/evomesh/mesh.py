@@ -386,7 +386,7 @@ class Mesh:
         set_ = object.__setattr__
         # The step that made these (immutable) arrays certified its triangles the
         # constrained Delaunay triangulation of the points and segments, every other
-        # edge strictly locally Delaunay (stat "triangulation_certified"): the next
+        # edge strictly locally Delaunay (the result's triangulation_certified): the next
         # step's changed-region update inherits that for the edges it keeps
         # (cpp/include/evomesh/triangulation_update.hpp). False when not known.
         set_(self, "_delaunay", bool(delaunay))

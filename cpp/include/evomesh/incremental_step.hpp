@@ -14,10 +14,10 @@
 //   earlier sphere can reject (Lemma 3.1: f(p) = delta(p) nn(p) = nn(p) at
 //   delta = 1, and two such spheres are disjoint).
 //
-// What stays global: the triangulation and quality pass of all selected points,
-// the parent map, nn_M (returned in the lineage), the spacing repair (its gap
-// repair visits every input point), and O(n) loops (docs/distributed-step.md
-// §2.5: a local triangulation is the next restriction).
+// What stays global: the quality pass of all selected points (without it the
+// triangulation is updated locally, docs/distributed-step.md 2.5), the parent
+// map, nn_M (returned in the lineage; measured again only where it can change),
+// the spacing repair (its gap repair visits every input point), and O(n) loops.
 #pragma once
 
 #include <vector>

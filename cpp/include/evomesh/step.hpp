@@ -96,6 +96,13 @@ struct Evolve_result {
   std::vector<double> output_nn;
   std::vector<Index> output_nn_grew;
   std::vector<double> output_nn_grown;
+  // The step's two contracts with its caller (also reported in stats):
+  // `unchanged`: the output is the input, the same points in the same order
+  // with its triangles and segments (finish_step's adopt_input_order);
+  // `triangulation_certified`: every edge of the output's triangulation is
+  // strictly locally Delaunay, so the next step's update checks only what it changes.
+  bool unchanged = false;
+  bool triangulation_certified = false;
   std::vector<std::pair<std::string, double>> stats;  // stage timings (s) and counts
 };
 

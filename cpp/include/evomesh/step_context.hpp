@@ -5,9 +5,9 @@
 // Design: a separate argument of the outlines (frfc, drfc, drfc_refine,
 // incremental_frfc, empty_scope_frfc), not a member of Frfc_options/Drfc_options.
 // The options say what the step computes (its result is a function of the mesh,
-// delta and the options); the context says how it runs, and later (section 4)
-// with whom: it will carry the communicator, which an options value bound to
-// Python and compared field by field cannot hold. The options keep their
+// delta and the options); the context says how it runs, and is where an exchange
+// between ranks would travel (it has none yet: docs/distributed-step.md, Open),
+// which an options value bound to Python and compared field by field cannot hold. The options keep their
 // `threads` field because it is a user-facing setting (evomesh.FrfcOptions):
 // the caller that builds the context reads it (Step_context::from_threads, the
 // bindings), the stages never do. The three-argument overloads of the

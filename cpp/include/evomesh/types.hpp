@@ -77,7 +77,7 @@ struct Mesh_arrays {
   // Optional, a step's input only (false: not known): the triangles are the
   // constrained Delaunay triangulation of the points and segments with every
   // edge that is not a segment strictly locally Delaunay (exact predicates), as
-  // a step certified it for its own output (stat "triangulation_certified"; the
+  // a step certified it for its own output (Evolve_result::triangulation_certified; the
   // Python Mesh keeps that for the arrays it cannot change). The changed-region
   // step then checks only the edges its update touches (triangulation_update.hpp).
   bool strictly_delaunay = false;
