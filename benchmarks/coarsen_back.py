@@ -9,6 +9,8 @@ from ``unit_square_mesh``):
 * ``spot``: plain ``size=``, a fine disc (radius 0.1, 0.006 inside, grading
   with slope 0.3 to h = 0.03) moved from x = 0.2 to 0.8 in 12 steps, then
   held for 3;
+* ``gone``: the spot's path, then size=h everywhere for 3 steps (the fresh
+  mesh is then the settled mesh for h alone);
 * ``drop``: the same path as an interface, ``evolve(m, size=h, interface=phi,
   interface_band=(0.03, 0.006))`` with phi the signed distance to the circle;
 * ``vortex``: a drop (radius 0.15 at (0.5, 0.75)) in the single-vortex flow
@@ -21,7 +23,7 @@ Printed per step: points, the median edge / request over the swept region
 axis, x in [0.15, 0.6]; vortex: both ends in the far field) and over all
 edges where the request is h. At the end: points against the fresh mesh.
 
-    .venv/bin/python benchmarks/coarsen_back.py [--runs spot,drop,vortex] [--vortex-steps 40]
+    .venv/bin/python benchmarks/coarsen_back.py [--runs spot,gone,drop,vortex] [--vortex-steps 40]
 """
 
 from __future__ import annotations
@@ -88,16 +90,17 @@ def moving(kind: str) -> None:
             mesh = evomesh.evolve(mesh, size=H, interface=circle(c), interface_band=(WIDTH, FINE), seed=step)
             size = band_request(circle(c), H, WIDTH, FINE)
         else:
-            size = spot_request(c)
+            size = spot_request(c) if kind == "spot" or step < STEPS else (lambda x: np.full(len(x), H))
             mesh = evomesh.evolve(mesh, size=size, seed=step)
         inside, far = edge_over_request(mesh, size, swept)
         print(f"{kind:6} {step:>4} {c[0]:6.2f} {mesh.n_points:>7} {inside:>12.3f} {far:>10.3f}")
     fresh = unit_square_mesh(int(1.17 / H**2))
-    for step in range(4):
+    for step in range(4 if kind != "gone" else 0):
         if kind == "drop":
             fresh = evomesh.evolve(fresh, size=H, interface=circle(c), interface_band=(WIDTH, FINE), seed=step)
         else:
             fresh = evomesh.evolve(fresh, size=size, seed=step)
+    fresh = settled(H) if kind == "gone" else fresh
     inside, far = edge_over_request(fresh, size, swept)
     print(f"{kind:6} fresh {'':6} {fresh.n_points:>7} {inside:>12.3f} {far:>10.3f}   points / fresh "
           f"{mesh.n_points / fresh.n_points:.3f} ({time.perf_counter() - start:.1f} s)")
@@ -149,7 +152,7 @@ def vortex(steps: int, period: float, h: float = 0.025, fine: float = 0.008) -> 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--runs", default="spot,drop,vortex")
+    parser.add_argument("--runs", default="spot,gone,drop,vortex")
     parser.add_argument("--vortex-steps", type=int, default=40)
     parser.add_argument("--vortex-period", type=float, default=2.0)
     args = parser.parse_args()
