@@ -127,6 +127,11 @@ def vortex_phi(t: float, period: float, centre_xy=(0.5, 0.75), radius: float = 0
     return phi
 
 
+def far_from(phi):
+    """Edges with both ends where |phi| > 0.3 (the far field)."""
+    return lambda mid, a, b: (np.abs(phi(a)) > 0.3) & (np.abs(phi(b)) > 0.3)
+
+
 def vortex(steps: int, period: float, h: float = 0.025, fine: float = 0.008) -> None:
     mesh = settled(h)
     start = time.perf_counter()
@@ -140,12 +145,12 @@ def vortex(steps: int, period: float, h: float = 0.025, fine: float = 0.008) -> 
             return
         first = first or mesh.n_points
         size = band_request(phi, h, h, fine)
-        far_field, coarse = edge_over_request(mesh, size, lambda mid, a, b: (np.abs(phi(a)) > 0.3) & (np.abs(phi(b)) > 0.3))
+        far_field, coarse = edge_over_request(mesh, size, far_from(phi))
         print(f"vortex {step:>4} {step / steps:6.2f} {mesh.n_points:>7} {far_field:>12.3f} {coarse:>10.3f}")
     fresh = unit_square_mesh(int(1.17 / h**2))
     for step in range(4):
         fresh = evomesh.evolve(fresh, size=h, interface=phi, interface_band=(h, fine), seed=step)
-    far_field, coarse = edge_over_request(fresh, size, lambda mid, a, b: (np.abs(phi(a)) > 0.3) & (np.abs(phi(b)) > 0.3))
+    far_field, coarse = edge_over_request(fresh, size, far_from(phi))
     print(f"vortex fresh {'':6} {fresh.n_points:>7} {far_field:>12.3f} {coarse:>10.3f}   points / fresh "
           f"{mesh.n_points / fresh.n_points:.3f}, at step 0 {first} ({time.perf_counter() - start:.1f} s)")
 

@@ -261,8 +261,8 @@ def test_size_request_where_a_fine_spot_has_passed_is_the_serial_one() -> None:
     mesh = evomesh.evolve(unit_square_mesh(470), size=h)
     for k in range(3):  # a fine spot moving across: a trail of fine points
         centre = np.array([0.3 + 0.1 * k, 0.5])
-        mesh = evomesh.evolve(mesh, size=lambda x: np.minimum(h, 0.0125 + 0.5 * np.maximum(
-            0.0, np.hypot(*(x - centre).T) - 0.08)), seed=k)
+        mesh = evomesh.evolve(mesh, size=lambda x, c=centre: np.minimum(h, 0.0125 + 0.5 * np.maximum(
+            0.0, np.hypot(*(x - c).T) - 0.08)), seed=k)
     dmesh = _scatter(mesh, "weighted", 5)
     delta = dmesh.gather_field(delta_from_size(dmesh, h))
     if RANK == 0:
