@@ -158,9 +158,11 @@ def delta_from_size(mesh: Mesh, size: ArrayLike | Callable[[np.ndarray], ArrayLi
 
     Limits: a request up to 1.25 times finer or 1.25 times coarser than the
     mesh leaves it as it is (a step that coarsens next to such a place takes
-    its finer points to the request); coarsening a regular lattice by less than about
-    1.5 changes it little (its packing keeps all points or about half of
-    them); a request more than about twice finer than the mesh is met in two
+    its finer points to the request); a finer pocket within three edges of
+    points that meet the request and joined to no coarsening region (a spot
+    refined by a few rings only) is kept, as such a cluster is; coarsening a
+    regular lattice by less than about 1.5 changes it little (its packing
+    keeps all points or about half of them); a request more than about twice finer than the mesh is met in two
     steps (the spacing function grades from the old points, Lemma 3.1).
 
     Parameters
