@@ -248,3 +248,25 @@ def test_the_worked_example_runs_without_gathering(capsys, monkeypatch) -> None:
         for row in rows:
             assert float(row[2]) <= 1.1
             assert abs(float(row[4]) - float(row[5])) <= 1e-12 * abs(float(row[4]))
+
+
+def test_size_request_where_a_fine_spot_has_passed_is_the_serial_one() -> None:
+    """delta_from_size's rings through too-fine points (the rim of a region
+    coarsening back) on the ranks, as the serial ones, bit for bit."""
+    from evomesh.distributed_spacing import delta_from_size
+    from evomesh.meshgen import unit_square_mesh
+    from evomesh.spacing_function import delta_from_size as serial_delta_from_size
+
+    h = 0.05
+    mesh = evomesh.evolve(unit_square_mesh(470), size=h)
+    for k in range(3):  # a fine spot moving across: a trail of fine points
+        centre = np.array([0.3 + 0.1 * k, 0.5])
+        mesh = evomesh.evolve(mesh, size=lambda x, c=centre: np.minimum(h, 0.0125 + 0.5 * np.maximum(
+            0.0, np.hypot(*(x - c).T) - 0.08)), seed=k)
+    dmesh = _scatter(mesh, "weighted", 5)
+    delta = dmesh.gather_field(delta_from_size(dmesh, h))
+    if RANK == 0:
+        reference = serial_delta_from_size(mesh, h)
+        assert (reference > 1).mean() > 0.2  # the trail coarsens
+    same = RANK != 0 or np.array_equal(delta.view(np.int64), reference.view(np.int64))
+    check_everywhere(same, "delta_from_size on a trail differs from the serial one")

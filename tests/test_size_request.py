@@ -102,9 +102,19 @@ def test_sharing_a_triangle_is_the_numpy_form(mesh, share, seed):
     assert np.array_equal(got.view(bool), numpy_sharing_a_triangle(triangles, marked))
 
 
+def numpy_reached(triangles: np.ndarray, seeds: np.ndarray, rings: int, through: np.ndarray) -> np.ndarray:
+    """The points of `through` within `rings` edges of a seed along paths through them (seeds included)."""
+    reached = seeds.copy()
+    for _ in range(rings):
+        star = np.zeros_like(reached)
+        star[triangles[reached[triangles].any(axis=1)].ravel()] = True
+        reached |= star & through
+    return reached
+
+
 def numpy_delta_from_size(mesh: evomesh.Mesh, size, keep_fine_clusters: bool = True) -> np.ndarray:
-    """delta_from_size as it was before edge_over_size_classes and sharing_a_triangle:
-    every L exact, the comparisons and the pairing in numpy."""
+    """delta_from_size with every L exact, the comparisons, the pairing and the
+    rings in numpy."""
     points, triangles = np.asarray(mesh.points), np.asarray(mesh.triangles)
     h = _size_values(mesh, size)
     local = _core.edge_over_size_around(points, triangles, h)
@@ -114,9 +124,12 @@ def numpy_delta_from_size(mesh: evomesh.Mesh, size, keep_fine_clusters: bool = T
         coarsen = np.maximum(1.0, h / nn)
     too_coarse = (local > 1.25) & (refine < 0.8)
     too_fine = local < 1 / 1.25
+    meets = local >= 1 / 1.1
     if too_fine.any() and keep_fine_clusters:
-        too_fine &= ~_core.near_seeds(triangles, too_fine, local >= 1 / 1.1, 3).view(bool)
-        too_fine = numpy_sharing_a_triangle(triangles, too_fine)
+        pocket = numpy_reached(triangles, meets, 3, np.ones_like(meets))
+        coarsening = numpy_sharing_a_triangle(triangles, too_fine & ~pocket)
+        too_fine = numpy_reached(triangles, coarsening, 3, too_fine)
+    too_fine |= numpy_reached(triangles, too_fine, 1, ~meets)
     return np.where(too_coarse, refine, np.where(too_fine, coarsen, 1.0))
 
 

@@ -220,6 +220,16 @@ def numpy_near_only(triangles: np.ndarray, points: np.ndarray, seeds: np.ndarray
     return points & near(triangles[region[triangles].any(axis=1)], seeds, rings)
 
 
+def numpy_near_through(triangles: np.ndarray, points: np.ndarray, seeds: np.ndarray, rings: int,
+                       through: np.ndarray) -> np.ndarray:
+    """Of `points`, those joined to a seed by a path of at most `rings` edges
+    whose points after the seed are all in `through`."""
+    reached = seeds.copy()
+    for _ in range(rings):
+        reached = reached | (through & np.isin(np.arange(len(seeds)), triangles[reached[triangles].any(axis=1)]))
+    return reached & points
+
+
 @settings(max_examples=15)
 @given(mesh_and_delta(), st.integers(0, 4), st.integers(0, 2**32 - 1))
 def test_the_core_clusters_of_delta_from_size_are_the_numpy_ones(case, rings, seed):
@@ -229,6 +239,9 @@ def test_the_core_clusters_of_delta_from_size_are_the_numpy_ones(case, rings, se
     points, seeds = rng.random(mesh.n_points) < 0.3, rng.random(mesh.n_points) < 0.05
     assert np.array_equal(evomesh._core.near_seeds(triangles, points, seeds, rings).view(bool),
                           numpy_near_only(triangles, points, seeds, rings))
+    through = rng.random(mesh.n_points) < 0.6
+    assert np.array_equal(evomesh._core.near_seeds(triangles, points, seeds, rings, through).view(bool),
+                          numpy_near_through(triangles, points, seeds, rings, through))
 
 
 def test_skip_settled_is_off_in_the_paper_preset():

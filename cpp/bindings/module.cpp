@@ -654,22 +654,27 @@ PYBIND11_MODULE(_core, m) {
 
   m.def(
       "near_seeds",
-      [](const Int_array& triangles, const Byte_array& points, const Byte_array& seeds, int rings) {
+      [](const Int_array& triangles, const Byte_array& points, const Byte_array& seeds, int rings,
+         std::optional<Byte_array> through) {
         auto tris = to_index_rows<3>(triangles, "triangles");
         auto marked = to_vector<std::uint8_t>(points);
         auto from = to_vector<std::uint8_t>(seeds);
-        if (marked.size() != from.size()) throw Input_error("points and seeds: one value per point each");
+        std::optional<std::vector<std::uint8_t>> via;
+        if (through) via = to_vector<std::uint8_t>(*through);
+        if (marked.size() != from.size() || (via && via->size() != marked.size()))
+          throw Input_error("points, seeds and through: one value per point each");
         require_indices(tris, marked.size(), "triangles");
         if (rings < 0) throw Input_error("rings must be >= 0");
         std::vector<std::uint8_t> near;
         {
           py::gil_scoped_release release;
-          near = near_seeds(tris, marked, from, rings);
+          near = near_seeds(tris, marked, from, rings, via ? &*via : nullptr);
         }
         return vector_array(near);
       },
-      py::arg("triangles"), py::arg("points"), py::arg("seeds"), py::arg("rings"),
-      "Of the marked points, those within `rings` edges of a seed (uint8 mask; size_request.hpp).");
+      py::arg("triangles"), py::arg("points"), py::arg("seeds"), py::arg("rings"), py::arg("through") = py::none(),
+      "Of the marked points, those within `rings` edges of a seed, through points marked in `through` if given "
+      "(uint8 mask; size_request.hpp).");
 
   m.def(
       "sharing_a_triangle",

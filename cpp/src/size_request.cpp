@@ -169,7 +169,8 @@ std::vector<std::uint8_t> edge_over_size_classes(const std::vector<Vec2>& points
 }
 
 std::vector<std::uint8_t> near_seeds(const std::vector<Triangle>& triangles, const std::vector<std::uint8_t>& points,
-                                     const std::vector<std::uint8_t>& seeds, int rings) {
+                                     const std::vector<std::uint8_t>& seeds, int rings,
+                                     const std::vector<std::uint8_t>* through) {
   const std::size_t n = seeds.size();
   std::vector<std::uint8_t> near(n);
   for (std::size_t p = 0; p < n; ++p) near[p] = seeds[p] != 0;
@@ -184,8 +185,10 @@ std::vector<std::uint8_t> near_seeds(const std::vector<Triangle>& triangles, con
   for (int ring = 0; ring < rings && !all_marked_reached(); ++ring) {
     bool grew = false;
     for (const Triangle& t : triangles) {
-      if ((near[t[0]] || near[t[1]] || near[t[2]]) && !(reached[t[0]] && reached[t[1]] && reached[t[2]])) {
-        reached[t[0]] = reached[t[1]] = reached[t[2]] = 1;
+      if (!(near[t[0]] || near[t[1]] || near[t[2]])) continue;
+      for (Index v : t) {
+        if (reached[v] || (through != nullptr && !(*through)[v])) continue;
+        reached[v] = 1;
         grew = true;
       }
     }

@@ -81,5 +81,11 @@ int main() {
     CHECK((near_seeds(three, all, seed, 2) == std::vector<std::uint8_t>{1, 1, 1, 1, 0, 0}));
     CHECK((near_seeds(three, all, seed, 3) == std::vector<std::uint8_t>{1, 1, 1, 1, 1, 1}));
     CHECK((near_seeds(three, marked, seed, 9) == marked));
+    // Through every point but 2: 2 is never reached, 3 comes from 1 a ring
+    // later, and 4 and 5 from 3.
+    const std::vector<std::uint8_t> through{1, 1, 0, 1, 1, 1};
+    CHECK((near_seeds(three, all, seed, 1, &through) == std::vector<std::uint8_t>{1, 1, 0, 0, 0, 0}));
+    CHECK((near_seeds(three, all, seed, 2, &through) == std::vector<std::uint8_t>{1, 1, 0, 1, 0, 0}));
+    CHECK((near_seeds(three, all, seed, 3, &through) == std::vector<std::uint8_t>{1, 1, 0, 1, 1, 1}));
   });
 }

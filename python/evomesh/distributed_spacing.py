@@ -518,10 +518,11 @@ def delta_from_size(dmesh: DistributedMesh, size: Any) -> np.ndarray:
 
     The serial rule reads two rings of triangles around a point (the mean edge
     over request L, `_core.edge_over_size_classes`), then three rings of the
-    result (`near_seeds`) and one more (`sharing_a_triangle`): the first on a
-    view of the mesh with two halo rings (points and triangles in global-id
-    order, so the core's sums run in the serial order), the others one ring at
-    a time with a halo exchange between rings.
+    result (`near_seeds`), one more (`sharing_a_triangle`), three through
+    too-fine points and one for the coarsening region's neighbours: the first
+    on a view of the mesh with two halo rings (points and triangles in
+    global-id order, so the core's sums run in the serial order), the others
+    one ring at a time with a halo exchange between rings.
 
     Parameters
     ----------
@@ -560,11 +561,15 @@ def delta_from_size(dmesh: DistributedMesh, size: Any) -> np.ndarray:
     too_fine = (owned_classes & sf._BELOW).astype(bool)
     MPI = _mpi()
     if comm.allreduce(bool(too_fine.any()), op=MPI.LOR):
-        reached = (owned_classes & sf._AT_LEAST).astype(bool)
+        meets = (owned_classes & sf._AT_LEAST).astype(bool)
+        pocket = meets
         for _ in range(sf._CLEARANCE_RINGS):
-            reached = _star_any(dmesh, reached, include_self=True)
-        too_fine &= ~reached
-        too_fine &= _star_any(dmesh, too_fine, include_self=False)
+            pocket = _star_any(dmesh, pocket, include_self=True)
+        coarsening = too_fine & ~pocket
+        coarsening &= _star_any(dmesh, coarsening, include_self=False)
+        for _ in range(sf._CLEARANCE_RINGS):  # (through too-fine points)
+            coarsening = too_fine & _star_any(dmesh, coarsening, include_self=True)
+        too_fine = coarsening | (~meets & _star_any(dmesh, coarsening, include_self=True))
     delta = np.where(too_coarse, refine, np.where(too_fine, coarsen, 1.0))
 
     def check() -> None:

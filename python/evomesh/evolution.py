@@ -165,7 +165,10 @@ def evolve(mesh: Mesh, delta: Any = None, *, size: Any = None, method: str = "fr
         after step changes next to nothing (at most 0.1 % of the points at
         the second step, none from the third on, where the first step's input
         was within about twice h; a step more per halving where it was
-        coarser). The factor this stands for is
+        coarser). Where the mesh is finer than that (a fine request or an
+        interface band has passed) it coarsens back to h in one or two steps,
+        the points next to it that lie within the tolerance too. The factor
+        this stands for is
         :func:`~evomesh.spacing_function.delta_from_size` (which says how);
         one step still changes the spacing by at most the factors above.
     method : {"frfc", "drfc"}

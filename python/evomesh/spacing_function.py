@@ -137,11 +137,17 @@ def delta_from_size(mesh: Mesh, size: ArrayLike | Callable[[np.ndarray], ArrayLi
       three edges of a point with L >= 1 / 1.1 (a finer cluster among points
       that meet the request: near segments, small angles, required points,
       graded requests; a step that coarsens it gets it back from the quality
-      pass). ``keep_fine_clusters=False`` (what ``evolve`` uses after a
-      ``displacement=``: a moved mesh has nothing settled to keep) drops this
-      exception; and except at a point with no too-fine neighbour (on its
-      own it coarsens nothing: its neighbours' spacing caps the spacing
-      around it, and a corner or a segment's end point stays anyway);
+      pass) unless a path of at most three edges through too-fine points
+      joins it to two too-fine neighbours that coarsen (then it is the rim of
+      a region coarsening back, where a fine request has passed), and except
+      at a point with no too-fine neighbour (on its own it coarsens nothing:
+      its neighbours' spacing caps the spacing around it, and a corner or a
+      segment's end point stays anyway). ``keep_fine_clusters=False`` (what
+      ``evolve`` uses after a ``displacement=``: a moved mesh has nothing
+      settled to keep) drops these exceptions. The neighbours of a coarsening
+      point with L < 1 / 1.1 coarsen to the request with it, so a region
+      coarsens back to the request (median edge / h within 10 %) in one or
+      two steps, not to the fine end of the band;
     - elsewhere the mesh meets the request: delta(p) = 1 exactly, and a step
       leaves such a neighbourhood as it is (the option ``skip_settled``). So
       ``evolve(evolve(m, size=h), size=h)`` changes next to nothing: at most
@@ -151,9 +157,12 @@ def delta_from_size(mesh: Mesh, size: ArrayLike | Callable[[np.ndarray], ArrayLi
       (see below).
 
     Limits: a request up to 1.25 times finer or 1.25 times coarser than the
-    mesh leaves it as it is; coarsening a regular lattice by less than about
-    1.5 changes it little (its packing keeps all points or about half of
-    them); a request more than about twice finer than the mesh is met in two
+    mesh leaves it as it is (a step that coarsens next to such a place takes
+    its finer points to the request); a finer pocket within three edges of
+    points that meet the request and joined to no coarsening region (a spot
+    refined by a few rings only) is kept, as such a cluster is; coarsening a
+    regular lattice by less than about 1.5 changes it little (its packing
+    keeps all points or about half of them); a request more than about twice finer than the mesh is met in two
     steps (the spacing function grades from the old points, Lemma 3.1).
 
     Parameters
@@ -193,20 +202,35 @@ def delta_from_size(mesh: Mesh, size: ArrayLike | Callable[[np.ndarray], ArrayLi
         coarsen = np.maximum(1.0, h / (_EDGE_OVER_NN_COARSENED * nn))
     too_coarse = (classes & _ABOVE).astype(bool) & (refine < _REFINE_BELOW)  # L > 1.25
     too_fine = (classes & _BELOW).astype(bool)  # L < 1 / 1.25
-    if too_fine.any() and keep_fine_clusters:
-        # (near_seeds in the core: the points within the rings of a seed, L >= 1 / 1.1)
-        meets = (classes & _AT_LEAST).astype(bool)
-        too_fine &= ~_core.near_seeds(triangles, too_fine, meets, _CLEARANCE_RINGS).view(bool)
-        # A too-fine point with no too-fine neighbour left: coarsening acts on
-        # a neighbourhood (f near p is capped by its neighbours' cones, nn(q)
-        # + |p - q|, about 2 nn(p)), and on its own it is a point the step
-        # keeps anyway or none that a step would change: a corner, a boundary
-        # point between two close ones
-        # (a short last piece of a split input segment: L = 0.44, delta = 3.8
-        # on benchmarks/stays_put.py's L-shape), the end of a settled cluster
-        # just beyond its rings. Asked step after step, it only kept the step
-        # off its empty scope (empty_scope.cpp, C1: delta == 1).
-        too_fine = _core.sharing_a_triangle(triangles, too_fine).view(bool)
+    if too_fine.any():
+        meets = (classes & _AT_LEAST).astype(bool)  # L >= 1 / 1.1
+        if keep_fine_clusters:
+            # (near_seeds in the core: the points within the rings of a seed)
+            pocket = _core.near_seeds(triangles, too_fine, meets, _CLEARANCE_RINGS).view(bool)
+            # A too-fine point with no too-fine neighbour left: coarsening acts on
+            # a neighbourhood (f near p is capped by its neighbours' cones, nn(q)
+            # + |p - q|, about 2 nn(p)), and on its own it is a point the step
+            # keeps anyway or none that a step would change: a corner, a boundary
+            # point between two close ones
+            # (a short last piece of a split input segment: L = 0.44, delta = 3.8
+            # on benchmarks/stays_put.py's L-shape), the end of a settled cluster
+            # just beyond its rings. Asked step after step, it only kept the step
+            # off its empty scope (empty_scope.cpp, C1: delta == 1).
+            coarsening = _core.sharing_a_triangle(triangles, too_fine & ~pocket).view(bool)
+            # A pocket joined to a coarsening region (through too-fine points,
+            # within the rings) is that region's edge, not a cluster among
+            # settled points: it coarsens with it. Kept, it held the region's
+            # rim fine for ever, and each step that coarsened a too-fine region
+            # made new settled points next to what was left of it (a region a
+            # fine request had left: median edge 0.62 of the request, 20 % more
+            # points than a fresh mesh; benchmarks/coarsen_back.py).
+            too_fine = _core.near_seeds(triangles, too_fine, coarsening, _CLEARANCE_RINGS, too_fine).view(bool)
+        # Where the mesh coarsens, its neighbours finer than 1 / 1.1 coarsen
+        # to the request with it: left at delta = 1 inside the band, each
+        # holds its spacing around it (f <= nn(q) + |x - q|, and the gap repair
+        # puts a point back at nn(q) from it when it is dropped), and the
+        # coarsened region settles at L of about 0.87, in the band for good.
+        too_fine |= _core.near_seeds(triangles, ~meets, too_fine, 1).view(bool)
     delta = np.where(too_coarse, refine, np.where(too_fine, coarsen, 1.0))
     bad = (delta < DELTA_MIN) | (delta > DELTA_MAX)
     if bad.any():

@@ -40,10 +40,13 @@ std::vector<std::uint8_t> edge_over_size_classes(const std::vector<Vec2>& points
 // Of the points marked in `points`, those within `rings` edges (triangle
 // sides) of a point marked in `seeds`: delta_from_size's settled clusters.
 // Ring by ring, every triangle with a corner reached so far reaches its other
-// corners. O(rings m); it stops at the ring that has reached every marked
-// point, or nothing new. Preconditions: indices in range, both masks one per point.
+// corners; with `through`, only those marked in it (paths through marked
+// points: delta_from_size's coarsening regions). O(rings m); it stops at the
+// ring that has reached every marked point, or nothing new. Preconditions:
+// indices in range, the masks one value per point.
 std::vector<std::uint8_t> near_seeds(const std::vector<Triangle>& triangles, const std::vector<std::uint8_t>& points,
-                                     const std::vector<std::uint8_t>& seeds, int rings);
+                                     const std::vector<std::uint8_t>& seeds, int rings,
+                                     const std::vector<std::uint8_t>* through = nullptr);
 
 // Of the points marked in `marked`, those that share a triangle with another
 // marked point (uint8 mask): delta_from_size's too-fine points that are not
