@@ -447,6 +447,27 @@ class Mesh:
             object.__setattr__(self, "_nn_grew", _frozen(grew))
         return self._nn
 
+    def with_tag_names(self, tag_names: Any) -> "Mesh":
+        """This mesh with other tag names (every array the same, shared).
+
+        Parameters
+        ----------
+        tag_names : mapping of (int, int) to str
+            The new names, checked as :class:`Mesh`'s ``tag_names`` (they
+            replace the old ones: ``{**mesh.tag_names, (1, 5): "inlet"}`` adds
+            one). Names of tags the mesh does not use are kept too: a step may
+            bring them into use (an interface's tag, ``(1,
+            evomesh.INTERFACE_TAG)``, or its region tags).
+
+        Returns
+        -------
+        Mesh
+        """
+        names = _as_tag_names(tag_names)
+        return Mesh._trusted(self.points, self.triangles, self.segments, self.segment_is_boundary, self.kind,
+                             self.origin, dict(self.stats), self.lineage, self._nn, self.segment_tags,
+                             self.triangle_tags, self.required, self._nn_grew, names, self._delaunay)
+
     def _known_nn(self) -> dict[str, Any]:
         """nn_M within the domain and where it grew, for a step (which then skips
         computing them); empty when not computed yet."""

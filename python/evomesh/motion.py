@@ -343,7 +343,7 @@ def move(mesh: Mesh, displacement: Any, *, geometry: BoundaryGeometry | None = N
     stats["motion_points_dropped"] = float(mesh.n_points - len(kept))
     try:
         moved_mesh = Mesh(moved[kept], triangles, segments, **labels, required=mesh.required[kept],
-                          kind=mesh.kind[kept], origin=kept)
+                          kind=mesh.kind[kept], origin=kept, tag_names=mesh.tag_names)
     except ValueError as error:
         raise _nothing_changed(f"the displacement does not leave a valid mesh: {error}") from None
     return Motion(moved_mesh, u, stats)
@@ -403,4 +403,4 @@ def after_step(old: Mesh, motion: Motion, new: Mesh) -> Mesh:
     known = new._known_nn()
     return Mesh._trusted(new.points, new.triangles, new.segments, new.segment_is_boundary, new.kind, origin, stats,
                          lineage, known.get("nn"), new.segment_tags, new.triangle_tags, new.required,
-                         known.get("nn_grew"))
+                         known.get("nn_grew"), tag_names=new.tag_names)
