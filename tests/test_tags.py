@@ -136,6 +136,49 @@ def test_write_and_read_mesh_keep_tags(tmp_path):
     assert set(data) == {"u"}
 
 
+NAMES = {(1, 1): "bottom", (1, 3): "right", (2, 7): "inside", (2, 8): "outside <&> ü",
+         (1, evomesh.INTERFACE_TAG): "interface"}
+
+
+def test_tag_names_survive_interfaces_motion_refinement_and_files(tmp_path, capsys):
+    # Names are kept by every kind of step (an interface's tag is named when the
+    # mesh names it, here before it exists), in Gmsh and VTU files, and shown by info.
+    from evomesh.cli import main
+
+    mesh = tagged(grid_mesh(14, 14, jitter=0.2, seed=4), seed=5).with_tag_names(NAMES)
+    assert dict(mesh.tag_names) == NAMES
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", evomesh.QualityWarning)
+        cut = evomesh.evolve(mesh, size=0.1, interface=lambda x: np.hypot(*(x - 0.5).T) - 0.15,
+                             interface_regions=(7, 8))
+        moved = evomesh.evolve(cut, size=0.1, displacement=lambda x: 0.02 * np.c_[x[:, 1] * (1 - x[:, 1]),
+                                                                                   np.zeros(len(x))])
+        refined = evomesh.delaunay_refine(moved, 0.6)
+    for out in (cut, moved, refined, evomesh.motion.move(mesh, (0.5, 0.0)).mesh):
+        assert dict(out.tag_names) == NAMES
+    assert (cut.segment_tags == evomesh.INTERFACE_TAG).any()
+    for suffix in (".vtu", ".msh"):
+        path = evomesh.io.write_mesh(tmp_path / f"m{suffix}", refined)
+        back, _ = evomesh.io.read_mesh(path)
+        assert dict(back.tag_names) == NAMES, suffix
+    assert main(["info", str(tmp_path / "m.vtu")]) == 0
+    printed = capsys.readouterr().out
+    count = int((refined.segment_tags == evomesh.INTERFACE_TAG).sum())
+    assert f'{evomesh.INTERFACE_TAG} "interface": {count}' in printed
+    assert f'7 "inside": {int((refined.triangle_tags == 7).sum())}' in printed
+    assert '(named, unused: 3 "right")' not in printed  # (the right side is still tagged 3)
+    assert f'3 "right": {int((refined.segment_tags == 3).sum())}' in printed
+
+
+def test_with_tag_names_checks_the_names_and_shares_the_arrays():
+    mesh = evomesh.unit_square_mesh(100)
+    named = mesh.with_tag_names({(1, 0): "wall"})
+    assert named.points is mesh.points and named.nn_spacing is mesh.nn_spacing
+    assert dict(named.tag_names) == {(1, 0): "wall"} and not mesh.tag_names
+    with pytest.raises(ValueError, match="dim must be 1"):
+        mesh.with_tag_names({(3, 0): "x"})
+
+
 def test_cell_transfer_is_conservative_per_region_over_steps():
     mesh = tagged(grid_mesh(12, 12, jitter=0.2, seed=5), seed=3)
     values = np.sin(7 * mesh.points[mesh.triangles].mean(axis=1)[:, 0]) + 2.0

@@ -5,7 +5,10 @@ from __future__ import annotations
 import importlib
 import math
 import numbers
+import os
 import re
+import shutil
+import tempfile
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Mapping, Sequence
 from xml.sax.saxutils import quoteattr
@@ -222,14 +225,39 @@ def _check_gmsh_tags(mesh: Mesh) -> None:
                              "(64-bit tags), or renumber the tags")
 
 
+#: Where a VTU file's dataset starts: its field data go right after it.
+_VTU_GRID = b"<UnstructuredGrid>"
+
+
+def _add_vtu_field_data(path: Path, field_data: Mapping[str, np.ndarray]) -> None:
+    """Insert ``field_data`` (name -> [tag, dim], as Gmsh's physical names)
+    into a VTU file meshio wrote (its writer drops field data; its reader and
+    ParaView read a ``FieldData`` element of the dataset): one ASCII Int64
+    array of two values per name, the name escaped for XML."""
+    if not field_data:
+        return
+    arrays = "".join(
+        f'<DataArray type="Int64" Name={quoteattr(name)} NumberOfTuples="{len(values)}" format="ascii">'
+        f"{' '.join(str(int(v)) for v in values)}</DataArray>\n"
+        for name, values in field_data.items()
+    )
+    text = b"\n<FieldData>\n" + arrays.encode("utf-8") + b"</FieldData>"
+    with open(path, "rb") as source:
+        head = source.read(1 << 16)  # (the dataset's tag is in meshio's first lines)
+        at = head.find(_VTU_GRID)
+        if at < 0:
+            raise ValueError(f"cannot write {path}: no {_VTU_GRID.decode()} in meshio's VTU file")
+        at += len(_VTU_GRID)
+        with open(path.with_name(path.name + ".fields"), "wb") as target:
+            target.write(head[:at] + text + head[at:])
+            shutil.copyfileobj(source, target)
+    os.replace(path.with_name(path.name + ".fields"), path)
+
+
 def _write_atomically(path: Path, out: meshio.Mesh, file_format: str) -> None:
     """meshio writes into a new folder beside ``path``; the file (and the
     files it refers to, such as an XDMF's .h5) then replace the old ones by
     rename. A failure leaves the old files as they were."""
-    import os
-    import shutil
-    import tempfile
-
     target = path.resolve() if path.is_symlink() else path  # write through a link, as open() would
     folder = target.parent if str(target.parent) else Path(".")
     scratch = Path(tempfile.mkdtemp(prefix=f".{target.name}.", dir=folder))
@@ -237,6 +265,8 @@ def _write_atomically(path: Path, out: meshio.Mesh, file_format: str) -> None:
         written = scratch / target.name
         try:
             out.write(written, file_format=file_format)
+            if file_format == "vtu":
+                _add_vtu_field_data(written, out.field_data)
         except (OSError, ImportError):
             raise
         except Exception as error:  # meshio's writers raise many things (WriteError, ValueError, KeyError, ...)
