@@ -167,6 +167,9 @@ def _gmsh_arrays(name: str, values: Any) -> list[tuple[str, np.ndarray]]:
 #: The format evomesh writes for a suffix where meshio knows several (.msh: Gmsh, not ANSYS).
 _FORMAT_OF_SUFFIX = {".msh": "gmsh"}
 _INT32 = np.iinfo(np.int32)
+#: Formats that hold a tag per cell in one block per cell type: write_mesh writes
+#: the cells there in the mesh's order (a checkpoint; Mesh.from_meshio keeps it).
+_IN_ORDER_FORMATS = frozenset({"gmsh22", "vtu", "xdmf"})
 
 
 def _file_format(path: Path) -> str:
@@ -293,6 +296,21 @@ def write_mesh(path: str | Path, mesh: Mesh, point_data: Mapping[str, ArrayLike]
     beside ``path`` under another name, then renamed: a failure leaves an
     existing file at ``path`` as it was.
 
+    A checkpoint: a ``.msh`` (Gmsh 2.2), ``.vtu`` or ``.xdmf`` file holds
+    everything the next step reads, so ``read_mesh(path)[0]`` steps to the
+    same bits as ``mesh`` (same request, options and seed): the points, the
+    triangles and segments in their order (one cell block per type, a tag
+    per cell: the order of the packing and the sampling follows them), the
+    tags, ``kind`` (the packing orders points by it: old, Steiner, sampled),
+    ``required``, and the tag names (in VTU as a ``FieldData`` element,
+    name -> [tag, dim] as Gmsh's physical names). ``origin``, ``lineage`` and
+    ``stats`` describe the previous step and are not read by the next one
+    (``origin`` is written, the others are not). A :class:`Mesh` rebuilt by
+    hand needs the same: ``Mesh(points, triangles, segments, segment_tags=...,
+    triangle_tags=..., required=..., kind=...)`` orders segments its own way
+    (boundary, then interior), so keep the Mesh (it pickles bit for bit) or
+    use these files.
+
     Returns
     -------
     Path
@@ -319,7 +337,9 @@ def write_mesh(path: str | Path, mesh: Mesh, point_data: Mapping[str, ArrayLike]
         file_format = "gmsh22"  # tags per cell, read back by meshio and Gmsh alike
     else:
         arrays = [a for name, values in (point_data or {}).items() for a in _vtu_arrays(name, values)]
-    out = mesh.to_meshio()
+    # The mesh's order of triangles and segments (a step depends on it), where
+    # the format keeps it: Gmsh 2.2, VTU, XDMF (tags per cell).
+    out = mesh._to_meshio(in_order=file_format in _IN_ORDER_FORMATS)
     if file_format != "gmsh22":
         out.point_data.pop("gmsh:dim_tags", None)  # only Gmsh files need it
     out.point_data.update(arrays)
@@ -339,8 +359,10 @@ def read_mesh(path: str | Path) -> tuple[Mesh, dict[str, np.ndarray]]:
     Returns
     -------
     mesh : Mesh
-        With the file's kind, origin, interior segments (line cells), tags
-        and, from Gmsh files, tag names (:meth:`Mesh.from_meshio`).
+        With the file's kind, origin, interior segments (line cells), tags,
+        tag names (Gmsh's physical names, a VTU's field data), and the order
+        of its triangles and segments (:meth:`Mesh.from_meshio`): a file of
+        :func:`write_mesh` steps as the mesh that was written.
     point_data : dict of ndarray
         The other point data, as stored (a complex field written by
         :func:`write_mesh` comes back as ``<name>_real`` and ``<name>_imag``).
