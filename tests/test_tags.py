@@ -215,3 +215,15 @@ def test_cell_transfer_is_conservative_per_region_over_steps():
         for tag, total in totals.items():
             now = float((mesh.triangle_areas * values)[mesh.triangle_tags == tag].sum())
             assert abs(now - total) <= 1e-12 * abs(total), (step, tag, now, total)
+
+
+def test_interface_region_tags_in_stats_are_exact_ints():
+    mesh = evomesh.unit_square_mesh(300)
+    big = 2**60 + 1  # (a float holds 2**60 exactly, not 2**60 + 1)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", evomesh.QualityWarning)
+        out = evomesh.evolve(mesh, size=0.08, interface=lambda x: np.hypot(*(x - 0.5).T) - 0.2,
+                             interface_regions=(big, big + 2))
+    for name, tag in (("interface_negative_tag", big), ("interface_positive_tag", big + 2)):
+        assert type(out.stats[name]) is int and out.stats[name] == tag
+    assert set(out.triangle_tags.tolist()) == {big, big + 2}
