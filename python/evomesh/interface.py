@@ -1031,7 +1031,7 @@ def _compose(mesh: Mesh, cut: Cut, out: Mesh, interface_tag: int) -> Mesh:
     stats = dict(out.stats)
     stats.update({"interface_crossings": float(cut.n_crossings), "interface_points_moved": float(cut.n_moved),
                   "interface_segments": float(((out.segment_tags == interface_tag) & ~out.segment_is_boundary).sum()),
-                  "interface_negative_tag": cut.regions[0], "interface_positive_tag": cut.regions[1]})  # (int64 tags: ints)
+                  "interface_negative_tag": cut.regions[0], "interface_positive_tag": cut.regions[1]})  # (ints: exact)
     tags = _regions_by_component(out)
     stats["interface_triangles_retagged"] = float((tags != out.triangle_tags).sum())
     nn = out._known_nn()
