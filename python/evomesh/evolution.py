@@ -419,7 +419,10 @@ def evolve(mesh: Mesh, delta: Any = None, *, size: Any = None, method: str = "fr
     interface_tag : int, optional
         Segment tag of the interface (default :data:`evomesh.INTERFACE_TAG`,
         -1). Keep it from step to step: interior segments of this tag are the
-        previous interface, which the next step releases.
+        previous interface, which the next step releases. To name it (in
+        files, ``evomesh info``), name the tag in the mesh:
+        ``mesh.with_tag_names({**mesh.tag_names, (1, tag): "interface"})``;
+        every step keeps the names.
     interface_regions : (int, int), optional
         Triangle tags of the negative and the positive side of phi. Default:
         of the mesh's regions, the one where phi is lowest on average for the
