@@ -450,6 +450,32 @@ def test_the_updated_triangulation_keeps_nn_within_a_thin_slot():
         mesh = fast
 
 
+@pytest.mark.parametrize("options", [{"options": evomesh.FrfcOptions.paper()},
+                                     {"within_domain": False, "quality": False}], ids=["paper", "euclidean"])
+def test_without_within_domain_nn_behind_a_thin_hole_matches_the_full_step(options):
+    # A hole 0.01 thick in a mesh of spacing 0.03: points on its two long sides
+    # are nearest across it. With the Euclidean nn of the paper the step still
+    # gives its output nn within the domain (Mesh.nn_spacing: the shortest edge
+    # there); the changed region, which reuses the input's nn for points whose
+    # triangles and nn did not change, must not reuse it where the input's grew.
+    from evomesh.meshgen import polygon_mesh
+
+    outer = [(0, 0), (1, 0), (1, 1), (0, 1)]
+    hole = [(0.3, 0.495), (0.3, 0.505), (0.7, 0.505), (0.7, 0.495)]
+    mesh = polygon_mesh([outer, hole], 0.03)
+    assert len(mesh._nn_grew) > 0
+    rng = np.random.default_rng(3)
+    for step in range(4):
+        delta = _front_delta(mesh, rng.uniform(0.2, 0.8, 2), rng.uniform(0.1, 0.3), 0.08, 0.5)
+        fast = _check_same_step(mesh, delta, step, **options)
+        assert _taken(fast)
+        assert len(fast._nn_grew) > 0
+        # ... and both are the nn within the domain that a Mesh of these arrays has
+        rebuilt = evomesh.Mesh(fast.points, fast.triangles, fast.segments)
+        assert np.array_equal(rebuilt.nn_spacing, fast.nn_spacing)
+        mesh = fast
+
+
 LATTICE_OPTIONS = {"default": {}, "no-quality": {"quality": False}, "paper": {"options": evomesh.FrfcOptions.paper()}}
 
 

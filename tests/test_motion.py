@@ -493,3 +493,19 @@ def test_the_supermesh_seeds_from_locations_when_points_moved():
     covered = np.bincount(supermesh.new_triangle, supermesh.area, minlength=new.n_triangles)
     np.testing.assert_allclose(covered, new.triangle_areas, rtol=1e-10)
     assert len(supermesh.gap_triangle) == 0
+
+
+def test_a_mirror_image_and_a_move_beyond_float64_are_refused_for_what_they_are():
+    mesh = evomesh.unit_square_mesh(400)
+    # The square mirrored onto itself: every triangle inverted, the domain turned over.
+    with pytest.raises(ValueError, match="turns the domain over.* 735 of 735 triangles are inverted, as in a mirror"):
+        move(mesh, lambda x: np.c_[1 - 2 * x[:, 0], np.zeros(len(x))])
+    # A rigid translation by 1e11: rounding (2.2e-5 there) flattens triangles of height 0.04.
+    with pytest.raises(ValueError, match="float64 rounds to 2.22e-05.*exceeds float64's resolution relative to the "
+                                         "mesh size"):
+        evomesh.evolve(mesh, size=0.05, displacement=(1e11, 0.0))
+    # ... what float64 can hold is a motion like any other (a half turn keeps the orientation).
+    for u in ((1e10, 0.0), (1e9, -1e9), lambda x: 1 - 2 * x):
+        out = evomesh.evolve(mesh, size=0.05, displacement=u)
+        check_valid_mesh(out)
+        assert out.area == pytest.approx(1.0)

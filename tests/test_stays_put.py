@@ -542,3 +542,21 @@ def test_a_step_that_returns_its_input_shares_its_arrays():
     changed_step = evomesh.evolve(new, delta)
     assert changed_step.stats["unchanged"] == 0 and changed_step.points is not new.points
     check_evolved(new, changed_step)
+
+
+@pytest.mark.parametrize("options", [{}, {"within_domain": False}], ids=["default", "euclidean-nn"])
+@pytest.mark.parametrize("tip", [20, 45])
+def test_delta_one_settles_next_to_sharp_holes_down_to_twenty_degrees(tip, options):
+    # README's condition for "changes no point from the second or third step
+    # on": the quality pass ends. A triangular hole with a sharp tip (the
+    # pass's 60 degrees not met there), also with the Euclidean nn.
+    half = 0.2 * np.tan(np.radians(tip / 2))
+    mesh = polygon_mesh([SQUARE, [(0.4, 0.5), (0.6, 0.5 + half), (0.6, 0.5 - half)]], 0.03)
+    counts = []
+    current = evomesh.evolve(mesh, 1.0, seed=0, **options)
+    for step in range(3):
+        new = evomesh.evolve(current, 1.0, seed=1 + step, **options)
+        check_evolved(current, new)
+        counts.append(changed(current, new))
+        current = new
+    assert counts[1:] == [0, 0], counts

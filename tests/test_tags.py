@@ -136,6 +136,74 @@ def test_write_and_read_mesh_keep_tags(tmp_path):
     assert set(data) == {"u"}
 
 
+CHECKPOINT_ARRAYS = ("points", "triangles", "segments", "segment_is_boundary", "kind", "segment_tags",
+                     "triangle_tags", "required")
+
+
+@pytest.mark.parametrize("suffix", [".msh", ".vtu"])
+def test_write_and_read_mesh_make_a_checkpoint(tmp_path, suffix):
+    # A step depends on the order of the triangles and segments and on kind: a
+    # mesh read back has them all, so it steps to the same bits as the mesh in memory.
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", evomesh.QualityWarning)
+        mesh = evomesh.evolve(tagged(grid_mesh(16, 16, jitter=0.2, seed=3), seed=1), 0.7, seed=0)
+        mesh = evomesh.evolve(mesh, np.where(mesh.points[:, 0] < 0.5, 0.8, 1.0), seed=1).with_tag_names(NAMES)
+        back, _ = evomesh.io.read_mesh(evomesh.io.write_mesh(tmp_path / f"m{suffix}", mesh))
+        for name in CHECKPOINT_ARRAYS:
+            assert np.array_equal(getattr(back, name), getattr(mesh, name)), name
+        assert dict(back.tag_names) == NAMES and np.array_equal(back.nn_spacing, mesh.nn_spacing)
+        delta = np.where(mesh.points[:, 1] < 0.4, 0.6, 1.3)
+        for options in ({}, {"options": evomesh.FrfcOptions.paper()}):
+            a, b = (evomesh.evolve(m, delta, seed=5, **options) for m in (mesh, back))
+            for name in CHECKPOINT_ARRAYS + ("origin",):
+                assert np.array_equal(getattr(a, name), getattr(b, name)), name
+            assert np.array_equal(a.lineage.parent_triangle, b.lineage.parent_triangle)
+            assert np.array_equal(a.lineage.barycentric, b.lineage.barycentric)
+
+
+NAMES = {(1, 1): "bottom", (1, 3): "right", (2, 7): "inside", (2, 8): "outside <&> ü",
+         (1, evomesh.INTERFACE_TAG): "interface"}
+
+
+def test_tag_names_survive_interfaces_motion_refinement_and_files(tmp_path, capsys):
+    # Names are kept by every kind of step (an interface's tag is named when the
+    # mesh names it, here before it exists), in Gmsh and VTU files, and shown by info.
+    from evomesh.cli import main
+
+    mesh = tagged(grid_mesh(14, 14, jitter=0.2, seed=4), seed=5).with_tag_names(NAMES)
+    assert dict(mesh.tag_names) == NAMES
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", evomesh.QualityWarning)
+        cut = evomesh.evolve(mesh, size=0.1, interface=lambda x: np.hypot(*(x - 0.5).T) - 0.15,
+                             interface_regions=(7, 8))
+        moved = evomesh.evolve(cut, size=0.1, displacement=lambda x: 0.02 * np.c_[x[:, 1] * (1 - x[:, 1]),
+                                                                                   np.zeros(len(x))])
+        refined = evomesh.delaunay_refine(moved, 0.6)
+    for out in (cut, moved, refined, evomesh.motion.move(mesh, (0.5, 0.0)).mesh):
+        assert dict(out.tag_names) == NAMES
+    assert (cut.segment_tags == evomesh.INTERFACE_TAG).any()
+    for suffix in (".vtu", ".msh"):
+        path = evomesh.io.write_mesh(tmp_path / f"m{suffix}", refined)
+        back, _ = evomesh.io.read_mesh(path)
+        assert dict(back.tag_names) == NAMES, suffix
+    assert main(["info", str(tmp_path / "m.vtu")]) == 0
+    printed = capsys.readouterr().out
+    count = int((refined.segment_tags == evomesh.INTERFACE_TAG).sum())
+    assert f'{evomesh.INTERFACE_TAG} "interface": {count}' in printed
+    assert f'7 "inside": {int((refined.triangle_tags == 7).sum())}' in printed
+    assert '(named, unused: 3 "right")' not in printed  # (the right side is still tagged 3)
+    assert f'3 "right": {int((refined.segment_tags == 3).sum())}' in printed
+
+
+def test_with_tag_names_checks_the_names_and_shares_the_arrays():
+    mesh = evomesh.unit_square_mesh(100)
+    named = mesh.with_tag_names({(1, 0): "wall"})
+    assert named.points is mesh.points and named.nn_spacing is mesh.nn_spacing
+    assert dict(named.tag_names) == {(1, 0): "wall"} and not mesh.tag_names
+    with pytest.raises(ValueError, match="dim must be 1"):
+        mesh.with_tag_names({(3, 0): "x"})
+
+
 def test_cell_transfer_is_conservative_per_region_over_steps():
     mesh = tagged(grid_mesh(12, 12, jitter=0.2, seed=5), seed=3)
     values = np.sin(7 * mesh.points[mesh.triangles].mean(axis=1)[:, 0]) + 2.0
@@ -147,3 +215,15 @@ def test_cell_transfer_is_conservative_per_region_over_steps():
         for tag, total in totals.items():
             now = float((mesh.triangle_areas * values)[mesh.triangle_tags == tag].sum())
             assert abs(now - total) <= 1e-12 * abs(total), (step, tag, now, total)
+
+
+def test_interface_region_tags_in_stats_are_exact_ints():
+    mesh = evomesh.unit_square_mesh(300)
+    big = 2**60 + 1  # (a float holds 2**60 exactly, not 2**60 + 1)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", evomesh.QualityWarning)
+        out = evomesh.evolve(mesh, size=0.08, interface=lambda x: np.hypot(*(x - 0.5).T) - 0.2,
+                             interface_regions=(big, big + 2))
+    for name, tag in (("interface_negative_tag", big), ("interface_positive_tag", big + 2)):
+        assert type(out.stats[name]) is int and out.stats[name] == tag
+    assert set(out.triangle_tags.tolist()) == {big, big + 2}

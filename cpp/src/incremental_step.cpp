@@ -15,6 +15,7 @@
 #include "evomesh/detail/sphere_conflict.hpp"
 #include "evomesh/detail/step_scope.hpp"
 #include "evomesh/global_ids.hpp"
+#include "evomesh/local_feature_size.hpp"
 #include "evomesh/packing.hpp"
 #include "evomesh/parallel.hpp"
 #include "evomesh/sampling.hpp"
@@ -547,6 +548,19 @@ std::vector<double> spacing_upper_bounds(const Mesh_arrays& mesh, const std::vec
   return u;
 }
 
+// The input points whose nn within the domain exceeds the Euclidean `nn` (the
+// input's own list when it brings one, else keep_within_domain's). O(m).
+std::vector<Index> nn_grew_within_domain(const Mesh_arrays& mesh, const std::vector<double>& nn) {
+  if (!mesh.nn_within_domain.empty()) return mesh.nn_grew;
+  std::vector<double> within = nn;
+  const auto grew = keep_within_domain(mesh.points, mesh.triangles, within);
+  std::vector<Index> out;
+  for (std::size_t i = 0; i < grew.size(); ++i) {
+    if (grew[i]) out.push_back(static_cast<Index>(i));
+  }
+  return out;
+}
+
 double coordinate_magnitude(const std::vector<Vec2>& points) {
   double m = 0;
   for (const Vec2& p : points) m = std::max({m, std::abs(p[0]), std::abs(p[1])});
@@ -566,6 +580,7 @@ class Changed_region final : public Step_scope {
                         const std::vector<Segment_chain>& chains, Stage_timer& timer) override {
     const std::size_t n = mesh.points.size();
     Step_weights weights = step_weights(mesh, delta, timer, options_.within_domain ? &chains : nullptr);
+    if (!options_.within_domain) input_nn_grew_ = nn_grew_within_domain(mesh, weights.nn);
     weight_ = std::move(weights.weight);
     grid_.emplace(mesh.points);
     grid_->set_weights(weight_);
@@ -725,12 +740,16 @@ class Changed_region final : public Step_scope {
   const std::vector<std::uint8_t>* same_fans() const override { return same_fans_.empty() ? nullptr : &same_fans_; }
   // (the walker takes them: the step's peak is the quality pass, the same in both scopes)
   bool keeps_fans() const override { return true; }
-  // The input's Euclidean nn is the step's nn except where it grew within the domain.
+  // The input's Euclidean nn is the step's nn except where it grew within the
+  // domain (spacing.evaluate; without within_domain the step's nn is Euclidean
+  // everywhere, but finish_step's `known` must still exclude the points whose
+  // nn within the domain grew: input_nn_grew_).
   const std::vector<double>* reusable_nn(const Scope_spacing& spacing) override {
     euclidean_nn_ = spacing.nn;
     for (std::size_t i = 0; i < spacing.evaluate.size(); ++i) {
       if (spacing.evaluate[i]) euclidean_nn_[i] = std::numeric_limits<double>::quiet_NaN();
     }
+    for (Index i : input_nn_grew_) euclidean_nn_[i] = std::numeric_limits<double>::quiet_NaN();
     return &euclidean_nn_;
   }
   // (its graphs and candidates are the change's: trimming between stages cost
@@ -786,6 +805,7 @@ class Changed_region final : public Step_scope {
   Spacing_queries graded_queries_;
   std::vector<std::uint8_t> safe_;  // old points no earlier sphere can reject (safe_old_points)
   std::vector<double> euclidean_nn_;
+  std::vector<Index> input_nn_grew_;  // without within_domain: the input points whose nn within the domain grew
   std::vector<std::uint8_t> same_fans_;  // triangulation()'s, when it updated the input's
   std::size_t n_sites_ = 0, n_scans_ = 0, n_scanned_ = 0, n_quiet_ = 0, n_region_ = 0;
   std::size_t n_packed_first_ = 0, n_packed_second_ = 0;

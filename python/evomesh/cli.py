@@ -95,7 +95,7 @@ def build_parser() -> argparse.ArgumentParser:
                        help="with --circle: vertices turning by more than DEG stay corners (default 30)")
     adapt.add_argument("--quiet", action="store_true", help="no progress bar, no summary")
 
-    info = commands.add_parser("info", help="points, triangles, segments, kinds and quality of a mesh file")
+    info = commands.add_parser("info", help="points, triangles, segments, kinds, tags and quality of a mesh file")
     info.add_argument("input", metavar="IN", help="mesh file")
     return parser
 
@@ -356,10 +356,33 @@ def _info(args: argparse.Namespace) -> int:
     print(f"  points     {mesh.n_points}  ({kinds})")
     print(f"  triangles  {mesh.n_triangles}, area {mesh.area:.6g}, holes {1 - mesh.euler_characteristic()}")
     print(f"  segments   {len(mesh.segments)} ({int(mesh.segment_is_boundary.sum())} boundary)")
+    for line in _tag_lines(mesh):
+        print(f"  {line}")
     print(f"  spacing    nn min {nn.min():.4g}, median {np.median(nn):.4g}, max {nn.max():.4g}")
     print(f"  quality    min angle {q.min_angle:.2f} deg, max radius/edge {q.max_radius_edge:.3f}")
     print(f"  point data {', '.join(data) or 'none'}")
     return 0
+
+
+def _tag_lines(mesh: Any) -> list[str]:
+    """The segment and triangle tags of a mesh with their counts and names
+    (``tag "name": count``, in increasing tag order), and the names of tags no
+    segment or triangle carries."""
+    lines = []
+    names = mesh.tag_names
+    for dim, what, tags in ((1, "segments ", mesh.segment_tags), (2, "triangles", mesh.triangle_tags)):
+        values, counts = np.unique(tags, return_counts=True)
+        used = set(values.tolist())
+        listed = ", ".join(f"{v}{_quoted(names.get((dim, v)))}: {c}" for v, c in zip(values.tolist(), counts.tolist()))
+        unused = sorted(tag for d, tag in names if d == dim and tag not in used)
+        if unused:
+            listed += f" (named, unused: {', '.join(f'{v}{_quoted(names[(dim, v)])}' for v in unused)})"
+        lines.append(f"{'tags' if dim == 1 else '':<11}{what} {listed or 'none'}")
+    return lines
+
+
+def _quoted(name: str | None) -> str:
+    return "" if name is None else f' "{name}"'
 
 
 def _growing_circle(args: argparse.Namespace) -> int:

@@ -412,15 +412,20 @@ def evolve(mesh: Mesh, delta: Any = None, *, size: Any = None, method: str = "fr
         meets the boundary (or another constraint) at less than 5 degrees or
         runs along it without crossing (tangent). ``stats`` adds
         ``interface_crossings``, ``interface_points_moved`` (old points moved
-        onto a crossing within 1e-3 of an edge from them),
-        ``interface_segments``, ``interface_negative_tag``,
-        ``interface_positive_tag`` and ``curve_refits`` (rounds of the quality
+        onto a crossing of one of their edges within a tenth of that edge's
+        length: the crossing's sphere would remove them anyway, and the cut
+        gets no edge shorter than that), ``interface_segments``,
+        ``interface_negative_tag`` and ``interface_positive_tag`` (the region
+        tags, as ints: exact beyond 2**53) and ``curve_refits`` (rounds of the quality
         pass after points were projected, so that angles stay above
         ``min_angle``).
     interface_tag : int, optional
         Segment tag of the interface (default :data:`evomesh.INTERFACE_TAG`,
         -1). Keep it from step to step: interior segments of this tag are the
-        previous interface, which the next step releases.
+        previous interface, which the next step releases. To name it (in
+        files, ``evomesh info``), name the tag in the mesh:
+        ``mesh.with_tag_names({**mesh.tag_names, (1, tag): "interface"})``;
+        every step keeps the names.
     interface_regions : (int, int), optional
         Triangle tags of the negative and the positive side of phi. Default:
         of the mesh's regions, the one where phi is lowest on average for the
@@ -504,7 +509,7 @@ def evolve(mesh: Mesh, delta: Any = None, *, size: Any = None, method: str = "fr
     return new if motion is None else after_step(old, motion, new)
 
 
-def _wrap(result: dict[str, Any], old: Mesh | None = None) -> Mesh:
+def _wrap(result: dict[str, Any], old: Mesh | None = None, tag_names: Any = None) -> Mesh:
     # Every output satisfies the limits Mesh() puts on inputs, or the step fails
     # here, saying why (issue 9: a square of side 1e-70 refined step after step).
     # The step brings its output's nn (Euclidean, and within the domain where that is larger).
@@ -550,7 +555,7 @@ def _wrap(result: dict[str, Any], old: Mesh | None = None) -> Mesh:
         result.get("triangle_tags"),
         result.get("required"),
         nn_grew,
-        tag_names=None if old is None else old.tag_names,  # the tags are the input's: so are their names
+        tag_names=tag_names if old is None else old.tag_names,  # the tags are the input's: so are their names
         delaunay=bool(result.get("triangulation_certified", False)),
     )
 
@@ -635,9 +640,9 @@ def delaunay_refine(mesh: Mesh, delta: Any, *, min_angle: float = 20.0, max_samp
         ``capped`` (1 if it stopped at its bound, twice the estimate). The
         input's labels carry over as in :func:`evolve`: a new segment has the
         tag of the input segment it splits (``segment_tags``), a triangle the
-        tag of the input triangle's region it lies in (``triangle_tags``), and
+        tag of the input triangle's region it lies in (``triangle_tags``),
         every input point keeps its ``required`` flag (refinement never moves
-        or removes a point).
+        or removes a point), and the ``tag_names`` are the input's.
     """
     _require_mesh(mesh)
     d = as_delta(mesh, delta)
@@ -646,4 +651,4 @@ def delaunay_refine(mesh: Mesh, delta: Any, *, min_angle: float = 20.0, max_samp
         mesh.points, mesh.triangles, mesh.segments, mesh.segment_is_boundary.astype(np.uint8), mesh.kind, d, o,
         **mesh._labels(),
     )
-    return _wrap(result)
+    return _wrap(result, tag_names=mesh.tag_names)

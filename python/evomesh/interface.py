@@ -573,7 +573,7 @@ def cut_mesh(mesh: Mesh, interface: Any, *, interface_tag: int = INTERFACE_TAG,
     _check_meeting_angles(all_points, segs, built_tags, boundary, interface_tag)
     origin = np.concatenate([np.where(is_moved, -1, np.arange(n)), np.full(len(new_index), -1)])
     cut = Mesh._trusted(all_points, tris, segs, boundary, kinds, origin, {}, None, None, built_tags, tags,
-                        required if required.any() else None)
+                        required if required.any() else None, tag_names=mesh.tag_names)
     parent_triangle = np.full(n_cut, -1, dtype=np.int64)
     barycentric = np.zeros((n_cut, 3))
     parent_triangle[n:] = owner
@@ -1031,10 +1031,10 @@ def _compose(mesh: Mesh, cut: Cut, out: Mesh, interface_tag: int) -> Mesh:
     stats = dict(out.stats)
     stats.update({"interface_crossings": float(cut.n_crossings), "interface_points_moved": float(cut.n_moved),
                   "interface_segments": float(((out.segment_tags == interface_tag) & ~out.segment_is_boundary).sum()),
-                  "interface_negative_tag": float(cut.regions[0]), "interface_positive_tag": float(cut.regions[1])})
+                  "interface_negative_tag": cut.regions[0], "interface_positive_tag": cut.regions[1]})  # (ints: exact)
     tags = _regions_by_component(out)
     stats["interface_triangles_retagged"] = float((tags != out.triangle_tags).sum())
     nn = out._known_nn()
     return Mesh._trusted(out.points, out.triangles, out.segments, out.segment_is_boundary, out.kind, origin, stats,
                          composed, nn.get("nn"), out.segment_tags, tags,
-                         out.required if out.required.any() else None, nn.get("nn_grew"))
+                         out.required if out.required.any() else None, nn.get("nn_grew"), tag_names=out.tag_names)

@@ -5,7 +5,10 @@ from __future__ import annotations
 import importlib
 import math
 import numbers
+import os
 import re
+import shutil
+import tempfile
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Mapping, Sequence
 from xml.sax.saxutils import quoteattr
@@ -164,6 +167,9 @@ def _gmsh_arrays(name: str, values: Any) -> list[tuple[str, np.ndarray]]:
 #: The format evomesh writes for a suffix where meshio knows several (.msh: Gmsh, not ANSYS).
 _FORMAT_OF_SUFFIX = {".msh": "gmsh"}
 _INT32 = np.iinfo(np.int32)
+#: Formats that hold a tag per cell in one block per cell type: write_mesh writes
+#: the cells there in the mesh's order (a checkpoint; Mesh.from_meshio keeps it).
+_IN_ORDER_FORMATS = frozenset({"gmsh22", "vtu", "xdmf"})
 
 
 def _file_format(path: Path) -> str:
@@ -222,14 +228,39 @@ def _check_gmsh_tags(mesh: Mesh) -> None:
                              "(64-bit tags), or renumber the tags")
 
 
+#: Where a VTU file's dataset starts: its field data go right after it.
+_VTU_GRID = b"<UnstructuredGrid>"
+
+
+def _add_vtu_field_data(path: Path, field_data: Mapping[str, np.ndarray]) -> None:
+    """Insert ``field_data`` (name -> [tag, dim], as Gmsh's physical names)
+    into a VTU file meshio wrote (its writer drops field data; its reader and
+    ParaView read a ``FieldData`` element of the dataset): one ASCII Int64
+    array of two values per name, the name escaped for XML."""
+    if not field_data:
+        return
+    arrays = "".join(
+        f'<DataArray type="Int64" Name={quoteattr(name)} NumberOfTuples="{len(values)}" format="ascii">'
+        f"{' '.join(str(int(v)) for v in values)}</DataArray>\n"
+        for name, values in field_data.items()
+    )
+    text = b"\n<FieldData>\n" + arrays.encode("utf-8") + b"</FieldData>"
+    with open(path, "rb") as source:
+        head = source.read(1 << 16)  # (the dataset's tag is in meshio's first lines)
+        at = head.find(_VTU_GRID)
+        if at < 0:
+            raise ValueError(f"cannot write {path}: no {_VTU_GRID.decode()} in meshio's VTU file")
+        at += len(_VTU_GRID)
+        with open(path.with_name(path.name + ".fields"), "wb") as target:
+            target.write(head[:at] + text + head[at:])
+            shutil.copyfileobj(source, target)
+    os.replace(path.with_name(path.name + ".fields"), path)
+
+
 def _write_atomically(path: Path, out: meshio.Mesh, file_format: str) -> None:
     """meshio writes into a new folder beside ``path``; the file (and the
     files it refers to, such as an XDMF's .h5) then replace the old ones by
     rename. A failure leaves the old files as they were."""
-    import os
-    import shutil
-    import tempfile
-
     target = path.resolve() if path.is_symlink() else path  # write through a link, as open() would
     folder = target.parent if str(target.parent) else Path(".")
     scratch = Path(tempfile.mkdtemp(prefix=f".{target.name}.", dir=folder))
@@ -237,6 +268,8 @@ def _write_atomically(path: Path, out: meshio.Mesh, file_format: str) -> None:
         written = scratch / target.name
         try:
             out.write(written, file_format=file_format)
+            if file_format == "vtu":
+                _add_vtu_field_data(written, out.field_data)
         except (OSError, ImportError):
             raise
         except Exception as error:  # meshio's writers raise many things (WriteError, ValueError, KeyError, ...)
@@ -262,6 +295,21 @@ def write_mesh(path: str | Path, mesh: Mesh, point_data: Mapping[str, ArrayLike]
     Everything is checked before anything is written, and the file is written
     beside ``path`` under another name, then renamed: a failure leaves an
     existing file at ``path`` as it was.
+
+    A checkpoint: a ``.msh`` (Gmsh 2.2), ``.vtu`` or ``.xdmf`` file holds
+    everything the next step reads, so ``read_mesh(path)[0]`` steps to the
+    same bits as ``mesh`` (same request, options and seed): the points, the
+    triangles and segments in their order (one cell block per type, a tag
+    per cell: the order of the packing and the sampling follows them), the
+    tags, ``kind`` (the packing orders points by it: old, Steiner, sampled),
+    ``required``, and the tag names (in VTU as a ``FieldData`` element,
+    name -> [tag, dim] as Gmsh's physical names). ``origin``, ``lineage`` and
+    ``stats`` describe the previous step and are not read by the next one
+    (``origin`` is written, the others are not). A :class:`Mesh` rebuilt by
+    hand needs the same: ``Mesh(points, triangles, segments, segment_tags=...,
+    triangle_tags=..., required=..., kind=...)`` orders segments its own way
+    (boundary, then interior), so keep the Mesh (it pickles bit for bit) or
+    use these files.
 
     Returns
     -------
@@ -289,7 +337,9 @@ def write_mesh(path: str | Path, mesh: Mesh, point_data: Mapping[str, ArrayLike]
         file_format = "gmsh22"  # tags per cell, read back by meshio and Gmsh alike
     else:
         arrays = [a for name, values in (point_data or {}).items() for a in _vtu_arrays(name, values)]
-    out = mesh.to_meshio()
+    # The mesh's order of triangles and segments (a step depends on it), where
+    # the format keeps it: Gmsh 2.2, VTU, XDMF (tags per cell).
+    out = mesh._to_meshio(in_order=file_format in _IN_ORDER_FORMATS)
     if file_format != "gmsh22":
         out.point_data.pop("gmsh:dim_tags", None)  # only Gmsh files need it
     out.point_data.update(arrays)
@@ -309,8 +359,10 @@ def read_mesh(path: str | Path) -> tuple[Mesh, dict[str, np.ndarray]]:
     Returns
     -------
     mesh : Mesh
-        With the file's kind, origin, interior segments (line cells), tags
-        and, from Gmsh files, tag names (:meth:`Mesh.from_meshio`).
+        With the file's kind, origin, interior segments (line cells), tags,
+        tag names (Gmsh's physical names, a VTU's field data), and the order
+        of its triangles and segments (:meth:`Mesh.from_meshio`): a file of
+        :func:`write_mesh` steps as the mesh that was written.
     point_data : dict of ndarray
         The other point data, as stored (a complex field written by
         :func:`write_mesh` comes back as ``<name>_real`` and ``<name>_imag``).

@@ -447,6 +447,27 @@ class Mesh:
             object.__setattr__(self, "_nn_grew", _frozen(grew))
         return self._nn
 
+    def with_tag_names(self, tag_names: Any) -> "Mesh":
+        """This mesh with other tag names (every array the same, shared).
+
+        Parameters
+        ----------
+        tag_names : mapping of (int, int) to str
+            The new names, checked as :class:`Mesh`'s ``tag_names`` (they
+            replace the old ones: ``{**mesh.tag_names, (1, 5): "inlet"}`` adds
+            one). Names of tags the mesh does not use are kept too: a step may
+            bring them into use (an interface's tag, ``(1,
+            evomesh.INTERFACE_TAG)``, or its region tags).
+
+        Returns
+        -------
+        Mesh
+        """
+        names = _as_tag_names(tag_names)
+        return Mesh._trusted(self.points, self.triangles, self.segments, self.segment_is_boundary, self.kind,
+                             self.origin, dict(self.stats), self.lineage, self._nn, self.segment_tags,
+                             self.triangle_tags, self.required, self._nn_grew, names, self._delaunay)
+
     def _known_nn(self) -> dict[str, Any]:
         """nn_M within the domain and where it grew, for a step (which then skips
         computing them); empty when not computed yet."""
@@ -484,7 +505,11 @@ class Mesh:
         ignored; quadrilaterals, polygons and higher-order cells are refused.
         With Gmsh tags (``gmsh:physical``), the names of physical groups of
         dimension 1 and 2 (meshio's ``field_data``, name -> [tag, dim]) become
-        ``tag_names``.
+        ``tag_names``. Triangles keep the file's order, and so do segments
+        when the line cells are exactly the mesh's segments (every boundary
+        edge and interior constraint once; else they come in :class:`Mesh`'s
+        order): a step depends on both orders (see
+        :func:`evomesh.io.write_mesh`).
         """
         return cls._from_meshio(m, tags)[0]
 
@@ -549,6 +574,8 @@ class Mesh:
                    required=None if required is None else _integral_values(required, "required").astype(bool),
                    kind=None if kind is None else _integral_values(kind, "kind"),
                    origin=None if origin is None else _integral_values(origin, "origin"))
+        if segs is not None:
+            mesh = _in_segment_order(mesh, segs)
         return mesh, used
 
     def to_meshio(self) -> Any:
@@ -569,20 +596,38 @@ class Mesh:
         A mesh with more blocks than points cannot be written as Gmsh 4.1
         (meshio needs a point on every entity; a UserWarning says so): write
         Gmsh 2.2 (:func:`evomesh.io.write_mesh` does) or VTU.
+
+        A step depends on the order of the triangles and segments: a mesh read
+        back from blocks grouped by tag steps differently from this one.
+        :func:`evomesh.io.write_mesh` writes Gmsh 2.2, VTU and XDMF files with
+        one block per cell type in the mesh's order instead (tags per cell),
+        and :meth:`from_meshio` keeps that order: a faithful checkpoint.
+        Passing ``file_format="gmsh22"`` (or ``"gmsh"``, 4.1) to
+        ``meshio.write`` for a ``.msh`` file: meshio's default for that
+        suffix is ANSYS, which holds no tags; :func:`evomesh.io.write_mesh`
+        picks Gmsh 2.2 by itself.
         """
+        return self._to_meshio(in_order=False)
+
+    def _to_meshio(self, in_order: bool) -> Any:
+        """to_meshio(); ``in_order``: one block per cell type, in the mesh's
+        order, tags per cell (not for Gmsh 4.1, which keeps one tag per block)."""
         import meshio
 
         points = np.c_[self.points, np.zeros(self.n_points)]
-        blocks: list[tuple[str, int, np.ndarray]] = []  # (type, tag, cells)
+        blocks: list[tuple[str, np.ndarray, np.ndarray]] = []  # (type, cells, their tags)
         for kind, cells, cell_tags in (("triangle", self.triangles, self.triangle_tags),
                                        ("line", self.segments, self.segment_tags)):
             if len(cells) == 0:
+                continue
+            if in_order:
+                blocks.append((kind, np.array(cells), np.array(cell_tags)))
                 continue
             order = np.argsort(cell_tags, kind="stable")
             sorted_tags = cell_tags[order]
             starts = np.flatnonzero(np.r_[True, sorted_tags[1:] != sorted_tags[:-1]])
             for first, last in zip(starts, np.r_[starts[1:], len(order)]):
-                blocks.append((kind, int(sorted_tags[first]), np.array(cells[order[first:last]])))
+                blocks.append((kind, np.array(cells[order[first:last]]), sorted_tags[first:last]))
         # Gmsh entities: one per block (geometrical tag k + 1 of block k). Every
         # entity must hold a point (meshio's Gmsh 4.1 writer lists only those),
         # and meshio's 4.1 reader keeps points and point data in step only when
@@ -596,12 +641,12 @@ class Mesh:
                           "as Gmsh 4.1 (write Gmsh 2.2 or VTU)", UserWarning, stacklevel=2)
         entity = entities[np.arange(self.n_points, dtype=np.int64) * len(blocks) // self.n_points]
         dim_tags = np.c_[dims[entity], entity + 1].astype(np.int32)
-        cell_data = {"gmsh:physical": [np.full(len(c), tag, np.int64) for _, tag, c in blocks],
-                     "gmsh:geometrical": [np.full(len(c), k + 1, np.int32) for k, (_, _, c) in enumerate(blocks)]}
+        cell_data = {"gmsh:physical": [np.asarray(tags, np.int64) for _, _, tags in blocks],
+                     "gmsh:geometrical": [np.full(len(c), k + 1, np.int32) for k, (_, c, _) in enumerate(blocks)]}
         point_data = {"kind": np.array(self.kind, dtype=np.int32), "origin": np.array(self.origin),
                       "required": np.array(self.required, dtype=np.uint8), "gmsh:dim_tags": dim_tags}
         field_data = {name: np.array([tag, dim], dtype=np.int64) for (dim, tag), name in self.tag_names.items()}
-        return meshio.Mesh(points, [(kind, c) for kind, _, c in blocks], point_data=point_data, cell_data=cell_data,
+        return meshio.Mesh(points, [(kind, c) for kind, c, _ in blocks], point_data=point_data, cell_data=cell_data,
                            field_data=field_data)
 
     @staticmethod
@@ -900,6 +945,27 @@ def _names_from_field_data(field_data: Mapping[str, Any]) -> dict[tuple[int, int
         if dim in (1, 2) and isinstance(name, str) and name and not _BAD_TAG_NAME_CHARACTER.search(name):
             names.setdefault((dim, tag), name)
     return names
+
+
+def _in_segment_order(mesh: "Mesh", segments: np.ndarray) -> "Mesh":
+    """``mesh`` with its segments in the order of ``segments`` (rows in either
+    direction, the line cells of a file) when they are exactly its segments;
+    else ``mesh``. Mesh() builds its own order (boundary edges, then interior
+    ones); a step's output has another, and the next step depends on it."""
+    n = np.int64(mesh.n_points)
+    mine = np.sort(mesh.segments, axis=1) @ np.array([n, 1], dtype=np.int64)
+    wanted = np.sort(np.asarray(segments, dtype=np.int64), axis=1) @ np.array([n, 1], dtype=np.int64)
+    if len(wanted) != len(mine) or len(mine) == 0:
+        return mesh
+    order = np.argsort(mine)
+    index = order[np.minimum(np.searchsorted(mine, wanted, sorter=order), len(mine) - 1)]
+    if not np.array_equal(mine[index], wanted) or len(np.unique(index)) != len(index):
+        return mesh
+    if np.array_equal(index, np.arange(len(index))):
+        return mesh
+    return Mesh._trusted(mesh.points, mesh.triangles, mesh.segments[index], mesh.segment_is_boundary[index],
+                         mesh.kind, mesh.origin, {}, None, mesh._nn, mesh.segment_tags[index], mesh.triangle_tags,
+                         mesh.required, mesh._nn_grew, mesh.tag_names)
 
 
 def _integral_values(values: np.ndarray, name: str, data: str = "point data", item: str = "point") -> np.ndarray:

@@ -166,6 +166,46 @@ def _flat_vertex(points: np.ndarray, triangles: np.ndarray, droppable: np.ndarra
     return np.where(score[rows, best] > 0, triangles[rows, best], -1)
 
 
+def _twice_areas(points: np.ndarray, triangles: np.ndarray) -> np.ndarray:
+    p = points[triangles]
+    d1, d2 = p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]
+    return d1[:, 0] * d2[:, 1] - d1[:, 1] * d2[:, 0]
+
+
+def _check_orientation_and_resolution(mesh: Mesh, moved: np.ndarray, folded: np.ndarray) -> None:
+    """Where the move folds triangles, the two reasons no remeshing can help:
+    the moved domain is turned over (the signed areas of the moved triangles
+    sum to the area the moved boundary encloses, with its orientation: below
+    zero the boundary runs the other way round, as in a mirror image), or a
+    folded triangle is below float64's resolution at its new coordinates
+    (its height before the move under Mesh's 1024 units of rounding of the
+    moved coordinates: the displacement is too large for the mesh's size)."""
+    twice = _twice_areas(moved, mesh.triangles)
+    total = float(twice.sum())
+    if not total > 0:
+        raise _nothing_changed(
+            f"the displacement turns the domain over: the moved triangles' areas sum to {0.5 * total:.6g} (before: "
+            f"{mesh.area:.6g}), and {int((twice < 0).sum())} of {mesh.n_triangles} triangles are inverted, as in a "
+            "mirror image; a motion must keep the orientation (to mirror a mesh, make a new Mesh of the mirrored "
+            "points and the same triangles: Mesh orients them)")
+    t = mesh.triangles[folded]
+    old = mesh.points[t]
+    longest = np.sqrt(np.max([((old[:, k] - old[:, (k + 1) % 3]) ** 2).sum(axis=1) for k in range(3)], axis=0))
+    height = _twice_areas(mesh.points, t) / longest
+    rounding = np.finfo(np.float64).eps * np.abs(moved[t]).max(axis=(1, 2))
+    below = height < _FLAT_MARGIN * _MIN_HEIGHT_ULPS * rounding  # (as _folded: such a triangle is folded)
+    if below.any():
+        k = int(np.argmax(below))
+        largest = float(np.hypot(*(moved[t[k]] - mesh.points[t[k]]).T).max())
+        raise _nothing_changed(
+            f"the displacement (up to {largest:.6g} at triangle {int(np.flatnonzero(folded)[k])}, points "
+            f"{t[k].tolist()}) moves the mesh to coordinates of magnitude {np.abs(moved[t[k]]).max():.6g}, where "
+            f"float64 rounds to {rounding[k]:.3g}: the triangle's height {height[k]:.3g} is below "
+            f"{_FLAT_MARGIN:g} x {_MIN_HEIGHT_ULPS} units of rounding (a Mesh needs {_MIN_HEIGHT_ULPS}, the move a "
+            "margin), so float64 cannot hold it there: the displacement exceeds float64's resolution relative to "
+            "the mesh size; translate the problem instead of the mesh")
+
+
 def _describe(mesh: Mesh, k: int, moved: np.ndarray) -> str:
     return f"point {k} (from {mesh.points[k].tolist()} to {moved[k].tolist()})"
 
@@ -310,8 +350,13 @@ def move(mesh: Mesh, displacement: Any, *, geometry: BoundaryGeometry | None = N
         message names the first such point), moves an interior point out of
         the domain where the boundary does not move, makes boundary or
         interface segments cross or touch (the domain itself would fold),
-        moves two boundary points onto each other, or moves a hole or region
-        across another. Nothing is changed then (the input is never modified).
+        moves two boundary points onto each other, moves a hole or region
+        across another, turns the domain over (a mirror image: every triangle
+        inverted), or moves a triangle to coordinates where float64 cannot
+        hold it (its height below 2 x 1024 units of rounding there: a rigid
+        translation by 1e11 of a mesh of spacing 0.03; one that float64 can
+        hold is accepted). Nothing is changed then (the input is never
+        modified).
     """
     _require_mesh(mesh)
     u = _as_displacement(mesh, displacement)
@@ -327,6 +372,8 @@ def move(mesh: Mesh, displacement: Any, *, geometry: BoundaryGeometry | None = N
             u = moved - mesh.points
             stats["motion_points_projected"] = float(len(on_curve))
     folded = _folded(moved, mesh.triangles)
+    if folded.any():
+        _check_orientation_and_resolution(mesh, moved, folded)
     stats["motion_folded_triangles"] = float(folded.sum())
     stats["motion_remeshed"] = float(folded.any())
     stats["motion_points_dropped_outside"] = 0.0
@@ -343,7 +390,7 @@ def move(mesh: Mesh, displacement: Any, *, geometry: BoundaryGeometry | None = N
     stats["motion_points_dropped"] = float(mesh.n_points - len(kept))
     try:
         moved_mesh = Mesh(moved[kept], triangles, segments, **labels, required=mesh.required[kept],
-                          kind=mesh.kind[kept], origin=kept)
+                          kind=mesh.kind[kept], origin=kept, tag_names=mesh.tag_names)
     except ValueError as error:
         raise _nothing_changed(f"the displacement does not leave a valid mesh: {error}") from None
     return Motion(moved_mesh, u, stats)
@@ -403,4 +450,4 @@ def after_step(old: Mesh, motion: Motion, new: Mesh) -> Mesh:
     known = new._known_nn()
     return Mesh._trusted(new.points, new.triangles, new.segments, new.segment_is_boundary, new.kind, origin, stats,
                          lineage, known.get("nn"), new.segment_tags, new.triangle_tags, new.required,
-                         known.get("nn_grew"))
+                         known.get("nn_grew"), tag_names=new.tag_names)
