@@ -43,16 +43,20 @@ installed_module() {
   .venv/bin/python -c 'import os, evomesh._core as m, pytest, hypothesis
 print(m.__file__, os.stat(m.__file__).st_mtime_ns)' 2>/dev/null
 }
-if [ "${EVOMESH_REINSTALL:-0}" != 1 ] && [ -f "$stamp" ] &&
+if [ "${EVOMESH_REINSTALL:-0}" != 1 ] && [ -f "$stamp" ] && [ -f build/core/CMakeCache.txt ] &&
   [ "$(cat "$stamp")" = "$source_hash $(installed_module || echo none)" ]; then
   echo "evomesh: up to date in $(pwd)/.venv"
   exit 0
 fi
 rm -f "$stamp"
 .venv/bin/python -m pip install -q --upgrade pip
-# The package (C++ extension built against Debian's CGAL) and the test tools;
-# also its build requirements, so that the developers' in-place rebuild
-# (pip install --no-build-isolation -ve . -Cbuild-dir=build/dev) works.
+# The build requirements go into .venv (ninja: scikit-build-core's generator),
+# and the package is built without isolation in the fixed CMake build dir
+# build/core: tools/run-tests.sh builds the C++ tests and benchmarks in that same
+# dir against the core compiled here, so the core compiles once, and a later
+# install recompiles only what changed. (The developers' in-place rebuild,
+# pip install --no-build-isolation -ve . -Cbuild-dir=build/dev, uses them too.)
+.venv/bin/python -m pip install -q "scikit-build-core>=0.10" "pybind11>=2.12" ninja
 # pip's verbose output goes to a log; the terminal gets one line per compiled
 # file, and the end of the log if the install fails.
 log=.venv/evomesh-install.log
@@ -67,7 +71,7 @@ compile_progress() {
     fi
   done
 }
-if ! .venv/bin/python -m pip install -v ".[test]" "scikit-build-core>=0.10" "pybind11>=2.12" 2>&1 |
+if ! .venv/bin/python -m pip install -v --no-build-isolation -Cbuild-dir=build/core ".[test]" 2>&1 |
   tee "$log" | compile_progress; then
   echo "evomesh: the install failed; the end of $log:" >&2
   tail -n 40 "$log" >&2
