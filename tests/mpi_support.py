@@ -23,9 +23,21 @@ COMM = MPI.COMM_WORLD
 WATCHDOG_SECONDS = float(os.environ.get("EVOMESH_MPI_TEST_TIMEOUT", "120"))
 
 
+def _terminal_stderr(config) -> int:
+    """The terminal's stderr: pytest captures fd 2 during a test, and a rank
+    the watchdog ends cannot hand over what was captured. pytest's own
+    faulthandler plugin keeps a copy of it."""
+    try:
+        from _pytest.faulthandler import fault_handler_stderr_fd_key
+
+        return config.stash[fault_handler_stderr_fd_key]
+    except (ImportError, KeyError):  # (another pytest: the captured fd, which at least fails)
+        return 2
+
+
 @pytest.fixture(autouse=True)
-def watchdog():
-    faulthandler.dump_traceback_later(WATCHDOG_SECONDS, exit=True)
+def watchdog(request):
+    faulthandler.dump_traceback_later(WATCHDOG_SECONDS, exit=True, file=_terminal_stderr(request.config))
     yield
     COMM.Barrier()  # the next test starts together on every rank (under the watchdog: a rank gone elsewhere fails)
     faulthandler.cancel_dump_traceback_later()

@@ -34,8 +34,8 @@ fi
 # The install is skipped when the sources it is built from are the ones installed
 # last time (a content hash, kept in the venv with the installed module's file
 # and mtime, so an in-place developer rebuild since then counts as a change) and
-# the module still imports: a wheel build compiles everything again.
-# EVOMESH_REINSTALL=1 forces it.
+# the module still imports, and the build dir below is there; an install
+# recompiles only what changed there. EVOMESH_REINSTALL=1 forces it.
 stamp=.venv/.evomesh-installed
 source_hash="$(find CMakeLists.txt pyproject.toml cpp/include cpp/src cpp/bindings python -type f \
   ! -path '*/__pycache__/*' -print0 | LC_ALL=C sort -z | xargs -0 sha256sum | sha256sum | cut -d' ' -f1)"

@@ -487,7 +487,7 @@ def _check_root(comm: Any, root: Any) -> int:
     return int(root)
 
 
-def _same_everywhere(comm: Any, call: str, fingerprints: dict[str, str],
+def _same_everywhere(comm: Any, call: str, fingerprints: dict[str, str] | Callable[[], dict[str, str]],
                      prepare: Callable[[], _T] | None = None) -> _T:
     """The first collective of every collective call (DistributedMesh's
     methods, :func:`evomesh.evolve` and the transfers on a DistributedMesh):
@@ -497,23 +497,29 @@ def _same_everywhere(comm: Any, call: str, fingerprints: dict[str, str],
 
     `fingerprints` are this rank's arguments that must agree, by name, as short
     canonical texts (:func:`_fingerprint`: values of small arguments, the kind
-    of per-point ones; never big arrays). `prepare`, run here on every rank,
-    checks and converts this rank's arguments; its result is returned. One
-    allgather of (call, fingerprints, prepare's failure), then the same verdict
-    on every rank: ranks in different calls, else an argument that differs
-    (ValueError naming the argument, and the ranks with each value), else a
-    failure of `prepare` (raised everywhere as :func:`_collective` raises it).
+    of per-point ones; never big arrays), or a function that makes them.
+    `prepare`, run here on every rank, checks and converts this rank's
+    arguments; its result is returned. One allgather of (call, fingerprints,
+    this rank's failure), then the same verdict on every rank: ranks in
+    different calls, else an argument that differs (ValueError naming the
+    argument, and the ranks with each value), else a failure of `prepare` or
+    of the fingerprints' function (raised everywhere as :func:`_collective`
+    raises it).
     """
-    error, result = (None, None) if prepare is None else _attempt(prepare)
-    every = comm.allgather((call, fingerprints, _report(error)))
+    error, texts = (None, fingerprints) if isinstance(fingerprints, dict) else _attempt(fingerprints)
+    result = None
+    if error is None and prepare is not None:
+        error, result = _attempt(prepare)
+    every = comm.allgather((call, texts, _report(error)))  # (texts None: their function failed)
     calls = [theirs[0] for theirs in every]
     if len(set(calls)) > 1:
         raise ValueError(f"the ranks are in different collective calls: {_by_rank(calls)}; every rank must make "
                          "the same collective calls in the same order") from error
-    for name in dict.fromkeys(name for theirs in every for name in theirs[1]):
-        values = [theirs[1].get(name, _NOT_GIVEN) for theirs in every]
-        if len(set(values)) > 1:
-            raise ValueError(f"{call}: {name} must be the same on every rank: {_by_rank(values)}") from error
+    if all(theirs[1] is not None for theirs in every):
+        for name in dict.fromkeys(name for theirs in every for name in theirs[1]):
+            values = [theirs[1].get(name, _NOT_GIVEN) for theirs in every]
+            if len(set(values)) > 1:
+                raise ValueError(f"{call}: {name} must be the same on every rank: {_by_rank(values)}") from error
     _raise_first([theirs[2] for theirs in every], error)
     return result  # type: ignore[return-value]
 
@@ -526,15 +532,24 @@ def _fingerprint(value: Any, per_point: bool = False) -> str:
     for equal arguments on any rank: numbers, strings and short tuples of them
     by value, ``None`` as "not given", anything else by its type. With
     `per_point` (delta, size: values over the owned points, or one number, or a
-    function of the owned coordinates) only the kind, and a number's value."""
+    function of the owned coordinates) only the kind, and a number's value.
+    Never raises."""
+    try:
+        return _fingerprint_of(value, per_point)
+    except Exception:  # noqa: BLE001 - (a number float() cannot take, a repr that raises): its type
+        return f"a {type(value).__name__}"
+
+
+def _fingerprint_of(value: Any, per_point: bool) -> str:
     if value is None:
         return _NOT_GIVEN
     if isinstance(value, (bool, np.bool_)):
         return repr(bool(value))
     if isinstance(value, numbers.Integral):
         return repr(int(value))
-    if isinstance(value, numbers.Real):
-        return repr(float(value))
+    if isinstance(value, numbers.Real):  # (1.0 as 1: the same number as an int or a float)
+        number = float(value)
+        return repr(int(number)) if number.is_integer() else repr(number)
     if isinstance(value, str):
         return repr(value)
     if per_point:

@@ -995,8 +995,8 @@ def evolve_distributed(dmesh: DistributedMesh, delta: Any = None, *, size: Any =
             o.validate()
         return o, as_geometry(geometry)
 
-    o, g = _same_everywhere(dmesh.comm, "evolve", _request_fingerprints(delta, size, method, geometry, arguments),
-                            check)
+    o, g = _same_everywhere(dmesh.comm, "evolve",
+                            lambda: _request_fingerprints(delta, size, method, geometry, arguments), check)
     out = step(dmesh, delta if size is None else delta_from_size(dmesh, size), o, stats=stats, geometry=g)
     return out.rebalance(renumber=False)  # (the lineage moves along)
 
