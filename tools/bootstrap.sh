@@ -61,7 +61,7 @@ rm -f "$stamp"
 # file, and the end of the log if the install fails.
 log=.venv/evomesh-install.log
 echo "evomesh: building the C++ core against CGAL and installing it with its Python dependencies"
-echo "evomesh: this takes a few minutes (3-5 on 2 cores; 3 minutes of CPU time to compile); log: $(pwd)/$log"
+echo "evomesh: this takes a few minutes (about 5 minutes of CPU time, 3-5 minutes on 2 idle cores); log: $(pwd)/$log"
 start=$SECONDS
 compile_progress() {
   local line
