@@ -127,6 +127,18 @@ def test_arguments_that_agree_give_the_serial_step() -> None:
     check_everywhere(same, "the agreed step equals the serial one")
 
 
+@needs_two
+@pytest.mark.parametrize("name", ["method", "values"])
+def test_transfer_arguments_that_differ_raise_on_every_rank(name: str) -> None:
+    d = _dmesh()
+    u = np.zeros(d.n_owned)
+    kwargs = {"method": dict(values=u, method="conservative" if RANK == ODD else "linear"),
+              "values": dict(values={"u": u} if RANK == ODD else u)}[name]
+    message = raises_everywhere(ValueError, evomesh.transfer, d, d, **kwargs)
+    assert message.startswith(f"transfer: {name} must be the same on every rank: "), message
+    assert message.endswith(f" on rank {ODD}"), message
+
+
 # Collective calls, each with arguments that are valid alone.
 _CALLS = {
     "evolve": lambda d: evomesh.evolve(d, 1.0),

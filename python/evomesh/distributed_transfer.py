@@ -140,6 +140,11 @@ def _check_pair(old: Any, new: Any, call: str, fingerprints: dict[str, str],
     return comm
 
 
+def _values_kind(values: Any) -> str:
+    """One array or several by name: the same on every rank (_fields gathers the names of a mapping)."""
+    return "a mapping" if isinstance(values, Mapping) else "an array"
+
+
 def _fields(comm: Any, values: Any) -> tuple[list[Any], list[Any] | None]:
     """The fields to transfer and their names (None: one array), the names the same on every rank."""
     if isinstance(values, Mapping):
@@ -755,7 +760,8 @@ def transfer(old: Any, new: Any, values: Any, method: str = "linear", *, frame: 
         if method not in ("linear", "conservative"):
             raise ValueError(f"method must be 'linear' or 'conservative', got {method!r}")
 
-    comm = _check_pair(old, new, "transfer", {"method": _fingerprint(method), "frame": _fingerprint(frame)}, check)
+    comm = _check_pair(old, new, "transfer", {"method": _fingerprint(method), "frame": _fingerprint(frame),
+                                              "values": _values_kind(values)}, check)
     stats = {} if stats is None else stats
     fields, names = _fields(comm, values)
     if method == "linear":
@@ -823,7 +829,7 @@ def transfer_cells(old: Any, new: Any, values: Any, *, stats: dict[str, Any] | N
     TypeError, ValueError
         On every rank, as :func:`transfer`.
     """
-    comm = _check_pair(old, new, "transfer_cells", {})
+    comm = _check_pair(old, new, "transfer_cells", {"values": _values_kind(values)})
     stats = {} if stats is None else stats
     fields, names = _fields(comm, values)
     arrays = [_field_array(comm, v, len(old.triangles), "triangle", None if names is None else names[k])
