@@ -559,6 +559,8 @@ def _fingerprint_of(value: Any, per_point: bool) -> str:
             return "an array"
     elif isinstance(value, (tuple, list)) and len(value) <= 8:
         return "(" + ", ".join(_fingerprint(v) for v in value) + ")"
+    elif isinstance(value, np.ndarray) and value.ndim == 1 and len(value) <= 8:
+        return _fingerprint(tuple(value.tolist()))
     if isinstance(value, (types.FunctionType, types.BuiltinFunctionType, types.MethodType, functools.partial)):
         return "a function"
     name = type(value).__name__
