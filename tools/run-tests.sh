@@ -4,7 +4,7 @@
 # suite and the MPI tests. Arguments go to pytest. The C++ tests and benchmarks
 # are built in bootstrap's CMake build dir (build/core), against the core its
 # install compiled: the core compiles once, and later runs rebuild only what
-# changed. EVOMESH_SKIP_CPP_TESTS=1 skips that part.
+# changed. EVOMESH_SKIP_CPP_TESTS=1 skips that part. The script fails if any part fails.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash tools/bootstrap.sh
@@ -25,9 +25,11 @@ if [ "${EVOMESH_SKIP_CPP_TESTS:-0}" != 1 ]; then
   (cd "$build" && "$ctest" --output-on-failure)
 fi
 
-# ruff and mypy (tools/lint.sh), then the Python suite.
-bash tools/lint.sh
-.venv/bin/python -m pytest -p no:cacheprovider "$@"
+# ruff and mypy (tools/lint.sh), then the Python suite, then the MPI tests: each
+# runs whatever the others gave, and the script fails at the end if any failed.
+status=0
+bash tools/lint.sh || status=1
+.venv/bin/python -m pytest -p no:cacheprovider "$@" || status=1
 
 # DistributedMesh, its transfers and the distributed step on MPI ranks
 # (tests/test_distributed*.py: every test file that uses MPI). MPI and its
@@ -47,6 +49,7 @@ if [ "${EVOMESH_SKIP_MPI_TESTS:-0}" != 1 ]; then
   for ranks in 1 2 4; do
     echo "== mpiexec -n $ranks: tests/test_distributed*.py"
     timeout --kill-after=30 1800 .venv/bin/mpiexec -n "$ranks" .venv/bin/python -m pytest -q -p no:cacheprovider \
-      tests/test_distributed*.py
+      tests/test_distributed*.py || status=1
   done
 fi
+exit $status
