@@ -29,19 +29,7 @@ from strategies import any_meshes, grid_mesh
 MPI = pytest.importorskip("mpi4py.MPI")
 COMM = MPI.COMM_WORLD
 RANK, SIZE = COMM.rank, COMM.size
-from mpi_support import check_everywhere, watchdog  # noqa: E402,F401 (watchdog: an autouse fixture)
-
-
-def raises_everywhere(exception: type[Exception], call, *args, **kwargs) -> str:
-    """Run a collective call that must raise `exception` on every rank; its message."""
-    try:
-        call(*args, **kwargs)
-    except exception as error:
-        message = str(error)
-    else:
-        message = None
-    check_everywhere(message is not None, f"{exception.__name__} is raised")
-    return message or ""
+from mpi_support import check_everywhere, raises_everywhere, watchdog  # noqa: E402,F401 (watchdog: an autouse fixture)
 
 
 # ----------------------------------------------------------------- meshes

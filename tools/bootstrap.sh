@@ -34,8 +34,8 @@ fi
 # The install is skipped when the sources it is built from are the ones installed
 # last time (a content hash, kept in the venv with the installed module's file
 # and mtime, so an in-place developer rebuild since then counts as a change) and
-# the module still imports: a wheel build compiles everything again.
-# EVOMESH_REINSTALL=1 forces it.
+# the module still imports, and the build dir below is there; an install
+# recompiles only what changed there. EVOMESH_REINSTALL=1 forces it.
 stamp=.venv/.evomesh-installed
 source_hash="$(find CMakeLists.txt pyproject.toml cpp/include cpp/src cpp/bindings python -type f \
   ! -path '*/__pycache__/*' -print0 | LC_ALL=C sort -z | xargs -0 sha256sum | sha256sum | cut -d' ' -f1)"
@@ -43,21 +43,25 @@ installed_module() {
   .venv/bin/python -c 'import os, evomesh._core as m, pytest, hypothesis
 print(m.__file__, os.stat(m.__file__).st_mtime_ns)' 2>/dev/null
 }
-if [ "${EVOMESH_REINSTALL:-0}" != 1 ] && [ -f "$stamp" ] &&
+if [ "${EVOMESH_REINSTALL:-0}" != 1 ] && [ -f "$stamp" ] && [ -f build/core/CMakeCache.txt ] &&
   [ "$(cat "$stamp")" = "$source_hash $(installed_module || echo none)" ]; then
   echo "evomesh: up to date in $(pwd)/.venv"
   exit 0
 fi
 rm -f "$stamp"
 .venv/bin/python -m pip install -q --upgrade pip
-# The package (C++ extension built against Debian's CGAL) and the test tools;
-# also its build requirements, so that the developers' in-place rebuild
-# (pip install --no-build-isolation -ve . -Cbuild-dir=build/dev) works.
+# The build requirements go into .venv (ninja: scikit-build-core's generator),
+# and the package is built without isolation in the fixed CMake build dir
+# build/core: tools/run-tests.sh builds the C++ tests and benchmarks in that same
+# dir against the core compiled here, so the core compiles once, and a later
+# install recompiles only what changed. (The developers' in-place rebuild,
+# pip install --no-build-isolation -ve . -Cbuild-dir=build/dev, uses them too.)
+.venv/bin/python -m pip install -q "scikit-build-core>=0.10" "pybind11>=2.12" ninja
 # pip's verbose output goes to a log; the terminal gets one line per compiled
 # file, and the end of the log if the install fails.
 log=.venv/evomesh-install.log
 echo "evomesh: building the C++ core against CGAL and installing it with its Python dependencies"
-echo "evomesh: this takes a few minutes (3-5 on 2 cores; 3 minutes of CPU time to compile); log: $(pwd)/$log"
+echo "evomesh: this takes a few minutes (about 5 minutes of CPU time, 3-5 minutes on 2 idle cores); log: $(pwd)/$log"
 start=$SECONDS
 compile_progress() {
   local line
@@ -67,7 +71,7 @@ compile_progress() {
     fi
   done
 }
-if ! .venv/bin/python -m pip install -v ".[test]" "scikit-build-core>=0.10" "pybind11>=2.12" 2>&1 |
+if ! .venv/bin/python -m pip install -v --no-build-isolation -Cbuild-dir=build/core ".[test]" 2>&1 |
   tee "$log" | compile_progress; then
   echo "evomesh: the install failed; the end of $log:" >&2
   tail -n 40 "$log" >&2

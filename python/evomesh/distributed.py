@@ -18,13 +18,20 @@ mpi4py is imported only when a method is called, so ``import evomesh`` works
 without it (``pip install evomesh[mpi]``; the MPI library itself comes from the
 ``mpich`` wheel or a system MPI).
 
-Every collective method validates its input on every rank and then agrees on
-the outcome with one allreduce: bad input on one rank makes **every** rank
-raise (the same exception type and message, naming the rank), never a hang.
+Every collective call (these methods, ``evolve`` and the transfers on a
+DistributedMesh) begins with one allgather in which the ranks agree that they
+are in the same call with the same arguments (``_same_everywhere``: cheap
+fingerprints, never big arrays) and that each rank's arguments are valid: a
+difference, or bad input on one rank, makes **every** rank raise the same
+exception (naming the argument, the ranks or the failing rank), never a hang.
+Later checks agree on their outcome with one allreduce (``_collective``).
 """
 
 from __future__ import annotations
 
+import functools
+import numbers
+import types
 from types import MappingProxyType
 from typing import Any, Callable, Mapping, TypeVar
 
@@ -77,20 +84,34 @@ def _collective(comm: Any, work: Callable[..., _T], *args: Any) -> _T:
     raised everywhere, so a rank never waits in a collective that a failed rank
     will not enter. Costs one allreduce (and an allgather on failure)."""
     MPI = _mpi()
-    error: BaseException | None = None
-    result: Any = None
-    try:
-        result = work(*args)
-    except Exception as exc:  # noqa: BLE001 - re-raised below, on every rank
-        error = exc
+    error, result = _attempt(work, *args)
     if comm.allreduce(error is not None, op=MPI.LOR):
-        reports = comm.allgather(None if error is None else (type(error).__name__, str(error)))
-        failed = [rank for rank, report in enumerate(reports) if report is not None]
-        name, message = reports[failed[0]]
-        kind = {"ValueError": ValueError, "TypeError": TypeError}.get(name, RuntimeError)
-        also = f" (ranks {failed} failed)" if len(failed) > 1 else ""
-        raise kind(f"on rank {failed[0]}: {message}{also}") from error
+        _raise_first(comm.allgather(_report(error)), error)
     return result
+
+
+def _attempt(work: Callable[..., _T], *args: Any) -> tuple[Exception | None, Any]:
+    """(None, work(*args)), or (the exception, None) when it raised."""
+    try:
+        return None, work(*args)
+    except Exception as exc:  # noqa: BLE001 - re-raised on every rank by the caller
+        return exc, None
+
+
+def _report(error: Exception | None) -> tuple[str, str] | None:
+    return None if error is None else (type(error).__name__, str(error))
+
+
+def _raise_first(reports: list[tuple[str, str] | None], error: Exception | None) -> None:
+    """Raise, on every rank alike, the failure of the lowest failing rank among
+    the ranks' `reports` (None: did not fail); `error` is this rank's own."""
+    failed = [rank for rank, report in enumerate(reports) if report is not None]
+    if not failed:
+        return
+    name, message = reports[failed[0]]  # type: ignore[misc]
+    kind = {"ValueError": ValueError, "TypeError": TypeError}.get(name, RuntimeError)
+    also = f" (ranks {failed} failed)" if len(failed) > 1 else ""
+    raise kind(f"on rank {failed[0]}: {message}{also}") from error
 
 
 def _exchange(comm: Any, dest: np.ndarray, records: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -466,20 +487,102 @@ def _check_root(comm: Any, root: Any) -> int:
     return int(root)
 
 
-def _same_everywhere(comm: Any, values: dict[str, Any]) -> None:
-    """Raise (on every rank) unless every rank passed the same `values`: a
-    different root or ring count on one rank would make the ranks call
-    different collectives and hang."""
-    every = comm.allgather(values)
+def _same_everywhere(comm: Any, call: str, fingerprints: dict[str, str] | Callable[[], dict[str, str]],
+                     prepare: Callable[[], _T] | None = None) -> _T:
+    """The first collective of every collective call (DistributedMesh's
+    methods, :func:`evomesh.evolve` and the transfers on a DistributedMesh):
+    the ranks agree that they are in the same `call` with the same arguments
+    before any work, so that none goes on into collectives that the others do
+    not make (a hang) or into a result that no serial call gives.
 
-    def check() -> None:
-        for r, theirs in enumerate(every):
-            for name, value in theirs.items():
-                if value != every[0][name]:
-                    raise ValueError(f"{name} must be the same on every rank: {every[0][name]!r} on rank 0, "
-                                     f"{value!r} on rank {r}")
+    `fingerprints` are this rank's arguments that must agree, by name, as short
+    canonical texts (:func:`_fingerprint`: values of small arguments, the kind
+    of per-point ones; never big arrays), or a function that makes them.
+    `prepare`, run here on every rank, checks and converts this rank's
+    arguments; its result is returned. One allgather of (call, fingerprints,
+    this rank's failure), then the same verdict on every rank: ranks in
+    different calls, else an argument that differs (ValueError naming the
+    argument, and the ranks with each value), else a failure of `prepare` or
+    of the fingerprints' function (raised everywhere as :func:`_collective`
+    raises it).
+    """
+    error, texts = (None, fingerprints) if isinstance(fingerprints, dict) else _attempt(fingerprints)
+    result = None
+    if error is None and prepare is not None:
+        error, result = _attempt(prepare)
+    every = comm.allgather((call, texts, _report(error)))  # (texts None: their function failed)
+    calls = [theirs[0] for theirs in every]
+    if len(set(calls)) > 1:
+        raise ValueError(f"the ranks are in different collective calls: {_by_rank(calls)}; every rank must make "
+                         "the same collective calls in the same order") from error
+    if all(theirs[1] is not None for theirs in every):
+        for name in dict.fromkeys(name for theirs in every for name in theirs[1]):
+            values = [theirs[1].get(name, _NOT_GIVEN) for theirs in every]
+            if len(set(values)) > 1:
+                raise ValueError(f"{call}: {name} must be the same on every rank: {_by_rank(values)}") from error
+    _raise_first([theirs[2] for theirs in every], error)
+    return result  # type: ignore[return-value]
 
-    _collective(comm, check)
+
+_NOT_GIVEN = "not given"
+
+
+def _fingerprint(value: Any, per_point: bool = False) -> str:
+    """A short text of an argument that must be the same on every rank, equal
+    for equal arguments on any rank: numbers, strings and short tuples of them
+    by value, ``None`` as "not given", anything else by its type. With
+    `per_point` (delta, size: values over the owned points, or one number, or a
+    function of the owned coordinates) only the kind, and a number's value.
+    Never raises."""
+    try:
+        return _fingerprint_of(value, per_point)
+    except Exception:  # noqa: BLE001 - (a number float() cannot take, a repr that raises): its type
+        return f"a {type(value).__name__}"
+
+
+def _fingerprint_of(value: Any, per_point: bool) -> str:
+    if value is None:
+        return _NOT_GIVEN
+    if isinstance(value, (bool, np.bool_)):
+        return repr(bool(value))
+    if isinstance(value, numbers.Integral):
+        return repr(int(value))
+    if isinstance(value, numbers.Real):  # (1.0 as 1: the same number as an int or a float)
+        number = float(value)
+        return repr(int(number)) if number.is_integer() else repr(number)
+    if isinstance(value, str):
+        return repr(value)
+    if per_point:
+        if isinstance(value, np.ndarray) and value.ndim == 0:
+            return _fingerprint(value[()])
+        if isinstance(value, (np.ndarray, list, tuple)):
+            return "an array"
+    elif isinstance(value, (tuple, list)) and len(value) <= 8:
+        return "(" + ", ".join(_fingerprint(v) for v in value) + ")"
+    elif isinstance(value, np.ndarray) and value.ndim == 1 and len(value) <= 8:
+        return _fingerprint(tuple(value.tolist()))
+    if isinstance(value, (types.FunctionType, types.BuiltinFunctionType, types.MethodType, functools.partial)):
+        return "a function"
+    name = type(value).__name__
+    return f"{'an' if name[:1] in 'AEIOUaeiou' else 'a'} {name}"
+
+
+def _by_rank(values: list[str]) -> str:
+    """'a on ranks 0, 2; b on rank 1': each value and the ranks that have it."""
+    groups: dict[str, list[int]] = {}
+    for rank, value in enumerate(values):
+        groups.setdefault(value, []).append(rank)
+    shown = [f"{value} on {_ranks_text(ranks)}" for value, ranks in list(groups.items())[:4]]
+    if len(groups) > 4:
+        shown.append(f"{len(groups) - 4} other values on the other ranks")
+    return "; ".join(shown)
+
+
+def _ranks_text(ranks: list[int]) -> str:
+    if len(ranks) == 1:
+        return f"rank {ranks[0]}"
+    listed = ", ".join(map(str, ranks[:6]))
+    return f"ranks {listed}" + (f", ... ({len(ranks)} ranks)" if len(ranks) > 6 else "")
 
 
 def _numbered(records: np.ndarray, key: np.ndarray, comm: Any) -> np.ndarray:
@@ -573,6 +676,7 @@ class Renumbering:
     def _move(self, values: Any, dest: np.ndarray, old_gids: np.ndarray, new_rows: np.ndarray,
               what: str) -> np.ndarray:
         comm = self._comm
+        _same_everywhere(comm, f"Renumbering.move_{what}_values", {})
         array = _field_rows(comm, values, len(dest), "values", f"owned {what} of the mesh before rebalance")
         record = np.dtype([("gid", "<i8"), ("value", array.dtype, array.shape[1:])])
         rows = np.empty(len(array), record)
@@ -944,8 +1048,9 @@ class DistributedMesh:
                     raise ValueError("weights must have a positive sum")
             return r, h, _root_records(mesh, size, w)
 
-        root_, rings, records = _collective(comm, prepare)
-        _same_everywhere(comm, {"root": root_, "halo_rings": rings})
+        root_, rings, records = _same_everywhere(
+            comm, "DistributedMesh.scatter", {"root": _fingerprint(root), "halo_rings": _fingerprint(halo_rings)},
+            prepare)
         if rank == root_:
             (point_dest, point_records), (tri_dest, tri_records), (seg_dest, seg_records) = records
             tag_names: Any = dict(mesh.tag_names)  # type: ignore[union-attr]
@@ -1016,11 +1121,13 @@ class DistributedMesh:
         """
         _check_comm(comm)
         size = comm.size
-        local = _collective(comm, _check_local, points, triangles, global_ids, size, owners, segments,
-                            segment_tags, triangle_tags, required, kind, origin, tag_names, triangle_global_ids,
-                            segment_global_ids)
-        rings = _collective(comm, _check_halo_rings, halo_rings)
-        _same_everywhere(comm, {"halo_rings": rings})
+        def prepare() -> tuple[dict[str, Any], int]:
+            return (_check_local(points, triangles, global_ids, size, owners, segments, segment_tags, triangle_tags,
+                                 required, kind, origin, tag_names, triangle_global_ids, segment_global_ids),
+                    _check_halo_rings(halo_rings))
+
+        local, rings = _same_everywhere(comm, "DistributedMesh.from_local",
+                                        {"halo_rings": _fingerprint(halo_rings)}, prepare)
         given = comm.allgather((local["given"], sorted(local["tag_names"].items())))
 
         def agree() -> None:
@@ -1104,8 +1211,8 @@ class DistributedMesh:
         points and triangles numbered as in the old mesh's ``gather``.
         """
         comm = self.comm
-        root_ = _collective(comm, _check_root, comm, root)
-        _same_everywhere(comm, {"root": root_})
+        root_ = _same_everywhere(comm, "DistributedMesh.gather", {"root": _fingerprint(root)},
+                                 lambda: _check_root(comm, root))
         owned = slice(0, self.n_owned)
         points = np.empty(self.n_owned, _POINT)
         points["gid"], points["xy"] = self.global_ids[owned], self.points[owned]
@@ -1243,8 +1350,9 @@ class DistributedMesh:
                     raise TypeError(f"{name} must be True or False, got {flag!r}")
             return rings, bool(renumber), bool(return_map), _point_weights(weights, self.owned_points)
 
-        rings, renumber_, return_map_, w = _collective(comm, prepare)
-        _same_everywhere(comm, {"halo_rings": rings, "renumber": renumber_, "return_map": return_map_})
+        rings, renumber_, return_map_, w = _same_everywhere(
+            comm, "DistributedMesh.rebalance", {name: _fingerprint(value) for name, value in (
+                ("renumber", renumber), ("halo_rings", halo_rings), ("return_map", return_map))}, prepare)
         wanted_map = return_map_
         # A step's output carries its lineage (rows per owned point): it moves along.
         return_map_ = return_map_ or self.lineage is not None
@@ -1333,6 +1441,7 @@ class DistributedMesh:
             ``values`` on the owned points, the owners' values on the halo
             points (one Alltoallv with the neighbours; the plan is made once).
         """
+        _same_everywhere(self.comm, "DistributedMesh.exchange_halo", {})
         return self._halo_rows(self._field(values, "values"))
 
     def _halo_rows(self, array: np.ndarray) -> np.ndarray:
@@ -1361,8 +1470,8 @@ class DistributedMesh:
         root : int, optional
         """
         comm = self.comm
-        root_ = _collective(comm, _check_root, comm, root)
-        _same_everywhere(comm, {"root": root_})
+        root_ = _same_everywhere(comm, "DistributedMesh.gather_field", {"root": _fingerprint(root)},
+                                 lambda: _check_root(comm, root))
         array = self._field(values, "values")
         record = np.dtype([("gid", "<i8"), ("value", array.dtype, array.shape[1:])])
         rows = np.empty(len(array), record)
@@ -1383,6 +1492,7 @@ class DistributedMesh:
             ``point_balance``, ``triangle_balance``: the largest owned count
             over the mean (1.0 is perfect).
         """
+        _same_everywhere(self.comm, "DistributedMesh.partition_stats", {})
         counts = np.array([self.n_owned, len(self.points) - self.n_owned, len(self.triangles),
                            len(self.halo_triangles)], dtype=np.int64)
         every = np.empty((self.comm.size, 4), dtype=np.int64)

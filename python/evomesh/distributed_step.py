@@ -34,12 +34,12 @@ quality pass, which is refused by name; curved boundaries (``geometry``) too.
 from __future__ import annotations
 
 import time
-from typing import Any, Callable
+from typing import Any, Callable, Mapping
 
 import numpy as np
 
 from . import _core, _halo
-from .distributed import DistributedMesh, _collective, _exchange, _mpi
+from .distributed import _NOT_GIVEN, DistributedMesh, _collective, _exchange, _fingerprint, _mpi, _same_everywhere
 from .distributed_packing import lexical_first_mis
 from .distributed_repair import gap_repair, spacing_repair
 from .distributed_spacing import DistributedSpacing, boundary_flags, delta_from_size, segment_skeleton
@@ -957,22 +957,35 @@ def _carried_triangle_tags(old: DistributedMesh, a: np.ndarray, b: np.ndarray, c
 
 def evolve_distributed(dmesh: DistributedMesh, delta: Any = None, *, size: Any = None, method: str = "frfc",
                        options: Any = None, stats: dict[str, Any] | None = None,
-                       build_options: Callable[[], Any] | None = None, geometry: Any = None) -> DistributedMesh:
+                       build_options: Callable[[], Any] | None = None, geometry: Any = None,
+                       arguments: Mapping[str, Any] | None = None) -> DistributedMesh:
     """:func:`evomesh.evolve` on a :class:`~evomesh.DistributedMesh` (it calls
     this, with `build_options` making the options from its arguments as for a
-    Mesh). Collective: every rank calls it with its own delta. The step is
+    Mesh, and its other `arguments` by name: seed, options, overrides,
+    displacement, interface, interface_tag, interface_regions, interface_band).
+    Collective: every rank calls it with its own delta. The step is
     :func:`step`, the result rebalanced (:meth:`DistributedMesh.rebalance`,
     global ids kept: the serial step's output order) with its lineage moved
     along. `options`: an FrfcOptions, when called directly (default: the
-    paper's)."""
-    comm = dmesh.comm
+    paper's).
 
-    def check() -> Any:
+    Before any work the ranks agree on every argument but the per-point
+    values (:func:`_request_fingerprints`; a difference raises the same
+    ValueError on every rank, naming the argument and the ranks), then check
+    and convert them (a failure on one rank raises on all)."""
+    arguments = {"options": options} if arguments is None else arguments
+
+    def check() -> tuple[Any, Any]:
         if (delta is None) == (size is None):
             raise TypeError("evolve on a DistributedMesh needs exactly one of delta and size (each a value per "
                             "owned point, a scalar, or a function of the owned coordinates)")
         if method != "frfc":
             raise ValueError(f"not yet on a DistributedMesh: method={method!r} (only 'frfc')")
+        if arguments.get("displacement") is not None or arguments.get("interface") is not None:
+            raise ValueError("not yet on a DistributedMesh: displacement= and interface= (gather() the mesh, evolve "
+                             "it on the root, and scatter() the result)")
+        if any(arguments.get(name) is not None for name in _INTERFACE_ARGUMENTS):
+            raise TypeError("interface_tag, interface_regions and interface_band need interface (phi)")
         if build_options is not None:
             o = build_options()
         else:
@@ -980,9 +993,49 @@ def evolve_distributed(dmesh: DistributedMesh, delta: Any = None, *, size: Any =
             if not isinstance(o, _core.FrfcOptions):
                 raise TypeError(f"options must be evomesh FrfcOptions, got {type(o).__name__}")
             o.validate()
-        return o
+        return o, as_geometry(geometry)
 
-    o = _collective(comm, check)
-    g = _collective(comm, as_geometry, geometry)
+    o, g = _same_everywhere(dmesh.comm, "evolve",
+                            lambda: _request_fingerprints(delta, size, method, geometry, arguments), check)
     out = step(dmesh, delta if size is None else delta_from_size(dmesh, size), o, stats=stats, geometry=g)
     return out.rebalance(renumber=False)  # (the lineage moves along)
+
+
+_INTERFACE_ARGUMENTS = ("interface_tag", "interface_regions", "interface_band")
+# Options that may differ between ranks: the result does not depend on them.
+_RANK_LOCAL_OPTIONS = ("threads",)
+
+
+def _request_fingerprints(delta: Any, size: Any, method: Any, geometry: Any,
+                          arguments: Mapping[str, Any]) -> dict[str, str]:
+    """What must be the same on every rank for a step, as short texts
+    (distributed._fingerprint): the method, the kind of delta and size (and a
+    number's value), the geometry's parameters, the seed, the options (field by
+    field) and every keyword override, the interface arguments. Per-point
+    values (arrays, functions) only by kind: comparing them is the step's work."""
+    fingerprints = {"method": _fingerprint(method), "delta": _fingerprint(delta, per_point=True),
+                    "size": _fingerprint(size, per_point=True), "geometry": _geometry_fingerprint(geometry)}
+    for name, value in arguments.items():
+        if name == "overrides":
+            fingerprints.update({key: _fingerprint(v) for key, v in value.items() if key not in _RANK_LOCAL_OPTIONS})
+        elif name == "options":
+            fingerprints["options"] = _fingerprint(value)
+            if isinstance(value, (_core.FrfcOptions, _core.DrfcOptions)):
+                fingerprints.update({f"options.{field}": _fingerprint(_option_value(getattr(value, field)))
+                                     for field in type(value).fields if field not in _RANK_LOCAL_OPTIONS})
+        else:
+            fingerprints[name] = _fingerprint(value, per_point=name in ("displacement", "interface"))
+    return fingerprints
+
+
+def _option_value(value: Any) -> Any:
+    """An option field as a plain value (an enum by its name)."""
+    return value if isinstance(value, (bool, int, float, str)) else str(value)
+
+
+def _geometry_fingerprint(geometry: Any) -> str:
+    try:
+        g = as_geometry(geometry)
+    except Exception:  # noqa: BLE001 - the check after the agreement says what is wrong with it
+        return _fingerprint(geometry)
+    return _NOT_GIVEN if g is None else g._fingerprint()

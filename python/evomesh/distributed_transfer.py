@@ -62,7 +62,7 @@ correctly rounded sum of the partials, independent of the order of ranks.
 from __future__ import annotations
 
 import math
-from typing import Any, Mapping
+from typing import Any, Callable, Mapping
 
 import numpy as np
 
@@ -72,9 +72,11 @@ from .distributed import (
     _collective,
     _contains,
     _exchange,
+    _fingerprint,
     _first_of_each,
     _index_of,
     _mpi,
+    _same_everywhere,
     _unique,
 )
 from .field_transfer import (
@@ -111,12 +113,16 @@ def _receiving_chunks(n: int) -> np.ndarray:
 
 
 # ------------------------------------------------------------------ checks
-def _check_pair(old: Any, new: Any) -> Any:
-    """The communicator both meshes live on; raises on every rank (on the
-    communicator of whichever argument is distributed) when they do not fit."""
+def _check_pair(old: Any, new: Any, call: str, fingerprints: dict[str, str],
+                check_arguments: Callable[[], None] = lambda: None) -> Any:
+    """The communicator both meshes live on, after the ranks agreed on the call
+    and its `fingerprints` (_same_everywhere); raises on every rank (on the
+    communicator of whichever argument is distributed) when they do not fit or
+    `check_arguments` raises."""
     comm = old.comm if isinstance(old, DistributedMesh) else new.comm
 
     def check() -> None:
+        check_arguments()
         MPI = _mpi()
         for name, mesh in (("old", old), ("new", new)):
             if not isinstance(mesh, DistributedMesh):
@@ -130,8 +136,13 @@ def _check_pair(old: Any, new: Any) -> Any:
                 raise ValueError(f"{name} has halo_rings=0: the distributed transfer needs halo_rings >= 1 (the "
                                  "stars of owned points: boundary edges of old, mass matrix rows of new)")
 
-    _collective(comm, check)
+    _same_everywhere(comm, call, fingerprints, check)
     return comm
+
+
+def _values_kind(values: Any) -> str:
+    """One array or several by name: the same on every rank (_fields gathers the names of a mapping)."""
+    return "a mapping" if isinstance(values, Mapping) else "an array"
 
 
 def _fields(comm: Any, values: Any) -> tuple[list[Any], list[Any] | None]:
@@ -743,16 +754,15 @@ def transfer(old: Any, new: Any, values: Any, method: str = "linear", *, frame: 
         plus: a Mesh paired with a DistributedMesh, different communicators,
         halo_rings=0, field names or dtypes that differ between ranks).
     """
-    comm = _check_pair(old, new)
-    stats = {} if stats is None else stats
-
     def check() -> None:
         if frame not in ("eulerian", "lagrangian"):
             raise ValueError(f"frame must be 'eulerian' or 'lagrangian', got {frame!r}")
         if method not in ("linear", "conservative"):
             raise ValueError(f"method must be 'linear' or 'conservative', got {method!r}")
 
-    _collective(comm, check)
+    comm = _check_pair(old, new, "transfer", {"method": _fingerprint(method), "frame": _fingerprint(frame),
+                                              "values": _values_kind(values)}, check)
+    stats = {} if stats is None else stats
     fields, names = _fields(comm, values)
     if method == "linear":
         out = _linear(comm, old, new, fields, names, stats)
@@ -819,7 +829,7 @@ def transfer_cells(old: Any, new: Any, values: Any, *, stats: dict[str, Any] | N
     TypeError, ValueError
         On every rank, as :func:`transfer`.
     """
-    comm = _check_pair(old, new)
+    comm = _check_pair(old, new, "transfer_cells", {"values": _values_kind(values)})
     stats = {} if stats is None else stats
     fields, names = _fields(comm, values)
     arrays = [_field_array(comm, v, len(old.triangles), "triangle", None if names is None else names[k])

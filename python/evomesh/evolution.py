@@ -143,8 +143,12 @@ def evolve(mesh: Mesh, delta: Any = None, *, size: Any = None, method: str = "fr
         FRFC options, delta or size and curved boundaries (``geometry``;
         evomesh.distributed_step); tags, required points, origin and the
         lineage come along, and a step that returns its input keeps its order.
-        The quality pass (with ``quality``, the default) runs on rank 0 on the
-        gathered kept points and pieces (docs/distributed-step.md 3.11).
+        Every other argument (a scalar delta or size too, and their kind) must
+        be the same on every rank, but ``threads``: a difference raises the
+        same ValueError on every rank before any work, naming the argument
+        and the ranks. The quality pass (with ``quality``, the default) runs
+        on rank 0 on the gathered kept points and pieces
+        (docs/distributed-step.md 3.11).
     delta : array_like, shape (n,), or a scalar
         Per-point factor, relative to the current spacing: the new spacing
         (nearest-neighbour distance) at p is about delta(p) nn_M(p); < 1
@@ -457,19 +461,20 @@ def evolve(mesh: Mesh, delta: Any = None, *, size: Any = None, method: str = "fr
         domain, crossing boundaries). The input is never modified.
     """
     if type(mesh).__name__ == "DistributedMesh":  # (not imported here: mpi4py is optional)
-        if displacement is not None or interface is not None:
-            raise ValueError("not yet on a DistributedMesh: displacement= and interface= (gather() the "
-                             "mesh, evolve it on the root, and scatter() the result)")
         from evomesh.distributed_step import evolve_distributed
 
-        def build_options() -> Any:  # (on every rank, inside the step's failure agreement)
+        def build_options() -> Any:  # (on every rank, once the ranks agree on the arguments)
             o = make_options("frfc", options, **overrides)
             if seed is not None:
                 o.seed = _check_seed(seed)
             return o
 
+        # Every argument goes to the ranks' agreement (displacement and interface are refused there, on every rank).
         return evolve_distributed(mesh, delta, size=size, method=method,  # type: ignore[return-value]
-                                  build_options=build_options, geometry=geometry)
+                                  build_options=build_options, geometry=geometry, arguments=dict(
+                                      seed=seed, options=options, overrides=overrides, displacement=displacement,
+                                      interface=interface, interface_tag=interface_tag,
+                                      interface_regions=interface_regions, interface_band=interface_band))
     _require_mesh(mesh)
     if (delta is None) == (size is None):
         raise TypeError(

@@ -25,8 +25,10 @@ with :meth:`BoundaryGeometry.from_projection`.
 
 from __future__ import annotations
 
+import hashlib
 import math
 import numbers
+import re
 from collections.abc import Callable, Iterable, Mapping
 from typing import Any, Protocol
 
@@ -264,6 +266,15 @@ class BoundaryGeometry:
 
     def __repr__(self) -> str:
         return f"BoundaryGeometry(tags={list(self.tags)}, corner_angle={self.corner_angle})"
+
+    def _fingerprint(self) -> str:
+        """This geometry in a few characters, equal on every process for equal
+        parameters (a DistributedMesh's ranks compare it before a step): the
+        tags, the corner angle and a hash of each curve's repr (a Circle's or an
+        Arc's parameters; a function by its name), memory addresses removed."""
+        curves = [(tag, self._curves[tag]) for tag in self.tags] + [(None, self._project_all)]
+        text = re.sub(r" at 0x[0-9a-fA-F]+", "", repr(curves))
+        return f"{self!r} #{hashlib.sha256(text.encode()).hexdigest()[:12]}"
 
 
 def as_geometry(geometry: Any) -> BoundaryGeometry | None:
