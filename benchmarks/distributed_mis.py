@@ -1,5 +1,5 @@
 """Issue 29: the lexical-first MIS on real MPI ranks
-(evomesh.distributed_packing.lexical_first_mis): rounds, halo copies and bytes
+(evomesh.distributed.packing.lexical_first_mis): rounds, halo copies and bytes
 exchanged against mesh size and rank count, every run checked against the
 serial MIS. The sphere systems are benchmarks/mis_rounds.py's (a refining
 step's second packing pass: old points plus 3 candidates per refining
@@ -26,7 +26,7 @@ import numpy as np
 from mpi4py import MPI
 
 from evomesh import _core
-from evomesh.distributed_packing import lexical_first_mis
+from evomesh.distributed.packing import lexical_first_mis
 
 sys.path.insert(0, str(Path(__file__).parent))
 from mis_rounds import hilbert_parts, spheres  # noqa: E402

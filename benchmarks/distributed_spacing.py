@@ -1,4 +1,4 @@
-"""Issue 29: step 1 on real MPI ranks (evomesh.distributed_spacing.DistributedSpacing):
+"""Issue 29: step 1 on real MPI ranks (evomesh.distributed.spacing.DistributedSpacing):
 halo records and bytes exchanged against mesh size and rank count, and seconds
 against the serial step 1 (`_core.step_spacing`) on the same mesh in the same
 run; every run is checked bit for bit against the serial values.
@@ -25,7 +25,7 @@ from mpi4py import MPI
 
 import evomesh
 from evomesh import DistributedMesh, _core
-from evomesh.distributed_spacing import DistributedSpacing
+from evomesh.distributed.spacing import DistributedSpacing
 from evomesh.meshgen import polygon_mesh
 
 

@@ -29,7 +29,7 @@ from mpi4py import MPI
 
 import evomesh
 from evomesh import DistributedMesh
-from evomesh.distributed_step import evolve_distributed
+from evomesh.distributed.step import evolve_distributed
 
 sys.path.insert(0, str(Path(__file__).parent))
 from distributed_spacing import domain  # noqa: E402 (the same plate with two holes)

@@ -29,7 +29,7 @@ import numpy as np
 from mpi4py import MPI
 
 import evomesh
-from evomesh import distributed_transfer
+from evomesh.distributed import transfer as distributed_transfer
 from evomesh.meshgen import unit_square_mesh
 
 

@@ -25,7 +25,7 @@ import numpy as np
 
 import evomesh
 from evomesh import _core
-from evomesh.distributed import _hilbert_keys
+from evomesh.distributed.mesh import _hilbert_keys
 
 
 def spheres(n: int, seed: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:

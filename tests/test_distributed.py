@@ -22,7 +22,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import evomesh
-from evomesh.distributed import _hilbert_keys
+from evomesh.distributed.mesh import _hilbert_keys
 from evomesh.meshgen import disc_with_hole_mesh, polygon_mesh, unit_square_mesh
 from strategies import any_meshes, grid_mesh
 

@@ -18,7 +18,7 @@ from evomesh.meshgen import HOLE_TAG, OUTER_TAG, disc_with_hole_mesh, polygon_me
 
 MPI = pytest.importorskip("mpi4py.MPI")
 from evomesh import DistributedMesh  # noqa: E402
-from evomesh.distributed_step import evolve_distributed  # noqa: E402
+from evomesh.distributed.step import evolve_distributed  # noqa: E402
 from mpi_support import check_everywhere, watchdog  # noqa: E402,F401 (watchdog: an autouse fixture)
 
 COMM = MPI.COMM_WORLD

@@ -1,4 +1,4 @@
-"""The lineage of a step on MPI ranks (evomesh.distributed_lineage, issue 29):
+"""The lineage of a step on MPI ranks (evomesh.distributed.lineage, issue 29):
 ``evolve(dmesh, ...).lineage`` names each owned point's old triangle by global
 id, survives the step's rebalance, and ``gather()`` gives the serial step's
 Lineage: bit for bit wherever the serial parent is the same triangle (every
@@ -21,7 +21,7 @@ from evomesh import _core
 
 MPI = pytest.importorskip("mpi4py.MPI")
 from evomesh import DistributedLineage  # noqa: E402
-from evomesh.distributed_transfer import transfer as distributed_transfer  # noqa: E402 (evomesh.transfer's, with stats)
+from evomesh.distributed.transfer import transfer as distributed_transfer  # noqa: E402 (evomesh.transfer's, with stats)
 from mpi_support import check_everywhere, watchdog  # noqa: E402,F401 (watchdog: an autouse fixture)
 from test_distributed_step import _DOMAINS, _front, _mesh, _options, _scatter, _with_required  # noqa: E402
 

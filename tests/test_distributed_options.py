@@ -1,4 +1,4 @@
-"""The serial step's recommended options on MPI ranks (evomesh.distributed_step,
+"""The serial step's recommended options on MPI ranks (evomesh.distributed.step,
 issue 29): demotion, settled and coarse skipping, adaptive grid cells, ring
 candidates and the cheap radius, each alone and together, give the serial
 step's mesh array for array on any number of ranks.
@@ -19,7 +19,7 @@ from strategies import crack_mesh, holes_mesh
 
 MPI = pytest.importorskip("mpi4py.MPI")
 from evomesh import DistributedMesh  # noqa: E402
-from evomesh.distributed_step import _grid_graph, _pack, evolve_distributed  # noqa: E402
+from evomesh.distributed.step import _grid_graph, _pack, evolve_distributed  # noqa: E402
 from mpi_support import check_everywhere, watchdog  # noqa: E402,F401 (watchdog: an autouse fixture)
 
 COMM = MPI.COMM_WORLD

@@ -1,4 +1,4 @@
-"""The lexical-first MIS on MPI ranks (evomesh.distributed_packing, issue 29):
+"""The lexical-first MIS on MPI ranks (evomesh.distributed.packing, issue 29):
 the kept set equals the serial packing's on any number of ranks and any
 partition, including partitions that cut the order into contiguous ranges (the
 worst case for rounds) and spheres whose conflicts cross gaps (no mesh, no
@@ -20,7 +20,7 @@ from hypothesis import strategies as st
 from evomesh import _core
 
 MPI = pytest.importorskip("mpi4py.MPI")
-from evomesh.distributed_packing import lexical_first_mis  # noqa: E402
+from evomesh.distributed.packing import lexical_first_mis  # noqa: E402
 from mpi_support import check_everywhere, watchdog  # noqa: E402,F401 (watchdog: an autouse fixture)
 
 COMM = MPI.COMM_WORLD

@@ -1,4 +1,4 @@
-"""The quality pass in a step on MPI ranks (evomesh.distributed_step,
+"""The quality pass in a step on MPI ranks (evomesh.distributed.step,
 issue 29; docs/distributed-step.md 3.11): ``evolve(dmesh, ...)`` with the
 recommended options (the quality pass on, serial or in rounds) gives the serial
 ``evolve`` mesh array for array on any number of ranks, with holes, required
@@ -24,7 +24,7 @@ from strategies import crack_mesh, holes_mesh
 
 MPI = pytest.importorskip("mpi4py.MPI")
 from evomesh import DistributedMesh  # noqa: E402
-from evomesh.distributed_step import evolve_distributed  # noqa: E402
+from evomesh.distributed.step import evolve_distributed  # noqa: E402
 from mpi_support import check_everywhere, watchdog  # noqa: E402,F401 (watchdog: an autouse fixture)
 
 COMM = MPI.COMM_WORLD

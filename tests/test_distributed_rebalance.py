@@ -20,7 +20,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import evomesh
-from evomesh.distributed import Renumbering, _hilbert_keys
+from evomesh.distributed.mesh import Renumbering, _hilbert_keys
 from evomesh.meshgen import unit_square_mesh
 from strategies import any_meshes
 

@@ -1,4 +1,4 @@
-"""Step 1 on MPI ranks (evomesh.distributed_spacing, issue 29,
+"""Step 1 on MPI ranks (evomesh.distributed.spacing, issue 29,
 docs/distributed-step.md 3.1-3.2): nn, the weights (capped by the local feature
 size, whose chains and walks cross ranks) and f at the owned points equal the
 serial step's bit for bit, on any number of ranks and any partition; f at
@@ -22,7 +22,7 @@ from strategies import grid_mesh
 
 MPI = pytest.importorskip("mpi4py.MPI")
 from evomesh import DistributedMesh  # noqa: E402
-from evomesh.distributed_spacing import DistributedSpacing  # noqa: E402
+from evomesh.distributed.spacing import DistributedSpacing  # noqa: E402
 from mpi_support import check_everywhere, watchdog  # noqa: E402,F401 (watchdog: an autouse fixture)
 
 COMM = MPI.COMM_WORLD

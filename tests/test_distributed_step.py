@@ -1,4 +1,4 @@
-"""FRFC's step on MPI ranks (evomesh.distributed_step, issue 29): the kept
+"""FRFC's step on MPI ranks (evomesh.distributed.step, issue 29): the kept
 points of the packing, and the step's mesh, equal the serial step's on any
 number of ranks and partitions.
 
@@ -18,7 +18,7 @@ from strategies import crack_mesh
 
 MPI = pytest.importorskip("mpi4py.MPI")
 from evomesh import DistributedMesh  # noqa: E402
-from evomesh.distributed_step import packing  # noqa: E402
+from evomesh.distributed.step import packing  # noqa: E402
 from mpi_support import check_everywhere, watchdog  # noqa: E402,F401 (watchdog: an autouse fixture)
 
 COMM = MPI.COMM_WORLD
@@ -162,7 +162,7 @@ def test_size_requests_on_ranks_give_the_serial_meshes(name: str) -> None:
     triangles, then three and one more by halo exchanges) equals the serial
     one bit for bit, and so do the meshes, step after step: refining half the
     domain, coarsening the other, then the same request again (it stays put)."""
-    from evomesh.distributed_spacing import delta_from_size
+    from evomesh.distributed.spacing import delta_from_size
     from evomesh.spacing_function import delta_from_size as serial_delta_from_size
 
     mesh = _mesh(name)
@@ -253,7 +253,7 @@ def test_the_worked_example_runs_without_gathering(capsys, monkeypatch) -> None:
 def test_size_request_where_a_fine_spot_has_passed_is_the_serial_one() -> None:
     """delta_from_size's rings through too-fine points (the rim of a region
     coarsening back) on the ranks, as the serial ones, bit for bit."""
-    from evomesh.distributed_spacing import delta_from_size
+    from evomesh.distributed.spacing import delta_from_size
     from evomesh.meshgen import unit_square_mesh
     from evomesh.spacing_function import delta_from_size as serial_delta_from_size
 

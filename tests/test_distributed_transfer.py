@@ -193,7 +193,7 @@ def test_conservative_transfer_of_several_fields_and_dtypes():
     local = {key: owned(d_old, f) for key, f in fields.items()}
     before = {key: f.copy() for key, f in local.items()}
     stats: dict = {}
-    from evomesh import distributed_transfer
+    from evomesh.distributed import transfer as distributed_transfer
 
     got = distributed_transfer.transfer(d_old, d_new, local, method="conservative", stats=stats)
     want = evomesh.transfer(old, new, fields, method="conservative")

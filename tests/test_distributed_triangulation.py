@@ -1,5 +1,5 @@
 """The constrained Delaunay triangulation on MPI ranks
-(evomesh.distributed_triangulation, issue 29, docs/distributed-step.md 3.5):
+(evomesh.distributed.triangulation, issue 29, docs/distributed-step.md 3.5):
 the union of the ranks' triangles is the serial ``constrained_delaunay`` of all
 points and pieces (holes, interior constraints, concave domains, lattices full
 of cocircular points), on any number of ranks and any partition of the points,
@@ -21,7 +21,7 @@ from evomesh.meshgen import disc_with_hole_mesh, polygon_mesh, unit_square_mesh
 from strategies import grid_mesh
 
 MPI = pytest.importorskip("mpi4py.MPI")
-from evomesh.distributed_triangulation import constrained_delaunay  # noqa: E402
+from evomesh.distributed.triangulation import constrained_delaunay  # noqa: E402
 from mpi_support import check_everywhere, watchdog  # noqa: E402,F401 (watchdog: an autouse fixture)
 
 COMM = MPI.COMM_WORLD
@@ -32,7 +32,7 @@ RANK, SIZE = COMM.rank, COMM.size
 def first_reach(request, monkeypatch):
     """Also with a first reach far below the spacing: nearly every fan then
     certifies only after widening, which is where a loose certificate shows."""
-    import evomesh.distributed_triangulation as dt
+    import evomesh.distributed.triangulation as dt
 
     monkeypatch.setattr(dt, "_FIRST_REACH", request.param)
     return request.param

@@ -1,6 +1,6 @@
 // Binding of the lexical-first MIS in rounds over a partition (issue 29):
 // evomesh._core.lexical_first_mis_in_rounds and evomesh._core.MisPart (one
-// MPI rank's sweeps: python/evomesh/distributed_packing.py). Registered by module.cpp through bind_mis_rounds().
+// MPI rank's sweeps: python/evomesh/distributed/packing.py). Registered by module.cpp through bind_mis_rounds().
 #include <pybind11/numpy.h>
 #include <pybind11/pybind11.h>
 

@@ -945,7 +945,7 @@ PYBIND11_MODULE(_core, m) {
       "(lfs, certified) per query; certified 0 where a walk reached the part's border.");
 
   // A rank's part of a mesh for the stages of a distributed step (issue 29;
-  // python/evomesh/distributed_step.py): the held points and triangles with their
+  // python/evomesh/distributed/step.py): the held points and triangles with their
   // global ids, and the whole segment skeleton, in global-id order.
   const auto part_mesh = [](const py::dict& part) {
     Mesh_arrays mesh = to_mesh(part["points"].cast<Float_array>(), part["triangles"].cast<Int_array>(),
@@ -1166,7 +1166,7 @@ PYBIND11_MODULE(_core, m) {
       "Kept candidates on a part's segments moved onto their curves (project_segment_candidates; all of them "
       "kept): (centres, largest move).");
 
-  // The spacing repair in rounds over ranks (python/evomesh/distributed_repair.py).
+  // The spacing repair in rounds over ranks (python/evomesh/distributed/repair.py).
   m.def(
       "part_ring_candidates",
       [part_mesh, per_point](const py::dict& part, const Float_array& f, const Frfc_options& options,

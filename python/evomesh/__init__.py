@@ -7,7 +7,7 @@ as it can.
 """
 
 from evomesh.distributed import DistributedMesh
-from evomesh.distributed_lineage import DistributedLineage
+from evomesh.distributed.lineage import DistributedLineage
 from evomesh.evolution import (
     DRFC_DEFAULTS,
     FRFC_DEFAULTS,
@@ -58,8 +58,8 @@ __all__ = [
 
 __version__ = "0.1.0"
 
-from evomesh import distributed_transfer  # noqa: E402,F401 (registers transfer on DistributedMesh with field_transfer)
 from evomesh._core import default_thread_count  # noqa: E402
+from evomesh.distributed import transfer as distributed_transfer  # noqa: E402,F401 (registers transfer on DistributedMesh with field_transfer)
 
 # Moving-front workflow.
 from evomesh.experiments.growing_circle import growing_circle  # noqa: E402

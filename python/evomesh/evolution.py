@@ -141,7 +141,7 @@ def evolve(mesh: Mesh, delta: Any = None, *, size: Any = None, method: str = "fr
         returns a DistributedMesh whose ``gather()`` is this function's result
         on the gathered mesh, bit for bit, on any number of ranks, with any
         FRFC options, delta or size and curved boundaries (``geometry``;
-        evomesh.distributed_step); tags, required points, origin and the
+        evomesh.distributed.step); tags, required points, origin and the
         lineage come along, and a step that returns its input keeps its order.
         Every other argument (a scalar delta or size too, and their kind) must
         be the same on every rank, but ``threads``: a difference raises the
@@ -461,7 +461,7 @@ def evolve(mesh: Mesh, delta: Any = None, *, size: Any = None, method: str = "fr
         domain, crossing boundaries). The input is never modified.
     """
     if type(mesh).__name__ == "DistributedMesh":  # (not imported here: mpi4py is optional)
-        from evomesh.distributed_step import evolve_distributed
+        from evomesh.distributed.step import evolve_distributed
 
         def build_options() -> Any:  # (on every rank, once the ranks agree on the arguments)
             o = make_options("frfc", options, **overrides)

@@ -315,14 +315,14 @@ def _carried(values: Any, origin: np.ndarray, n_old: int) -> np.ndarray:
     return array[origin]
 
 
-# The transfers on two DistributedMesh, registered by evomesh.distributed_transfer
+# The transfers on two DistributedMesh, registered by evomesh.distributed.transfer
 # (which builds on this module, so this one does not import it).
 _DISTRIBUTED: dict[str, Callable[..., Any]] = {}
 
 
 def _distributed(name: str) -> Callable[..., Any]:
     if name not in _DISTRIBUTED:
-        raise ImportError("the transfers on DistributedMesh live in evomesh.distributed_transfer: import evomesh")
+        raise ImportError("the transfers on DistributedMesh live in evomesh.distributed.transfer: import evomesh")
     return _DISTRIBUTED[name]
 
 

@@ -95,7 +95,7 @@ Candidates segment_candidates(const Mesh_arrays& mesh, const std::vector<double>
 // in a cover disc (incremental_step.cpp); they are not sampled, the result is the same.
 // `queries` (optional): f for the adaptive grids of strongly graded triangles
 // (sample_triangle_blocks).
-// For a rank's part of a distributed step (distributed_step.py), whose halo
+// For a rank's part of a distributed step (distributed/step.py), whose halo
 // points come without their whole fans: `settled` (optional, one flag per
 // point) replaces settled_points on `mesh`; `ring_from` (optional, one flag per
 // point) limits the ring candidates to the R-points flagged (the part's owned

@@ -46,7 +46,7 @@ Mis_rounds lexical_first_mis_in_rounds(const std::vector<Vec2>& centers, const s
                                        const std::vector<std::int32_t>& part, int n_parts);
 
 // One rank's share of the same rounds when the parts are MPI ranks
-// (python/evomesh/distributed_packing.py does the exchanges): the rank holds its
+// (python/evomesh/distributed/packing.py does the exchanges): the rank holds its
 // own spheres and copies of every other sphere that can conflict with one of
 // them (its halo), `order` lists them all in the global order, and sweep()
 // applies the rule of a round to its own undecided spheres, reading its own

@@ -45,7 +45,7 @@ std::vector<Vec2> repair_spacing(const Spacing_repair_input& input, const Frfc_o
                                  std::vector<std::uint8_t>& kept, std::size_t& n_added);
 
 // The pieces of the spacing repair's first part (repair_spacing), for the
-// distributed step (python/evomesh/distributed_repair.py), which decides the
+// distributed step (python/evomesh/distributed/repair.py), which decides the
 // needy points in rounds over ranks and must decide each as serial does.
 
 // The squared target of the re-check at an R-point: (repair_ratio delta nn)^2.

@@ -76,7 +76,7 @@ std::vector<Triangle> constrained_delaunay(const std::vector<Vec2>& points,
                                            const std::vector<Constraint_piece>& pieces);
 
 // The constrained Delaunay triangulation of one MPI rank's points, for the
-// distributed triangulation (python/evomesh/distributed_triangulation.py;
+// distributed triangulation (python/evomesh/distributed/triangulation.py;
 // docs/distributed-step.md 3.5): every finite face, unlabelled, with what the
 // caller needs to certify faces and label the domain across ranks.
 // neighbour[t][k]: the face across the edge opposite corner k (-1: infinite);

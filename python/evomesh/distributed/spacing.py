@@ -40,9 +40,10 @@ from typing import Any, cast
 
 import numpy as np
 
-from . import _core, _halo
-from .distributed import DistributedMesh, _check_comm, _collective, _exchange, _mpi
-from .spacing_function import as_delta
+from .. import _core
+from ..spacing_function import as_delta
+from . import _halo
+from .mesh import DistributedMesh, _check_comm, _collective, _exchange, _mpi
 
 __all__ = ["DistributedSpacing", "delta_from_size", "segment_skeleton"]
 
@@ -528,7 +529,7 @@ def delta_from_size(dmesh: DistributedMesh, size: Any) -> np.ndarray:
     ----------
     size : float, array_like (n_owned,), or callable of the owned coordinates (an (n_owned, 2) array)
     """
-    from . import spacing_function as sf
+    from .. import spacing_function as sf
 
     comm = dmesh.comm
     n_owned = dmesh.n_owned

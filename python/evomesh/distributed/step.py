@@ -38,13 +38,14 @@ from typing import Any, Callable, Mapping
 
 import numpy as np
 
-from . import _core, _halo
-from .distributed import _NOT_GIVEN, DistributedMesh, _collective, _exchange, _fingerprint, _mpi, _same_everywhere
-from .distributed_packing import lexical_first_mis
-from .distributed_repair import gap_repair, spacing_repair
-from .distributed_spacing import DistributedSpacing, boundary_flags, delta_from_size, segment_skeleton
-from .geometry import as_geometry
-from .mesh_quality import _warn_quality
+from .. import _core
+from ..geometry import as_geometry
+from ..mesh_quality import _warn_quality
+from . import _halo
+from .mesh import _NOT_GIVEN, DistributedMesh, _collective, _exchange, _fingerprint, _mpi, _same_everywhere
+from .packing import lexical_first_mis
+from .repair import gap_repair, spacing_repair
+from .spacing import DistributedSpacing, boundary_flags, delta_from_size, segment_skeleton
 
 __all__ = ["evolve_distributed", "packing", "step", "with_curve_kinds"]
 
@@ -634,7 +635,7 @@ def step(dmesh: DistributedMesh, delta: Any, options: Any = None, *, stats: dict
 
     # The triangulation, each triangle on the rank of its least id.
     cdt: dict = {}
-    from .distributed_triangulation import _lookup, constrained_delaunay
+    from .triangulation import _lookup, constrained_delaunay
 
     triangles = constrained_delaunay(comm, points, point_keys, pieces, piece_boundary, stats=cdt)
     old = packed["input_gid"]
@@ -744,7 +745,7 @@ def _output(dmesh: DistributedMesh, packed: dict, found: np.ndarray, ids: np.nda
     # returns its arrays as they are (Mesh._trusted), in the serial order.
     object.__setattr__(out, "_segment_is_boundary", boundary_flags(out))
     object.__setattr__(out, "_trusted", True)
-    from .distributed_lineage import step_lineage  # (where the output's points lie in dmesh)
+    from .lineage import step_lineage  # (where the output's points lie in dmesh)
     object.__setattr__(out, "lineage", step_lineage(dmesh, out, packed["spacing"], reach))
     return out, same is not None
 
@@ -924,7 +925,7 @@ def _carried_triangle_tags(old: DistributedMesh, a: np.ndarray, b: np.ndarray, c
     After a step on curves, a centroid may lie outside the old domain by up to
     `reach`: it gets the nearest old triangle (the serial walk stops in a
     boundary triangle within that distance). Collective."""
-    from .distributed_transfer import _bounds, _HeldOld, _nearest_triangles, _receiving_chunks, _table
+    from .transfer import _bounds, _HeldOld, _nearest_triangles, _receiving_chunks, _table
 
     comm = old.comm
     MPI = _mpi()

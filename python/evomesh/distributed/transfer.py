@@ -32,7 +32,7 @@ global ids are the serial indices, triangles keep their rotation):
 - linear, new a step's output from old: the lineage's parents (by global
   id; they contain the points, so they are held) and weights, checked and
   mixed as serially: bit for bit against the serial transfer of the gathered
-  meshes, which carry that lineage (distributed_lineage.py).
+  meshes, which carry that lineage (distributed/lineage.py).
 - linear otherwise: the same kept copies and the same C++ point location and
   barycentric weights (the containing triangle is unique unless a point lies
   exactly on an old edge or vertex: then CGAL's walk picks one of the
@@ -66,20 +66,8 @@ from typing import Any, Callable, Mapping
 
 import numpy as np
 
-from . import _core, _halo
-from .distributed import (
-    DistributedMesh,
-    _collective,
-    _contains,
-    _exchange,
-    _fingerprint,
-    _first_of_each,
-    _index_of,
-    _mpi,
-    _same_everywhere,
-    _unique,
-)
-from .field_transfer import (
+from .. import _core
+from ..field_transfer import (
     _DISTRIBUTED,
     _LINEAGE_SLACK,
     _ROUNDING_ULPS,
@@ -91,6 +79,19 @@ from .field_transfer import (
     _numeric,
     _pairs_within,
     _to_segments,
+)
+from . import _halo
+from .mesh import (
+    DistributedMesh,
+    _collective,
+    _contains,
+    _exchange,
+    _fingerprint,
+    _first_of_each,
+    _index_of,
+    _mpi,
+    _same_everywhere,
+    _unique,
 )
 
 __all__ = ["transfer", "transfer_cells"]

@@ -36,9 +36,10 @@ from typing import Any
 
 import numpy as np
 
-from . import _core, _halo
-from .distributed import _collective, _exchange, _index_of, _mpi
-from .mesh import Lineage, _frozen
+from .. import _core
+from ..mesh import Lineage, _frozen
+from . import _halo
+from .mesh import _collective, _exchange, _index_of, _mpi
 
 __all__ = ["DistributedLineage", "step_lineage"]
 
@@ -162,7 +163,7 @@ def step_lineage(old: Any, new: Any, spacing: Any, outside: float = 0.0) -> Dist
     (ties: least global id) and a negative coordinate, as the serial walk's
     boundary triangle within that reach.
     """
-    from .distributed_transfer import _bounds, _HeldOld, _nearest_triangles, _receiving_chunks, _table
+    from .transfer import _bounds, _HeldOld, _nearest_triangles, _receiving_chunks, _table
 
     MPI = _mpi()
     comm = old.comm

@@ -908,7 +908,7 @@ class DistributedMesh:
     origin: np.ndarray
     tag_names: Mapping[tuple[int, int], str]
     halo_rings: int
-    lineage: Any  # DistributedLineage | None (distributed_lineage.py)
+    lineage: Any  # DistributedLineage | None (distributed/lineage.py)
     _send_index: np.ndarray  # owned points to send in a halo exchange, grouped by destination rank
     _send_counts: np.ndarray
     _recv_positions: np.ndarray  # halo positions the received values go to, grouped by source rank

@@ -27,8 +27,9 @@ from typing import Any
 
 import numpy as np
 
-from . import _core, _halo
-from .distributed import _check_comm, _collective, _exchange, _mpi
+from .. import _core
+from . import _halo
+from .mesh import _check_comm, _collective, _exchange, _mpi
 
 __all__ = ["lexical_first_mis"]
 
@@ -83,7 +84,7 @@ def lexical_first_mis(comm: Any, centers: Any, radii: Any, classes: Any, ties: A
     check_ties : bool, default True
         Check that ties are unique over the ranks and forced spheres come
         first (an exchange of every tie); False for a caller that guarantees
-        both (evomesh.distributed_step).
+        both (evomesh.distributed.step).
     stats : dict, optional
         Filled with "rounds", "copies" (halo spheres held, summed over ranks),
         "bytes_halo" and "bytes_states" (sent, summed over ranks), and

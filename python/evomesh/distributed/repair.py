@@ -51,8 +51,9 @@ from typing import Any
 
 import numpy as np
 
-from . import _core, _halo
-from .distributed import _collective, _exchange, _mpi, _ranges
+from .. import _core
+from . import _halo
+from .mesh import _collective, _exchange, _mpi, _ranges
 
 __all__ = ["gap_repair", "spacing_repair"]
 

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .distributed import _HILBERT_ORDER, _hilbert_keys, _ranges
+from .mesh import _HILBERT_ORDER, _hilbert_keys, _ranges
 
 # Records per chunk: boxes of a few hundred Hilbert-ordered records are tight,
 # and P x (n / 256) boxes are cheap to share. At most _MAX_CHUNKS chunks a rank

@@ -35,8 +35,9 @@ import numpy as np
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
-from . import _core, _halo
-from .distributed import _check_comm, _collective, _exchange, _mpi
+from .. import _core
+from . import _halo
+from .mesh import _check_comm, _collective, _exchange, _mpi
 
 __all__ = ["constrained_delaunay"]
 
