@@ -269,3 +269,17 @@ def test_quality_measures_on_a_regular_tetrahedron():
         tet = tet[:, [0, 2, 1, 3]]
     assert np.allclose(radius_edge_ratios(points, tet), np.sqrt(6) / 4)
     assert np.allclose(dihedral_angles(points, tet), np.degrees(np.arccos(1 / 3)))
+
+
+def test_sliver_pass_moves_only_new_points(cube):
+    def h(x):
+        return np.minimum(0.12, 0.03 + 0.3 * np.abs(np.linalg.norm(x - [0.4, 0.5, 0.5], axis=1) - 0.2))
+
+    plain = evomesh.evolve(cube, size=h, seed=5, sliver_angle=0)
+    treated = evomesh.evolve(cube, size=h, seed=5)
+    check_step(cube, treated)
+    # the same packing: the same old points kept, at the same places
+    assert np.array_equal(np.sort(plain.origin[plain.origin >= 0]), np.sort(treated.origin[treated.origin >= 0]))
+    assert treated.stats["slivers_after"] < treated.stats["slivers_before"]
+    dihedral = dihedral_angles(treated.points, treated.tetrahedra)
+    assert (dihedral < 10).mean() < (dihedral_angles(plain.points, plain.tetrahedra) < 10).mean()

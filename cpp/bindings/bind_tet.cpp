@@ -143,7 +143,7 @@ void bind_tet(py::module_& m) {
       "tet_step",
       [](const Float_array& points, const Int_array& tets, const Int_array& boundary, const Int_array& boundary_tet,
          const Byte_array& steiner, const Byte_array& required, const Float_array& weight, const Float_array& box,
-         double cell_factor, double radius_scale, double boundary_clearance, double max_radius_edge, double max_samples, std::uint64_t seed, int threads,
+         double cell_factor, double radius_scale, double boundary_clearance, double max_radius_edge, double sliver_angle, double max_samples, std::uint64_t seed, int threads,
          std::optional<py::function> cap) {
         Tet_step_input in;
         in.points = to_points3(points, "points");
@@ -164,6 +164,7 @@ void bind_tet(py::module_& m) {
         options.radius_scale = radius_scale;
         options.boundary_clearance = boundary_clearance;
         options.max_radius_edge = max_radius_edge;
+        options.sliver_angle = sliver_angle;
         options.max_samples = max_samples;
         options.seed = seed;
         options.threads = threads;
@@ -205,6 +206,6 @@ void bind_tet(py::module_& m) {
       py::arg("points"), py::arg("tetrahedra"), py::arg("boundary"), py::arg("boundary_tet"), py::arg("steiner"),
       py::arg("required"), py::arg("weight"), py::arg("box"), py::arg("cell_factor"), py::arg("radius_scale"),
       py::arg("boundary_clearance"),
-      py::arg("max_radius_edge"), py::arg("max_samples"), py::arg("seed"), py::arg("threads"), py::arg("cap") = py::none(),
+      py::arg("max_radius_edge"), py::arg("sliver_angle"), py::arg("max_samples"), py::arg("seed"), py::arg("threads"), py::arg("cap") = py::none(),
       "One FRFC step on a box's tetrahedral mesh (evomesh.tet_evolution drives it).");
 }

@@ -574,7 +574,14 @@ Tet_step_result tet_step(const Tet_step_input& in, const Tet_step_options& optio
   if (options.max_radius_edge > 0) {
     Refinement_report report;
     const std::size_t n_kept = result.points.size();
-    result.tets = refined_delaunay(result.points, in.lo, in.hi, options.max_radius_edge, n_kept / 10 + 100, report);
+    Sliver_options slivers;
+    slivers.min_dihedral = options.sliver_angle;
+    slivers.max_radius_edge = options.max_radius_edge;
+    slivers.first_movable = static_cast<std::size_t>(
+        std::count_if(result.origin.begin(), result.origin.end(), [](Index o) { return o >= 0; }));
+    slivers.seed = mix(options.seed ^ 0x51u);
+    result.tets = refined_delaunay(result.points, in.lo, in.hi, options.max_radius_edge, n_kept / 10 + 100, slivers,
+                                   report);
     // The refinement's points: located in the old mesh by a walk from the
     // old tetrahedron of a vertex of the tetrahedron they split.
     const Old_mesh old(in);
@@ -587,6 +594,15 @@ Tet_step_result tet_step(const Tet_step_input& in, const Tet_step_options& optio
       result.kind.push_back(static_cast<std::uint8_t>(output_kind(c, box, in)));
       result.f.push_back(0.0);
     }
+    // Points the sliver pass moved: located again, from where they were.
+    for (Index k : report.moved) {
+      const auto j = static_cast<std::size_t>(k);
+      result.parent_tet[j] = old.locate(result.points[j], result.parent_tet[j]);
+    }
+    stat("sliver_points_moved", static_cast<double>(report.moved.size()));
+    stat("sliver_off_centres", static_cast<double>(report.off_centres));
+    stat("slivers_before", static_cast<double>(report.slivers_before));
+    stat("slivers_after", static_cast<double>(report.slivers_after));
     stat("refinement_points", static_cast<double>(report.inserted));
     stat("refinement_rounds", static_cast<double>(report.rounds));
     stat("radius_edge_unresolved", static_cast<double>(report.unresolved));

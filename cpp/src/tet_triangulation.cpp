@@ -63,6 +63,200 @@ std::vector<Tet> finite_tets(const Delaunay_3& triangulation) {
 
 double squared(const Point_3& a, const Point_3& b) { return CGAL::to_double(CGAL::squared_distance(a, b)); }
 
+// The smallest of the six dihedral angles of a tetrahedron, in degrees: at
+// edge (i, j) the angle between the normals of its two faces there.
+double min_dihedral(const Point_3& a, const Point_3& b, const Point_3& c, const Point_3& d) {
+  const Point_3 p[4] = {a, b, c, d};
+  constexpr int kEdges[6][4] = {{0, 1, 2, 3}, {0, 2, 1, 3}, {0, 3, 1, 2}, {1, 2, 0, 3}, {1, 3, 0, 2}, {2, 3, 0, 1}};
+  double smallest = 180.0;
+  for (const auto& e : kEdges) {
+    const auto edge = p[e[1]] - p[e[0]];
+    const auto n1 = CGAL::cross_product(edge, p[e[2]] - p[e[0]]);
+    const auto n2 = CGAL::cross_product(edge, p[e[3]] - p[e[0]]);
+    const double cosine = n1 * n2 / std::sqrt(n1.squared_length() * n2.squared_length());
+    smallest = std::min(smallest, std::acos(std::clamp(cosine, -1.0, 1.0)) * 180.0 / M_PI);
+  }
+  return smallest;
+}
+
+double min_dihedral(const Delaunay_3::Cell_handle& cell) {
+  return min_dihedral(cell->vertex(0)->point(), cell->vertex(1)->point(), cell->vertex(2)->point(),
+                      cell->vertex(3)->point());
+}
+
+double radius_edge(const Delaunay_3::Cell_handle& cell) {
+  const Point_3& a = cell->vertex(0)->point();
+  const Point_3& b = cell->vertex(1)->point();
+  const Point_3& c = cell->vertex(2)->point();
+  const Point_3& d = cell->vertex(3)->point();
+  const double shortest = std::min({squared(a, b), squared(a, c), squared(a, d), squared(b, c), squared(b, d),
+                                    squared(c, d)});
+  return std::sqrt(squared(CGAL::circumcenter(a, b, c, d), a) / shortest);
+}
+
+// The worst of the tetrahedra around v: (min dihedral, -max radius-edge) to maximise.
+std::pair<double, double> star_quality(const Delaunay_3& triangulation, Vertex_handle v) {
+  std::vector<Delaunay_3::Cell_handle> cells;
+  triangulation.finite_incident_cells(v, std::back_inserter(cells));
+  double dihedral = 180.0, ratio = 0.0;
+  for (const auto& cell : cells) {
+    dihedral = std::min(dihedral, min_dihedral(cell));
+    ratio = std::max(ratio, radius_edge(cell));
+  }
+  return {dihedral, ratio};
+}
+
+std::uint64_t mix(std::uint64_t z) {
+  z += 0x9e3779b97f4a7c15ULL;
+  z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ULL;
+  z = (z ^ (z >> 27)) * 0x94d049bb133111ebULL;
+  return z ^ (z >> 31);
+}
+
+// Picking regions for new points (Chew; Li and Teng): each sliver (smallest
+// dihedral below the bound) with a movable vertex (a new interior point: old
+// points and the box's points never move) tries that vertex at random points
+// of a ball of radius rho times its shortest edge, and keeps the position
+// whose star has the largest smallest dihedral (radius-edge still within
+// bound), if that beats where it was. A move changes every distance from the
+// point by at most rho times its shortest edge, so the spacing stays within
+// that factor of the packing's. In rounds, slivers in canonical order.
+void perturb_slivers(Delaunay_3& triangulation, std::vector<Vertex_handle>& handles, std::vector<Vec3>& points,
+                     const Sliver_options& options, const Vec3& lo, const Vec3& hi, bool first_pass,
+                     Refinement_report& report) {
+  auto movable = [&](Index k) {
+    if (static_cast<std::size_t>(k) < options.first_movable) return false;
+    const Vec3& x = points[static_cast<std::size_t>(k)];
+    for (int a = 0; a < 3; ++a) {
+      if (x[a] == lo[a] || x[a] == hi[a]) return false;
+    }
+    return true;
+  };
+  std::vector<std::uint8_t> moved(points.size(), 0);
+  for (int round = 0; round < options.rounds; ++round) {
+    std::vector<Tet> slivers;
+    for (auto cell = triangulation.finite_cells_begin(); cell != triangulation.finite_cells_end(); ++cell) {
+      if (min_dihedral(cell) < options.min_dihedral) {
+        slivers.push_back(canonical({cell->vertex(0)->info(), cell->vertex(1)->info(), cell->vertex(2)->info(),
+                                     cell->vertex(3)->info()}));
+      }
+    }
+    if (round == 0 && first_pass) report.slivers_before = slivers.size();
+    std::sort(slivers.begin(), slivers.end());
+    std::size_t improved = 0;
+    for (const Tet& t : slivers) {
+      const auto h = [&](int q) { return handles[static_cast<std::size_t>(t[static_cast<std::size_t>(q)])]; };
+      Delaunay_3::Cell_handle cell;
+      int i, j, k, l;
+      if (!triangulation.is_cell(h(0), h(1), h(2), h(3), cell, i, j, k, l)) continue;
+      if (min_dihedral(cell) >= options.min_dihedral) continue;
+      for (int q = 0; q < 4; ++q) {
+        const Index index = t[static_cast<std::size_t>(q)];
+        if (!movable(index)) continue;
+        const Vertex_handle v = h(q);
+        const Point_3 home = v->point();
+        std::vector<Vertex_handle> around;
+        triangulation.finite_adjacent_vertices(v, std::back_inserter(around));
+        double shortest = std::numeric_limits<double>::infinity();
+        for (const auto& w : around) shortest = std::min(shortest, squared(w->point(), home));
+        const double reach = options.rho * std::sqrt(shortest);
+        auto best = star_quality(triangulation, v);
+        const double start = best.first;
+        Point_3 best_point = home;
+        for (int attempt = 0; attempt < options.attempts; ++attempt) {
+          // A uniform point of the ball (rejection from the cube, counter-based draws).
+          double u[3], norm;
+          std::uint64_t draw = mix(mix(options.seed ^ static_cast<std::uint64_t>(index)) + static_cast<std::uint64_t>(round * 64 + attempt));
+          do {
+            norm = 0;
+            for (double& c : u) {
+              draw = mix(draw);
+              c = 2.0 * (static_cast<double>(draw >> 11) * 0x1.0p-53) - 1.0;
+              norm += c * c;
+            }
+          } while (norm > 1.0);
+          const Vec3 x{home.x() + reach * u[0], home.y() + reach * u[1], home.z() + reach * u[2]};
+          bool inside = true;
+          for (int a = 0; a < 3; ++a) inside = inside && x[a] > lo[a] && x[a] < hi[a];
+          if (!inside) continue;
+          if (triangulation.move_if_no_collision(v, Point_3(x[0], x[1], x[2])) != v) continue;
+          const auto quality = star_quality(triangulation, v);
+          if (quality.second <= options.max_radius_edge && quality.first > best.first) {
+            best = quality;
+            best_point = v->point();
+          }
+        }
+        triangulation.move_if_no_collision(v, best_point);
+        if (best.first > start) {
+          points[static_cast<std::size_t>(index)] = {best_point.x(), best_point.y(), best_point.z()};
+          moved[static_cast<std::size_t>(index)] = 1;
+          ++improved;
+        }
+        if (best.first >= options.min_dihedral) break;
+      }
+    }
+    if (improved == 0) break;
+  }
+  report.moved.clear();
+  for (std::size_t k = 0; k < points.size(); ++k) {
+    if (moved[k] || report.was_moved(k)) report.moved.push_back(static_cast<Index>(k));
+  }
+  report.moved_mask.assign(moved.begin(), moved.end());
+  for (Index k : report.moved) report.moved_mask[static_cast<std::size_t>(k)] = 1;
+  std::size_t left = 0;
+  for (auto cell = triangulation.finite_cells_begin(); cell != triangulation.finite_cells_end(); ++cell) {
+    left += min_dihedral(cell) < options.min_dihedral;
+  }
+  report.slivers_after = left;
+}
+
+// Slivers left with no movable vertex (four kept points): a new point at the
+// sliver's circumcentre (which the sliver's empty sphere keeps clear of every
+// point by its circumradius), where that lies inside the box, at least half
+// the sliver's shortest edge from its faces; the perturbation then moves the
+// new points. Returns how many were inserted.
+std::size_t insert_off_centres(Delaunay_3& triangulation, std::vector<Vertex_handle>& handles,
+                               std::vector<Vec3>& points, const Sliver_options& options, const Vec3& lo,
+                               const Vec3& hi, Refinement_report& report) {
+  std::vector<Tet> slivers;
+  for (auto cell = triangulation.finite_cells_begin(); cell != triangulation.finite_cells_end(); ++cell) {
+    if (min_dihedral(cell) < options.min_dihedral) {
+      slivers.push_back(canonical({cell->vertex(0)->info(), cell->vertex(1)->info(), cell->vertex(2)->info(),
+                                   cell->vertex(3)->info()}));
+    }
+  }
+  std::sort(slivers.begin(), slivers.end());
+  std::size_t inserted = 0;
+  for (const Tet& t : slivers) {
+    const auto h = [&](int q) { return handles[static_cast<std::size_t>(t[static_cast<std::size_t>(q)])]; };
+    Delaunay_3::Cell_handle cell;
+    int i, j, k, l;
+    if (!triangulation.is_cell(h(0), h(1), h(2), h(3), cell, i, j, k, l)) continue;
+    if (std::any_of(t.begin(), t.end(), [&](Index v) { return static_cast<std::size_t>(v) >= options.first_movable; })) {
+      continue;  // the perturbation's
+    }
+    const Point_3 centre = CGAL::circumcenter(h(0)->point(), h(1)->point(), h(2)->point(), h(3)->point());
+    double shortest = std::numeric_limits<double>::infinity();
+    for (int u = 0; u < 4; ++u) {
+      for (int v = u + 1; v < 4; ++v) shortest = std::min(shortest, squared(h(u)->point(), h(v)->point()));
+    }
+    const double clearance = 0.5 * std::sqrt(shortest);
+    const Vec3 x{centre.x(), centre.y(), centre.z()};
+    bool clear = true;
+    for (int a = 0; a < 3; ++a) clear = clear && x[a] - lo[a] >= clearance && hi[a] - x[a] >= clearance;
+    if (!clear) continue;
+    const std::size_t before = triangulation.number_of_vertices();
+    const Vertex_handle v = triangulation.insert(centre, cell);
+    if (triangulation.number_of_vertices() == before) continue;
+    v->info() = static_cast<Index>(points.size());
+    points.push_back(x);
+    handles.push_back(v);
+    report.hints.push_back(t[0]);
+    ++inserted;
+  }
+  return inserted;
+}
+
 }  // namespace
 
 std::vector<Tet> delaunay_tetrahedra(const std::vector<Vec3>& points) {
@@ -71,7 +265,7 @@ std::vector<Tet> delaunay_tetrahedra(const std::vector<Vec3>& points) {
 }
 
 std::vector<Tet> refined_delaunay(std::vector<Vec3>& points, const Vec3& lo, const Vec3& hi, double max_ratio,
-                                  std::size_t budget, Refinement_report& report) {
+                                  std::size_t budget, const Sliver_options& slivers, Refinement_report& report) {
   std::vector<Vertex_handle> handles;
   Delaunay_3 triangulation = triangulate(points, handles);
   const std::size_t n_input = points.size();
@@ -146,6 +340,11 @@ std::vector<Tet> refined_delaunay(std::vector<Vec3>& points, const Vec3& lo, con
       ++inserted;
     }
     if (inserted == 0) break;
+  }
+  if (slivers.min_dihedral > 0) {
+    perturb_slivers(triangulation, handles, points, slivers, lo, hi, true, report);
+    report.off_centres = insert_off_centres(triangulation, handles, points, slivers, lo, hi, report);
+    if (report.off_centres > 0) perturb_slivers(triangulation, handles, points, slivers, lo, hi, false, report);
   }
   report.inserted = points.size() - n_input;
   return finite_tets(triangulation);

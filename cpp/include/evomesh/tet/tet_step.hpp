@@ -52,6 +52,9 @@ struct Tet_step_options {
   // (refined_delaunay below; 0: none), with at most a tenth of the kept
   // points plus 100 insertions.
   double max_radius_edge = 2.0;
+  // The sliver pass: tetrahedra with a dihedral angle below this (degrees)
+  // get their new interior vertices perturbed (Sliver_options); 0: none.
+  double sliver_angle = 0;
   // Refuse (Input_error) a step whose grids hold more cells than this.
   double max_samples = 5e7;
   std::uint64_t seed = 0;
@@ -103,8 +106,25 @@ std::vector<double> cone_envelope_3(const std::vector<Vec3>& sites, const std::v
 // first (an even permutation), rows sorted: canonical for the point set.
 std::vector<Tet> delaunay_tetrahedra(const std::vector<Vec3>& points);
 
+// The sliver pass (refined_delaunay): new interior points move within
+// picking regions; old points never move.
+struct Sliver_options {
+  double min_dihedral = 0;          // degrees; 0: no pass
+  double rho = 0.15;                // picking region: rho times the point's shortest edge
+  int attempts = 12;                // random positions tried per point
+  int rounds = 3;
+  double max_radius_edge = 2.0;     // a move must keep the star within this
+  std::size_t first_movable = 0;    // points below this index never move (the kept old points)
+  std::uint64_t seed = 0;
+};
+
 struct Refinement_report {
-  std::size_t inserted = 0;
+  std::vector<Index> moved;     // points the sliver pass moved
+  std::vector<std::uint8_t> moved_mask;
+  bool was_moved(std::size_t k) const { return k < moved_mask.size() && moved_mask[k]; }
+  std::size_t off_centres = 0;  // sliver circumcentres inserted
+  std::size_t slivers_before = 0, slivers_after = 0;
+  std::size_t inserted = 0;     // refinement and off-centre points
   std::size_t unresolved = 0;   // tetrahedra above the ratio when it stopped
   std::size_t rounds = 0;
   std::vector<Index> hints;     // per inserted point: a vertex of the tetrahedron it split
@@ -117,8 +137,9 @@ struct Refinement_report {
 // that lies beyond a box face or within half the shortest edge of it, the
 // centre's projection onto that face (kept off the face's edges; none near an
 // edge). At most `budget` points, appended to `points`.
+// Then, with slivers.min_dihedral > 0, the sliver pass (points moved in place).
 std::vector<Tet> refined_delaunay(std::vector<Vec3>& points, const Vec3& lo, const Vec3& hi, double max_ratio,
-                                  std::size_t budget, Refinement_report& report);
+                                  std::size_t budget, const Sliver_options& slivers, Refinement_report& report);
 
 Tet_step_result tet_step(const Tet_step_input& input, const Tet_step_options& options, const Size_cap& cap);
 
