@@ -152,7 +152,7 @@ def main() -> None:
     mmg_ratio = None
     if binary:
         points, tets = start_mesh.points, start_mesh.tetrahedra
-        for k in range(3):
+        for _ in range(3):
             points, tets, _ = mmg_step(binary, points, tets, size_function(centre0, args.hmin))
         for step in range(1, args.steps + 1):
             h = size_function(centres[step], args.hmin)

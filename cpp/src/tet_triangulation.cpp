@@ -63,25 +63,27 @@ std::vector<Tet> finite_tets(const Delaunay_3& triangulation) {
 
 double squared(const Point_3& a, const Point_3& b) { return CGAL::to_double(CGAL::squared_distance(a, b)); }
 
-// The smallest of the six dihedral angles of a tetrahedron, in degrees: at
-// edge (i, j) the angle between the normals of its two faces there.
-double min_dihedral(const Point_3& a, const Point_3& b, const Point_3& c, const Point_3& d) {
+// How far a tetrahedron's dihedral angles stay from 0 and 180 degrees:
+// min(smallest, 180 - largest), in degrees (at edge (i, j) the angle between
+// the normals of its two faces there). Slivers and caps both score low.
+double dihedral_margin(const Point_3& a, const Point_3& b, const Point_3& c, const Point_3& d) {
   const Point_3 p[4] = {a, b, c, d};
   constexpr int kEdges[6][4] = {{0, 1, 2, 3}, {0, 2, 1, 3}, {0, 3, 1, 2}, {1, 2, 0, 3}, {1, 3, 0, 2}, {2, 3, 0, 1}};
-  double smallest = 180.0;
+  double margin = 90.0;
   for (const auto& e : kEdges) {
     const auto edge = p[e[1]] - p[e[0]];
     const auto n1 = CGAL::cross_product(edge, p[e[2]] - p[e[0]]);
     const auto n2 = CGAL::cross_product(edge, p[e[3]] - p[e[0]]);
     const double cosine = n1 * n2 / std::sqrt(n1.squared_length() * n2.squared_length());
-    smallest = std::min(smallest, std::acos(std::clamp(cosine, -1.0, 1.0)) * 180.0 / M_PI);
+    const double angle = std::acos(std::clamp(cosine, -1.0, 1.0)) * 180.0 / M_PI;
+    margin = std::min({margin, angle, 180.0 - angle});
   }
-  return smallest;
+  return margin;
 }
 
-double min_dihedral(const Delaunay_3::Cell_handle& cell) {
-  return min_dihedral(cell->vertex(0)->point(), cell->vertex(1)->point(), cell->vertex(2)->point(),
-                      cell->vertex(3)->point());
+double dihedral_margin(const Delaunay_3::Cell_handle& cell) {
+  return dihedral_margin(cell->vertex(0)->point(), cell->vertex(1)->point(), cell->vertex(2)->point(),
+                         cell->vertex(3)->point());
 }
 
 double radius_edge(const Delaunay_3::Cell_handle& cell) {
@@ -100,7 +102,7 @@ std::pair<double, double> star_quality(const Delaunay_3& triangulation, Vertex_h
   triangulation.finite_incident_cells(v, std::back_inserter(cells));
   double dihedral = 180.0, ratio = 0.0;
   for (const auto& cell : cells) {
-    dihedral = std::min(dihedral, min_dihedral(cell));
+    dihedral = std::min(dihedral, dihedral_margin(cell));
     ratio = std::max(ratio, radius_edge(cell));
   }
   return {dihedral, ratio};
@@ -113,11 +115,11 @@ std::uint64_t mix(std::uint64_t z) {
   return z ^ (z >> 31);
 }
 
-// Picking regions for new points (Chew; Li and Teng): each sliver (smallest
-// dihedral below the bound) with a movable vertex (a new interior point: old
+// Picking regions for new points (Chew; Li and Teng): each sliver (a
+// dihedral angle below the bound or above 180 degrees minus it) with a movable vertex (a new interior point: old
 // points and the box's points never move) tries that vertex at random points
 // of a ball of radius rho times its shortest edge, and keeps the position
-// whose star has the largest smallest dihedral (radius-edge still within
+// whose star has the largest dihedral margin (radius-edge still within
 // bound), if that beats where it was. A move changes every distance from the
 // point by at most rho times its shortest edge, so the spacing stays within
 // that factor of the packing's. In rounds, slivers in canonical order.
@@ -136,7 +138,7 @@ void perturb_slivers(Delaunay_3& triangulation, std::vector<Vertex_handle>& hand
   for (int round = 0; round < options.rounds; ++round) {
     std::vector<Tet> slivers;
     for (auto cell = triangulation.finite_cells_begin(); cell != triangulation.finite_cells_end(); ++cell) {
-      if (min_dihedral(cell) < options.min_dihedral) {
+      if (dihedral_margin(cell) < options.min_dihedral) {
         slivers.push_back(canonical({cell->vertex(0)->info(), cell->vertex(1)->info(), cell->vertex(2)->info(),
                                      cell->vertex(3)->info()}));
       }
@@ -149,7 +151,7 @@ void perturb_slivers(Delaunay_3& triangulation, std::vector<Vertex_handle>& hand
       Delaunay_3::Cell_handle cell;
       int i, j, k, l;
       if (!triangulation.is_cell(h(0), h(1), h(2), h(3), cell, i, j, k, l)) continue;
-      if (min_dihedral(cell) >= options.min_dihedral) continue;
+      if (dihedral_margin(cell) >= options.min_dihedral) continue;
       for (int q = 0; q < 4; ++q) {
         const Index index = t[static_cast<std::size_t>(q)];
         if (!movable(index)) continue;
@@ -205,7 +207,7 @@ void perturb_slivers(Delaunay_3& triangulation, std::vector<Vertex_handle>& hand
   for (Index k : report.moved) report.moved_mask[static_cast<std::size_t>(k)] = 1;
   std::size_t left = 0;
   for (auto cell = triangulation.finite_cells_begin(); cell != triangulation.finite_cells_end(); ++cell) {
-    left += min_dihedral(cell) < options.min_dihedral;
+    left += dihedral_margin(cell) < options.min_dihedral;
   }
   report.slivers_after = left;
 }
@@ -220,7 +222,7 @@ std::size_t insert_off_centres(Delaunay_3& triangulation, std::vector<Vertex_han
                                const Vec3& hi, Refinement_report& report) {
   std::vector<Tet> slivers;
   for (auto cell = triangulation.finite_cells_begin(); cell != triangulation.finite_cells_end(); ++cell) {
-    if (min_dihedral(cell) < options.min_dihedral) {
+    if (dihedral_margin(cell) < options.min_dihedral) {
       slivers.push_back(canonical({cell->vertex(0)->info(), cell->vertex(1)->info(), cell->vertex(2)->info(),
                                    cell->vertex(3)->info()}));
     }

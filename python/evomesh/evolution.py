@@ -471,7 +471,7 @@ def evolve(mesh: Mesh, delta: Any = None, *, size: Any = None, method: str = "fr
                                           ("interface_band", interface_band)) if value is not None]
         if extra or method != "frfc":
             raise ValueError(f"not yet on a TetMesh: {', '.join(extra) or 'method=' + repr(method)}")
-        return evolve_tet(mesh, delta, size=size, seed=seed, options=options, **overrides)  # type: ignore[return-value]
+        return evolve_tet(mesh, delta, size=size, seed=seed, options=options, **overrides)
     _require_mesh(mesh)
     if (delta is None) == (size is None):
         raise TypeError(

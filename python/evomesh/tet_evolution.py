@@ -80,9 +80,9 @@ class TetOptions:
             raise ValueError(f"radius_scale must be in (0, 1], got {self.radius_scale!r}")
         if not isinstance(self.boundary_clearance, (int, float)) or not 0 <= self.boundary_clearance < 1:
             raise ValueError(f"boundary_clearance must be in [0, 1), got {self.boundary_clearance!r}")
-        if not isinstance(self.max_radius_edge, (int, float)) or not (self.max_radius_edge == 0
-                                                                       or 1 < self.max_radius_edge < np.inf):
-            raise ValueError(f"max_radius_edge must be 0 (none) or a finite number above 1, got {self.max_radius_edge!r}")
+        ratio = self.max_radius_edge
+        if not isinstance(ratio, (int, float)) or not (ratio == 0 or 1 < ratio < np.inf):
+            raise ValueError(f"max_radius_edge must be 0 (none) or a finite number above 1, got {ratio!r}")
         if not isinstance(self.sliver_angle, (int, float)) or not 0 <= self.sliver_angle <= 30:
             raise ValueError(f"sliver_angle must be in [0, 30] degrees, got {self.sliver_angle!r}")
         if self.threads is not None and (not isinstance(self.threads, int) or self.threads < 1):
@@ -259,9 +259,8 @@ def evolve_tet(mesh: TetMesh, delta: Any = None, *, size: Any = None, seed: int 
     steiner = (mesh.kind >= TetPointKind.STEINER).astype(np.uint8)
     threads = 0 if options.threads is None else options.threads
     out = _core.tet_step(mesh.points, mesh.tetrahedra, faces, face_tet, steiner, mesh.required.astype(np.uint8),
-                         weight, box, options.cell_factor, options.radius_scale, options.boundary_clearance, options.max_radius_edge,
-                         options.sliver_angle,
-                         options.max_samples, int(seed),
+                         weight, box, options.cell_factor, options.radius_scale, options.boundary_clearance,
+                         options.max_radius_edge, options.sliver_angle, options.max_samples, int(seed),
                          threads, cap)
     points, tets, origin = out["points"], out["tetrahedra"], out["origin"]
     new_faces, new_face_tet = boundary_faces(tets)

@@ -50,12 +50,16 @@ class TetLineage:
 
     __slots__ = ("n_old_points", "n_old_tetrahedra", "parent_tet")
 
+    n_old_points: int
+    n_old_tetrahedra: int
+    parent_tet: np.ndarray
+
     def __init__(self, n_old_points: int, n_old_tetrahedra: int, parent_tet: np.ndarray):
         object.__setattr__(self, "n_old_points", int(n_old_points))
         object.__setattr__(self, "n_old_tetrahedra", int(n_old_tetrahedra))
         object.__setattr__(self, "parent_tet", _frozen(np.asarray(parent_tet, dtype=np.int64)))
 
-    def matches(self, old: "TetMesh") -> bool:
+    def matches(self, old: TetMesh) -> bool:
         return old.n_points == self.n_old_points and len(old.tetrahedra) == self.n_old_tetrahedra
 
     def __setattr__(self, name: str, value: Any) -> None:
@@ -262,6 +266,8 @@ class TetMesh:
     origin: np.ndarray
     lineage: TetLineage | None
     stats: Mapping[str, float]
+    _nn: np.ndarray | None
+    _boundary: tuple[np.ndarray, np.ndarray] | None
 
     def __init__(self, points: Any, tetrahedra: Any, faces: Any = None, *, face_tags: Any = None,
                  tet_tags: Any = None, required: Any = None):
@@ -313,7 +319,7 @@ class TetMesh:
 
     @classmethod
     def _trusted(cls, points, tetrahedra, faces, face_tags=None, tet_tags=None, required=None, kind=None,
-                 origin=None, lineage=None, stats=None, boundary=None) -> "TetMesh":
+                 origin=None, lineage=None, stats=None, boundary=None) -> TetMesh:
         """Wrap arrays that evomesh itself produced (already valid); no checks."""
         mesh = cls.__new__(cls)
         mesh._assign(points, tetrahedra, faces, face_tags, tet_tags, required, kind, origin, lineage, stats or {},

@@ -109,7 +109,7 @@ std::vector<Tet> delaunay_tetrahedra(const std::vector<Vec3>& points);
 // The sliver pass (refined_delaunay): new interior points move within
 // picking regions; old points never move.
 struct Sliver_options {
-  double min_dihedral = 0;          // degrees; 0: no pass
+  double min_dihedral = 0;          // degrees: a sliver has a dihedral below it or above 180 minus it; 0: no pass
   double rho = 0.15;                // picking region: rho times the point's shortest edge
   int attempts = 12;                // random positions tried per point
   int rounds = 3;
