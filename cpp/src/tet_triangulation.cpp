@@ -86,14 +86,42 @@ double dihedral_margin(const Delaunay_3::Cell_handle& cell) {
                          cell->vertex(3)->point());
 }
 
+Tet cell_indices(const Delaunay_3::Cell_handle& cell) {
+  return canonical({cell->vertex(0)->info(), cell->vertex(1)->info(), cell->vertex(2)->info(), cell->vertex(3)->info()});
+}
+
+// The finite cells that pass `test`, by canonical vertex indices, sorted: the
+// order a round visits them in, whatever the triangulation's storage order.
+template <class Test>
+std::vector<Tet> cells_where(const Delaunay_3& triangulation, Test test) {
+  std::vector<Tet> out;
+  for (auto cell = triangulation.finite_cells_begin(); cell != triangulation.finite_cells_end(); ++cell) {
+    if (test(cell)) out.push_back(cell_indices(cell));
+  }
+  std::sort(out.begin(), out.end());
+  return out;
+}
+
+// The cell with these vertices, if an earlier change of the round left it.
+bool find_cell(const Delaunay_3& triangulation, const std::vector<Vertex_handle>& handles, const Tet& t,
+               Delaunay_3::Cell_handle& cell) {
+  const auto h = [&](std::size_t q) { return handles[static_cast<std::size_t>(t[q])]; };
+  int i, j, k, l;
+  return triangulation.is_cell(h(0), h(1), h(2), h(3), cell, i, j, k, l);
+}
+
+double shortest_edge(const Delaunay_3::Cell_handle& cell) {
+  double shortest = std::numeric_limits<double>::infinity();
+  for (int u = 0; u < 4; ++u) {
+    for (int v = u + 1; v < 4; ++v) shortest = std::min(shortest, squared(cell->vertex(u)->point(), cell->vertex(v)->point()));
+  }
+  return std::sqrt(shortest);
+}
+
 double radius_edge(const Delaunay_3::Cell_handle& cell) {
   const Point_3& a = cell->vertex(0)->point();
-  const Point_3& b = cell->vertex(1)->point();
-  const Point_3& c = cell->vertex(2)->point();
-  const Point_3& d = cell->vertex(3)->point();
-  const double shortest = std::min({squared(a, b), squared(a, c), squared(a, d), squared(b, c), squared(b, d),
-                                    squared(c, d)});
-  return std::sqrt(squared(CGAL::circumcenter(a, b, c, d), a) / shortest);
+  const Point_3 centre = CGAL::circumcenter(a, cell->vertex(1)->point(), cell->vertex(2)->point(), cell->vertex(3)->point());
+  return std::sqrt(squared(centre, a)) / shortest_edge(cell);
 }
 
 // The worst of the tetrahedra around v: (min dihedral, -max radius-edge) to maximise.
@@ -135,23 +163,15 @@ void perturb_slivers(Delaunay_3& triangulation, std::vector<Vertex_handle>& hand
     return true;
   };
   std::vector<std::uint8_t> moved(points.size(), 0);
+  const auto is_sliver = [&](const Delaunay_3::Cell_handle& cell) { return dihedral_margin(cell) < options.min_dihedral; };
   for (int round = 0; round < options.rounds; ++round) {
-    std::vector<Tet> slivers;
-    for (auto cell = triangulation.finite_cells_begin(); cell != triangulation.finite_cells_end(); ++cell) {
-      if (dihedral_margin(cell) < options.min_dihedral) {
-        slivers.push_back(canonical({cell->vertex(0)->info(), cell->vertex(1)->info(), cell->vertex(2)->info(),
-                                     cell->vertex(3)->info()}));
-      }
-    }
+    const std::vector<Tet> slivers = cells_where(triangulation, is_sliver);
     if (round == 0 && first_pass) report.slivers_before = slivers.size();
-    std::sort(slivers.begin(), slivers.end());
     std::size_t improved = 0;
     for (const Tet& t : slivers) {
       const auto h = [&](int q) { return handles[static_cast<std::size_t>(t[static_cast<std::size_t>(q)])]; };
       Delaunay_3::Cell_handle cell;
-      int i, j, k, l;
-      if (!triangulation.is_cell(h(0), h(1), h(2), h(3), cell, i, j, k, l)) continue;
-      if (dihedral_margin(cell) >= options.min_dihedral) continue;
+      if (!find_cell(triangulation, handles, t, cell) || !is_sliver(cell)) continue;
       for (int q = 0; q < 4; ++q) {
         const Index index = t[static_cast<std::size_t>(q)];
         if (!movable(index)) continue;
@@ -205,11 +225,7 @@ void perturb_slivers(Delaunay_3& triangulation, std::vector<Vertex_handle>& hand
   }
   report.moved_mask.assign(moved.begin(), moved.end());
   for (Index k : report.moved) report.moved_mask[static_cast<std::size_t>(k)] = 1;
-  std::size_t left = 0;
-  for (auto cell = triangulation.finite_cells_begin(); cell != triangulation.finite_cells_end(); ++cell) {
-    left += dihedral_margin(cell) < options.min_dihedral;
-  }
-  report.slivers_after = left;
+  report.slivers_after = cells_where(triangulation, is_sliver).size();
 }
 
 // Slivers left with no movable vertex (four kept points): a new point at the
@@ -220,29 +236,18 @@ void perturb_slivers(Delaunay_3& triangulation, std::vector<Vertex_handle>& hand
 std::size_t insert_off_centres(Delaunay_3& triangulation, std::vector<Vertex_handle>& handles,
                                std::vector<Vec3>& points, const Sliver_options& options, const Vec3& lo,
                                const Vec3& hi, Refinement_report& report) {
-  std::vector<Tet> slivers;
-  for (auto cell = triangulation.finite_cells_begin(); cell != triangulation.finite_cells_end(); ++cell) {
-    if (dihedral_margin(cell) < options.min_dihedral) {
-      slivers.push_back(canonical({cell->vertex(0)->info(), cell->vertex(1)->info(), cell->vertex(2)->info(),
-                                   cell->vertex(3)->info()}));
-    }
-  }
-  std::sort(slivers.begin(), slivers.end());
+  const std::vector<Tet> slivers = cells_where(
+      triangulation, [&](const Delaunay_3::Cell_handle& cell) { return dihedral_margin(cell) < options.min_dihedral; });
   std::size_t inserted = 0;
   for (const Tet& t : slivers) {
-    const auto h = [&](int q) { return handles[static_cast<std::size_t>(t[static_cast<std::size_t>(q)])]; };
     Delaunay_3::Cell_handle cell;
-    int i, j, k, l;
-    if (!triangulation.is_cell(h(0), h(1), h(2), h(3), cell, i, j, k, l)) continue;
+    if (!find_cell(triangulation, handles, t, cell)) continue;
     if (std::any_of(t.begin(), t.end(), [&](Index v) { return static_cast<std::size_t>(v) >= options.first_movable; })) {
       continue;  // the perturbation's
     }
-    const Point_3 centre = CGAL::circumcenter(h(0)->point(), h(1)->point(), h(2)->point(), h(3)->point());
-    double shortest = std::numeric_limits<double>::infinity();
-    for (int u = 0; u < 4; ++u) {
-      for (int v = u + 1; v < 4; ++v) shortest = std::min(shortest, squared(h(u)->point(), h(v)->point()));
-    }
-    const double clearance = 0.5 * std::sqrt(shortest);
+    const Point_3 centre = CGAL::circumcenter(cell->vertex(0)->point(), cell->vertex(1)->point(),
+                                              cell->vertex(2)->point(), cell->vertex(3)->point());
+    const double clearance = 0.5 * shortest_edge(cell);
     const Vec3 x{centre.x(), centre.y(), centre.z()};
     bool clear = true;
     for (int a = 0; a < 3; ++a) clear = clear && x[a] - lo[a] >= clearance && hi[a] - x[a] >= clearance;
@@ -279,36 +284,18 @@ std::vector<Tet> refined_delaunay(std::vector<Vec3>& points, const Vec3& lo, con
   };
   for (report.rounds = 0; report.rounds < 64; ++report.rounds) {
     // The round's bad tetrahedra, by canonical vertex indices.
-    std::vector<Tet> bad;
-    for (auto cell = triangulation.finite_cells_begin(); cell != triangulation.finite_cells_end(); ++cell) {
-      const Point_3& a = cell->vertex(0)->point();
-      const Point_3& b = cell->vertex(1)->point();
-      const Point_3& c = cell->vertex(2)->point();
-      const Point_3& d = cell->vertex(3)->point();
-      const double shortest = std::min({squared(a, b), squared(a, c), squared(a, d), squared(b, c), squared(b, d),
-                                        squared(c, d)});
-      const double radius = squared(CGAL::circumcenter(a, b, c, d), a);
-      if (radius > max_ratio * max_ratio * shortest) {
-        bad.push_back(canonical({cell->vertex(0)->info(), cell->vertex(1)->info(), cell->vertex(2)->info(),
-                                 cell->vertex(3)->info()}));
-      }
-    }
+    const std::vector<Tet> bad = cells_where(
+        triangulation, [&](const Delaunay_3::Cell_handle& cell) { return radius_edge(cell) > max_ratio; });
     report.unresolved = bad.size();
     if (bad.empty() || points.size() - n_input >= budget) break;
-    std::sort(bad.begin(), bad.end());
     std::size_t inserted = 0;
     for (const Tet& t : bad) {
       if (points.size() - n_input >= budget) break;
       Delaunay_3::Cell_handle cell;
-      int i, j, k, l;
-      const auto h = [&](int q) { return handles[static_cast<std::size_t>(t[static_cast<std::size_t>(q)])]; };
-      if (!triangulation.is_cell(h(0), h(1), h(2), h(3), cell, i, j, k, l)) continue;  // gone this round
-      const Point_3 centre = CGAL::circumcenter(h(0)->point(), h(1)->point(), h(2)->point(), h(3)->point());
-      double shortest = std::numeric_limits<double>::infinity();
-      for (int u = 0; u < 4; ++u) {
-        for (int v = u + 1; v < 4; ++v) shortest = std::min(shortest, squared(h(u)->point(), h(v)->point()));
-      }
-      shortest = std::sqrt(shortest);
+      if (!find_cell(triangulation, handles, t, cell)) continue;  // gone this round
+      const Point_3 centre = CGAL::circumcenter(cell->vertex(0)->point(), cell->vertex(1)->point(),
+                                                cell->vertex(2)->point(), cell->vertex(3)->point());
+      const double shortest = shortest_edge(cell);
       Vec3 x{centre.x(), centre.y(), centre.z()};
       // A centre near or beyond a box face goes onto that face (the face's
       // coordinate exact), away from its edges; none near an edge.

@@ -10,7 +10,7 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 
 from evomesh import _core
-from evomesh.mesh import _as_array, _as_mask, _as_tags, _frozen, _frozen_constant
+from evomesh.mesh import _as_array, _as_indices, _as_mask, _as_tags, _frozen, _frozen_constant
 
 __all__ = ["TetMesh", "TetPointKind", "TetLineage", "unit_cube_mesh", "box_mesh", "radius_edge_ratios",
            "dihedral_angles"]
@@ -80,18 +80,6 @@ def _as_points3(points: Any) -> np.ndarray:
     if array.size and np.abs(array).max() > _MAX_COORDINATE:
         raise ValueError(f"point coordinates must be below {_MAX_COORDINATE:g} in magnitude")
     return array
-
-
-def _as_cells(values: Any, columns: int, name: str, n_points: int) -> np.ndarray:
-    array = _as_array(values, name)
-    if array.dtype == object or array.dtype.kind not in "iu":
-        raise TypeError(f"{name} must be an integer array, got dtype {array.dtype}")
-    if array.ndim != 2 or array.shape[1] != columns:
-        raise ValueError(f"{name} must have shape (k, {columns}), got {array.shape}")
-    if array.size and (array.min() < 0 or array.max() >= n_points):
-        bad = int(np.argmax(((array < 0) | (array >= n_points)).any(axis=1)))
-        raise ValueError(f"{name} row {bad} has a point index out of range [0, {n_points})")
-    return array.astype(np.int64)
 
 
 def _row_keys(rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -275,7 +263,7 @@ class TetMesh:
         n = len(pts)
         if n < 4:
             raise ValueError(f"a tetrahedral mesh needs at least 4 points, got {n}")
-        tets = _as_cells(tetrahedra, 4, "tetrahedra", n)
+        tets = _as_indices(tetrahedra, 4, "tetrahedra", n)
         if len(tets) == 0:
             raise ValueError("a tetrahedral mesh needs at least one tetrahedron")
         tet_t = None if tet_tags is None else _as_tags(tet_tags, len(tets), "tet_tags", "tetrahedra")
@@ -288,7 +276,7 @@ class TetMesh:
                 raise ValueError("face_tags need faces: one tag per row of faces")
             fcs, f_tags = bnd, None
         else:
-            fcs = _as_cells(faces, 3, "faces", n)
+            fcs = _as_indices(faces, 3, "faces", n)
             f_tags = None if face_tags is None else _as_tags(face_tags, len(fcs), "face_tags", "faces")
             _check_faces(tets, fcs, bnd)
         self._assign(pts, tets, fcs, f_tags, tet_t, req, None, None, None, {}, nn, (bnd, bnd_tet))
