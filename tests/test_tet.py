@@ -285,3 +285,35 @@ def test_sliver_pass_moves_only_new_points(cube):
     assert treated.stats["slivers_after"] < treated.stats["slivers_before"]
     dihedral = dihedral_angles(treated.points, treated.tetrahedra)
     assert (dihedral < 10).mean() < (dihedral_angles(plain.points, plain.tetrahedra) < 10).mean()
+
+
+def test_face_tags_follow_the_box_sides():
+    mesh = evomesh.unit_cube_mesh(4)
+    faces, _ = boundary_faces(mesh.tetrahedra)
+    q = mesh.points[faces]
+    side = np.full(len(faces), -1)
+    for axis in range(3):
+        for high, bound in ((0, 0.0), (1, 1.0)):
+            side[(q[:, :, axis] == bound).all(axis=1)] = 2 * axis + high
+    tagged = evomesh.TetMesh(mesh.points, mesh.tetrahedra, faces, face_tags=10 + side)
+    new = evomesh.evolve(tagged, 0.6, seed=0)
+    p = new.points[new.faces]
+    for axis in range(3):
+        for high, bound in ((0, 0.0), (1, 1.0)):
+            on = (p[:, :, axis] == bound).all(axis=1)
+            assert on.any() and (new.face_tags[on] == 10 + 2 * axis + high).all()
+    mixed = side.copy()
+    mixed[0] = 99
+    with pytest.raises(ValueError, match="vary within box side"):
+        evomesh.evolve(evomesh.TetMesh(mesh.points, mesh.tetrahedra, faces, face_tags=mixed), 1.0)
+
+
+def test_required_points_are_kept_under_coarsening():
+    mesh = evomesh.unit_cube_mesh(5)
+    required = np.zeros(mesh.n_points, bool)
+    required[[43, 93]] = True  # interior points; required points near a box edge can leave a tetrahedron above 2
+    tagged = evomesh.TetMesh(mesh.points, mesh.tetrahedra, required=required)
+    new = evomesh.evolve(tagged, 3.0, seed=0)
+    check_step(tagged, new)
+    assert np.isin(np.flatnonzero(required), new.origin).all()
+    assert np.array_equal(np.sort(new.origin[new.required]), np.flatnonzero(required))
