@@ -461,6 +461,7 @@ PYBIND11_MODULE(_core, m) {
   void bind_motion(pybind11::module_&); bind_motion(m);  // cpp/bindings/bind_motion.cpp (issue 28)
   void bind_mis_rounds(pybind11::module_&); bind_mis_rounds(m);  // cpp/bindings/bind_mis_rounds.cpp (issue 29)
   void bind_quality(pybind11::module_&); bind_quality(m);  // cpp/bindings/bind_quality.cpp (issue 29)
+  void bind_tet(pybind11::module_&); bind_tet(m);  // cpp/bindings/bind_tet.cpp (tetrahedral meshes)
   m.doc() = "evomesh C++ core (CGAL): spacing functions, sampling, lexical-first MIS, FRFC";
 
   m.def(

@@ -25,6 +25,8 @@ from evomesh.mesh import Lineage, Mesh, PointKind
 from evomesh.mesh_quality import Quality, quality
 from evomesh.packing import lexical_first_mis
 from evomesh.spacing_function import SpacingFunction, nn_spacing, spacing
+from evomesh.tet_evolution import TetOptions
+from evomesh.tet_mesh import TetLineage, TetMesh, TetPointKind, box_mesh, unit_cube_mesh
 
 __all__ = [
     "Mesh",
@@ -54,6 +56,12 @@ __all__ = [
     "lexical_first_mis",
     "quality",
     "Quality",
+    "TetMesh",
+    "TetPointKind",
+    "TetLineage",
+    "TetOptions",
+    "unit_cube_mesh",
+    "box_mesh",
 ]
 
 __version__ = "0.1.0"

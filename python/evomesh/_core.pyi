@@ -527,3 +527,30 @@ def triangulate_moved(
 ) -> MovedTriangulation:
     """Constrained Delaunay triangulation of the moved points with the pieces as constraints, regions
     flood-filled from the pieces' sides (cpp/src/motion.cpp)."""
+
+# Tetrahedral meshes (cpp/bindings/bind_tet.cpp).
+def tet_nn_spacing(points: ArrayLike, threads: int = 0) -> NDArray[np.float64]: ...
+def tet_orientations(points: ArrayLike, tetrahedra: ArrayLike) -> NDArray[np.int8]: ...
+def cone_envelope_3(
+    sites: ArrayLike, weights: ArrayLike, queries: ArrayLike, brute_force: bool = False, threads: int = 0
+) -> tuple[NDArray[np.float64], int]: ...
+def delaunay_tetrahedra(points: ArrayLike) -> NDArray[np.int64]: ...
+def tet_step(
+    points: ArrayLike,
+    tetrahedra: ArrayLike,
+    boundary: ArrayLike,
+    boundary_tet: ArrayLike,
+    steiner: ArrayLike,
+    required: ArrayLike,
+    weight: ArrayLike,
+    box: ArrayLike,
+    cell_factor: float,
+    radius_scale: float,
+    boundary_clearance: float,
+    max_radius_edge: float,
+    sliver_angle: float,
+    max_samples: float,
+    seed: int,
+    threads: int,
+    cap: Callable[[NDArray[np.float64], NDArray[np.int64]], ArrayLike] | None = None,
+) -> dict[str, Any]: ...

@@ -14,6 +14,8 @@ from evomesh.mesh import Lineage, Mesh, PointKind, check_boundary_not_pinched, c
 from evomesh.mesh_quality import QualityWarning, _warn_quality
 from evomesh.motion import after_step, step_input
 from evomesh.spacing_function import _require_mesh, as_delta, delta_from_size
+from evomesh.tet_evolution import evolve_tet
+from evomesh.tet_mesh import TetMesh
 
 __all__ = ["evolve", "delaunay_refine", "make_options", "FRFC_DEFAULTS", "DRFC_DEFAULTS", "FrfcOptions", "DrfcOptions",
            "SampleMode", "RadiusRule", "QualityWarning"]
@@ -475,6 +477,14 @@ def evolve(mesh: Mesh, delta: Any = None, *, size: Any = None, method: str = "fr
                                       seed=seed, options=options, overrides=overrides, displacement=displacement,
                                       interface=interface, interface_tag=interface_tag,
                                       interface_regions=interface_regions, interface_band=interface_band))
+    if isinstance(mesh, TetMesh):
+        extra = [name for name, value in (("geometry", geometry), ("displacement", displacement),
+                                          ("interface", interface), ("interface_tag", interface_tag),
+                                          ("interface_regions", interface_regions),
+                                          ("interface_band", interface_band)) if value is not None]
+        if extra or method != "frfc":
+            raise ValueError(f"not yet on a TetMesh: {', '.join(extra) or 'method=' + repr(method)}")
+        return evolve_tet(mesh, delta, size=size, seed=seed, options=options, **overrides)
     _require_mesh(mesh)
     if (delta is None) == (size is None):
         raise TypeError(

@@ -13,6 +13,8 @@ from scipy.spatial import cKDTree
 from evomesh import _core
 from evomesh.mesh import Mesh
 from evomesh.spacing_function import _require_mesh
+from evomesh.tet_evolution import transfer_tet
+from evomesh.tet_mesh import TetMesh
 
 __all__ = ["transfer", "transfer_cells", "domain_change", "DomainChange", "region_exchange", "RegionExchange",
            "Interpolation", "Supermesh"]
@@ -421,6 +423,12 @@ def transfer(
     """
     if "DistributedMesh" in (type(old).__name__, type(new).__name__):  # (mpi4py is optional: not imported here)
         return _distributed("transfer")(old, new, values, method, frame=frame)
+    if isinstance(old, TetMesh) or isinstance(new, TetMesh):
+        if method != "linear":
+            raise ValueError("transfer between tetrahedral meshes supports method='linear' only (yet)")
+        if isinstance(values, Mapping):
+            return {name: transfer_tet(old, new, v) for name, v in values.items()}
+        return transfer_tet(old, new, values)
     if frame not in ("eulerian", "lagrangian"):
         raise ValueError(f"frame must be 'eulerian' or 'lagrangian', got {frame!r}")
     _require_mesh(old)

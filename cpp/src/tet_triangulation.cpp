@@ -1,0 +1,342 @@
+// The Delaunay tetrahedralisation of a step's kept points, and its
+// radius-edge refinement (tet/tet_step.hpp).
+#include <CGAL/Delaunay_triangulation_3.h>
+#include <CGAL/Triangulation_vertex_base_with_info_3.h>
+
+#include <algorithm>
+#include <cmath>
+#include <utility>
+#include <vector>
+
+#include "evomesh/kernel.hpp"
+#include "evomesh/tet/tet_step.hpp"
+
+namespace evomesh::tet {
+
+namespace {
+
+using Point_3 = Kernel::Point_3;
+using Vertex_base = CGAL::Triangulation_vertex_base_with_info_3<Index, Kernel>;
+using Data_structure = CGAL::Triangulation_data_structure_3<Vertex_base>;
+using Delaunay_3 = CGAL::Delaunay_triangulation_3<Kernel, Data_structure>;
+using Vertex_handle = Delaunay_3::Vertex_handle;
+
+// The tetrahedron's smallest index first by an even permutation (the same
+// orientation), then the other three rotated to put their smallest first.
+Tet canonical(Tet t) {
+  const auto first = static_cast<int>(std::min_element(t.begin(), t.end()) - t.begin());
+  switch (first) {
+    case 1: t = {t[1], t[0], t[3], t[2]}; break;
+    case 2: t = {t[2], t[0], t[1], t[3]}; break;
+    case 3: t = {t[3], t[0], t[2], t[1]}; break;
+    default: break;
+  }
+  while (t[1] > t[2] || t[1] > t[3]) t = {t[0], t[2], t[3], t[1]};
+  return t;
+}
+
+Delaunay_3 triangulate(const std::vector<Vec3>& points, std::vector<Vertex_handle>& handles) {
+  std::vector<std::pair<Point_3, Index>> sites(points.size());
+  for (std::size_t k = 0; k < points.size(); ++k) {
+    sites[k] = {Point_3(points[k][0], points[k][1], points[k][2]), static_cast<Index>(k)};
+  }
+  // The range insertion sorts the points spatially (CGAL::spatial_sort) first.
+  Delaunay_3 triangulation(sites.begin(), sites.end());
+  if (triangulation.number_of_vertices() != points.size()) throw Input_error("duplicate points in a triangulation");
+  handles.assign(points.size(), Vertex_handle());
+  for (auto v = triangulation.finite_vertices_begin(); v != triangulation.finite_vertices_end(); ++v) {
+    handles[static_cast<std::size_t>(v->info())] = v;
+  }
+  return triangulation;
+}
+
+std::vector<Tet> finite_tets(const Delaunay_3& triangulation) {
+  std::vector<Tet> tets;
+  tets.reserve(triangulation.number_of_finite_cells());
+  for (auto cell = triangulation.finite_cells_begin(); cell != triangulation.finite_cells_end(); ++cell) {
+    tets.push_back(canonical({cell->vertex(0)->info(), cell->vertex(1)->info(), cell->vertex(2)->info(),
+                              cell->vertex(3)->info()}));
+  }
+  std::sort(tets.begin(), tets.end());
+  return tets;
+}
+
+double squared(const Point_3& a, const Point_3& b) { return CGAL::to_double(CGAL::squared_distance(a, b)); }
+
+// How far a tetrahedron's dihedral angles stay from 0 and 180 degrees:
+// min(smallest, 180 - largest), in degrees (at edge (i, j) the angle between
+// the normals of its two faces there). Slivers and caps both score low.
+double dihedral_margin(const Point_3& a, const Point_3& b, const Point_3& c, const Point_3& d) {
+  const Point_3 p[4] = {a, b, c, d};
+  constexpr int kEdges[6][4] = {{0, 1, 2, 3}, {0, 2, 1, 3}, {0, 3, 1, 2}, {1, 2, 0, 3}, {1, 3, 0, 2}, {2, 3, 0, 1}};
+  double margin = 90.0;
+  for (const auto& e : kEdges) {
+    const auto edge = p[e[1]] - p[e[0]];
+    const auto n1 = CGAL::cross_product(edge, p[e[2]] - p[e[0]]);
+    const auto n2 = CGAL::cross_product(edge, p[e[3]] - p[e[0]]);
+    const double cosine = n1 * n2 / std::sqrt(n1.squared_length() * n2.squared_length());
+    const double angle = std::acos(std::clamp(cosine, -1.0, 1.0)) * 180.0 / M_PI;
+    margin = std::min({margin, angle, 180.0 - angle});
+  }
+  return margin;
+}
+
+double dihedral_margin(const Delaunay_3::Cell_handle& cell) {
+  return dihedral_margin(cell->vertex(0)->point(), cell->vertex(1)->point(), cell->vertex(2)->point(),
+                         cell->vertex(3)->point());
+}
+
+Tet cell_indices(const Delaunay_3::Cell_handle& cell) {
+  return canonical({cell->vertex(0)->info(), cell->vertex(1)->info(), cell->vertex(2)->info(), cell->vertex(3)->info()});
+}
+
+// The finite cells that pass `test`, by canonical vertex indices, sorted: the
+// order a round visits them in, whatever the triangulation's storage order.
+template <class Test>
+std::vector<Tet> cells_where(const Delaunay_3& triangulation, Test test) {
+  std::vector<Tet> out;
+  for (auto cell = triangulation.finite_cells_begin(); cell != triangulation.finite_cells_end(); ++cell) {
+    if (test(cell)) out.push_back(cell_indices(cell));
+  }
+  std::sort(out.begin(), out.end());
+  return out;
+}
+
+// The cell with these vertices, if an earlier change of the round left it.
+bool find_cell(const Delaunay_3& triangulation, const std::vector<Vertex_handle>& handles, const Tet& t,
+               Delaunay_3::Cell_handle& cell) {
+  const auto h = [&](std::size_t q) { return handles[static_cast<std::size_t>(t[q])]; };
+  int i, j, k, l;
+  return triangulation.is_cell(h(0), h(1), h(2), h(3), cell, i, j, k, l);
+}
+
+double shortest_edge(const Delaunay_3::Cell_handle& cell) {
+  double shortest = std::numeric_limits<double>::infinity();
+  for (int u = 0; u < 4; ++u) {
+    for (int v = u + 1; v < 4; ++v) shortest = std::min(shortest, squared(cell->vertex(u)->point(), cell->vertex(v)->point()));
+  }
+  return std::sqrt(shortest);
+}
+
+double radius_edge(const Delaunay_3::Cell_handle& cell) {
+  const Point_3& a = cell->vertex(0)->point();
+  const Point_3 centre = CGAL::circumcenter(a, cell->vertex(1)->point(), cell->vertex(2)->point(), cell->vertex(3)->point());
+  return std::sqrt(squared(centre, a)) / shortest_edge(cell);
+}
+
+// The worst of the tetrahedra around v: (min dihedral, -max radius-edge) to maximise.
+std::pair<double, double> star_quality(const Delaunay_3& triangulation, Vertex_handle v) {
+  std::vector<Delaunay_3::Cell_handle> cells;
+  triangulation.finite_incident_cells(v, std::back_inserter(cells));
+  double dihedral = 180.0, ratio = 0.0;
+  for (const auto& cell : cells) {
+    dihedral = std::min(dihedral, dihedral_margin(cell));
+    ratio = std::max(ratio, radius_edge(cell));
+  }
+  return {dihedral, ratio};
+}
+
+std::uint64_t mix(std::uint64_t z) {
+  z += 0x9e3779b97f4a7c15ULL;
+  z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ULL;
+  z = (z ^ (z >> 27)) * 0x94d049bb133111ebULL;
+  return z ^ (z >> 31);
+}
+
+// Picking regions for new points (Chew; Li and Teng): each sliver (a
+// dihedral angle below the bound or above 180 degrees minus it) with a movable vertex (a new interior point: old
+// points and the box's points never move) tries that vertex at random points
+// of a ball of radius rho times its shortest edge, and keeps the position
+// whose star has the largest dihedral margin (radius-edge still within
+// bound), if that beats where it was. A move changes every distance from the
+// point by at most rho times its shortest edge, so the spacing stays within
+// that factor of the packing's. In rounds, slivers in canonical order.
+void perturb_slivers(Delaunay_3& triangulation, std::vector<Vertex_handle>& handles, std::vector<Vec3>& points,
+                     const Sliver_options& options, const Vec3& lo, const Vec3& hi, bool first_pass,
+                     Refinement_report& report) {
+  auto movable = [&](Index k) {
+    if (static_cast<std::size_t>(k) < options.first_movable) return false;
+    const Vec3& x = points[static_cast<std::size_t>(k)];
+    for (int a = 0; a < 3; ++a) {
+      if (x[a] == lo[a] || x[a] == hi[a]) return false;
+    }
+    return true;
+  };
+  std::vector<std::uint8_t> moved(points.size(), 0);
+  const auto is_sliver = [&](const Delaunay_3::Cell_handle& cell) { return dihedral_margin(cell) < options.min_dihedral; };
+  for (int round = 0; round < options.rounds; ++round) {
+    const std::vector<Tet> slivers = cells_where(triangulation, is_sliver);
+    if (round == 0 && first_pass) report.slivers_before = slivers.size();
+    std::size_t improved = 0;
+    for (const Tet& t : slivers) {
+      const auto h = [&](int q) { return handles[static_cast<std::size_t>(t[static_cast<std::size_t>(q)])]; };
+      Delaunay_3::Cell_handle cell;
+      if (!find_cell(triangulation, handles, t, cell) || !is_sliver(cell)) continue;
+      for (int q = 0; q < 4; ++q) {
+        const Index index = t[static_cast<std::size_t>(q)];
+        if (!movable(index)) continue;
+        const Vertex_handle v = h(q);
+        const Point_3 home = v->point();
+        std::vector<Vertex_handle> around;
+        triangulation.finite_adjacent_vertices(v, std::back_inserter(around));
+        double shortest = std::numeric_limits<double>::infinity();
+        for (const auto& w : around) shortest = std::min(shortest, squared(w->point(), home));
+        const double reach = options.rho * std::sqrt(shortest);
+        auto best = star_quality(triangulation, v);
+        const double start = best.first;
+        Point_3 best_point = home;
+        for (int attempt = 0; attempt < options.attempts; ++attempt) {
+          // A uniform point of the ball (rejection from the cube, counter-based draws).
+          double u[3], norm;
+          std::uint64_t draw = mix(mix(options.seed ^ static_cast<std::uint64_t>(index)) + static_cast<std::uint64_t>(round * 64 + attempt));
+          do {
+            norm = 0;
+            for (double& c : u) {
+              draw = mix(draw);
+              c = 2.0 * (static_cast<double>(draw >> 11) * 0x1.0p-53) - 1.0;
+              norm += c * c;
+            }
+          } while (norm > 1.0);
+          const Vec3 x{home.x() + reach * u[0], home.y() + reach * u[1], home.z() + reach * u[2]};
+          bool inside = true;
+          for (int a = 0; a < 3; ++a) inside = inside && x[a] > lo[a] && x[a] < hi[a];
+          if (!inside) continue;
+          if (triangulation.move_if_no_collision(v, Point_3(x[0], x[1], x[2])) != v) continue;
+          const auto quality = star_quality(triangulation, v);
+          if (quality.second <= options.max_radius_edge && quality.first > best.first) {
+            best = quality;
+            best_point = v->point();
+          }
+        }
+        triangulation.move_if_no_collision(v, best_point);
+        if (best.first > start) {
+          points[static_cast<std::size_t>(index)] = {best_point.x(), best_point.y(), best_point.z()};
+          moved[static_cast<std::size_t>(index)] = 1;
+          ++improved;
+        }
+        if (best.first >= options.min_dihedral) break;
+      }
+    }
+    if (improved == 0) break;
+  }
+  report.moved.clear();
+  for (std::size_t k = 0; k < points.size(); ++k) {
+    if (moved[k] || report.was_moved(k)) report.moved.push_back(static_cast<Index>(k));
+  }
+  report.moved_mask.assign(moved.begin(), moved.end());
+  for (Index k : report.moved) report.moved_mask[static_cast<std::size_t>(k)] = 1;
+  report.slivers_after = cells_where(triangulation, is_sliver).size();
+}
+
+// Slivers left with no movable vertex (four kept points): a new point at the
+// sliver's circumcentre (which the sliver's empty sphere keeps clear of every
+// point by its circumradius), where that lies inside the box, at least half
+// the sliver's shortest edge from its faces; the perturbation then moves the
+// new points. Returns how many were inserted.
+std::size_t insert_off_centres(Delaunay_3& triangulation, std::vector<Vertex_handle>& handles,
+                               std::vector<Vec3>& points, const Sliver_options& options, const Vec3& lo,
+                               const Vec3& hi, Refinement_report& report) {
+  const std::vector<Tet> slivers = cells_where(
+      triangulation, [&](const Delaunay_3::Cell_handle& cell) { return dihedral_margin(cell) < options.min_dihedral; });
+  std::size_t inserted = 0;
+  for (const Tet& t : slivers) {
+    Delaunay_3::Cell_handle cell;
+    if (!find_cell(triangulation, handles, t, cell)) continue;
+    if (std::any_of(t.begin(), t.end(), [&](Index v) { return static_cast<std::size_t>(v) >= options.first_movable; })) {
+      continue;  // the perturbation's
+    }
+    const Point_3 centre = CGAL::circumcenter(cell->vertex(0)->point(), cell->vertex(1)->point(),
+                                              cell->vertex(2)->point(), cell->vertex(3)->point());
+    const double clearance = 0.5 * shortest_edge(cell);
+    const Vec3 x{centre.x(), centre.y(), centre.z()};
+    bool clear = true;
+    for (int a = 0; a < 3; ++a) clear = clear && x[a] - lo[a] >= clearance && hi[a] - x[a] >= clearance;
+    if (!clear) continue;
+    const std::size_t before = triangulation.number_of_vertices();
+    const Vertex_handle v = triangulation.insert(centre, cell);
+    if (triangulation.number_of_vertices() == before) continue;
+    v->info() = static_cast<Index>(points.size());
+    points.push_back(x);
+    handles.push_back(v);
+    report.hints.push_back(t[0]);
+    ++inserted;
+  }
+  return inserted;
+}
+
+}  // namespace
+
+std::vector<Tet> delaunay_tetrahedra(const std::vector<Vec3>& points) {
+  std::vector<Vertex_handle> handles;
+  return finite_tets(triangulate(points, handles));
+}
+
+std::vector<Tet> refined_delaunay(std::vector<Vec3>& points, const Vec3& lo, const Vec3& hi, double max_ratio,
+                                  std::size_t budget, const Sliver_options& slivers, Refinement_report& report) {
+  std::vector<Vertex_handle> handles;
+  Delaunay_3 triangulation = triangulate(points, handles);
+  const std::size_t n_input = points.size();
+  auto inside = [&](const Vec3& x) {
+    for (int i = 0; i < 3; ++i) {
+      if (!(x[i] > lo[i] && x[i] < hi[i])) return false;
+    }
+    return true;
+  };
+  for (report.rounds = 0; report.rounds < 64; ++report.rounds) {
+    // The round's bad tetrahedra, by canonical vertex indices.
+    const std::vector<Tet> bad = cells_where(
+        triangulation, [&](const Delaunay_3::Cell_handle& cell) { return radius_edge(cell) > max_ratio; });
+    report.unresolved = bad.size();
+    if (bad.empty() || points.size() - n_input >= budget) break;
+    std::size_t inserted = 0;
+    for (const Tet& t : bad) {
+      if (points.size() - n_input >= budget) break;
+      Delaunay_3::Cell_handle cell;
+      if (!find_cell(triangulation, handles, t, cell)) continue;  // gone this round
+      const Point_3 centre = CGAL::circumcenter(cell->vertex(0)->point(), cell->vertex(1)->point(),
+                                                cell->vertex(2)->point(), cell->vertex(3)->point());
+      const double shortest = shortest_edge(cell);
+      Vec3 x{centre.x(), centre.y(), centre.z()};
+      // A centre near or beyond a box face goes onto that face (the face's
+      // coordinate exact), away from its edges; none near an edge.
+      int near_axis = -1;
+      double near_distance = 0.5 * shortest;
+      for (int a = 0; a < 3; ++a) {
+        for (const double bound : {lo[a], hi[a]}) {
+          const double distance = std::abs(x[a] - bound);
+          const bool beyond = bound == lo[a] ? x[a] <= lo[a] : x[a] >= hi[a];
+          if (beyond || distance < near_distance) near_axis = a, near_distance = beyond ? -1.0 : distance;
+        }
+      }
+      if (near_axis >= 0) {
+        x[near_axis] = std::abs(x[near_axis] - lo[near_axis]) < std::abs(x[near_axis] - hi[near_axis]) ? lo[near_axis]
+                                                                                                        : hi[near_axis];
+        bool clear = true;
+        for (int a = 0; a < 3; ++a) {
+          if (a != near_axis && !(x[a] - lo[a] >= 0.5 * shortest && hi[a] - x[a] >= 0.5 * shortest)) clear = false;
+        }
+        if (!clear) continue;
+      } else if (!inside(x)) {
+        continue;
+      }
+      const std::size_t before = triangulation.number_of_vertices();
+      const Vertex_handle v = triangulation.insert(Point_3(x[0], x[1], x[2]), cell);
+      if (triangulation.number_of_vertices() == before) continue;  // an existing point
+      v->info() = static_cast<Index>(points.size());
+      points.push_back(x);
+      handles.push_back(v);
+      report.hints.push_back(t[0]);
+      ++inserted;
+    }
+    if (inserted == 0) break;
+  }
+  if (slivers.min_dihedral > 0) {
+    perturb_slivers(triangulation, handles, points, slivers, lo, hi, true, report);
+    report.off_centres = insert_off_centres(triangulation, handles, points, slivers, lo, hi, report);
+    if (report.off_centres > 0) perturb_slivers(triangulation, handles, points, slivers, lo, hi, false, report);
+  }
+  report.inserted = points.size() - n_input;
+  return finite_tets(triangulation);
+}
+
+}  // namespace evomesh::tet
