@@ -287,6 +287,27 @@ def test_sliver_pass_moves_only_new_points(cube):
     assert (dihedral < 10).mean() < (dihedral_angles(plain.points, plain.tetrahedra) < 10).mean()
 
 
+def test_no_sliver_is_left_on_a_moving_sphere():
+    # A small moving sphere: every step's tetrahedra have all their dihedral
+    # angles within [10, 170] degrees and radius-edge at most 2, with the old
+    # points kept where they were (the same case without the pass has slivers).
+    def size_at(centre):
+        return lambda x: np.minimum(0.1, 0.03 + 0.3 * np.abs(np.linalg.norm(x - centre, axis=1) - 0.2))
+
+    mesh = evomesh.unit_cube_mesh(5)
+    for step in range(4):
+        h = size_at(np.array([0.3 + 0.1 * max(step - 1, 0), 0.5, 0.5]))
+        new = evomesh.evolve(mesh, size=h, seed=step)
+        check_step(mesh, new)
+        dihedral = dihedral_angles(new.points, new.tetrahedra)
+        assert dihedral.min() >= 10 and dihedral.max() <= 170, (step, dihedral.min(), dihedral.max())
+        assert radius_edge_ratios(new.points, new.tetrahedra).max() <= 2
+        assert new.stats["slivers_after"] == 0 and new.stats["radius_edge_unresolved"] == 0
+        mesh = new
+    plain = evomesh.evolve(mesh, size=h, seed=9, sliver_angle=0)
+    assert dihedral_angles(plain.points, plain.tetrahedra).min() < 10
+
+
 def test_face_tags_follow_the_box_sides():
     mesh = evomesh.unit_cube_mesh(4)
     faces, _ = boundary_faces(mesh.tetrahedra)

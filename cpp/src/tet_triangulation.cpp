@@ -136,6 +136,31 @@ std::pair<double, double> star_quality(const Delaunay_3& triangulation, Vertex_h
   return {dihedral, ratio};
 }
 
+// Where a circumcentre goes (Delaunay refinement and the sliver pass): the
+// centre itself when it lies inside the box at least half the tetrahedron's
+// shortest edge from every face; its projection onto the box face it is near
+// or beyond (that face's coordinate exact) when the projection keeps half
+// the shortest edge from the other faces; else nowhere (false).
+bool centre_placement(const Point_3& centre, double shortest, const Vec3& lo, const Vec3& hi, Vec3& x) {
+  x = {centre.x(), centre.y(), centre.z()};
+  int near_axis = -1;
+  double near_distance = 0.5 * shortest;
+  for (int a = 0; a < 3; ++a) {
+    for (const double bound : {lo[a], hi[a]}) {
+      const double distance = std::abs(x[a] - bound);
+      const bool beyond = bound == lo[a] ? x[a] <= lo[a] : x[a] >= hi[a];
+      if (beyond || distance < near_distance) near_axis = a, near_distance = beyond ? -1.0 : distance;
+    }
+  }
+  if (near_axis < 0) return true;
+  x[near_axis] = std::abs(x[near_axis] - lo[near_axis]) < std::abs(x[near_axis] - hi[near_axis]) ? lo[near_axis]
+                                                                                                  : hi[near_axis];
+  for (int a = 0; a < 3; ++a) {
+    if (a != near_axis && !(x[a] - lo[a] >= 0.5 * shortest && hi[a] - x[a] >= 0.5 * shortest)) return false;
+  }
+  return true;
+}
+
 std::uint64_t mix(std::uint64_t z) {
   z += 0x9e3779b97f4a7c15ULL;
   z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ULL;
@@ -154,13 +179,17 @@ std::uint64_t mix(std::uint64_t z) {
 void perturb_slivers(Delaunay_3& triangulation, std::vector<Vertex_handle>& handles, std::vector<Vec3>& points,
                      const Sliver_options& options, const Vec3& lo, const Vec3& hi, bool first_pass,
                      Refinement_report& report) {
-  auto movable = [&](Index k) {
-    if (static_cast<std::size_t>(k) < options.first_movable) return false;
+  // -1: the point never moves (an old point, or on a box edge or corner);
+  // 3: it moves freely (interior); 0-2: it moves within the box face
+  // normal to that axis (the face's coordinate kept exactly).
+  auto fixed_axis = [&](Index k) {
+    if (static_cast<std::size_t>(k) < options.first_movable) return -1;
     const Vec3& x = points[static_cast<std::size_t>(k)];
+    int axis = 3;
     for (int a = 0; a < 3; ++a) {
-      if (x[a] == lo[a] || x[a] == hi[a]) return false;
+      if (x[a] == lo[a] || x[a] == hi[a]) axis = axis == 3 ? a : -1;
     }
-    return true;
+    return axis;
   };
   std::vector<std::uint8_t> moved(points.size(), 0);
   const auto is_sliver = [&](const Delaunay_3::Cell_handle& cell) { return dihedral_margin(cell) < options.min_dihedral; };
@@ -174,7 +203,8 @@ void perturb_slivers(Delaunay_3& triangulation, std::vector<Vertex_handle>& hand
       if (!find_cell(triangulation, handles, t, cell) || !is_sliver(cell)) continue;
       for (int q = 0; q < 4; ++q) {
         const Index index = t[static_cast<std::size_t>(q)];
-        if (!movable(index)) continue;
+        const int fixed = fixed_axis(index);
+        if (fixed < 0) continue;
         const Vertex_handle v = h(q);
         const Point_3 home = v->point();
         std::vector<Vertex_handle> around;
@@ -197,9 +227,10 @@ void perturb_slivers(Delaunay_3& triangulation, std::vector<Vertex_handle>& hand
               norm += c * c;
             }
           } while (norm > 1.0);
-          const Vec3 x{home.x() + reach * u[0], home.y() + reach * u[1], home.z() + reach * u[2]};
+          Vec3 x{home.x() + reach * u[0], home.y() + reach * u[1], home.z() + reach * u[2]};
+          if (fixed < 3) x[static_cast<std::size_t>(fixed)] = points[static_cast<std::size_t>(index)][static_cast<std::size_t>(fixed)];
           bool inside = true;
-          for (int a = 0; a < 3; ++a) inside = inside && x[a] > lo[a] && x[a] < hi[a];
+          for (int a = 0; a < 3; ++a) inside = inside && (a == fixed || (x[a] > lo[a] && x[a] < hi[a]));
           if (!inside) continue;
           if (triangulation.move_if_no_collision(v, Point_3(x[0], x[1], x[2])) != v) continue;
           const auto quality = star_quality(triangulation, v);
@@ -228,11 +259,12 @@ void perturb_slivers(Delaunay_3& triangulation, std::vector<Vertex_handle>& hand
   report.slivers_after = cells_where(triangulation, is_sliver).size();
 }
 
-// Slivers left with no movable vertex (four kept points): a new point at the
-// sliver's circumcentre (which the sliver's empty sphere keeps clear of every
-// point by its circumradius), where that lies inside the box, at least half
-// the sliver's shortest edge from its faces; the perturbation then moves the
-// new points. Returns how many were inserted.
+// The slivers the perturbation left (four kept points, or new points it
+// could not move far enough): a new point inside each one's circumsphere,
+// which destroys it, at its circumcentre (the sliver's empty sphere keeps it
+// clear of every point by the circumradius) or, near or beyond a box face,
+// the centre's projection onto that face (centre_placement); the perturbation
+// then moves the new points. Returns how many were inserted.
 std::size_t insert_off_centres(Delaunay_3& triangulation, std::vector<Vertex_handle>& handles,
                                std::vector<Vec3>& points, const Sliver_options& options, const Vec3& lo,
                                const Vec3& hi, Refinement_report& report) {
@@ -241,19 +273,13 @@ std::size_t insert_off_centres(Delaunay_3& triangulation, std::vector<Vertex_han
   std::size_t inserted = 0;
   for (const Tet& t : slivers) {
     Delaunay_3::Cell_handle cell;
-    if (!find_cell(triangulation, handles, t, cell)) continue;
-    if (std::any_of(t.begin(), t.end(), [&](Index v) { return static_cast<std::size_t>(v) >= options.first_movable; })) {
-      continue;  // the perturbation's
-    }
+    if (!find_cell(triangulation, handles, t, cell)) continue;  // gone this round
     const Point_3 centre = CGAL::circumcenter(cell->vertex(0)->point(), cell->vertex(1)->point(),
                                               cell->vertex(2)->point(), cell->vertex(3)->point());
-    const double clearance = 0.5 * shortest_edge(cell);
-    const Vec3 x{centre.x(), centre.y(), centre.z()};
-    bool clear = true;
-    for (int a = 0; a < 3; ++a) clear = clear && x[a] - lo[a] >= clearance && hi[a] - x[a] >= clearance;
-    if (!clear) continue;
+    Vec3 x;
+    if (!centre_placement(centre, shortest_edge(cell), lo, hi, x)) continue;
     const std::size_t before = triangulation.number_of_vertices();
-    const Vertex_handle v = triangulation.insert(centre, cell);
+    const Vertex_handle v = triangulation.insert(Point_3(x[0], x[1], x[2]), cell);
     if (triangulation.number_of_vertices() == before) continue;
     v->info() = static_cast<Index>(points.size());
     points.push_back(x);
@@ -276,12 +302,6 @@ std::vector<Tet> refined_delaunay(std::vector<Vec3>& points, const Vec3& lo, con
   std::vector<Vertex_handle> handles;
   Delaunay_3 triangulation = triangulate(points, handles);
   const std::size_t n_input = points.size();
-  auto inside = [&](const Vec3& x) {
-    for (int i = 0; i < 3; ++i) {
-      if (!(x[i] > lo[i] && x[i] < hi[i])) return false;
-    }
-    return true;
-  };
   for (report.rounds = 0; report.rounds < 64; ++report.rounds) {
     // The round's bad tetrahedra, by canonical vertex indices.
     const std::vector<Tet> bad = cells_where(
@@ -295,30 +315,8 @@ std::vector<Tet> refined_delaunay(std::vector<Vec3>& points, const Vec3& lo, con
       if (!find_cell(triangulation, handles, t, cell)) continue;  // gone this round
       const Point_3 centre = CGAL::circumcenter(cell->vertex(0)->point(), cell->vertex(1)->point(),
                                                 cell->vertex(2)->point(), cell->vertex(3)->point());
-      const double shortest = shortest_edge(cell);
-      Vec3 x{centre.x(), centre.y(), centre.z()};
-      // A centre near or beyond a box face goes onto that face (the face's
-      // coordinate exact), away from its edges; none near an edge.
-      int near_axis = -1;
-      double near_distance = 0.5 * shortest;
-      for (int a = 0; a < 3; ++a) {
-        for (const double bound : {lo[a], hi[a]}) {
-          const double distance = std::abs(x[a] - bound);
-          const bool beyond = bound == lo[a] ? x[a] <= lo[a] : x[a] >= hi[a];
-          if (beyond || distance < near_distance) near_axis = a, near_distance = beyond ? -1.0 : distance;
-        }
-      }
-      if (near_axis >= 0) {
-        x[near_axis] = std::abs(x[near_axis] - lo[near_axis]) < std::abs(x[near_axis] - hi[near_axis]) ? lo[near_axis]
-                                                                                                        : hi[near_axis];
-        bool clear = true;
-        for (int a = 0; a < 3; ++a) {
-          if (a != near_axis && !(x[a] - lo[a] >= 0.5 * shortest && hi[a] - x[a] >= 0.5 * shortest)) clear = false;
-        }
-        if (!clear) continue;
-      } else if (!inside(x)) {
-        continue;
-      }
+      Vec3 x;
+      if (!centre_placement(centre, shortest_edge(cell), lo, hi, x)) continue;
       const std::size_t before = triangulation.number_of_vertices();
       const Vertex_handle v = triangulation.insert(Point_3(x[0], x[1], x[2]), cell);
       if (triangulation.number_of_vertices() == before) continue;  // an existing point
@@ -332,8 +330,15 @@ std::vector<Tet> refined_delaunay(std::vector<Vec3>& points, const Vec3& lo, con
   }
   if (slivers.min_dihedral > 0) {
     perturb_slivers(triangulation, handles, points, slivers, lo, hi, true, report);
-    report.off_centres = insert_off_centres(triangulation, handles, points, slivers, lo, hi, report);
-    if (report.off_centres > 0) perturb_slivers(triangulation, handles, points, slivers, lo, hi, false, report);
+    for (int pass = 0; pass < slivers.insertion_passes && report.slivers_after > 0; ++pass) {
+      const std::size_t inserted = insert_off_centres(triangulation, handles, points, slivers, lo, hi, report);
+      if (inserted == 0) break;
+      report.off_centres += inserted;
+      perturb_slivers(triangulation, handles, points, slivers, lo, hi, false, report);
+    }
+    // The insertions may leave a tetrahedron above the ratio: counted.
+    report.unresolved = cells_where(
+        triangulation, [&](const Delaunay_3::Cell_handle& cell) { return radius_edge(cell) > max_ratio; }).size();
   }
   report.inserted = points.size() - n_input;
   return finite_tets(triangulation);

@@ -106,13 +106,15 @@ std::vector<double> cone_envelope_3(const std::vector<Vec3>& sites, const std::v
 // first (an even permutation), rows sorted: canonical for the point set.
 std::vector<Tet> delaunay_tetrahedra(const std::vector<Vec3>& points);
 
-// The sliver pass (refined_delaunay): new interior points move within
-// picking regions; old points never move.
+// The sliver pass (refined_delaunay): new points move within picking
+// regions (new face points within their face); old points never move;
+// what is left gets points inside the slivers' circumspheres.
 struct Sliver_options {
   double min_dihedral = 0;          // degrees: a sliver has a dihedral below it or above 180 minus it; 0: no pass
   double rho = 0.15;                // picking region: rho times the point's shortest edge
   int attempts = 12;                // random positions tried per point
   int rounds = 3;
+  int insertion_passes = 4;         // circumcentre insertions, each followed by the perturbation again
   double max_radius_edge = 2.0;     // a move must keep the star within this
   std::size_t first_movable = 0;    // points below this index never move (the kept old points)
   std::uint64_t seed = 0;
@@ -122,7 +124,7 @@ struct Refinement_report {
   std::vector<Index> moved;     // points the sliver pass moved
   std::vector<std::uint8_t> moved_mask;
   bool was_moved(std::size_t k) const { return k < moved_mask.size() && moved_mask[k]; }
-  std::size_t off_centres = 0;  // sliver circumcentres inserted
+  std::size_t off_centres = 0;  // points inserted in slivers' circumspheres
   std::size_t slivers_before = 0, slivers_after = 0;
   std::size_t inserted = 0;     // refinement and off-centre points
   std::size_t unresolved = 0;   // tetrahedra above the ratio when it stopped
