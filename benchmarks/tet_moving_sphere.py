@@ -5,8 +5,10 @@ Size h(x) = min(0.1, hmin + 0.3 | |x - c| - 0.2 |): fine on a sphere of radius
 Each method first adapts a Kuhn 10^3 cube three times to c0, then steps from
 its own output. Per step: points, tetrahedra, the old points kept (bit-identical
 coordinates), radius-edge median / p99 / max, dihedral min / median / max and
-% of dihedrals below 10 / above 170 degrees, CPU seconds, memory per point, the
-median edge length over h and f's kd-tree evaluations per query.
+% of dihedrals below 10 / above 170 degrees, CPU seconds, memory per output point
+(evomesh: the step's peak resident memory above the resident memory before it;
+MMG3D: its process's peak resident memory), the median edge length over h and f's
+kd-tree evaluations per query.
 
 MMG3D (mmg3d_O3 of the mmgpy 0.17.1 wheel, MMG 5.8.0) runs in the same script
 when build/peers/mmg-venv holds it (python3 -m venv build/peers/mmg-venv &&
@@ -34,10 +36,25 @@ import evomesh
 from evomesh.tet_mesh import dihedral_angles, radius_edge_ratios
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-# The resident memory after the imports: "RSS bytes / point" is the peak
-# resident memory above it (the whole run so far: meshes, numpy temporaries of
-# the quality figures, the step) over the step's output points.
-BASE_RSS = int(open("/proc/self/statm").read().split()[1]) * os.sysconf("SC_PAGE_SIZE")
+
+
+def status_bytes(field: str) -> int:
+    """A memory figure of this process from /proc/self/status (VmRSS, VmHWM), in bytes."""
+    with open("/proc/self/status") as status:
+        for line in status:
+            if line.startswith(field + ":"):
+                return int(line.split()[1]) * 1024
+    raise RuntimeError(f"{field} not in /proc/self/status")
+
+
+def step_memory(run):
+    """run() and the peak resident memory above the resident memory before it
+    (the step's own memory: the peak is reset first through /proc/self/clear_refs)."""
+    with open("/proc/self/clear_refs", "w") as refs:
+        refs.write("5")
+    before = status_bytes("VmRSS")
+    out = run()
+    return out, status_bytes("VmHWM") - before
 
 
 def size_function(centre: np.ndarray, hmin: float):
@@ -114,7 +131,7 @@ def read_medit(path: str) -> tuple[np.ndarray, np.ndarray]:
     return points, tets
 
 
-def mmg_step(binary: str, points: np.ndarray, tets: np.ndarray, h) -> tuple[np.ndarray, np.ndarray, float]:
+def mmg_step(binary: str, points: np.ndarray, tets: np.ndarray, h) -> tuple[np.ndarray, np.ndarray, float, int]:
     faces, _ = evomesh.tet_mesh.boundary_faces(tets)
     with tempfile.TemporaryDirectory() as tmp:
         write_medit(os.path.join(tmp, "m.mesh"), points, tets, faces)
@@ -124,10 +141,11 @@ def mmg_step(binary: str, points: np.ndarray, tets: np.ndarray, h) -> tuple[np.n
                        stdout=subprocess.DEVNULL)
         after = resource.getrusage(resource.RUSAGE_CHILDREN)
         cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+        peak = after.ru_maxrss * 1024  # the largest child so far (MMG3D runs grow step by step)
         new_points, new_tets = read_medit(os.path.join(tmp, "o.mesh"))
     sign = evomesh._core.tet_orientations(new_points, new_tets)
     new_tets = np.where((sign < 0)[:, None], new_tets[:, [0, 2, 1, 3]], new_tets)
-    return new_points, new_tets, cpu
+    return new_points, new_tets, cpu, peak
 
 
 # --- the run ------------------------------------------------------------------
@@ -146,23 +164,23 @@ def main() -> None:
     binary = None if args.no_mmg else mmg_binary()
     start_mesh = evomesh.unit_cube_mesh(10)
     header = ("| method | step | points | tets | kept % of old | edge/h median | radius-edge median / p99 / max | "
-              "dihedral min / median / max | % < 10 / > 170 | CPU s | evaluations / query | peak RSS bytes / point |")
+              "dihedral min / median / max | % < 10 / > 170 | CPU s | evaluations / query | step RSS bytes / point |")
     rows = []
 
     mmg_ratio = None
     if binary:
         points, tets = start_mesh.points, start_mesh.tetrahedra
         for _ in range(3):
-            points, tets, _ = mmg_step(binary, points, tets, size_function(centre0, args.hmin))
+            points, tets, _, _ = mmg_step(binary, points, tets, size_function(centre0, args.hmin))
         for step in range(1, args.steps + 1):
             h = size_function(centres[step], args.hmin)
-            new_points, new_tets, cpu = mmg_step(binary, points, tets, h)
+            new_points, new_tets, cpu, peak = mmg_step(binary, points, tets, h)
             ratio = median_edge_over_h(new_points, new_tets, h)
             mmg_ratio = ratio if mmg_ratio is None else mmg_ratio
             q = quality_row(new_points, new_tets)
             rows.append(("MMG3D 5.8.0", step, len(new_points), len(new_tets),
                          100 * kept_count(points, new_points) / len(points), ratio, q, cpu, float("nan"),
-                         float("nan")))
+                         peak / len(new_points)))
             print(format_row(rows[-1]), flush=True)
             points, tets = new_points, new_tets
     elif not args.no_mmg:
@@ -177,16 +195,16 @@ def main() -> None:
         for step in range(1, steps + 1):
             h = size_function(centres[step], args.hmin)
             t0 = time.process_time()
-            new = evomesh.evolve(mesh, size=h, seed=10 + step, size_factor=size_factor, **sliver)
+            new, step_rss = step_memory(lambda: evomesh.evolve(mesh, size=h, seed=10 + step, size_factor=size_factor,
+                                                               **sliver))
             cpu = time.process_time() - t0
             ratio = median_edge_over_h(new.points, new.tetrahedra, h)
             ratio0 = ratio if ratio0 is None else ratio0
             if report:
-                rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024 - BASE_RSS
                 q = quality_row(new.points, new.tetrahedra)
                 rows.append((f"evomesh (size_factor {size_factor:.3f}, sliver_angle {sliver_angle:g})", step, new.n_points, new.n_tetrahedra,
                              100 * new.stats["kept_fraction"], ratio, q, cpu, new.stats["evaluations_per_sample"],
-                             rss / new.n_points))
+                             step_rss / new.n_points))
                 print(format_row(rows[-1]), "| samples drawn:", int(new.stats["interior_samples"]), "dropped:",
                       int(new.stats["samples_dropped"]), "refinement points:", int(new.stats["refinement_points"]),
                       "slivers before / after the pass:", int(new.stats["slivers_before"]),
