@@ -47,13 +47,13 @@ def status_bytes(field: str) -> int:
     raise RuntimeError(f"{field} not in /proc/self/status")
 
 
-def step_memory(run):
-    """run() and the peak resident memory above the resident memory before it
+def step_memory(run, *args, **kwargs):
+    """run(*args, **kwargs) and the peak resident memory above the resident memory before it
     (the step's own memory: the peak is reset first through /proc/self/clear_refs)."""
     with open("/proc/self/clear_refs", "w") as refs:
         refs.write("5")
     before = status_bytes("VmRSS")
-    out = run()
+    out = run(*args, **kwargs)
     return out, status_bytes("VmHWM") - before
 
 
@@ -195,8 +195,8 @@ def main() -> None:
         for step in range(1, steps + 1):
             h = size_function(centres[step], args.hmin)
             t0 = time.process_time()
-            new, step_rss = step_memory(lambda: evomesh.evolve(mesh, size=h, seed=10 + step, size_factor=size_factor,
-                                                               **sliver))
+            new, step_rss = step_memory(evomesh.evolve, mesh, size=h, seed=10 + step, size_factor=size_factor,
+                                        **sliver)
             cpu = time.process_time() - t0
             ratio = median_edge_over_h(new.points, new.tetrahedra, h)
             ratio0 = ratio if ratio0 is None else ratio0
