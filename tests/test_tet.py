@@ -308,6 +308,23 @@ def test_no_sliver_is_left_on_a_moving_sphere():
     assert dihedral_angles(plain.points, plain.tetrahedra).min() < 10
 
 
+def test_points_stay_where_the_request_changes_little():
+    # A mesh settled on h, then a request 1.15 times coarser (within the
+    # default size_tolerance 1.25): nearly every point stays; with the
+    # tolerance off the packing drops many of them.
+    def h(x):
+        return 0.06 + 0.1 * x[:, 0]
+
+    def coarser(x):
+        return 1.15 * h(x)
+
+    mesh = evomesh.evolve(evomesh.evolve(evomesh.unit_cube_mesh(6), size=h, seed=0), size=h, seed=1)
+    new = evomesh.evolve(mesh, size=coarser, seed=2)
+    check_step(mesh, new)
+    assert new.stats["kept_fraction"] >= 0.9
+    assert evomesh.evolve(mesh, size=coarser, seed=2, size_tolerance=1).stats["kept_fraction"] < 0.75
+
+
 def test_face_tags_follow_the_box_sides():
     mesh = evomesh.unit_cube_mesh(4)
     faces, _ = boundary_faces(mesh.tetrahedra)
