@@ -169,9 +169,11 @@ std::uint64_t mix(std::uint64_t z) {
 }
 
 // Picking regions for new points (Chew; Li and Teng): each sliver (a
-// dihedral angle below the bound or above 180 degrees minus it) with a movable vertex (a new interior point: old
-// points and the box's points never move) tries that vertex at random points
-// of a ball of radius rho times its shortest edge, and keeps the position
+// dihedral angle below the bound or above 180 degrees minus it) with a
+// movable vertex (a new point: inside the box, or on one box face, where it
+// moves within the face so that the faces stay covered; old points and the
+// box's edges and corners never move) tries that vertex at random points
+// of a ball (a disc on a face) of radius rho times its shortest edge, and keeps the position
 // whose star has the largest dihedral margin (radius-edge still within
 // bound), if that beats where it was. A move changes every distance from the
 // point by at most rho times its shortest edge, so the spacing stays within

@@ -41,14 +41,18 @@ class TetOptions:
         (``stats["radius_edge_unresolved"]`` counts what is left). 0: none.
     sliver_angle : float in [0, 30], default 10.0
         The sliver pass: every tetrahedron with a dihedral angle below this
-        (degrees) with a new interior vertex tries that vertex at random
-        points of a small ball (0.15 of its shortest edge) and keeps the
-        position whose tetrahedra around it have the largest smallest
-        dihedral angle (radius-edge still within ``max_radius_edge``). Old
-        points and points on the box never move. ``stats`` reports
-        ``slivers_before``/``slivers_after`` (tetrahedra below the angle) and
-        ``sliver_points_moved``. Slivers are measured, not excluded: a sliver
-        of four old points stays. 0: no pass.
+        or above 180 minus it (degrees) with a new vertex tries that vertex at
+        random points of a small ball (0.15 of its shortest edge; a new
+        point on a box face stays in that face) and keeps the position whose
+        tetrahedra around it have the largest margin of dihedral angles
+        (radius-edge still within ``max_radius_edge``). Old points, box edges
+        and corners never move. The slivers left (four old points, say) get
+        a new point in their circumsphere (the circumcentre, or its
+        projection onto a box face it is near or beyond), and the moves run
+        again, up to four times. ``stats`` reports ``slivers_before`` /
+        ``slivers_after`` (tetrahedra outside the bounds), ``sliver_points_moved``
+        and ``sliver_off_centres`` (points inserted). Slivers are measured,
+        not excluded: ``slivers_after`` may be above 0. 0: no pass.
     size_factor : float, default 0.9
         With ``size=h``: f = size_factor h, which
         gives a median edge length close to h (measured against MMG3D:

@@ -52,8 +52,9 @@ struct Tet_step_options {
   // (refined_delaunay below; 0: none), with at most a tenth of the kept
   // points plus 100 insertions.
   double max_radius_edge = 2.0;
-  // The sliver pass: tetrahedra with a dihedral angle below this (degrees)
-  // get their new interior vertices perturbed (Sliver_options); 0: none.
+  // The sliver pass: tetrahedra with a dihedral angle below this or above 180
+  // minus it (degrees) get their new vertices perturbed, then points in the
+  // circumspheres of those left (Sliver_options); 0: none.
   double sliver_angle = 0;
   // Refuse (Input_error) a step whose grids hold more cells than this.
   double max_samples = 5e7;
