@@ -283,6 +283,13 @@ std::size_t insert_off_centres(Delaunay_3& triangulation, std::vector<Vertex_han
     const std::size_t before = triangulation.number_of_vertices();
     const Vertex_handle v = triangulation.insert(Point_3(x[0], x[1], x[2]), cell);
     if (triangulation.number_of_vertices() == before) continue;
+    // Every tetrahedron the insertion makes has v as a vertex: one whose
+    // radius-edge ratio the insertion would break is not made (removing v
+    // restores the Delaunay tetrahedra it replaced).
+    if (star_quality(triangulation, v).second > options.max_radius_edge) {
+      triangulation.remove(v);
+      continue;
+    }
     v->info() = static_cast<Index>(points.size());
     points.push_back(x);
     handles.push_back(v);
