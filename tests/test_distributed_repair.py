@@ -1,4 +1,4 @@
-"""The spacing repair on MPI ranks (evomesh.distributed.repair, issue 29): the
+"""The spacing repair on MPI ranks (evomesh.distributed.repair): the
 needy points (repair_ratio) and then the open points (the gap repair,
 gap_repair_ratio and refine_gap_ratio) decided in rounds give the serial step's
 mesh array for array on any number of ranks, with the recommended options (less
