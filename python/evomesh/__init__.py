@@ -20,7 +20,7 @@ from evomesh.evolution import (
     evolve,
 )
 from evomesh.geometry import Arc, BoundaryGeometry, Circle, SignedDistance
-from evomesh.interface import INTERFACE_TAG, InterfaceWarning, LevelSet
+from evomesh.interface import INTERFACE_TAG, LevelSet
 from evomesh.mesh import Lineage, Mesh, PointKind
 from evomesh.mesh_quality import Quality, quality
 from evomesh.packing import lexical_first_mis
@@ -39,7 +39,6 @@ __all__ = [
     "INTERFACE_TAG",
     "Lineage",
     "QualityWarning",
-    "InterfaceWarning",
     "default_thread_count",
     "evolve",
     "delaunay_refine",

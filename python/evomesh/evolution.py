@@ -414,14 +414,14 @@ def evolve(mesh: Mesh, delta: Any = None, *, size: Any = None, method: str = "fr
         boundary): an old point is moved onto a crossing only where that
         leaves it on exactly two interface segments and leaves every
         component of one sign of phi a point of its sign, so a component
-        around a single point (smaller than the spacing) is meshed; one whose
-        points all lie within rounding of phi = 0 is lost and reported
-        (``interface_components_lost``, an :class:`evomesh.InterfaceWarning`);
-        a component between the points (inside one triangle) is not seen.
+        around a single point (smaller than the spacing) is meshed; a
+        component between the points (inside one triangle) is not seen.
         Where the smallest angle stays below ``min_angle`` next to the
-        interface after the refits (the exception for curves above), a
-        :class:`QualityWarning` names the place and
-        ``interface_angle_exception`` is 1. phi is called in vectorised
+        interface (away from where it meets other constraints under less
+        than 60 degrees) after the refits (the exception for curves above),
+        ``interface_angle_exception`` is 1 and ``interface_min_angle``
+        (``_x``, ``_y``) say how small and where; below 0.9 ``min_angle``
+        also a :class:`QualityWarning`. phi is called in vectorised
         batches: once at the points, once per round of the root finding on
         the crossed edges (typically 10-30, at most 200) and once per Newton
         round of each projection (one batch of the points and their four

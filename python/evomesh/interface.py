@@ -46,7 +46,7 @@ from evomesh.geometry import DEFAULT_CORNER_ANGLE, BoundaryGeometry, as_geometry
 from evomesh.mesh import Lineage, Mesh, PointKind
 from evomesh.spacing_function import DELTA_MAX, DELTA_MIN, _require_mesh, as_delta, delta_from_size
 
-__all__ = ["LevelSet", "INTERFACE_TAG", "InterfaceWarning", "cut_mesh", "Cut", "default_regions"]
+__all__ = ["LevelSet", "INTERFACE_TAG", "cut_mesh", "Cut", "default_regions"]
 
 _CORNER, _BOUNDARY, _STEINER = (int(PointKind[name]) for name in ("CORNER", "BOUNDARY", "STEINER"))
 
@@ -73,13 +73,6 @@ _MIN_MEETING_ANGLE = 5.0
 # above it, moving points onto a curve after the quality pass leaves such
 # angles routinely (28.6 degrees of 30 after coarsening a disc).
 _ANGLE_WARNING_FRACTION = 0.9
-
-
-class InterfaceWarning(UserWarning):
-    """An interface step did not mesh part of what phi describes: a component
-    of one sign that the mesh points do not resolve (``stats
-    ["interface_components_lost"]``), or interface points left off phi = 0
-    (``stats["interface_points_off_curve"]``). The step's mesh is valid."""
 
 
 class LevelSet:
@@ -171,9 +164,10 @@ class LevelSet:
         each settled). One call of phi per round (two with a given gradient).
         The step is (phi / |g|) g / |g| (no overflow for phi scaled by 1e160,
         no underflow at 1e-170); a step after which |phi| grew is halved
-        instead (damped Newton: arctan-like phi); a step that removed less than
-        half of phi is lengthened by the ratio (a secant correction: a gradient
-        off by a constant factor)."""
+        instead (damped Newton: arctan-like phi); with a given gradient, a step
+        that removed less than half of phi lengthens this and the later steps
+        by the ratio (a secant correction: a gradient off by a constant factor), so that the end test
+        (a step below four units of rounding) holds for the corrected step."""
         x = x.copy()
         settled = np.zeros(len(x), dtype=bool)
         if len(x) == 0:
@@ -185,6 +179,8 @@ class LevelSet:
         ulp = np.finfo(np.float64).eps * np.maximum(np.abs(x).max(axis=1), tiny)
         previous = np.full(len(x), np.inf)  # |phi| before the last step
         last = np.zeros_like(x)  # the last step
+        factor = np.ones(len(x))  # the secant correction of the step's length
+        damped = np.zeros(len(x), dtype=bool)  # the last round halved the step (no secant ratio from it)
         active = np.arange(len(x))
         for _ in range(self.max_iterations):
             xa = x[active]
@@ -206,8 +202,10 @@ class LevelSet:
             step[p] = (value[p] / g2[p])[:, None] * g[p]
             step[q] = (value[q] / norm[q])[:, None] * (g[q] / norm[q][:, None])
             removed = np.where(np.isfinite(previous[active]), 1 - size / previous[active], 1.0)
-            slow = ok & (removed < 0.5) & (removed > 0)
-            step[slow] /= np.maximum(removed[slow], 1e-3)[:, None]
+            slow = ok & (removed < 0.5) & (removed > 0) & ~damped[active] & (self.gradient is not None)
+            factor[active[slow]] /= np.maximum(removed[slow], 1e-3)
+            damped[active] = worse
+            step *= factor[active][:, None]
             x[active[ok]] = xa[ok] - step[ok]
             last[active[ok]] = -step[ok]
             previous[active[ok]] = size[ok]
@@ -348,10 +346,6 @@ class Cut:
         piecewise-linear zero set of the values.
     n_crossings, n_moved : int
         Points added on edges, old points moved onto a crossing.
-    n_components_lost : int
-        Components of one sign of phi (at the points) all of whose points lie
-        within rounding of phi = 0: no point of theirs sees their sign, so the
-        cut has no interface around them.
     regions : (int, int)
         Triangle tags of the negative and the positive side.
     scale : float
@@ -369,7 +363,6 @@ class Cut:
     n_moved: int
     regions: tuple[int, int]
     scale: float
-    n_components_lost: int = 0
 
 
 class _Counted:
@@ -505,8 +498,7 @@ def cut_mesh(mesh: Mesh, interface: Any, *, interface_tag: int = INTERFACE_TAG,
     # component of one sign (a small circle around a vertex would vanish).
     sign_component, n_components = _sign_components(edges, phi)
     rounded = values == 0  # (phi within rounding of 0 at them, or exactly)
-    moved, crossing_of, n_dropped = _keep_components(sign_component, n_components, rounded, moved, crossing_of,
-                                                     distance[first])
+    moved, crossing_of = _keep_components(sign_component, n_components, rounded, moved, crossing_of, distance[first])
     points = P.copy()
     while len(moved):
         valid = _valid_moves(points, T, moved, raw_crossing[crossing_of])
@@ -666,7 +658,7 @@ def cut_mesh(mesh: Mesh, interface: Any, *, interface_tag: int = INTERFACE_TAG,
     return Cut(mesh=cut, old_index=np.where(origin >= 0, origin, -1), parent_triangle=parent_triangle,
                barycentric=barycentric, triangle_parent=triangle_parent, triangle_weights=vertex_weights,
                curve=curve, n_crossings=len(new_index), n_moved=len(moved), regions=(negative_tag, positive_tag),
-               scale=scale, n_components_lost=n_dropped)
+               scale=scale)
 
 
 def _tag(value: Any, name: str) -> int:
@@ -743,29 +735,28 @@ def _sign_components(edges: np.ndarray, phi: np.ndarray) -> tuple[np.ndarray, in
 
 
 def _keep_components(component: np.ndarray, n_components: int, rounded: np.ndarray, moved: np.ndarray,
-                     crossing_of: np.ndarray, distance: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
+                     crossing_of: np.ndarray, distance: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The moves onto crossings (`moved`, `crossing_of`, at `distance`) less,
     in every sign component all of whose points would reach phi = 0 (moved, or
-    `rounded`: within rounding of a crossing), the move of its point farthest
-    from its crossing, so the component keeps a point of its sign; and the
-    number of components lost anyway (all points within rounding of phi = 0)."""
+    `rounded`: within rounding of a crossing) by a move, the move of its point
+    farthest from its crossing, so the component keeps a point of its sign.
+    (A component all of whose points are within rounding of phi = 0 has no
+    sign to keep: the points of the previous interface.)"""
     at_zero = rounded.copy()
     at_zero[moved] = True
     labelled = component >= 0
     total = np.bincount(component[labelled], minlength=n_components)
     zeroed = np.bincount(component[labelled & at_zero], minlength=n_components)
     gone = total == zeroed
-    lost = gone.copy()
-    if len(moved) and gone.any():
-        own = component[moved]
-        candidates = np.flatnonzero(gone[own])
+    own = component[moved]
+    candidates = np.flatnonzero(gone[own]) if len(moved) else moved
+    if len(candidates):
         order = candidates[np.lexsort((-distance[candidates], own[candidates]))]
         first = order[np.r_[True, own[order][1:] != own[order][:-1]]]
-        lost[own[first]] = False
         keep = np.ones(len(moved), dtype=bool)
         keep[first] = False
         moved, crossing_of = moved[keep], crossing_of[keep]
-    return moved, crossing_of, int(lost.sum())
+    return moved, crossing_of
 
 
 def _interface_degree(T: np.ndarray, negative: np.ndarray) -> np.ndarray:
@@ -1084,10 +1075,6 @@ def evolve_with_interface(mesh: Mesh, delta: Any, size: Any, interface: Any, int
     out = run_step(cut.mesh, cut_delta, geometry=g, **step_arguments)
     extra = _placement_report(out, cut.curve, tag, extent)
     extra.update(_angle_report(out, step_arguments, tag))
-    if cut.n_components_lost:
-        warnings.warn(f"{cut.n_components_lost} component(s) of one sign of the interface phi lie within rounding of "
-                      "phi = 0 at every mesh point of theirs: the step has no interface around them (stats "
-                      "'interface_components_lost'); refine there", InterfaceWarning, stacklevel=3)
     return _compose(mesh, cut, out, tag, extra)
 
 
@@ -1249,8 +1236,7 @@ def _compose(mesh: Mesh, cut: Cut, out: Mesh, interface_tag: int, extra: dict[st
     stats = dict(out.stats)
     stats.update({"interface_crossings": float(cut.n_crossings), "interface_points_moved": float(cut.n_moved),
                   "interface_segments": float(((out.segment_tags == interface_tag) & ~out.segment_is_boundary).sum()),
-                  "interface_negative_tag": float(cut.regions[0]), "interface_positive_tag": float(cut.regions[1]),
-                  "interface_components_lost": float(cut.n_components_lost)})
+                  "interface_negative_tag": float(cut.regions[0]), "interface_positive_tag": float(cut.regions[1])})
     stats.update(extra)
     tags = _regions_by_component(out)
     stats["interface_triangles_retagged"] = float((tags != out.triangle_tags).sum())

@@ -9,6 +9,7 @@
 #include <algorithm>
 #include <cstdint>
 #include <functional>
+#include <utility>
 #include <vector>
 
 #include "evomesh/types.hpp"
@@ -63,10 +64,21 @@ Mesh_arrays with_curve_kinds(const Mesh_arrays& mesh);
 // segment_of_candidate[k]; each may move by at most its sphere's radius, or by
 // its distance along the curved segments to a vertex on the curve (else
 // Input_error: the curve is not the one the segments approximate). Returns the
-// largest move.
+// largest move; `interior_moves` (if given) gets (candidate, position before)
+// of every candidate of an interior chain that moved.
 double project_segment_candidates(const Mesh_arrays& mesh, const std::vector<std::uint32_t>& segment_of_candidate,
                                   std::size_t first, const std::vector<std::uint8_t>& kept,
-                                  const std::vector<double>& radius, std::vector<Vec2>& centers);
+                                  const std::vector<double>& radius, std::vector<Vec2>& centers,
+                                  std::vector<std::pair<std::size_t, Vec2>>* interior_moves = nullptr);
+
+// Undoes the moves (point, position before) of points whose pieces cross or
+// touch other pieces (meeting_pieces), until none do or every such move is
+// undone; returns the number undone. For the points of interior chains (an
+// interface): where a fold of the curve is narrower than the spacing, the move
+// onto the curve would make its pieces cross; the point stays on its chord
+// (the pieces between unmoved points are chords of the input's, which do not cross).
+std::size_t keep_pieces_apart(std::vector<Vec2>& points, const std::vector<Constraint_piece>& pieces,
+                              const std::vector<std::pair<Index, Vec2>>& moved);
 
 // After triangulating the selection with `pieces`: every new point on a curved
 // piece (a new selected point, or one the quality pass inserted; by at most half
