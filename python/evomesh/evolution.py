@@ -416,12 +416,14 @@ def evolve(mesh: Mesh, delta: Any = None, *, size: Any = None, method: str = "fr
         component of one sign of phi a point of its sign, so a component
         around a single point (smaller than the spacing) is meshed; a
         component between the points (inside one triangle) is not seen.
-        Where the smallest angle stays below ``min_angle`` next to the
-        interface (away from where it meets other constraints under less
-        than 60 degrees) after the refits (the exception for curves above),
-        ``interface_angle_exception`` is 1 and ``interface_min_angle``
-        (``_x``, ``_y``) say how small and where; below 0.9 ``min_angle``
-        also a :class:`QualityWarning`. phi is called in vectorised
+        Where the smallest angle stays below ``min_angle`` (quality pass
+        neither capped nor failed), ``interface_angle_exception`` says which
+        exception applied, and ``interface_min_angle`` (``_x``, ``_y``) how
+        small and where: 2 when only triangles next to where the interface
+        meets the boundary or another constraint are below it (small input
+        angles), 1 elsewhere next to the interface (the exception for curves
+        above: the refits did not restore the angle, or points were left on
+        their chords), with a :class:`QualityWarning` below 0.9 ``min_angle``. phi is called in vectorised
         batches: once at the points, once per round of the root finding on
         the crossed edges (typically 10-30, at most 200) and once per Newton
         round of each projection (one batch of the points and their four
@@ -506,7 +508,8 @@ def evolve(mesh: Mesh, delta: Any = None, *, size: Any = None, method: str = "fr
         from evomesh.interface import evolve_with_interface  # (it calls evolve: imported here, not at the top)
 
         return evolve_with_interface(mesh, delta, size, interface, interface_tag, interface_regions, interface_band,
-                                     geometry, evolve, method=method, seed=seed, options=options, **overrides)
+                                     geometry, evolve, method=method, seed=seed,
+                                     options=make_options(method, options, **overrides))
     if interface_tag is not None or interface_regions is not None or interface_band is not None:
         raise TypeError("interface_tag, interface_regions and interface_band need interface (phi)")
     old, motion = mesh, None

@@ -44,6 +44,7 @@ from scipy.spatial import cKDTree
 from evomesh import _core
 from evomesh.geometry import DEFAULT_CORNER_ANGLE, BoundaryGeometry, as_geometry
 from evomesh.mesh import Lineage, Mesh, PointKind
+from evomesh.mesh_quality import QualityWarning, triangle_angles
 from evomesh.spacing_function import DELTA_MAX, DELTA_MIN, _require_mesh, as_delta, delta_from_size
 
 __all__ = ["LevelSet", "INTERFACE_TAG", "cut_mesh", "Cut", "default_regions"]
@@ -1108,15 +1109,14 @@ def _angle_report(out: Mesh, step_arguments: dict[str, Any], interface_tag: int)
     to curves. Where the smallest other angle is still below min_angle, the
     exception is the curve's (interface points moved onto phi = 0 after the
     quality pass, the refits did not restore the angle, or points were left
-    on their chords where phi = 0 folds within the spacing): stats
-    "interface_angle_exception" = 1 with the angle and its place
-    ("interface_min_angle", "_x", "_y"), and below _ANGLE_WARNING_FRACTION of
-    min_angle a QualityWarning naming them."""
-    from evomesh.evolution import make_options  # (evolution imports this module inside evolve)
-    from evomesh.mesh_quality import QualityWarning, triangle_angles
-
-    overrides = {k: v for k, v in step_arguments.items() if k not in ("method", "seed", "options")}
-    o = make_options(step_arguments.get("method", "frfc"), step_arguments.get("options"), **overrides)
+    on their chords where phi = 0 folds within the spacing). stats
+    "interface_angle_exception" says which applied (bits: 1 the curves', the
+    smallest such angle in "interface_min_angle_curve"; 2 the small input
+    angles', where the smallest angle is next to a meeting point), with the
+    smallest angle and its place ("interface_min_angle", "_x", "_y"); below
+    _ANGLE_WARNING_FRACTION of min_angle next to the curve, a QualityWarning
+    names them."""
+    o = step_arguments["options"]  # (the step's options, overrides applied: evolve makes them)
     stats = out.stats
     report = {"interface_angle_exception": 0.0}
     if not o.quality or stats.get("quality_capped") or stats.get("quality_failed"):
@@ -1132,25 +1132,28 @@ def _angle_report(out: Mesh, step_arguments: dict[str, Any], interface_tag: int)
     junction = np.intersect1d(out.segments[is_interface].ravel(), np.flatnonzero(on_other))
     corners = out.points[out.triangles]
     centroid = corners.mean(axis=1)
+    worst = int(np.argmin(angles))
+    away = angles
     if len(junction):
         longest = np.hypot(*(corners - np.roll(corners, 1, axis=1)).transpose(2, 0, 1)).max(axis=1)
         near, _ = cKDTree(out.points[junction]).query(centroid)
-        angles = np.where(near <= 3 * longest, 180.0, angles)
-    worst = int(np.argmin(angles))
-    smallest = float(angles[worst])
-    if smallest >= o.min_angle - 1e-9 - np.degrees(rounding):
-        return report
+        away = np.where(near <= 3 * longest, 180.0, angles)
+    threshold = o.min_angle - 1e-9 - np.degrees(rounding)
+    curve = float(away.min())
+    exception = (1 if curve < threshold else 0) | (2 if away[worst] != angles[worst] else 0)
     x, y = centroid[worst]
-    report = {"interface_angle_exception": 1.0, "interface_min_angle": smallest, "interface_min_angle_x": float(x),
-              "interface_min_angle_y": float(y)}
-    if smallest >= _ANGLE_WARNING_FRACTION * o.min_angle:
+    report = {"interface_angle_exception": float(exception), "interface_min_angle": float(angles[worst]),
+              "interface_min_angle_x": float(x), "interface_min_angle_y": float(y),
+              "interface_min_angle_curve": curve}
+    if curve >= _ANGLE_WARNING_FRACTION * o.min_angle:
         return report
+    x, y = centroid[int(np.argmin(away))]
     left = stats.get("curve_points_left_on_chords", 0) + stats.get("curve_samples_left_on_chords", 0)
-    warnings.warn(f"the smallest angle, {smallest:.3g} deg near ({x:.6g}, {y:.6g}), is below min_angle = "
+    warnings.warn(f"the smallest angle, {curve:.3g} deg near ({x:.6g}, {y:.6g}), is below min_angle = "
                   f"{o.min_angle:g} next to the interface (evolve's exception for curves): its points moved onto "
                   "phi = 0 after the quality pass and the refits did not restore the angle "
                   f"({int(left)} point(s) left on their chords where phi = 0 folds within the spacing); stats "
-                  "'interface_angle_exception' = 1. A finer interface_band there resolves it",
+                  "'interface_angle_exception' has bit 1. A finer interface_band there resolves it",
                   QualityWarning, stacklevel=4)
     return report
 
