@@ -87,7 +87,8 @@ class LevelSet:
         gradient near the zero set (a signed distance is ideal).
     gradient : callable, optional
         ``gradient(x) -> (k, 2)``; default: central differences with a step of
-        cbrt(eps) times the coordinate scale.
+        cbrt(eps) times the extent of the points (the mesh's, in a step),
+        evaluated with phi itself in one call.
     max_iterations : int, default 50
         Of the Newton projection (:meth:`project`).
 
@@ -96,7 +97,10 @@ class LevelSet:
     ``project`` moves points onto phi = 0 by Newton's iteration
     x <- x - phi(x) grad phi(x) / |grad phi(x)|^2 until the step is below four
     units of rounding of the coordinates: the result is within a few units of
-    rounding of the zero set, whatever the accuracy of the gradient.
+    rounding of the zero set, whatever the scale of phi (1e160 or 1e-170).
+    A step after which |phi| grew is halved (arctan-like phi), and with a given
+    gradient a step that removed less than half of phi is lengthened by the
+    secant ratio (a gradient off by a constant factor).
     """
 
     phi: Callable[[np.ndarray], Any]
