@@ -408,10 +408,39 @@ def evolve(mesh: Mesh, delta: Any = None, *, size: Any = None, method: str = "fr
         curve: every point it creates on it lies on phi = 0 (within a few
         units of rounding for a function; on the piecewise-linear zero set of
         the values), except where the zero set is not a curve at the local
-        spacing (two circles touching): there a point stays on its chord. The
+        spacing (two circles touching) or its move onto phi = 0 would make
+        the interface cross or fold onto itself (a filament or gap narrower
+        than the spacing): there a point stays on its chord
+        (``curve_points_left_on_chords``, ``curve_samples_left_on_chords``,
+        and ``interface_points_off_curve``, ``interface_largest_off_curve``:
+        interface points farther than 8 units of rounding from phi = 0). The
         spacing comes from ``delta``/``size`` at the old points as usual
-        (absolute: the cut's short edges next to crossings do not refine).
-        Several components, merging and splitting work. ``new.lineage``
+        (absolute: the cut's short edges next to crossings do not refine),
+        capped near the interface by its local feature size (the distance
+        across the domain to the next piece of the interface, its own other
+        side included: a filament, a narrow ring or a short wave is resolved
+        as the step's points see it). The interface is closed (or ends on the
+        boundary): an old point is moved onto a crossing only where that
+        leaves it on exactly two interface segments and leaves every
+        component of one sign of phi a point of its sign, so a component
+        around a single point (smaller than the spacing) is meshed; a
+        component between the points (inside one triangle) is not seen.
+        Where the smallest angle stays below ``min_angle`` (quality pass
+        neither capped nor failed), ``interface_angle_exception`` says which
+        exception applied, and ``interface_min_angle`` (``_x``, ``_y``) how
+        small and where: 2 when only triangles next to where the interface
+        meets the boundary or another constraint are below it (small input
+        angles), 1 elsewhere next to the interface (the exception for curves
+        above: the refits did not restore the angle, or points were left on
+        their chords), with a :class:`QualityWarning` below 0.9 ``min_angle``. phi is called in vectorised
+        batches: once at the points, once per round of the root finding on
+        the crossed edges (typically 10-30, at most 200) and once per Newton
+        round of each projection (one batch of the points and their four
+        finite-difference neighbours, or phi and the gradient of a
+        LevelSet; typically 2-6 rounds, at most ``max_iterations``, for the
+        segment samples and each of up to three fits), and once for the
+        report; ``interface_phi_calls`` counts them. Several components,
+        merging and splitting work. ``new.lineage``
         refers to ``mesh``, so :func:`evomesh.transfer` and
         :func:`evomesh.transfer_cells` work across the move. ValueError when
         phi is not finite, has no sign change on the mesh, or its zero set
@@ -502,7 +531,8 @@ def evolve(mesh: Mesh, delta: Any = None, *, size: Any = None, method: str = "fr
         from evomesh.interface import evolve_with_interface  # (it calls evolve: imported here, not at the top)
 
         return evolve_with_interface(mesh, delta, size, interface, interface_tag, interface_regions, interface_band,
-                                     geometry, evolve, method=method, seed=seed, options=options, **overrides)
+                                     geometry, evolve, method=method, seed=seed,
+                                     options=make_options(method, options, **overrides))
     if interface_tag is not None or interface_regions is not None or interface_band is not None:
         raise TypeError("interface_tag, interface_regions and interface_band need interface (phi)")
     old, motion = mesh, None

@@ -65,8 +65,20 @@ struct Constraint_piece {
 
 // What a step says when two of its constraint pieces cross (CGAL's
 // Intersection_of_constraints_exception while inserting them): a ValueError in
-// Python, never CGAL's bare RuntimeError.
-Input_error crossing_pieces_error();
+// Python, never CGAL's bare RuntimeError, naming the two pieces and where they
+// cross (first_crossing_pieces), and whether the cause is rounding or geometry.
+Input_error crossing_pieces_error(const std::vector<Vec2>& points, const std::vector<Constraint_piece>& pieces);
+
+// The pairs (i < j, sorted) of pieces that cross: their interiors meet at one
+// point, or they overlap along a line (exact predicates); with `touching`, also
+// those where an end of one lies inside the other (which a constrained
+// triangulation splits there). A grid of cells about the mean piece length:
+// O(m) for pieces of similar length.
+std::vector<std::array<Index, 2>> meeting_pieces(const std::vector<Vec2>& points,
+                                                 const std::vector<Constraint_piece>& pieces, bool touching);
+// The first pair of meeting_pieces without touching, {-1, -1} for none.
+std::array<Index, 2> first_crossing_pieces(const std::vector<Vec2>& points,
+                                           const std::vector<Constraint_piece>& pieces);
 
 // Constrained Delaunay triangulation of `points` with `pieces` as constraints;
 // returns the counter-clockwise triangles inside the domain the pieces bound
