@@ -129,8 +129,8 @@ std::vector<double> distance_along_to_curve(const Boundary_geometry& geometry, c
 }
 
 // Projects `points` (on segments tagged `tags`) onto their curves; each may move
-// by at most limit[k]. A point of an interior chain (interior[k]; an interface,
-// issue 28) that would move farther stays where it is, on its chord: there the
+// by at most limit[k]. A point of an interior chain (interior[k]; an interface)
+// that would move farther stays where it is, on its chord: there the
 // curve is not resolved at the local spacing (two level-set circles touching),
 // and an interior chain does not bound the domain. Returns the largest move;
 // adds the points left so to *left.
@@ -526,7 +526,7 @@ double fit_to_curves(const Boundary_geometry& geometry, const std::vector<Constr
   // pass runs again on the fitted mesh (its segments as pieces, no point
   // dropped) and its new points on curves are fitted in turn. Each round's moves
   // are sagittas of shorter chords when the chords' ends lie on the curve; two
-  // rounds settle it in practice (issue 28). Where they do not (kept points of
+  // rounds settle it in practice. Where they do not (kept points of
   // a coarse input polygon, which stay on its chords), a point the pass puts
   // between two of them moves by up to the polygon's sagitta, far more than its
   // new segments' length: a spike whose thin triangles the next round splits

@@ -285,7 +285,7 @@ Evolve_result frfc_over_scope(const Mesh_arrays& input, const Mesh_arrays& mesh,
   const auto release_free_memory = [&context, &scope] {
     if (scope.releases_memory_between_stages()) frfc_stages::release_free_memory(context);
   };
-  // Memory (issue 13): what a stage leaves behind goes as soon as nothing reads it.
+  // Memory: what a stage leaves behind goes as soon as nothing reads it.
 
   // Step 1: nn_M and the spacing function f (Section 3.1), within the domain.
   const auto chains = segment_chains(mesh);

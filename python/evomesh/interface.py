@@ -1,4 +1,4 @@
-"""Level-set interfaces (issue 28): the zero set of phi as interior constraints that move with phi.
+"""Level-set interfaces: the zero set of phi as interior constraints that move with phi.
 
 ``evolve(mesh, delta, interface=phi)`` runs in three stages:
 
@@ -56,7 +56,7 @@ INTERFACE_TAG: int = -1
 
 # Root finding stops when the bracket is below this fraction of the coordinate
 # scale (max |x| of the mesh): the crossing is then within 1e-14 of phi = 0,
-# two orders inside the 1e-12 that issue 28 asks for.
+# two orders inside the 1e-12 promised for interface points.
 _ROOT_TOLERANCE = 1e-14
 # A crossing this close (relative to the coordinate scale) to a vertex is the
 # vertex: phi there is taken as 0 and no point is added.

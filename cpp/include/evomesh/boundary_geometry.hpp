@@ -1,4 +1,4 @@
-// Curved boundaries (issue 12): the true curve behind a polygonal boundary,
+// Curved boundaries: the true curve behind a polygonal boundary,
 // given per segment tag as a projection onto it. With a geometry, a boundary
 // vertex of a curved tag where the boundary turns by less than `corner_angle`
 // is not a corner (a step may remove it), and every boundary point a step

@@ -1,4 +1,4 @@
-// Geometry-aware spacing (issue 11): the spacing of a mesh measured within its
+// Geometry-aware spacing: the spacing of a mesh measured within its
 // domain, and the spacing its domain can carry.
 //
 // nn_M(p) of the paper is the distance to the nearest other mesh point, which
