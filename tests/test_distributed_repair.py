@@ -18,7 +18,8 @@ from evomesh import _core
 from evomesh.meshgen import polygon_mesh
 
 MPI = pytest.importorskip("mpi4py.MPI")
-from evomesh import DistributedMesh, distributed_repair  # noqa: E402
+from evomesh import DistributedMesh  # noqa: E402
+from evomesh.distributed import repair as distributed_repair  # noqa: E402
 from evomesh.distributed.step import evolve_distributed  # noqa: E402
 from mpi_support import check_everywhere, watchdog  # noqa: E402,F401 (watchdog: an autouse fixture)
 from test_distributed_options import _ARRAYS, _DOMAINS, _delta, _mesh  # noqa: E402
