@@ -1,4 +1,4 @@
-"""A whole time step through the driver against evolve alone (issue 10).
+"""A whole time step through the driver against evolve alone.
 
 One moving-front step on the graded mesh of bench_evolve.py (about --size
 points): ``evolve`` alone, then ``Driver.step`` on the same mesh and delta

@@ -1,4 +1,4 @@
-"""Time one FRFC step through the Python API on graded meshes (issues 2 and 5).
+"""Time one FRFC step through the Python API on graded meshes.
 
 The meshes are the ones of ``cpp/bench/bench_evolve.cpp``: a k x k triangulated
 grid on the unit square, evolved once (not timed) towards the spacing
@@ -74,7 +74,7 @@ def graded_case(target: float, threads: int | None) -> tuple[evomesh.Mesh, np.nd
     points, triangles = structured_grid(k)
     grid = evomesh.Mesh(points, triangles)
     setup_delta = target_spacing(grid.points[:, 0], BAND_CENTER, s) * (k - 1)
-    # The graded input is fixed: built with the packing of before issue 11 (exact radii,
+    # The graded input is fixed: built with the paper's packing (exact radii,
     # old points first), so the timed step and compare_peers.py's front case keep their input.
     graded = evomesh.evolve(grid, setup_delta, seed=0, quality=False, max_samples=1e10, threads=threads,
                             radius="exact", demote_ratio=None, gap_repair_ratio=None, refine_gap_ratio=None)

@@ -1,4 +1,4 @@
-"""Issue 13 goal 2, "cost follows the change": what one FRFC step costs against
+"""Cost follows the change: what one FRFC step costs against
 the fraction of the mesh that changes, and what a bit-identical incremental
 step would have to pay at least.
 
@@ -16,8 +16,8 @@ For every fraction, ``--repeats`` alternating runs of
 * the incremental step (``incremental=True``, the default), asserted equal;
 * the whole-mesh stages the incremental step still runs: it rebuilds the
   constrained Delaunay triangulation of *all* selected points and runs the
-  quality pass, the parent map and the output checks on the whole mesh. (Until
-  issue 29 the triangle array was CGAL's face order, a function of the whole
+  quality pass, the parent map and the output checks on the whole mesh. (The
+  triangle array used to be CGAL's face order, a function of the whole
   insertion history, so a bit-identical step had to; ``--order-evidence``
   showed a 1 % band reordering every triangle far away. Triangles now come in
   a canonical order, so a local update of the triangulation could return the
@@ -38,11 +38,11 @@ For every fraction, ``--repeats`` alternating runs of
 
 and the medians, with the ratios taken run by run.
 
-Command (tables in benchmarks/README.md, "Issue 13 goal 2: cost follows the change")::
+Command (tables in benchmarks/README.md, "Cost follows the change")::
 
     .venv/bin/python benchmarks/bench_incremental.py --sizes 1e5,1e6 --repeats 3 --order-evidence
 
-``--loop`` (issue 29): the same comparison in a time loop, where the input is
+``--loop``: the same comparison in a time loop, where the input is
 what the previous step of the loop returned (a step's own output: its
 triangles in canonical order and, without the quality pass, certified strictly
 Delaunay, which the next update inherits): the 5 % band at x = 0.3 evolves the
@@ -50,7 +50,7 @@ stepped mesh (not timed), then the timed step moves the band to x = 0.6::
 
     .venv/bin/python benchmarks/bench_incremental.py --loop --sizes 1e5,1e6 --repeats 5 --options no-quality
 
-``--one-point`` (issue 27, section 3): delta = 1 except at the point nearest the
+``--one-point``: delta = 1 except at the point nearest the
 centre (1e-6: refine there, 1e3: coarsen there), and for comparison the 5 % front
 band above. Each path runs in a fresh process
 (one per path and case): the peak resident memory of the step (the largest
@@ -351,7 +351,7 @@ def main() -> None:
     parser.add_argument("--order-evidence", action="store_true")
     parser.add_argument("--options", choices=["recommended", "no-quality", "paper"], default="recommended",
                         help="the step's options: evolve's defaults, less the quality pass, or the paper's")
-    parser.add_argument("--one-point", action="store_true", help="the one-point table (issue 27) instead")
+    parser.add_argument("--one-point", action="store_true", help="the one-point table instead")
     parser.add_argument("--loop", action="store_true", help="the 5 %% band in a time loop (the input a step's output)")
     parser.add_argument("--one-point-worker", help=argparse.SUPPRESS)
     args = parser.parse_args()

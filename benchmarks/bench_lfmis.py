@@ -1,4 +1,4 @@
-"""The lexical-first MIS stage with one and two threads (issue 13, goal 5).
+"""The lexical-first MIS stage with one and two threads.
 
 Builds one mesh of a ``compare_peers.py`` scenario (default: ``front`` at 1e6
 points, not timed), then runs ``evomesh.evolve(mesh, delta, seed=0,

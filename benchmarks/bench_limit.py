@@ -1,4 +1,4 @@
-"""One step against the physical limit (issue 13, goal 1).
+"""One step against the physical limit.
 
 The limit of a step is what any remesher must at least do: a constrained
 Delaunay triangulation of the output points (CGAL, the output's segments as

@@ -1,5 +1,5 @@
 """Time the spacing function's construction (the step's ``apollonius`` stage)
-with and without the filter of hidden sites (issue 13, goal B).
+with and without the filter of hidden sites.
 
 Scenario ``band-coarsen`` of ``benchmarks/compare_peers.py``: the mesh
 ``unit_square_mesh(n, seed=0)`` and delta = 1 in the band ``|x - 0.5| < 0.1``,

@@ -1,4 +1,4 @@
-"""Time conservative transfer against evolve and linear transfer (issue 12).
+"""Time conservative transfer against evolve and linear transfer.
 
 The mesh is ``evomesh.unit_square_mesh(N)``; the step's delta refines in a
 vertical band (x in [0.3, 0.4]) and coarsens elsewhere, as a moving-front step

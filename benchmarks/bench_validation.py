@@ -1,4 +1,4 @@
-"""Time ``Mesh()`` validation on graded meshes before and after issue 13, goal A.
+"""Time ``Mesh()`` validation on graded meshes: the current checks against the older ones.
 
 The meshes are those of ``benchmarks/bench_evolve.py`` (a grid evolved once
 towards a band of fine spacing, not timed). For each size the script times
@@ -15,7 +15,7 @@ along two paths in the same process, alternating:
 
 * **after**: ``Mesh()``'s path (planarity by the winding of the boundary,
   flatness in C++);
-* **before**: the checks of the commit before issue 13 on the same data: the
+* **before**: the older checks on the same data: the
   constrained Delaunay triangulation of every edge
   (``prepare_mesh(reference_planarity=True)``, i.e. ``check_planar_mesh_cdt``)
   and the numpy flatness arithmetic. Its ``segments`` stage is the new counting
@@ -60,7 +60,7 @@ def cpu_seconds() -> float:
 
 
 def numpy_flatness(points: np.ndarray, triangles: np.ndarray) -> None:
-    """The flatness check as it was before issue 13 (numpy over all triangles)."""
+    """The older flatness check (numpy over all triangles)."""
     height, longest, rounding = mesh_module._flatness(points, triangles)
     thin = height < mesh_module._MIN_RELATIVE_HEIGHT * longest
     coarse = height < mesh_module._MIN_HEIGHT_ULPS * rounding
@@ -86,7 +86,7 @@ def staged(points: np.ndarray, triangles: np.ndarray, segments: np.ndarray, befo
     oriented = result[0]
     lap("flatness", lambda: numpy_flatness(points, oriented) if before else mesh_module._check_not_flat(points,
                                                                                                        oriented))
-    # The near-touching boundary (2026-12-01, after issue 13's goal 3): no such check before.
+    # The near-touching boundary check (added 2026-12-01, after the faster checks): none before.
     if before:
         out["pinch"] = 0.0
     else:

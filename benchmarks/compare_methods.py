@@ -1,4 +1,4 @@
-"""Compare FRFC, its practical variations, the quality pass and DRFC (issue 4).
+"""Compare FRFC, its practical variations, the quality pass and DRFC.
 
 Two cases:
 

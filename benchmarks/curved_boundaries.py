@@ -1,4 +1,4 @@
-"""Issue 12: curved boundaries on a disc with a hole (evomesh.meshgen.disc_with_hole_mesh).
+"""Curved boundaries on a disc with a hole (evomesh.meshgen.disc_with_hole_mesh).
 
 Coarsen by 3, then refine back to the initial spacing and to half of it, with
 and without the circles' geometry; prints per step the points, the boundary

@@ -1,4 +1,4 @@
-"""Issue 29: the lexical-first MIS on real MPI ranks
+"""The lexical-first MIS on real MPI ranks
 (evomesh.distributed.packing.lexical_first_mis): rounds, halo copies and bytes
 exchanged against mesh size and rank count, every run checked against the
 serial MIS. The sphere systems are benchmarks/mis_rounds.py's (a refining

@@ -1,4 +1,4 @@
-"""Issue 29: step 1 on real MPI ranks (evomesh.distributed.spacing.DistributedSpacing):
+"""Step 1 on real MPI ranks (evomesh.distributed.spacing.DistributedSpacing):
 halo records and bytes exchanged against mesh size and rank count, and seconds
 against the serial step 1 (`_core.step_spacing`) on the same mesh in the same
 run; every run is checked bit for bit against the serial values.

@@ -1,4 +1,4 @@
-"""Issue 29: one FRFC step on real MPI ranks (evolve on a DistributedMesh, the
+"""One FRFC step on real MPI ranks (evolve on a DistributedMesh, the
 paper's options with within_domain): MIS rounds of both packing passes, the
 triangulation's widenings and label rounds, bytes exchanged per point, the
 balance of the output, and seconds against the serial evolve of the same mesh

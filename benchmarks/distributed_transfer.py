@@ -1,5 +1,5 @@
 """transfer / transfer_cells on two DistributedMesh against the serial transfers
-of the same meshes, in the same run (issue 29).
+of the same meshes, in the same run.
 
 Run under MPI, once per rank count (oversubscribing a small machine is fine)::
 

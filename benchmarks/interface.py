@@ -1,4 +1,4 @@
-"""Issue 28: level-set interfaces, ``evolve(mesh, ..., interface=phi)``.
+"""Level-set interfaces, ``evolve(mesh, ..., interface=phi)``.
 
 Sections (all by default; pick some with --only):
 

@@ -1,4 +1,4 @@
-"""Issue 29: rounds and messages of the lexical-first MIS over a partition
+"""Rounds and messages of the lexical-first MIS over a partition
 (cpp/src/mis_rounds.cpp, simulated in one process), against mesh size and part
 count: does it stay bounded?
 

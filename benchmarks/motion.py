@@ -1,4 +1,4 @@
-"""Issue 28: Lagrangian motion, evolve(mesh, ..., displacement=u), and the transfers across the move.
+"""Lagrangian motion, evolve(mesh, ..., displacement=u), and the transfers across the move.
 
 A unit square, ``--steps`` steps at the initial spacing h (``size=h``) of
 three motions that keep the domain:
@@ -21,7 +21,7 @@ drift per step of a P1 field's integral (transfer, "conservative") and of a P0
 field's total per region against what region_exchange says came in (the
 material that changed region, as a % of the total, in the last column).
 
-Then "by hand" (before issue 28): move the points and rebuild Mesh, which
+Then "by hand" (without displacement=): move the points and rebuild Mesh, which
 refuses a fold, and carry the field by the linear transfer (no lineage): its
 integral error per step. Then the cost, as ratios against a step without
 motion run in the same script: the step with a displacement (and its parts:
@@ -109,7 +109,7 @@ def run_motion(mesh: evomesh.Mesh, u, h: float, steps: int) -> dict[str, float]:
 
 
 def by_hand(mesh: evomesh.Mesh, u, steps: int) -> str:
-    """The workaround before issue 28: points moved, Mesh rebuilt, the linear transfer."""
+    """The workaround without displacement=: points moved, Mesh rebuilt, the linear transfer."""
     field = 1.0 + mesh.points[:, 0] ** 2
     errors = []
     for _ in range(steps):

@@ -1,6 +1,6 @@
-"""How close to f can a mesh that follows the request be? (issue 11, goal 1)
+"""How close to f can a mesh that follows the request be?
 
-Issue 11 asks for two things of one step: nn_M'(p) / (delta(p) nn_M(p)) <= 1.10
+Two things are asked of one step: nn_M'(p) / (delta(p) nn_M(p)) <= 1.10
 at the 99th percentile over the input points (the new spacing follows the
 request h = delta nn_M at the old points), and a median of nn_M' / f over the
 output points in [0.75, 1.0]. f(x) = min_p (h(p) + |x - p|) is the largest

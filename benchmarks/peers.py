@@ -1,4 +1,4 @@
-"""Peer remeshers and the metrics shared by benchmarks/compare_peers.py (issues 11 and 13).
+"""Peer remeshers and the metrics shared by benchmarks/compare_peers.py.
 
 Three ways to adapt one input mesh to one size map h (given at the input
 vertices, linear in between):

@@ -1,4 +1,4 @@
-"""Cost per input point of one evolve step against size (issue 13, goals 4 and 5).
+"""Cost per input point of one evolve step against size (memory and time per point).
 
 For each scenario of ``compare_peers.py`` (``front``: the graded mesh of
 ``bench_evolve.py`` with the band moved; ``band-coarsen``; ``uniform-coarsen``)

@@ -1,4 +1,4 @@
-"""The quality pass in rounds (``quality_rounds=True``, issue 29) against the
+"""The quality pass in rounds (``quality_rounds=True``) against the
 serial pass (the default) on the same refining step of a graded front.
 
 The step is bench_evolve.py's: a graded mesh with a band of fine spacing,

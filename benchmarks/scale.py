@@ -1,4 +1,4 @@
-"""Scale test (issue 5): one evolve step on graded meshes of 1e6 and 1e7 points.
+"""Scale test: one evolve step on graded meshes of 1e6 and 1e7 points.
 
 Builds the graded meshes of ``bench_evolve.py`` (a grid evolved once towards a
 band of fine spacing) and times one ``evolve`` step with the band moved, each

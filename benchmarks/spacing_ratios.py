@@ -2,7 +2,7 @@
 
 * ``scenarios``: the three cases of compare_peers.py (front, band-coarsen,
   uniform-coarsen) through ``evomesh.evolve(M, delta, seed=0)`` only, with the
-  issue's ratio: over the input points p, nn_M'(p) / (delta(p) nn_M(p)) where
+  spacing ratio: over the input points p, nn_M'(p) / (delta(p) nn_M(p)) where
   nn_M'(p) is the distance to p's nearest *other* output point when p is kept,
   the second nearest output point when it is not (the paper's nn); p50/p99/max,
   the median of nn_M'/f over the output points, n / integral(1/f^2), the

@@ -1,4 +1,4 @@
-"""Issue 27, section 2: does a mesh stay put when the request does not change?
+"""Does a mesh stay put when the request does not change?
 
 For a uniform, a graded (h = 0.004 + 0.02 x), a curved (disc with a hole and its
 circles), a tagged mesh, a square with two holes and an L-shape (about 1.2e4
@@ -14,7 +14,7 @@ time instead of wall time, steadier on a shared machine; ``core`` stays
 wall time); ``empty``
 is 1 where the step was the empty-scope step (cpp/src/empty_scope.cpp: the
 input certified to be the full step's output, returned without the stages).
-Issue 27 asks the stays-put step to cost at most 10 % of a full step.
+The goal: a stays-put step costs at most 10 % of a full step.
 
     .venv/bin/python benchmarks/stays_put.py [--steps 5] [--scale 1] [--repeats 3] [--cases uniform,graded]
         [--clock wall|cpu]

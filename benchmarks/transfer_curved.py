@@ -1,4 +1,4 @@
-"""Transfers across curved steps (issue 27, section 1): errors and balances.
+"""Transfers across curved steps: errors and balances.
 
 A disc with a hole, both circles curved (``geometry=``), evolved for ``--steps``
 steps with delta alternating between refining and coarsening; after every step

@@ -1,4 +1,4 @@
-"""A time loop on MPI ranks that never gathers the mesh (issue 29).
+"""A time loop on MPI ranks that never gathers the mesh.
 
 A front (a circle) moves across a plate with two holes; every step refines
 near it and coarsens elsewhere (FRFC, the paper's options; --quality: the

@@ -1,4 +1,4 @@
-"""Two phases with a moving interface in the mesh (issue 28), with scikit-fem.
+"""Two phases with a moving interface in the mesh, with scikit-fem.
 
 A disc of a second material (conductivity 10 against 1 outside) is carried
 around the unit square by a rotating velocity field. Every step the interface,

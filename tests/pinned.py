@@ -1,5 +1,5 @@
-"""The fixed set of steps whose outputs are pinned by hash (issue 10: a
-refactor must leave every hash unchanged).
+"""The fixed set of steps whose outputs are pinned by hash (a refactor must
+leave every hash unchanged).
 
 Regenerate tests/data/pinned_hashes.json only for an intended change of the
 algorithm, and say so in the commit:  .venv/bin/python tests/pinned.py --write

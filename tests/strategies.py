@@ -78,7 +78,7 @@ def mesh_and_delta(draw, max_side: int = 12):
 
 
 # ---------------------------------------------------------------------------
-# Fuzzing (issue 5): random point-cloud meshes, invalid mutations, bad delta.
+# Fuzzing: random point-cloud meshes, invalid mutations, bad delta.
 # Arrays come from a numpy generator seeded by hypothesis: cheap to draw, and
 # every case is reproducible from its seed.
 # ---------------------------------------------------------------------------

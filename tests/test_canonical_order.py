@@ -1,4 +1,4 @@
-"""Issue 29: every path that makes triangles returns them in the canonical order
+"""Every path that makes triangles returns them in the canonical order
 (each rotated to start at its least point index, orientation kept; rows sorted),
 so the arrays, not only the triangle set, are a function of the points and
 constraints; a mesh that does not change keeps its input's order."""

@@ -1,4 +1,4 @@
-"""Conservative transfer (issue 12): the P1 L2 projection of transfer(...,
+"""Conservative transfer: the P1 L2 projection of transfer(...,
 method="conservative") and the P0 projection of transfer_cells, both on the
 local supermesh of a step."""
 

@@ -1,4 +1,4 @@
-"""fit_to_curves' refits (issue 28) on a coarse polygon of a curve (issue 27): a refit round must not make the
+"""fit_to_curves' refits on a coarse polygon of a curve: a refit round must not make the
 mesh worse. Its kept points on a 12-gon's chords stay there; a point the quality pass puts between two of them
 moves onto the circle by up to the 12-gon's sagitta, far more than its new segments' length, and each further
 round split the spikes so made into thinner triangles, down to a degenerate one."""

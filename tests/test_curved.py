@@ -1,4 +1,4 @@
-"""Issue 12: curved boundaries (evomesh.geometry, evolve(..., geometry=...))."""
+"""Curved boundaries (evomesh.geometry, evolve(..., geometry=...))."""
 
 from __future__ import annotations
 
@@ -45,7 +45,7 @@ def distance_to_circles(mesh: evomesh.Mesh) -> tuple[float, float]:
 
 
 def test_disc_with_hole_coarsen_then_refine_back() -> None:
-    """The issue's test: boundary points follow the spacing and stay on the circles."""
+    """Boundary points follow the spacing and stay on the circles."""
     h = 0.04
     mesh = disc_with_hole_mesh(h)
     g = geometry()

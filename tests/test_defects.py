@@ -1,4 +1,4 @@
-"""Regression tests for the defects of issue 9 (core and Mesh): one per item."""
+"""Regression tests for defects found by trying evomesh as a new user would (core and Mesh): one per defect."""
 
 from __future__ import annotations
 
@@ -168,7 +168,7 @@ def test_refining_a_tiny_square_raises_instead_of_returning_an_invalid_mesh():
     with pytest.raises(ValueError, match="not a valid mesh in float64"):
         for step in range(60):
             delta = np.where(np.hypot(*mesh.points.T) < 0.3 * side, 0.01, 1.0)
-            # the sizes and angle bound of before issue 11 (refine more slowly than the defaults, so the
+            # the paper's sizes and the old angle bound of 20 degrees (refine more slowly than the defaults, so the
             # float64 limit comes before the sample budget)
             mesh = evomesh.evolve(mesh, delta, seed=step, radius="exact", demote_ratio=None,
                                    gap_repair_ratio=None, refine_gap_ratio=None, min_angle=20.0)

@@ -1,4 +1,4 @@
-"""Regression tests for the Python-side defects of issue 9 (transfer far from
+"""Regression tests for Python-side defects found by trying evomesh as a new user would (transfer far from
 the origin, partial runs, write_run / read_mesh validation)."""
 
 import importlib

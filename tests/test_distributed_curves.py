@@ -1,4 +1,4 @@
-"""Curved boundaries on MPI ranks, and a step that returns its input (issue 29):
+"""Curved boundaries on MPI ranks, and a step that returns its input:
 ``evolve(dmesh, ..., geometry=g)`` gives the serial ``evolve(mesh, ..., geometry=g)``
 mesh on any number of ranks, array for array, and a step whose output is its
 input keeps the input's triangle and segment order, as serial.

@@ -1,4 +1,4 @@
-"""The lineage of a step on MPI ranks (evomesh.distributed.lineage, issue 29):
+"""The lineage of a step on MPI ranks (evomesh.distributed.lineage):
 ``evolve(dmesh, ...).lineage`` names each owned point's old triangle by global
 id, survives the step's rebalance, and ``gather()`` gives the serial step's
 Lineage: bit for bit wherever the serial parent is the same triangle (every

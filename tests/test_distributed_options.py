@@ -1,7 +1,7 @@
-"""The serial step's recommended options on MPI ranks (evomesh.distributed.step,
-issue 29): demotion, settled and coarse skipping, adaptive grid cells, ring
-candidates and the cheap radius, each alone and together, give the serial
-step's mesh array for array on any number of ranks.
+"""The serial step's recommended options on MPI ranks (evomesh.distributed.step):
+demotion, settled and coarse skipping, adaptive grid cells, ring candidates and
+the cheap radius, each alone and together, give the serial step's mesh array
+for array on any number of ranks.
 
 Plain ``pytest`` runs these on one rank; CI runs them under ``mpiexec -n 2`` and
 ``-n 4`` too (tools/run-tests.sh).

@@ -1,4 +1,4 @@
-"""The lexical-first MIS on MPI ranks (evomesh.distributed.packing, issue 29):
+"""The lexical-first MIS on MPI ranks (evomesh.distributed.packing):
 the kept set equals the serial packing's on any number of ranks and any
 partition, including partitions that cut the order into contiguous ranges (the
 worst case for rounds) and spheres whose conflicts cross gaps (no mesh, no

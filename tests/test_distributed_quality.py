@@ -1,5 +1,5 @@
 """The quality pass in a step on MPI ranks (evomesh.distributed.step,
-issue 29; docs/distributed-step.md 3.11): ``evolve(dmesh, ...)`` with the
+docs/distributed-step.md 3.11): ``evolve(dmesh, ...)`` with the
 recommended options (the quality pass on, serial or in rounds) gives the serial
 ``evolve`` mesh array for array on any number of ranks, with holes, required
 points, interior constraints, tags and curves; the pass's stats and warnings
@@ -144,7 +144,7 @@ def test_quality_on_curves_on_ranks_gives_the_serial_meshes(name: str) -> None:
 
 def test_points_restored_onto_dropped_input_points_keep_their_origin() -> None:
     """Coarsen then refine back: the pass puts points where the packing just
-    dropped input points (segment midpoints, issue 27); those keep their input
+    dropped input points (segment midpoints); those keep their input
     global id as origin on the ranks, as serial (restore_origins)."""
     mesh = _mesh("L-shape")
     options = _options(False, seed=1)

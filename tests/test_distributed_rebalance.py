@@ -1,4 +1,4 @@
-"""DistributedMesh.rebalance (issue 29): the points cut into equal-weight
+"""DistributedMesh.rebalance: the points cut into equal-weight
 Hilbert ranges and renumbered along the curve, the same result whatever
 partition the mesh came in.
 

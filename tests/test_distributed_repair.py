@@ -1,4 +1,4 @@
-"""The spacing repair on MPI ranks (evomesh.distributed.repair, issue 29): the
+"""The spacing repair on MPI ranks (evomesh.distributed.repair): the
 needy points (repair_ratio) and then the open points (the gap repair,
 gap_repair_ratio and refine_gap_ratio) decided in rounds give the serial step's
 mesh array for array on any number of ranks, with the recommended options (less
@@ -18,7 +18,8 @@ from evomesh import _core
 from evomesh.meshgen import polygon_mesh
 
 MPI = pytest.importorskip("mpi4py.MPI")
-from evomesh import DistributedMesh, distributed_repair  # noqa: E402
+from evomesh import DistributedMesh  # noqa: E402
+from evomesh.distributed import repair as distributed_repair  # noqa: E402
 from evomesh.distributed.step import evolve_distributed  # noqa: E402
 from mpi_support import check_everywhere, watchdog  # noqa: E402,F401 (watchdog: an autouse fixture)
 from test_distributed_options import _ARRAYS, _DOMAINS, _delta, _mesh  # noqa: E402

@@ -1,4 +1,4 @@
-"""Step 1 on MPI ranks (evomesh.distributed.spacing, issue 29,
+"""Step 1 on MPI ranks (evomesh.distributed.spacing,
 docs/distributed-step.md 3.1-3.2): nn, the weights (capped by the local feature
 size, whose chains and walks cross ranks) and f at the owned points equal the
 serial step's bit for bit, on any number of ranks and any partition; f at

@@ -1,4 +1,4 @@
-"""FRFC's step on MPI ranks (evomesh.distributed.step, issue 29): the kept
+"""FRFC's step on MPI ranks (evomesh.distributed.step): the kept
 points of the packing, and the step's mesh, equal the serial step's on any
 number of ranks and partitions.
 

@@ -1,4 +1,4 @@
-"""evomesh.transfer and evomesh.transfer_cells on two DistributedMesh (issue 29):
+"""evomesh.transfer and evomesh.transfer_cells on two DistributedMesh:
 equal to the serial transfers of the same meshes on any number of ranks and
 any partitions of old and new, and failures raised on every rank.
 

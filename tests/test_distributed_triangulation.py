@@ -1,5 +1,5 @@
 """The constrained Delaunay triangulation on MPI ranks
-(evomesh.distributed.triangulation, issue 29, docs/distributed-step.md 3.5):
+(evomesh.distributed.triangulation, docs/distributed-step.md 3.5):
 the union of the ranks' triangles is the serial ``constrained_delaunay`` of all
 points and pieces (holes, interior constraints, concave domains, lattices full
 of cocircular points), on any number of ranks and any partition of the points,

@@ -169,7 +169,7 @@ def test_defaults_are_documented():
         delaunay_refine(mesh.points, 1.0)
 
 
-# Issue 27: delaunay_refine and evolve(method="drfc") carry segment tags,
+# delaunay_refine and evolve(method="drfc") carry segment tags,
 # triangle tags and required points (test_tags.py's labelling and checks).
 @settings(max_examples=12)
 @given(random_meshes(max_points=80), st.integers(0, 2**16), st.sampled_from([0.3, 0.6, 1.0]))

@@ -182,7 +182,7 @@ def test_growing_circle_meets_the_paper_targets():
     radii, old points first, no gap repair: radius="exact", demote_ratio=None,
     gap_repair_ratio=None, refine_gap_ratio=None): at least 70% of
     the points kept in every step and a minimum angle at least the paper's worst.
-    With the defaults (issue 11) the band gets the spacing it asks for, which takes
+    With the defaults the band gets the spacing it asks for, which takes
     more new points: see test_growing_circle_with_the_defaults."""
     result = evomesh.growing_circle(progress=False, radius="exact", demote_ratio=None, gap_repair_ratio=None,
                                     refine_gap_ratio=None)
@@ -199,9 +199,9 @@ def test_growing_circle_meets_the_paper_targets():
 
 
 def test_growing_circle_with_the_defaults():
-    """Issue 11: the band gets more of the spacing it asks for (measured nn'/h max
+    """The band gets more of the spacing it asks for (measured nn'/h max
     1.23-1.60 at the input points, 1.54-1.75 before), at the price of old points
-    (measured 60-71 %, not the issue's 70 % in every step: benchmarks/README.md, "Issue 11")."""
+    (measured 60-71 %, not the 70 % asked for in every step)."""
     result = evomesh.growing_circle(progress=False)
     assert result.column("spacing_ratio_max").max() <= 1.65
     assert result.column("original_pct").min() >= 55.0

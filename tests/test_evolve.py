@@ -13,7 +13,7 @@ from strategies import grid_mesh, mesh_and_delta
 # Reported by the property tests below (pytest -s shows them).
 SPACING_BOUND = 2.0
 SIZE_BOUND = 2.0
-# The default interpolated sizes (issue 11) are at least f / 1.3 where the request
+# The default interpolated sizes are at least f / 1.3 where the request
 # refines an old neighbourhood: at most 1.3^2 times the paper's points there.
 SIZE_BOUND_INTERPOLATED = SIZE_BOUND * 1.3**2
 
@@ -45,7 +45,7 @@ def test_spacing_and_size_ratios(case):
 
 
 def test_figures_on_a_graded_case(capsys):
-    """The figures the issue asks to report, on a 40x40 jittered grid."""
+    """The reported figures of a step, on a 40x40 jittered grid."""
     mesh = grid_mesh(40, 40, jitter=0.2, seed=3)
     delta = np.where(mesh.points[:, 0] < 0.5, 0.3, 3.0)
     new = evomesh.evolve(mesh, delta, seed=0)

@@ -1,4 +1,4 @@
-"""The scripts in examples/ run on small sizes (issue 12)."""
+"""The scripts in examples/ run on small sizes."""
 
 import subprocess
 import sys

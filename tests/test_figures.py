@@ -1,4 +1,4 @@
-"""Figures stay readable on dense meshes (issue 12): fields with colour bars,
+"""Figures stay readable on dense meshes: fields with colour bars,
 rasterised, small files."""
 
 import numpy as np

@@ -1,4 +1,4 @@
-"""Fuzzing evolve (issue 5, item 2).
+"""Fuzzing evolve.
 
 Random valid meshes (grids with holes and notches; Delaunay meshes of uniform,
 clustered, integer-grid, collinear and annular point clouds with triangles

@@ -1,4 +1,4 @@
-"""Global ids of a step's input (issue 29, docs/distributed-step.md section 2.2).
+"""Global ids of a step's input (docs/distributed-step.md section 2.2).
 
 The core keys by point, triangle and segment ids what it used to key by array
 position: the random streams of the samples, the packing's tie order, the spacing

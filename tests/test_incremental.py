@@ -1,13 +1,13 @@
-"""Issue 13 goal 2: the incremental step (cpp/src/incremental_step.cpp) returns
+"""Cost follows the change: the incremental step (cpp/src/incremental_step.cpp) returns
 what the full algorithm returns, bit for bit, on every array of the new mesh
 and its lineage; it is taken where delta = 1 on most of the mesh and declines
 where it does not apply.
 
-Issue 27, section 3: the path is chosen before the work from O(n) counts
-(stats["incremental_step"] says which ran), the incremental step's peak memory
-is not above the full step's, and a refused sample budget is the same error on
-both paths. (That a failure inside the incremental step reaches the caller is
-checked in C++, cpp/tests/test_incremental_failures.cpp, by injecting one.)"""
+The path is chosen before the work from O(n) counts (stats["incremental_step"]
+says which ran), the incremental step's peak memory is not above the full
+step's, and a refused sample budget is the same error on both paths. (That a
+failure inside the incremental step reaches the caller is checked in C++,
+cpp/tests/test_incremental_failures.cpp, by injecting one.)"""
 
 from __future__ import annotations
 
@@ -222,7 +222,7 @@ def test_curved_boundaries_take_the_full_path():
     assert _taken(evomesh.evolve(mesh, np.ones(mesh.n_points), seed=0))
 
 
-# Issue 27, section 3 ----------------------------------------------------------------------
+# The path chosen before the work ----------------------------------------------------------
 
 
 def _centre_point(mesh: evomesh.Mesh) -> int:
@@ -254,7 +254,7 @@ def test_one_changed_point_takes_the_incremental_path_with_the_same_bits(value, 
 
 @pytest.mark.parametrize("band", [None, 0.5, 2.0])
 def test_strongly_graded_triangles_take_the_incremental_path_with_the_same_bits(band):
-    # The grids of these triangles ask f at their blocks: before issue 27 the step gave up
+    # The grids of these triangles ask f at their blocks: the step once gave up
     # on them late (after the packing), or its sample estimate, lacking f, refused them.
     mesh = _graded_mesh()
     delta = np.ones(mesh.n_points)
@@ -320,7 +320,7 @@ print(json.dumps({"peak_mib": max(peaks) if peaks else None, "incremental_step":
 
 
 def test_one_point_at_tiny_delta_takes_no_more_memory_than_the_full_step():
-    # Issue 27: one point at delta = 1e-6 on a 2,000-point mesh took 1.6 GB by default
+    # One point at delta = 1e-6 on a 2,000-point mesh once took 1.6 GB by default
     # against 72 MB with incremental=False (the incremental attempt sized a sample grid
     # without f, gave up, and the full step ran). Each path in a fresh process; the peak
     # resident memory of the step from the core's own stats (EVOMESH_STAGE_PROFILE).
@@ -339,7 +339,7 @@ def test_one_point_at_tiny_delta_takes_no_more_memory_than_the_full_step():
     assert fast["peak_mib"] <= 1.05 * full["peak_mib"], (fast["peak_mib"], full["peak_mib"])
 
 
-# Issue 29: without the quality pass the incremental step updates the input's
+# Without the quality pass the incremental step updates the input's
 # triangulation where it changed (cpp/src/triangulation_update.cpp) instead of
 # building it whole, and certifies the result (every piece an edge, every other
 # edge strictly Delaunay), or builds it whole: the same bits either way.

@@ -1,4 +1,4 @@
-"""Level-set interfaces (issue 28): evolve(mesh, ..., interface=phi)."""
+"""Level-set interfaces: evolve(mesh, ..., interface=phi)."""
 
 from __future__ import annotations
 
@@ -27,7 +27,7 @@ def interface_segments(mesh: evomesh.Mesh, tag: int = INTERFACE_TAG) -> np.ndarr
 
 def check_interface(mesh: evomesh.Mesh, phi, *, tol: float | None = 1e-12, min_angle: float | None = 30.0,
                     singular: np.ndarray | None = None, radius: float = 0.0) -> None:
-    """What every interface step must give (issue 28, "What must hold"):
+    """What every interface step must give (what the docstring promises):
     everywhere but within ``radius`` of the ``singular`` points of phi = 0
     (kinks, touching points), where the zero set is not a smooth curve."""
     check_valid_mesh(mesh)
@@ -369,7 +369,7 @@ def test_random_circles(cx: float, cy: float, r: float, coarsen: float) -> None:
     phi = circle(cx, cy, r)
     try:
         new = evomesh.evolve(mesh, coarsen, interface=phi)
-    except ValueError as error:  # only the refusals issue 28 asks for
+    except ValueError as error:  # only the documented refusals
         assume("tangent" not in str(error) and "change sign" not in str(error))
         raise
     # near the boundary the interface meets it at small angles: angles only where it is inside

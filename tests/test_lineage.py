@@ -1,4 +1,4 @@
-"""The step's parent map (issue 10): every new point's old triangle and
+"""The step's parent map: every new point's old triangle and
 barycentric coordinates, so transfer needs no point location."""
 
 import pickle

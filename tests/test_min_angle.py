@@ -1,4 +1,4 @@
-"""Issue 27: evolve's promise on the quality pass (its ``quality`` option): where
+"""Evolve's promise on the quality pass (its ``quality`` option): where
 no two segments meet under less than 60 degrees the result has no angle below
 ``min_angle``, unless the pass says it stopped (``quality_capped``) after its
 bound plus twice its estimate of the points Ruppert's rules need, or is
@@ -39,7 +39,7 @@ def test_no_small_angle_means_min_angle(case, method):
 
 # A rough request (delta from 0.1 to 10 at random neighbours) grades the
 # selected points so steeply that the pass needs more than 0.5 n + 1000
-# insertions: it stopped there before issue 27, at 26.7 degrees with frfc.
+# insertions: it used to stop there, at 26.7 degrees with frfc.
 @pytest.mark.parametrize("method", ["frfc", "drfc"])
 def test_a_rough_request_meets_min_angle(method):
     mesh = grid_mesh(60, 60, jitter=0.2, seed=3)

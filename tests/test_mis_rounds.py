@@ -1,4 +1,4 @@
-"""Issue 29: the lexical-first MIS computed in rounds by parts that see each
+"""The lexical-first MIS computed in rounds by parts that see each
 other's states only between rounds (cpp/src/mis_rounds.cpp; the argument in
 docs/distributed-step.md, 3.4) equals the serial MIS on every partition."""
 

@@ -1,4 +1,4 @@
-"""Lagrangian motion (issue 28): evolve(mesh, ..., displacement=u) moves every
+"""Lagrangian motion: evolve(mesh, ..., displacement=u) moves every
 point, repairs folds by remeshing, and its lineage lets the transfers remap
 fields across the move (conservatively; per region for cells, with the
 material that changed region reported by region_exchange)."""
@@ -204,7 +204,7 @@ def test_a_moving_interface_reports_the_material_that_changed_sides():
 
 
 def test_interface_points_moved_alone_further_than_a_cell():
-    """The issue's case: only the interface moves, by three cells, over points that stay
+    """Only the interface moves, by three cells, over points that stay
     (refused before as overlapping triangles). The fold is remeshed, the swept points
     join the region that now covers them, every one of them is kept."""
     mesh = two_regions(1500)

@@ -1,4 +1,4 @@
-"""Options in one place (issue 10): the core's option types, their presets and
+"""Options in one place: the core's option types, their presets and
 their validation, as Python sees them."""
 
 import copy

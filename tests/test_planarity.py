@@ -1,4 +1,4 @@
-"""Mesh()'s planarity check (issue 13): the boundary-winding check accepts and
+"""Mesh()'s planarity check: the boundary-winding check accepts and
 refuses exactly what the reference check (a constrained Delaunay triangulation of
 every edge, ``check_planar_mesh_cdt``) does, and the C++ flatness limits are
 numpy's.

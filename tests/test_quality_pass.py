@@ -152,12 +152,12 @@ def test_quality_false_is_the_paper_and_the_pass_reports_its_changes():
     added = len(after) - len(kept)
     assert removed == good.stats["quality_points_removed"]
     assert added == good.stats["quality_points_added"]
-    # its points are new, or put back exactly where the packing dropped an input point (issue 27)
+    # its points are new, or put back exactly where the packing dropped an input point
     fresh = np.array([tuple(p) not in before for p in good.points])
     restored = fresh & (good.origin >= 0)
     assert restored.sum() == good.stats["restored_points"]
     assert np.array_equal(good.points[restored], mesh.points[good.origin[restored]])
-    # Few points at the 20 degree bound of before issue 11 (66 here, under 5 %); the default
+    # Few points at the old 20 degree bound (66 here, under 5 %); the default
     # 30 degrees costs more on this rough size map (delta drawn per point in [0.3, 3]):
     # 781 here (56 %; 272 at 25 degrees).
     assert added <= 0.6 * plain.n_points

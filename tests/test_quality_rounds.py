@@ -1,5 +1,5 @@
-"""The quality pass in rounds of independent insertions (issue 29,
-docs/distributed-step.md section 3.6, option ``quality_rounds``): its output is a
+"""The quality pass in rounds of independent insertions
+(docs/distributed-step.md section 3.6, option ``quality_rounds``): its output is a
 function of the input *sets* (any order of points and pieces, either direction
 of an interior piece, any thread count), and it is a valid quality mesh."""
 

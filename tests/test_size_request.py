@@ -1,7 +1,7 @@
 """size= in the core (cpp/src/size_request.cpp): the comparisons delta_from_size
 reads from L are exactly those of the exact L, and delta_from_size gives the
-delta of its numpy form, bit for bit (issue 27, section 2: the repeated size=
-step's cost; the figures are in benchmarks/stays_put.py)."""
+delta of its numpy form, bit for bit (it sets the cost of a repeated size=
+step; the figures are in benchmarks/stays_put.py)."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Mesh.from_skfem / Mesh.to_skfem: scikit-fem conversion with named tags (issue 12)."""
+"""Mesh.from_skfem / Mesh.to_skfem: scikit-fem conversion with named tags."""
 
 import numpy as np
 import pytest

@@ -207,7 +207,7 @@ def steep_deltas(draw):
 @settings(max_examples=40, deadline=None)
 @given(steep_deltas(), st.integers(0, 1000), st.booleans())
 def test_sites_hidden_by_a_neighbour_are_left_out_without_changing_f(case, seed, split):
-    """Issue 13: with the mesh's triangles the construction leaves out sites
+    """With the mesh's triangles the construction leaves out sites
     hidden by a neighbour; f, the site found and n_hidden are bit for bit those
     of the full construction, certified or not, in one graph or in parts."""
     from evomesh import _core

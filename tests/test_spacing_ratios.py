@@ -28,7 +28,7 @@ def test_ten_steps_of_delta_08_refine_by_08_to_the_10th():
 
 
 def test_the_paper_packing_is_still_there():
-    """radius="exact", demote_ratio=None: old points first, as before issue 11 (it
+    """radius="exact", demote_ratio=None: old points first, as in the paper (it
     keeps the lattice at delta = 0.8)."""
     mesh = evomesh.unit_square_mesh(1000, seed=0)
     new = evomesh.evolve(mesh, 0.8, seed=0, radius="exact", demote_ratio=None, gap_repair_ratio=None,

@@ -1,4 +1,4 @@
-"""A mesh stays put when the request does not change (issue 27, section 2).
+"""A mesh stays put when the request does not change.
 
 ``evolve(new, size=h)`` after ``new = evolve(m, size=h)`` changes at most 0.1 %
 of the points after at most two steps, and ``evolve(new, delta=1)`` changes

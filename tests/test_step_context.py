@@ -1,4 +1,4 @@
-"""The step context (issue 29, docs/distributed-step.md section 2.3) from Python.
+"""The step context (docs/distributed-step.md section 2.3) from Python.
 
 The core reads no environment variable; the bindings build each step's context from
 the options and from EVOMESH_SITE_FILTER / EVOMESH_STAGE_PROFILE, read at every call.

@@ -1,4 +1,4 @@
-"""The output's nn that a step hands to the next (issue 13), computed beside the
+"""The output's nn that a step hands to the next, computed beside the
 parent map: the same bits as a fresh computation on the output, on lattices
 (equal distances everywhere), jittered grids, incremental steps and steps whose
 quality pass adds and drops points."""

@@ -1,4 +1,4 @@
-"""Tags and required points through steps, and meshio round trips (issue 12)."""
+"""Tags and required points through steps, and meshio round trips."""
 
 import warnings
 

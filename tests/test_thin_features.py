@@ -1,4 +1,4 @@
-"""Issue 11, goal 4: spacing within the domain and capped by its local feature size.
+"""Spacing within the domain and capped by its local feature size.
 
 A channel 1e-3 wide between two boxes and a slit 1e-4 wide into a square: with
 the paper's Euclidean nn_M, a slit wall's nearest point lies across the slit
@@ -61,9 +61,9 @@ def test_channel_every_delta(channel: evomesh.Mesh, delta: float) -> None:
 
 def test_channel_with_the_papers_nn_is_left_to_the_quality_pass() -> None:
     """The baseline within_domain fixes: with the paper's Euclidean nn_M the
-    packing leaves the channel unresolved (it hit the quality pass's bound of
-    0.5 n + 1000 insertions, with 1-3 degree angles, before issue 27); the pass
-    now resolves it, at the cost of most of the step's points."""
+    packing leaves the channel unresolved (the quality pass used to stop at its
+    bound of 0.5 n + 1000 insertions, with 1-3 degree angles); the pass now
+    resolves it, at the cost of most of the step's points."""
     mesh = polygon_mesh([CHANNEL], 0.05)
     paper = evomesh.evolve(mesh, 10.0, within_domain=False)
     within = evomesh.evolve(mesh, 10.0)
@@ -83,7 +83,7 @@ def channel_resolved(new: evomesh.Mesh) -> bool:
     return bool((walls > 0).sum() > 0.9 / (2 * WIDTH) and (walls < 0).sum() > 0.9 / (2 * WIDTH))
 
 
-# Issue 27: from a mesh that does not resolve the channel (polygon_mesh without
+# From a mesh that does not resolve the channel (polygon_mesh without
 # its smoothing steps: channel triangles 1e-3 high and up to the spacing long),
 # delta 10 left 1-18 degrees (frfc) and 3-18 (drfc): the quality pass stopped
 # at 0.5 n + 1000 insertions where the channel's walls need about 2 / 1e-3

@@ -1,4 +1,4 @@
-"""The parallel stages' threads seen from Python (issue 10): the default count
+"""The parallel stages' threads seen from Python: the default count
 comes from EVOMESH_NUM_THREADS / OMP_NUM_THREADS (invalid values ignored), the
 results never depend on it, and the persistent workers do not outlive a fork
 (a forked child starts its own)."""
@@ -65,7 +65,7 @@ def test_sampling_that_asks_f_gives_the_same_bits_on_any_number_of_threads():
     assert len(digests) == 1
 
 
-# Issue 27: a step with threads=k keeps at most k threads working, also in the
+# A step with threads=k keeps at most k threads working, also in the
 # threads it starts beside its stages (the early triangulation, the old mesh's
 # walker, the output's nn) and in the pool's workers, which an earlier call
 # with more threads left behind (several processes per node each take their

@@ -1,4 +1,4 @@
-"""Input validation at the Python boundary (issue 5, item 1).
+"""Input validation at the Python boundary.
 
 Every malformed input raises a clear TypeError or ValueError (never a crash, a
 RuntimeError or a silently wrong result), and the caller's arrays are never
@@ -433,7 +433,7 @@ def test_spacing_function_constructor_copies_its_input():
 
 
 # ---------------------------------------------------------------------------
-# fronts (issue 3): their constructors and distance queries
+# fronts: their constructors and distance queries
 # ---------------------------------------------------------------------------
 
 fronts = pytest.importorskip("evomesh.fronts")
@@ -492,7 +492,7 @@ def test_spacing_law_rejects_bad_distances(mesh, distance, error):
 
 
 # ---------------------------------------------------------------------------
-# mesh files (evomesh.io, issue 3) and the command line
+# mesh files (evomesh.io) and the command line
 # ---------------------------------------------------------------------------
 
 io = pytest.importorskip("evomesh.io")
@@ -556,7 +556,7 @@ def test_cli_errors_are_one_line_and_exit_non_zero(tmp_path, capsys):
 
 
 def test_unbounded_sizes_are_refused_at_once(capsys):
-    """Sizes that could only exhaust memory or time are refused before any work (issue 5)."""
+    """Sizes that could only exhaust memory or time are refused before any work."""
     from evomesh.meshgen import MAX_POINTS, unit_square_mesh
 
     cli = pytest.importorskip("evomesh.cli")

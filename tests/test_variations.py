@@ -149,7 +149,7 @@ def test_sample_filter_changes_nothing_but_the_work(case, samples, radius, cell_
 
 def test_sample_filter_drops_most_samples_where_nothing_changes():
     mesh = grid_mesh(30, 30, jitter=0.2, seed=3)
-    # (skip_settled=False: with it no sample is drawn at all where delta = 1, issue 27)
+    # (skip_settled=False: with it no sample is drawn at all where delta = 1)
     out = evomesh.evolve(mesh, np.ones(mesh.n_points), cell_factor=1.0, incremental=False, skip_settled=False)
     assert out.stats["n_interior_samples"] < 0.3 * out.stats["n_interior_samples_drawn"]
     out = evomesh.evolve(mesh, np.ones(mesh.n_points), cell_factor=2.0, incremental=False, skip_settled=False)

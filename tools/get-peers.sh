@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Installs the peer remeshers that benchmarks/compare_peers.py measures evomesh
-# against (issues 11 and 13). They are never dependencies of evomesh:
+# against. They are never dependencies of evomesh:
 #   - MMG2D: the mmg2d_O3 binary shipped inside the pymmg 1.0.0 wheel (PyPI),
 #     unpacked to build/peers/mmg2d_O3;
 #   - Gmsh: the `gmsh` PyPI package (Python API), pip-installed into .venv.

@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Build the evomesh extension with AddressSanitizer and UndefinedBehaviorSanitizer
-# and run the test suite under it (issue 5, item 3).
+# and run the test suite under it.
 #
 #   tools/sanitize.sh                      # build, then the whole suite ("ci" profile)
 #   tools/sanitize.sh tests/test_fuzz.py   # build, then these pytest arguments

@@ -1,7 +1,6 @@
 // Times one FRFC step (Section 3.2) on graded meshes of about 1e4, 1e5, 1e6 points
-// (issue 2 "Speed") and larger ones (issue 5 "Scale"): per stage, peak memory, and
-// the ratio to a plain CGAL constrained Delaunay of the output points, measured in
-// the same run.
+// and larger ones: per stage, peak memory, and the ratio to a plain CGAL
+// constrained Delaunay of the output points, measured in the same run.
 //
 // The graded mesh (not timed): a k x k triangulated grid on the unit square, then one
 // FRFC step towards the spacing h_old of a vertical band of fine spacing (see
@@ -116,7 +115,7 @@ Graded_case graded_case(double target, int threads, double max_samples) {
     setup_delta[i] = target_spacing(grid.points[i][0], kBandCenter, s) / grid_spacing;
   }
   // The setup step samples densely in the band: it is not limited by --max-samples.
-  // The graded input is fixed: the packing of before issue 11 (exact radii, old points first).
+  // The graded input is fixed: the paper's packing (exact radii, old points first).
   Frfc_options setup_options = bench_options(threads, std::max(max_samples, 1e10));
   setup_options.radius = Radius_rule::exact;
   setup_options.demote_ratio = 0;

@@ -1,4 +1,4 @@
-// Binding of the lexical-first MIS in rounds over a partition (issue 29):
+// Binding of the lexical-first MIS in rounds over a partition:
 // evomesh._core.lexical_first_mis_in_rounds and evomesh._core.MisPart (one
 // MPI rank's sweeps: python/evomesh/distributed/packing.py). Registered by module.cpp through bind_mis_rounds().
 #include <pybind11/numpy.h>
@@ -52,12 +52,12 @@ void bind_mis_rounds(py::module_& m) {
       },
       py::arg("centers"), py::arg("radii"), py::arg("order"), py::arg("n_forced"), py::arg("part"),
       py::arg("n_parts"),
-      "The lexical-first MIS computed in rounds by n_parts parts (issue 29, simulated in one process): "
+      "The lexical-first MIS computed in rounds by n_parts parts (simulated in one process): "
       "{'kept', 'rounds', 'messages' (per round), 'undecided' (per round), 'halo'}.");
 
   py::class_<Mis_part>(m, "MisPart",
                        "One rank's share of the lexical-first MIS in rounds: its own spheres and copies of the "
-                       "others that can conflict with them (issue 29, docs/distributed-step.md 3.4).")
+                       "others that can conflict with them (docs/distributed-step.md 3.4).")
       .def(py::init([](const Float_array& centers, const Float_array& radii, const Int_array& order,
                        const Byte_array& owned) {
              if (centers.ndim() != 2 || centers.shape(1) != 2) throw Input_error("centers must have shape (n, 2)");

@@ -1,4 +1,4 @@
-// Bindings of the triangulation after a Lagrangian motion (issue 28):
+// Bindings of the triangulation after a Lagrangian motion:
 // evomesh._core.triangulate_moved. Registered by module.cpp through bind_motion().
 #include <pybind11/numpy.h>
 #include <pybind11/pybind11.h>

@@ -1,4 +1,4 @@
-// Binding of the quality pass alone (Section 6; its rounds, issue 29):
+// Binding of the quality pass alone (Section 6, serial or in rounds):
 // evomesh._core.quality_triangulate, for tests and benchmarks that hand it a
 // point set and pieces directly. Registered by module.cpp through bind_quality().
 #include <CGAL/exceptions.h>

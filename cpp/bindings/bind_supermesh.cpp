@@ -1,4 +1,4 @@
-// Bindings of the local supermesh (issue 12): evomesh._core.supermesh.
+// Bindings of the local supermesh: evomesh._core.supermesh.
 // Registered by module.cpp's PYBIND11_MODULE through bind_supermesh().
 #include <pybind11/numpy.h>
 #include <pybind11/pybind11.h>

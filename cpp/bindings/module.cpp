@@ -68,7 +68,7 @@ void require_shape(const py::array& a, py::ssize_t cols, const char* name) {
 
 // The core assumes what Python's Mesh checks (a valid planar mesh); the bindings
 // check only what is cheap and would otherwise read out of bounds or feed NaN
-// to CGAL: shapes, finite coordinates, index ranges (issue 5).
+// to CGAL: shapes, finite coordinates, index ranges.
 std::vector<Vec2> to_points(const Float_array& a, const char* name = "points") {
   require_shape(a, 2, name);
   std::vector<Vec2> out(static_cast<std::size_t>(a.shape(0)));
@@ -405,7 +405,7 @@ void bind_options(py::module_& m) {
 }  // namespace
 
 // Global ids of a step's input (Mesh_arrays::point_gids, ...; None: the
-// positions), for a caller that holds part of a larger mesh (issue 29).
+// positions), for a caller that holds part of a larger mesh.
 void add_global_ids(Mesh_arrays& mesh, const std::optional<Int_array>& point_gids,
                     const std::optional<Int_array>& triangle_gids, const std::optional<Int_array>& segment_keys) {
   if (point_gids) mesh.point_gids = to_vector<std::int64_t>(*point_gids);
@@ -457,10 +457,10 @@ void bind_step(py::module_& m, const char* name,
 }
 
 PYBIND11_MODULE(_core, m) {
-  void bind_supermesh(pybind11::module_&); bind_supermesh(m);  // cpp/bindings/bind_supermesh.cpp (issue 12)
-  void bind_motion(pybind11::module_&); bind_motion(m);  // cpp/bindings/bind_motion.cpp (issue 28)
-  void bind_mis_rounds(pybind11::module_&); bind_mis_rounds(m);  // cpp/bindings/bind_mis_rounds.cpp (issue 29)
-  void bind_quality(pybind11::module_&); bind_quality(m);  // cpp/bindings/bind_quality.cpp (issue 29)
+  void bind_supermesh(pybind11::module_&); bind_supermesh(m);  // cpp/bindings/bind_supermesh.cpp
+  void bind_motion(pybind11::module_&); bind_motion(m);  // cpp/bindings/bind_motion.cpp
+  void bind_mis_rounds(pybind11::module_&); bind_mis_rounds(m);  // cpp/bindings/bind_mis_rounds.cpp
+  void bind_quality(pybind11::module_&); bind_quality(m);  // cpp/bindings/bind_quality.cpp
   void bind_tet(pybind11::module_&); bind_tet(m);  // cpp/bindings/bind_tet.cpp (tetrahedral meshes)
   m.doc() = "evomesh C++ core (CGAL): spacing functions, sampling, lexical-first MIS, FRFC";
 
@@ -522,7 +522,7 @@ PYBIND11_MODULE(_core, m) {
       "n_flipped, segment_tags of the built segments: the user's tag, 0 for a boundary edge not given, "
       "{stage: seconds} for seconds_orient, seconds_segments, seconds_planar, seconds_classify). "
       "reference_planarity: the constrained Delaunay triangulation of every edge (check_planar_mesh_cdt, the "
-      "check before issue 13) instead of the boundary-winding check; for tests and benchmarks.");
+      "older check) instead of the boundary-winding check; for tests and benchmarks.");
 
   m.def(
       "quality_summary",
@@ -945,8 +945,8 @@ PYBIND11_MODULE(_core, m) {
       "The walks of the local feature size on a part of a mesh (local_feature_size.hpp: chain_feature_sizes): "
       "(lfs, certified) per query; certified 0 where a walk reached the part's border.");
 
-  // A rank's part of a mesh for the stages of a distributed step (issue 29;
-  // python/evomesh/distributed/step.py): the held points and triangles with their
+  // A rank's part of a mesh for the stages of a distributed step
+  // (python/evomesh/distributed/step.py): the held points and triangles with their
   // global ids, and the whole segment skeleton, in global-id order.
   const auto part_mesh = [](const py::dict& part) {
     Mesh_arrays mesh = to_mesh(part["points"].cast<Float_array>(), part["triangles"].cast<Int_array>(),

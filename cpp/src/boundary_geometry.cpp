@@ -3,6 +3,7 @@
 #include <CGAL/exceptions.h>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <limits>
 #include <queue>
@@ -128,8 +129,8 @@ std::vector<double> distance_along_to_curve(const Boundary_geometry& geometry, c
 }
 
 // Projects `points` (on segments tagged `tags`) onto their curves; each may move
-// by at most limit[k]. A point of an interior chain (interior[k]; an interface,
-// issue 28) that would move farther stays where it is, on its chord: there the
+// by at most limit[k]. A point of an interior chain (interior[k]; an interface)
+// that would move farther stays where it is, on its chord: there the
 // curve is not resolved at the local spacing (two level-set circles touching),
 // and an interior chain does not bound the domain. Returns the largest move;
 // adds the points left so to *left.
@@ -195,7 +196,8 @@ Mesh_arrays with_curve_kinds(const Mesh_arrays& input) {
 
 double project_segment_candidates(const Mesh_arrays& mesh, const std::vector<std::uint32_t>& segment_of_candidate,
                                   std::size_t first, const std::vector<std::uint8_t>& kept,
-                                  const std::vector<double>& radius, std::vector<Vec2>& centers) {
+                                  const std::vector<double>& radius, std::vector<Vec2>& centers,
+                                  std::vector<std::pair<std::size_t, Vec2>>* interior_moves) {
   const Boundary_geometry& geometry = *mesh.geometry;
   std::vector<std::size_t> which;
   std::vector<Vec2> points;
@@ -237,12 +239,19 @@ double project_segment_candidates(const Mesh_arrays& mesh, const std::vector<std
       const Vec2& q = mesh.points[end];
       bound = std::min(bound, std::hypot(points[k][0] - q[0], points[k][1] - q[1]) + along[polygon.node(end, tags[k])]);
     }
-    if (std::isfinite(bound)) limit[k] = std::max(limit[k], bound);
+    // (not on an interior chain: an interface's input points lie on its curve,
+    // and a longer move means the curve is not resolved there)
+    if (std::isfinite(bound) && !interior[k]) limit[k] = std::max(limit[k], bound);
     limit[k] += kOnCurveUlps * rounding_of(points[k], points[k]);
     ++k;
   }
   const double largest = project_points(geometry, points, tags, limit, interior);
-  for (std::size_t j = 0; j < which.size(); ++j) centers[which[j]] = points[j];
+  for (std::size_t j = 0; j < which.size(); ++j) {
+    if (interior_moves != nullptr && interior[j] && points[j] != centers[which[j]]) {
+      interior_moves->emplace_back(which[j], centers[which[j]]);
+    }
+    centers[which[j]] = points[j];
+  }
   return largest;
 }
 
@@ -321,6 +330,52 @@ Index Segments_at_points::walk(const Mesh_arrays& mesh, const std::vector<Index>
     w = other(s, w);
   }
   return w;
+}
+
+std::size_t keep_pieces_apart(std::vector<Vec2>& points, const std::vector<Constraint_piece>& pieces,
+                              const std::vector<std::pair<Index, Vec2>>& moved) {
+  if (moved.empty()) return 0;
+  std::vector<Index> move_of(points.size(), -1);
+  for (std::size_t k = 0; k < moved.size(); ++k) move_of[moved[k].first] = static_cast<Index>(k);
+  // The two piece neighbours of every moved point (-1: not exactly two).
+  std::vector<std::array<Index, 2>> beside(moved.size(), {-1, -1});
+  std::vector<int> count(moved.size(), 0);
+  for (const auto& piece : pieces) {
+    for (const auto& [v, w] : {std::pair{piece.a, piece.b}, std::pair{piece.b, piece.a}}) {
+      if (move_of[v] < 0) continue;
+      const Index k = move_of[v];
+      if (count[k] < 2) beside[k][count[k]] = w;
+      ++count[k];
+    }
+  }
+  std::size_t undone = 0;
+  const auto undo = [&](Index v) {
+    if (move_of[v] < 0) return false;
+    points[v] = moved[move_of[v]].second;
+    move_of[v] = -1;
+    ++undone;
+    return true;
+  };
+  // Each round undoes at least one move, and with every move undone the pieces
+  // are the input's chords again.
+  for (;;) {
+    bool any = false;
+    for (const auto& pair : meeting_pieces(points, pieces, /*touching=*/true)) {
+      for (const Index piece : pair) {
+        for (const Index v : {pieces[piece].a, pieces[piece].b}) any = undo(v) || any;
+      }
+    }
+    // A move that folds its chain back (its pieces meet at less than 90
+    // degrees) followed the curve onto another branch, or a branch the input
+    // does not resolve (two curves closer than the spacing): undone too.
+    for (std::size_t k = 0; k < moved.size(); ++k) {
+      const Index v = moved[k].first;
+      if (move_of[v] < 0 || count[k] != 2) continue;
+      const Vec2 &p = points[v], &u = points[beside[k][0]], &w = points[beside[k][1]];
+      if ((u[0] - p[0]) * (w[0] - p[0]) + (u[1] - p[1]) * (w[1] - p[1]) > 0) any = undo(v) || any;
+    }
+    if (!any) return undone;
+  }
 }
 
 namespace {
@@ -421,22 +476,29 @@ Fit_round fit_once(const Boundary_geometry& geometry, const std::vector<Constrai
     which.push_back(static_cast<Index>(v));
     points.push_back(mesh.points[v]);
     tags.push_back(tag_of[v]);
-    const double bound = along[polygon.node(static_cast<Index>(v), tag_of[v])];
+    const double bound = interior[v] ? 0.0 : along[polygon.node(static_cast<Index>(v), tag_of[v])];
     limit.push_back(std::max(0.5 * shortest, std::isfinite(bound) ? bound : 0.0) +
                     kOnCurveUlps * rounding_of(mesh.points[v], mesh.points[v]));
   }
   const double largest = project_points(geometry, points, tags, limit, on_interior, &round.left_on_chords);
   bool& moved = round.moved;
+  std::vector<std::pair<Index, Vec2>> interior_moves;  // (point, where it was)
   for (std::size_t k = 0; k < which.size(); ++k) {
-    moved = moved || points[k] != mesh.points[which[k]];
+    if (points[k] == mesh.points[which[k]]) continue;
+    moved = true;
+    if (on_interior[k]) interior_moves.emplace_back(which[k], mesh.points[which[k]]);
     mesh.points[which[k]] = points[k];
   }
   if (moved) {
     // The same constraints through the moved points: triangulated again.
     std::vector<Constraint_piece> constraints(mesh.segments.size());
     for (std::size_t s = 0; s < mesh.segments.size(); ++s) {
-      constraints[s] = {mesh.segments[s][0], mesh.segments[s][1], mesh.segment_is_boundary[s] != 0, 0};
+      constraints[s] = {mesh.segments[s][0], mesh.segments[s][1], mesh.segment_is_boundary[s] != 0,
+                        round.segment_tags[s]};
     }
+    // An interior chain's points whose moves make its segments cross or touch
+    // others (a fold of the curve narrower than the spacing) stay on their chords.
+    round.left_on_chords += keep_pieces_apart(mesh.points, constraints, interior_moves);
     try {
       mesh.triangles = constrained_delaunay(mesh.points, constraints);
     } catch (const CGAL::Failure_exception&) {
@@ -464,7 +526,7 @@ double fit_to_curves(const Boundary_geometry& geometry, const std::vector<Constr
   // pass runs again on the fitted mesh (its segments as pieces, no point
   // dropped) and its new points on curves are fitted in turn. Each round's moves
   // are sagittas of shorter chords when the chords' ends lie on the curve; two
-  // rounds settle it in practice (issue 28). Where they do not (kept points of
+  // rounds settle it in practice. Where they do not (kept points of
   // a coarse input polygon, which stay on its chords), a point the pass puts
   // between two of them moves by up to the polygon's sagitta, far more than its
   // new segments' length: a spike whose thin triangles the next round splits

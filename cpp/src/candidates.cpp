@@ -319,7 +319,7 @@ Candidates interior_candidates(const Mesh_arrays& mesh, const Triangle_fans& fan
                                const std::vector<std::uint8_t>* settled_given,
                                const std::vector<std::uint8_t>* ring_from, std::vector<Index>* ring_point) {
   // options.skip_settled (unsampled_triangles) is why a step is idempotent on
-  // its own output (issue 27). Let M be the output of a step, and step again
+  // its own output. Let M be the output of a step, and step again
   // with delta = 1 (or with a size= request that M meets: delta_from_size
   // gives exactly 1 there). At every point p,
   // f(p) = nn_M(p) (Lemma 3.1), and nn_M(p) is an edge of p (the nearest

@@ -19,11 +19,11 @@ Refined_mesh spacing_refine(const Mesh_arrays& mesh, const Spacing_function& spa
   std::vector<Constraint_piece> pieces(mesh.segments.size());
   for (std::size_t k = 0; k < pieces.size(); ++k) {
     pieces[k] = {mesh.segments[k][0], mesh.segments[k][1], mesh.segment_is_boundary[k] != 0};
-    try {
-      cdt.insert_constraint(handles[pieces[k].a], handles[pieces[k].b]);
-    } catch (const Cdt::Intersection_of_constraints_exception&) {
-      throw crossing_pieces_error();
-    }
+  }
+  try {
+    for (const auto& piece : pieces) cdt.insert_constraint(handles[piece.a], handles[piece.b]);
+  } catch (const Cdt::Intersection_of_constraints_exception&) {
+    throw crossing_pieces_error(mesh.points, pieces);
   }
   // Sites of the input points: the Apollonius nearest site, or the point itself
   // where its own cone is the minimum (f(p) = delta(p) nn(p), Lemma 3.1).

@@ -285,7 +285,7 @@ Evolve_result frfc_over_scope(const Mesh_arrays& input, const Mesh_arrays& mesh,
   const auto release_free_memory = [&context, &scope] {
     if (scope.releases_memory_between_stages()) frfc_stages::release_free_memory(context);
   };
-  // Memory (issue 13): what a stage leaves behind goes as soon as nothing reads it.
+  // Memory: what a stage leaves behind goes as soon as nothing reads it.
 
   // Step 1: nn_M and the spacing function f (Section 3.1), within the domain.
   const auto chains = segment_chains(mesh);
@@ -380,13 +380,25 @@ Evolve_result frfc_over_scope(const Mesh_arrays& input, const Mesh_arrays& mesh,
 
   // Step 6: the kept points (on curves, moved onto them), the constraint pieces
   // between them, their triangulation.
+  std::vector<std::pair<std::size_t, Vec2>> interior_moves;  // (candidate, where it was)
   if (mesh.geometry) {
-    project_segment_candidates(mesh, on_segments.samples.parent, n, packing.kept, packing.radius, packing.centers);
+    project_segment_candidates(mesh, on_segments.samples.parent, n, packing.kept, packing.radius, packing.centers,
+                               &interior_moves);
   }
   std::vector<Index> out_index;
   Selection selection = select_output(mesh, forced, packing, n_seg, repair_points, out_index);
   selection.pin(mesh.required);
   const auto pieces = pieces_along_chains(mesh, chains, on_segments, out_index);
+  if (mesh.geometry) {
+    // Candidates of interior chains whose moves onto the curve make pieces
+    // cross or touch (a fold narrower than the spacing) stay on their chords.
+    std::vector<std::pair<Index, Vec2>> at_output;
+    for (const auto& [c, before] : interior_moves) {
+      if (out_index[c] >= 0) at_output.emplace_back(out_index[c], before);
+    }
+    const std::size_t undone = keep_pieces_apart(selection.mesh.points, pieces, at_output);
+    result.stats.emplace_back("curve_samples_left_on_chords", static_cast<double>(undone));
+  }
   const std::size_t n_demoted = packing.n_demoted;
   packing = Packing();
   out_index = std::vector<Index>();

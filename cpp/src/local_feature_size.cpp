@@ -179,8 +179,11 @@ std::vector<double> local_feature_size(const Mesh_arrays& mesh, const std::vecto
       const Vec2& w = mesh.points[w_index];
       // segment k runs v -> next in its own orientation
       const Chain_point point{v, chain.vertices[k - 1], w_index, chain.forward[k] != 0, !chain.boundary};
+      // An interior chain (an interface) also faces itself: a fold of one
+      // curve (a thin filament, a wave) is as narrow as a strip between two.
       const auto counts = [&](Index segment) {
-        return chain_of[segment] >= 0 && !adjacent(static_cast<Index>(c), chain_of[segment]);
+        const Index other = chain_of[segment];
+        return other >= 0 && (!adjacent(static_cast<Index>(c), other) || (other == static_cast<Index>(c) && !chain.boundary));
       };
       double best = cast_feature_size(mesh, walk, point, limit[v], counts, nullptr);
       if (std::isnan(best)) continue;
@@ -226,7 +229,8 @@ std::vector<double> chain_feature_sizes(const Mesh_arrays& part, const std::vect
     const auto& own_ends = end_of(own);
     const auto counts = [&](Index segment) {
       const std::int64_t other = chain_of_segment[segment];
-      if (other < 0 || other == own) return false;
+      if (other < 0) return false;
+      if (other == own) return points[k].two_sided;  // (an interior chain faces itself, as local_feature_size)
       const auto& e = end_of(other);
       return !(own_ends[0] == e[0] || own_ends[0] == e[1] || own_ends[1] == e[0] || own_ends[1] == e[1]);
     };

@@ -337,17 +337,32 @@ void carry_tags(const Old_mesh_walker& walker, const std::vector<Index>& origin,
       if (found[s] < 0) throw std::logic_error("carry_tags: a new segment outside the old mesh");
       Index best = -1;
       double best_distance = std::numeric_limits<double>::infinity();
+      const auto consider = [&](Index segment) {
+        const Edge& e = old_mesh.segments[segment];
+        const double d = distance_to_segment(midpoints[s], old_mesh.points[e[0]], old_mesh.points[e[1]]);
+        if (d < best_distance) {
+          best_distance = d;
+          best = segment;
+        }
+      };
       for (Index v : old_mesh.triangles[found[s]]) {
-        for (Index a = xadj[v]; a < xadj[v + 1]; ++a) {
-          const Edge& e = old_mesh.segments[adj[a]];
-          const double d = distance_to_segment(midpoints[s], old_mesh.points[e[0]], old_mesh.points[e[1]]);
-          if (d < best_distance) {
-            best_distance = d;
-            best = adj[a];
-          }
+        for (Index a = xadj[v]; a < xadj[v + 1]; ++a) consider(adj[a]);
+      }
+      // A segment of an interior curve whose points moved onto the curve by
+      // more than an old triangle (an interface folded within the spacing):
+      // the old triangles at its ends, then (rarely) every old segment.
+      for (const Index end : new_mesh.segments[s]) {
+        if (best >= 0) break;
+        const Index t = hint_at(end);
+        if (t < 0) continue;
+        for (Index v : old_mesh.triangles[t]) {
+          for (Index a = xadj[v]; a < xadj[v + 1]; ++a) consider(adj[a]);
         }
       }
-      if (best < 0) throw std::logic_error("carry_tags: a new segment far from every old one");
+      if (best < 0) {
+        for (std::size_t o = 0; o < old_mesh.segments.size(); ++o) consider(static_cast<Index>(o));
+      }
+      if (best < 0) throw std::logic_error("carry_tags: a new segment and no old one");
       new_mesh.segment_tags[s] = old_mesh.segment_tags[best];
     }
   }

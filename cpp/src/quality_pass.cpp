@@ -145,7 +145,7 @@ Refined_mesh quality_pass(Cdt& cdt, const std::vector<Vertex_handle>& handles, c
   try {
     for (const auto& piece : pieces) cdt.insert_constraint(handles[piece.a], handles[piece.b]);
   } catch (const Cdt::Intersection_of_constraints_exception&) {
-    throw crossing_pieces_error();
+    throw crossing_pieces_error(points, pieces);
   }
   Refinement_report report;
   report.insert_seconds = seconds_since(constraints_begin);

@@ -1,4 +1,4 @@
-// The quality pass in rounds of independent insertions (issue 29; design in
+// The quality pass in rounds of independent insertions (design in
 // docs/distributed-step.md section 3.6, option 1): Spielman, Teng and Ungor's
 // parallel Delaunay refinement (IJCGA 2007) with off-centres, run serially.
 //

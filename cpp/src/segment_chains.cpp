@@ -31,7 +31,7 @@ std::vector<Segment_chain> segment_chains(const Mesh_arrays& mesh) {
   // Chains end at corners: those of the geometry (classify_points, whatever the
   // kinds say) and points labelled corner. So every closed loop has a corner,
   // and a kind that calls a turning point "boundary" cannot straighten the
-  // boundary through it (issue 9).
+  // boundary through it.
   const std::vector<Point_kind> geometric = classify_points(mesh);
   std::vector<std::uint8_t> is_corner(n, 0);
   for (std::size_t v = 0; v < n; ++v) {

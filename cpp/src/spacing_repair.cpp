@@ -137,7 +137,7 @@ class Kept_centres {
   mutable std::optional<detail::Point_tree> tree_;
 };
 
-// The gap repair (issue 11): the paper's nn_M'(p) of an input point is the
+// The gap repair: the paper's nn_M'(p) of an input point is the
 // distance from p to its second nearest output point (its nearest other one
 // when p is kept). The packing leaves gaps of up to about 2 radius_scale f
 // between kept spheres, so nn_M'(p) can reach 1.4 h(p), h = delta nn_M: next

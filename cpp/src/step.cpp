@@ -121,8 +121,8 @@ Step_spacing step_spacing(const Mesh_arrays& mesh, const std::vector<double>& de
   spacing.nn = std::move(weights.nn);
   const std::vector<std::uint8_t>& evaluate = weights.evaluate;
   const std::vector<double>& weight = weights.weight;
-  // Sites hidden by a mesh neighbour are left out of the Apollonius graph (issue
-  // 13; f is the same). Step_context::filter_sites = false keeps them, for benchmarks only.
+  // Sites hidden by a mesh neighbour are left out of the Apollonius graph
+  // (f is the same). Step_context::filter_sites = false keeps them, for benchmarks only.
   spacing.function =
       std::make_unique<Spacing_function>(mesh.points, weight, 0, filter_sites ? &mesh.triangles : nullptr,
                                          &mesh.point_gids);
@@ -274,7 +274,7 @@ std::vector<Index> segment_pieces(const Mesh_arrays& mesh, const std::vector<Con
 namespace {
 
 // An output point at exactly the coordinates of an input point that the
-// selection dropped is that point (issue 27): the quality pass splits a
+// selection dropped is that point: the quality pass splits a
 // segment at its midpoint or a triangle at its circumcentre, which is often
 // where the previous step's pass had put the point the packing just dropped (a
 // coarsening that the segments' Gabriel condition or the angle bound undoes).

@@ -10,6 +10,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <cstdio>
 #include <limits>
 #include <string>
 
@@ -622,11 +623,138 @@ Index first_inverted_triangle(const Vec2* points, std::size_t n, const Triangle*
   })[0];
 }
 
-Input_error crossing_pieces_error() {
-  return Input_error(
-      "two constraint pieces of the step's mesh cross: its boundary or interior segments are closer to "
-      "degenerate than float64 resolves here (a corner within rounding of a segment, or segments meeting at an "
-      "angle of a few units of rounding)");
+namespace {
+
+// Whether the pieces (a, b) and (c, d) cross: their interiors meet at one point
+// (all four orientations non-zero), or they overlap along a line beyond a shared
+// end. Exact predicates; a piece through an end of the other is no crossing
+// (CGAL's triangulation splits it there).
+bool pieces_cross(const std::vector<Vec2>& points, const Constraint_piece& p, const Constraint_piece& q) {
+  const Vec2 &a = points[p.a], &b = points[p.b], &c = points[q.a], &d = points[q.b];
+  const int c_side = orientation(a, b, c), d_side = orientation(a, b, d);
+  const int a_side = orientation(c, d, a), b_side = orientation(c, d, b);
+  if (c_side != 0 || d_side != 0) return c_side * d_side < 0 && a_side * b_side < 0;
+  // collinear: an overlap of positive length (a shared end alone is none)
+  const auto along = [&](const Vec2& x) {
+    return (x[0] - a[0]) * (b[0] - a[0]) + (x[1] - a[1]) * (b[1] - a[1]);
+  };
+  const double length2 = along(b);
+  const double lo = std::max(0.0, std::min(along(c), along(d))), hi = std::min(length2, std::max(along(c), along(d)));
+  return hi > lo;
+}
+
+// Whether an end of q that is no end of p lies inside p (exact): a piece
+// through a point of another, which a constrained triangulation splits there.
+bool end_inside(const std::vector<Vec2>& points, const Constraint_piece& p, const Constraint_piece& q) {
+  const Vec2 &a = points[p.a], &b = points[p.b];
+  for (const Index e : {q.a, q.b}) {
+    if (e == p.a || e == p.b) continue;
+    const Vec2& c = points[e];
+    if (orientation(a, b, c) != 0 || c == a || c == b) continue;
+    const bool within_x = std::min(a[0], b[0]) <= c[0] && c[0] <= std::max(a[0], b[0]);
+    const bool within_y = std::min(a[1], b[1]) <= c[1] && c[1] <= std::max(a[1], b[1]);
+    if (within_x && within_y) return true;
+  }
+  return false;
+}
+
+double distance_to_piece(const Vec2& q, const Vec2& a, const Vec2& b) {
+  const double dx = b[0] - a[0], dy = b[1] - a[1];
+  const double length2 = dx * dx + dy * dy;
+  const double t = length2 > 0 ? std::clamp(((q[0] - a[0]) * dx + (q[1] - a[1]) * dy) / length2, 0.0, 1.0) : 0.0;
+  return std::hypot(q[0] - a[0] - t * dx, q[1] - a[1] - t * dy);
+}
+
+std::string at_point(const Vec2& x) {
+  char buffer[64];
+  std::snprintf(buffer, sizeof buffer, "(%.6g, %.6g)", x[0], x[1]);
+  return buffer;
+}
+
+}  // namespace
+
+std::vector<std::array<Index, 2>> meeting_pieces(const std::vector<Vec2>& points,
+                                                 const std::vector<Constraint_piece>& pieces, bool touching) {
+  const std::size_t m = pieces.size();
+  std::vector<std::array<Index, 2>> pairs;
+  if (m < 2) return pairs;
+  // A uniform grid of cells about the mean piece length (at most about 4 m
+  // cells): each piece is tested against the pieces sharing a cell with its box.
+  double lo_x = std::numeric_limits<double>::infinity(), lo_y = lo_x, hi_x = -lo_x, hi_y = -lo_x, total = 0;
+  for (const auto& piece : pieces) {
+    const Vec2 &a = points[piece.a], &b = points[piece.b];
+    lo_x = std::min({lo_x, a[0], b[0]});
+    hi_x = std::max({hi_x, a[0], b[0]});
+    lo_y = std::min({lo_y, a[1], b[1]});
+    hi_y = std::max({hi_y, a[1], b[1]});
+    total += std::hypot(b[0] - a[0], b[1] - a[1]);
+  }
+  const double extent = std::max(hi_x - lo_x, hi_y - lo_y);
+  const double limit = 2 * std::sqrt(static_cast<double>(m)) + 1;
+  const double cell = std::max({total / static_cast<double>(m), extent / limit, std::numeric_limits<double>::min()});
+  const auto column = [&](double x, double lo) {
+    return static_cast<std::size_t>(std::min(limit, std::max(0.0, std::floor((x - lo) / cell))));
+  };
+  const std::size_t nx = column(hi_x, lo_x) + 1, ny = column(hi_y, lo_y) + 1;
+  std::vector<std::vector<Index>> in_cell(nx * ny);
+  for (std::size_t k = 0; k < m; ++k) {
+    const Vec2 &a = points[pieces[k].a], &b = points[pieces[k].b];
+    for (std::size_t i = column(std::min(a[0], b[0]), lo_x); i <= column(std::max(a[0], b[0]), lo_x); ++i) {
+      for (std::size_t j = column(std::min(a[1], b[1]), lo_y); j <= column(std::max(a[1], b[1]), lo_y); ++j) {
+        in_cell[i * ny + j].push_back(static_cast<Index>(k));
+      }
+    }
+  }
+  for (const auto& here : in_cell) {
+    for (std::size_t x = 0; x < here.size(); ++x) {
+      for (std::size_t y = x + 1; y < here.size(); ++y) {
+        const std::array<Index, 2> pair{std::min(here[x], here[y]), std::max(here[x], here[y])};
+        const Constraint_piece &p = pieces[pair[0]], &q = pieces[pair[1]];
+        if (pieces_cross(points, p, q) || (touching && (end_inside(points, p, q) || end_inside(points, q, p)))) {
+          pairs.push_back(pair);
+        }
+      }
+    }
+  }
+  std::sort(pairs.begin(), pairs.end());
+  pairs.erase(std::unique(pairs.begin(), pairs.end()), pairs.end());
+  return pairs;
+}
+
+std::array<Index, 2> first_crossing_pieces(const std::vector<Vec2>& points, const std::vector<Constraint_piece>& pieces) {
+  const auto pairs = meeting_pieces(points, pieces, /*touching=*/false);
+  return pairs.empty() ? std::array<Index, 2>{-1, -1} : pairs.front();
+}
+
+Input_error crossing_pieces_error(const std::vector<Vec2>& points, const std::vector<Constraint_piece>& pieces) {
+  const auto pair = first_crossing_pieces(points, pieces);
+  if (pair[0] < 0) {
+    return Input_error("two constraint pieces of the step's mesh cross (CGAL found it; the exact search for the pair "
+                       "did not): its boundary or interior segments are nearly degenerate here");
+  }
+  const Constraint_piece &p = pieces[pair[0]], &q = pieces[pair[1]];
+  const Vec2 &a = points[p.a], &b = points[p.b], &c = points[q.a], &d = points[q.b];
+  // How deep they cross: the least distance of an end to the other piece (an
+  // end within rounding of the other piece: a float64 limit; else geometry).
+  const double depth = std::min({distance_to_piece(a, c, d), distance_to_piece(b, c, d), distance_to_piece(c, a, b),
+                                 distance_to_piece(d, a, b)});
+  const double reach = std::max({std::abs(a[0]), std::abs(a[1]), std::abs(b[0]), std::abs(b[1]), std::abs(c[0]),
+                                 std::abs(c[1]), std::abs(d[0]), std::abs(d[1])});
+  const double longest = std::max(std::hypot(b[0] - a[0], b[1] - a[1]), std::hypot(d[0] - c[0], d[1] - c[1]));
+  const std::string pieces_named = "the piece " + at_point(a) + " - " + at_point(b) + " (segment tag " +
+                                   std::to_string(p.tag) + ") and the piece " + at_point(c) + " - " + at_point(d) +
+                                   " (segment tag " + std::to_string(q.tag) + ")";
+  if (depth <= 64 * std::numeric_limits<double>::epsilon() * reach) {
+    return Input_error("two constraint pieces of the step's mesh cross within rounding: " + pieces_named +
+                       "; the boundary or interior segments are closer to degenerate than float64 resolves here (a "
+                       "corner within rounding of a segment, or segments meeting at an angle of a few units of "
+                       "rounding)");
+  }
+  return Input_error("two constraint pieces of the step's mesh cross: " + pieces_named + ", pieces of length up to " +
+                     format_count(longest) + " whose ends come within " + format_count(depth) +
+                     " of the other piece: the constraints there are closer together than the step's spacing "
+                     "resolves (a strip between two constraints, or a fold of one, narrower than the spacing); ask "
+                     "for a spacing below " + format_count(depth) + " there");
 }
 
 // The canonical order (triangulation.hpp): a counting sort on the first
@@ -688,7 +816,7 @@ std::vector<Cdt::Vertex_handle> insert_points_and_pieces(Cdt& cdt, const std::ve
   try {
     for (const auto& piece : pieces) cdt.insert_constraint(handles[piece.a], handles[piece.b]);
   } catch (const Cdt::Intersection_of_constraints_exception&) {
-    throw crossing_pieces_error();
+    throw crossing_pieces_error(points, pieces);
   }
   return handles;
 }

@@ -1,7 +1,7 @@
 // The incremental step (incremental_step.hpp) is chosen before any work and
 // never hides a failure: frfc() takes it where incremental_applies() says so,
 // with the full step's bits, and whatever it throws reaches frfc()'s caller
-// (before issue 27 a catch-all reran the full step, so a bug showed only as lost
+// (a catch-all used to rerun the full step, so a bug showed only as lost
 // speed). The failure is injected: operator new is replaced for this binary and
 // throws std::bad_alloc at the k-th allocation, for k spread over the step.
 #include <atomic>
@@ -88,7 +88,7 @@ int main() {
     const Mesh_arrays mesh = grid_mesh(40);
     Frfc_options options;
     options.threads = 1;  // every allocation on this thread, in one order
-    // One point with delta = 1e-6 (issue 27: this step gave up late and reran the
+    // One point with delta = 1e-6 (this step once gave up late and reran the
     // full step), and a band of delta = 0.6.
     std::vector<std::vector<double>> deltas(2, std::vector<double>(mesh.points.size(), 1.0));
     deltas[0][20 * 40 + 20] = 1e-6;

@@ -1,7 +1,7 @@
 // default_thread_count() honours EVOMESH_NUM_THREADS, then OMP_NUM_THREADS, then
 // the CPUs. It is read once, so each case is its own process (see CMakeLists.txt):
 //   test_thread_env evomesh|omp|cpus
-// A Thread_limit holds for every thread its work starts (issue 27), checked in
+// A Thread_limit holds for every thread its work starts, checked in
 // each case against that default (3 in the "evomesh" case: more than the limit).
 #include <algorithm>
 #include <atomic>

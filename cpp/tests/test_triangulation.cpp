@@ -247,7 +247,7 @@ void check_classification() {
 
 }  // namespace
 
-// Mesh()'s planarity check (boundary winding, issue 13) against the reference
+// Mesh()'s planarity check (boundary winding) against the reference
 // (a constrained Delaunay triangulation of every edge) on meshes that are locally
 // fine everywhere but cover the plane twice, and on valid ones.
 bool refused(void (*check)(const std::vector<Vec2>&, const std::vector<Triangle>&, bool), const std::vector<Vec2>& p,

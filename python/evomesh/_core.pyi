@@ -192,7 +192,7 @@ def prepare_mesh(
 ]:
     """Orient triangles CCW, build segments, check planarity, classify points.
     Returns (triangles, segments, segment_is_boundary, kind, n_flipped, segment_tags, {stage: seconds}).
-    reference_planarity: the pre-issue-13 check (a constrained Delaunay triangulation of every edge)."""
+    reference_planarity: the older check (a constrained Delaunay triangulation of every edge)."""
 
 def quality_summary(
     points: ArrayLike, triangles: ArrayLike
@@ -382,7 +382,7 @@ def frfc(
     project: Callable[[NDArray[np.float64], NDArray[np.int64]], ArrayLike] | None = None,
     nn: ArrayLike | None = None,
     nn_grew: ArrayLike | None = None,
-    point_gids: ArrayLike | None = None,  # global ids (issue 29): None = the array positions
+    point_gids: ArrayLike | None = None,  # global ids: None = the array positions
     triangle_gids: ArrayLike | None = None,
     segment_keys: ArrayLike | None = None,
     strictly_delaunay: bool = False,  # the triangles certified strictly Delaunay by a step (Mesh._delaunay)
@@ -405,7 +405,7 @@ def drfc(
     project: Callable[[NDArray[np.float64], NDArray[np.int64]], ArrayLike] | None = None,
     nn: ArrayLike | None = None,
     nn_grew: ArrayLike | None = None,
-    point_gids: ArrayLike | None = None,  # global ids (issue 29): None = the array positions
+    point_gids: ArrayLike | None = None,  # global ids: None = the array positions
     triangle_gids: ArrayLike | None = None,
     segment_keys: ArrayLike | None = None,
     strictly_delaunay: bool = False,
@@ -445,7 +445,7 @@ def quality_triangulate(
     max_extra: float = ...,
     quality_rounds: bool = ...,
 ) -> dict[str, Any]:
-    """The quality pass alone (Section 6; in rounds with quality_rounds=True, issue 29)."""
+    """The quality pass alone (Section 6; in rounds with quality_rounds=True)."""
 
 def triangulate_selection(
     points: ArrayLike,

@@ -206,8 +206,8 @@ def evolve(mesh: Mesh, delta: Any = None, *, size: Any = None, method: str = "fr
             points (benchmarks/METHODS.md).
         radius : {"interpolated", "exact", "cheap"}, default "interpolated"
             Sample sphere radius f(x)/2 from the Apollonius graph ("exact", the
-            paper), the paper's cheaper (f(q) + |x - q|)/2, or ("interpolated",
-            issue 11) f(x)/2 except in triangles with a demoted vertex, where the
+            paper), the paper's cheaper (f(q) + |x - q|)/2, or ("interpolated")
+            f(x)/2 except in triangles with a demoted vertex, where the
             size follows the linear interpolation l of f at the vertices:
             min(f, max(1.2 l, f / 1.3))/2. f is a minimum of cones of slope 1, so
             between old points it exceeds the request by up to their spacing;
@@ -226,7 +226,7 @@ def evolve(mesh: Mesh, delta: Any = None, *, size: Any = None, method: str = "fr
             (a candidate just outside its sphere). None or 0 disables it (the
             paper's plain packing).
         gap_repair_ratio : float >= 1 or None, default 1.1
-            Gap repair (issue 11): an input point p with delta(p) >= 1 whose
+            Gap repair: an input point p with delta(p) >= 1 whose
             second nearest output point (the paper's nn_M'(p); the nearest other
             one when p is kept) lies beyond gap_repair_ratio delta(p) nn_M(p)
             gets one more point at distance delta(p) nn_M(p) (of eight
@@ -256,7 +256,7 @@ def evolve(mesh: Mesh, delta: Any = None, *, size: Any = None, method: str = "fr
             there being the spacing the mesh has. A step is then idempotent on
             its own output: with delta = 1 (or a ``size`` that the mesh meets)
             it keeps every point, adds none and returns the same triangles
-            (issue 27; the argument is in cpp/src/candidates.cpp). False: the
+            (the argument is in cpp/src/candidates.cpp). False: the
             paper's sampling, which adds points wherever a sphere fits between
             the old ones (a few per thousand points, step after step).
         filter_samples : bool, default True
@@ -322,11 +322,11 @@ def evolve(mesh: Mesh, delta: Any = None, *, size: Any = None, method: str = "fr
             Target smallest angle in degrees (Ruppert's algorithm provably ends
             up to about 20.7 degrees; beyond that the bound on inserted points
             stops it; CGAL's off-centres end in practice up to 30). FRFC's
-            default 30 (issue 11; was 20) costs a few % more points on smooth
+            default 30 (was 20) costs a few % more points on smooth
             size maps and up to about half more on rough ones.
         quality_rounds : bool, default False
-            The quality pass in rounds of independent insertions (issue 29,
-            docs/distributed-step.md section 3.6): each round splits the
+            The quality pass in rounds of independent insertions
+            (docs/distributed-step.md section 3.6): each round splits the
             lexical-first maximal independent set (sub-segments first, then the
             worst triangles; two conflict when their cavities share a triangle
             or an edge) of the bad triangles and encroached sub-segments of the
@@ -339,7 +339,7 @@ def evolve(mesh: Mesh, delta: Any = None, *, size: Any = None, method: str = "fr
 
         incremental : bool, default True
             Where delta = 1 on most of the mesh (at least half of the points),
-            skip the work that certainly changes nothing there (issue 13: the
+            skip the work that certainly changes nothing there (the
             Apollonius graph holds only the sites near the points where f is
             asked, triangles whose samples the packing certainly rejects are not
             sampled, the packing and the spacing repair run near spheres whose
@@ -376,7 +376,7 @@ def evolve(mesh: Mesh, delta: Any = None, *, size: Any = None, method: str = "fr
         boundary left outside). Without it the polygon is the domain, exactly.
         With ``displacement``: the curves after the move.
     displacement : array_like of shape (n, 2) or (2,), or callable, optional
-        Lagrangian motion (issue 28): every point p (boundary, interface and
+        Lagrangian motion: every point p (boundary, interface and
         interior) first moves to p + u(p), then the moved mesh evolves
         (``delta`` and ``size`` arrays are per point of ``mesh``; ``delta`` is
         relative to nn_M before the move, so 1 keeps the resolution however
@@ -395,7 +395,7 @@ def evolve(mesh: Mesh, delta: Any = None, *, size: Any = None, method: str = "fr
         "lagrangian"`` carries P1 values with the points instead).
         ``stats`` adds the ``motion_*`` counts of :class:`evomesh.motion.Motion`.
     interface : callable, LevelSet, or array_like of shape (n,), optional
-        A level-set interface (issue 28; "frfc" only): phi(x) on (k, 2)
+        A level-set interface ("frfc" only): phi(x) on (k, 2)
         arrays (or an :class:`evomesh.LevelSet`), or its values at the mesh
         points. Its zero set becomes interior segments of tag ``interface_tag``
         and every triangle gets the region tag of its side. The mesh is first
@@ -408,10 +408,39 @@ def evolve(mesh: Mesh, delta: Any = None, *, size: Any = None, method: str = "fr
         curve: every point it creates on it lies on phi = 0 (within a few
         units of rounding for a function; on the piecewise-linear zero set of
         the values), except where the zero set is not a curve at the local
-        spacing (two circles touching): there a point stays on its chord. The
+        spacing (two circles touching) or its move onto phi = 0 would make
+        the interface cross or fold onto itself (a filament or gap narrower
+        than the spacing): there a point stays on its chord
+        (``curve_points_left_on_chords``, ``curve_samples_left_on_chords``,
+        and ``interface_points_off_curve``, ``interface_largest_off_curve``:
+        interface points farther than 8 units of rounding from phi = 0). The
         spacing comes from ``delta``/``size`` at the old points as usual
-        (absolute: the cut's short edges next to crossings do not refine).
-        Several components, merging and splitting work. ``new.lineage``
+        (absolute: the cut's short edges next to crossings do not refine),
+        capped near the interface by its local feature size (the distance
+        across the domain to the next piece of the interface, its own other
+        side included: a filament, a narrow ring or a short wave is resolved
+        as the step's points see it). The interface is closed (or ends on the
+        boundary): an old point is moved onto a crossing only where that
+        leaves it on exactly two interface segments and leaves every
+        component of one sign of phi a point of its sign, so a component
+        around a single point (smaller than the spacing) is meshed; a
+        component between the points (inside one triangle) is not seen.
+        Where the smallest angle stays below ``min_angle`` (quality pass
+        neither capped nor failed), ``interface_angle_exception`` says which
+        exception applied, and ``interface_min_angle`` (``_x``, ``_y``) how
+        small and where: 2 when only triangles next to where the interface
+        meets the boundary or another constraint are below it (small input
+        angles), 1 elsewhere next to the interface (the exception for curves
+        above: the refits did not restore the angle, or points were left on
+        their chords), with a :class:`QualityWarning` below 0.9 ``min_angle``. phi is called in vectorised
+        batches: once at the points, once per round of the root finding on
+        the crossed edges (typically 10-30, at most 200) and once per Newton
+        round of each projection (one batch of the points and their four
+        finite-difference neighbours, or phi and the gradient of a
+        LevelSet; typically 2-6 rounds, at most ``max_iterations``, for the
+        segment samples and each of up to three fits), and once for the
+        report; ``interface_phi_calls`` counts them. Several components,
+        merging and splitting work. ``new.lineage``
         refers to ``mesh``, so :func:`evomesh.transfer` and
         :func:`evomesh.transfer_cells` work across the move. ValueError when
         phi is not finite, has no sign change on the mesh, or its zero set
@@ -502,11 +531,12 @@ def evolve(mesh: Mesh, delta: Any = None, *, size: Any = None, method: str = "fr
         from evomesh.interface import evolve_with_interface  # (it calls evolve: imported here, not at the top)
 
         return evolve_with_interface(mesh, delta, size, interface, interface_tag, interface_regions, interface_band,
-                                     geometry, evolve, method=method, seed=seed, options=options, **overrides)
+                                     geometry, evolve, method=method, seed=seed,
+                                     options=make_options(method, options, **overrides))
     if interface_tag is not None or interface_regions is not None or interface_band is not None:
         raise TypeError("interface_tag, interface_regions and interface_band need interface (phi)")
     old, motion = mesh, None
-    if displacement is not None:  # Lagrangian motion (issue 28): move the points, then evolve the moved mesh
+    if displacement is not None:  # Lagrangian motion: move the points, then evolve the moved mesh
         motion, delta, size = step_input(mesh, displacement, delta, size, as_geometry(geometry))
         mesh = motion.mesh
     d = as_delta(mesh, delta) if size is None else delta_from_size(mesh, size, keep_fine_clusters=motion is None)
@@ -526,7 +556,7 @@ def evolve(mesh: Mesh, delta: Any = None, *, size: Any = None, method: str = "fr
 
 def _wrap(result: dict[str, Any], old: Mesh | None = None, tag_names: Any = None) -> Mesh:
     # Every output satisfies the limits Mesh() puts on inputs, or the step fails
-    # here, saying why (issue 9: a square of side 1e-70 refined step after step).
+    # here, saying why (a square of side 1e-70 refined step after step).
     # The step brings its output's nn (Euclidean, and within the domain where that is larger).
     # A step that returned its input: the input's Mesh passed these checks.
     unchanged = old is not None and _is_the_input(result, old)

@@ -85,7 +85,7 @@ class Interpolation:
         self.located = np.flatnonzero(~kept)
         queries = new.points[self.located]
         if lineage is not None and lineage.matches(old):
-            # The step's parent map: no point location (issue 10); checked by
+            # The step's parent map: no point location; checked by
             # rebuilding the points from it, which a mismatched old mesh fails.
             triangle = lineage.parent_triangle[self.located]
             weights = lineage.barycentric[self.located]

@@ -363,7 +363,7 @@ class Mesh:
                 )
             # A kind can add corners, never remove one: every corner of the
             # geometry (where the boundary turns, chain ends) stays a corner, so
-            # a stale or wrong kind cannot change the domain (issue 9).
+            # a stale or wrong kind cannot change the domain.
             kinds = np.where(computed_kind == PointKind.CORNER, np.uint8(PointKind.CORNER), kinds.astype(np.uint8))
         check_boundary_not_pinched(pts, segs, boundary, kinds)
         if origin is None:

@@ -1,4 +1,4 @@
-"""Lagrangian motion: a step that moves the points of a mesh before it evolves it (issue 28).
+"""Lagrangian motion: a step that moves the points of a mesh before it evolves it.
 
 ``evolve(mesh, delta, displacement=u)`` moves every point p of ``mesh`` to
 p + u(p) (boundary, interface and interior points alike), then evolves the

@@ -276,7 +276,7 @@ class SpacingFunction:
 
     ``triangles`` (optional, indices into ``sites``: the mesh's) lets the
     construction leave out sites hidden by a neighbour before they reach the
-    graph (issue 13); f is the same with or without.
+    graph; f is the same with or without.
     """
 
     def __init__(self, sites: Any, weights: Any, triangles: Any = None):

@@ -1,4 +1,4 @@
-// Curved boundaries (issue 12): the true curve behind a polygonal boundary,
+// Curved boundaries: the true curve behind a polygonal boundary,
 // given per segment tag as a projection onto it. With a geometry, a boundary
 // vertex of a curved tag where the boundary turns by less than `corner_angle`
 // is not a corner (a step may remove it), and every boundary point a step
@@ -9,6 +9,7 @@
 #include <algorithm>
 #include <cstdint>
 #include <functional>
+#include <utility>
 #include <vector>
 
 #include "evomesh/types.hpp"
@@ -62,16 +63,32 @@ Mesh_arrays with_curve_kinds(const Mesh_arrays& mesh);
 // onto their curves. Candidate k is centers[first + k], on segment
 // segment_of_candidate[k]; each may move by at most its sphere's radius, or by
 // its distance along the curved segments to a vertex on the curve (else
-// Input_error: the curve is not the one the segments approximate). Returns the
-// largest move.
+// Input_error: the curve is not the one the segments approximate); a candidate
+// of an interior chain (an interface) by its radius only, else it stays on its
+// chord (an interface's input points lie on its curve: a longer move means the
+// curve is not resolved there). Returns the
+// largest move; `interior_moves` (if given) gets (candidate, position before)
+// of every candidate of an interior chain that moved.
 double project_segment_candidates(const Mesh_arrays& mesh, const std::vector<std::uint32_t>& segment_of_candidate,
                                   std::size_t first, const std::vector<std::uint8_t>& kept,
-                                  const std::vector<double>& radius, std::vector<Vec2>& centers);
+                                  const std::vector<double>& radius, std::vector<Vec2>& centers,
+                                  std::vector<std::pair<std::size_t, Vec2>>* interior_moves = nullptr);
+
+// Undoes the moves (point, position before) of points whose pieces cross or
+// touch other pieces (meeting_pieces), until none do or every such move is
+// undone; returns the number undone. For the points of interior chains (an
+// interface): where a fold of the curve is narrower than the spacing, the move
+// onto the curve would make its pieces cross; the point stays on its chord
+// (the pieces between unmoved points are chords of the input's, which do not cross).
+std::size_t keep_pieces_apart(std::vector<Vec2>& points, const std::vector<Constraint_piece>& pieces,
+                              const std::vector<std::pair<Index, Vec2>>& moved);
 
 // After triangulating the selection with `pieces`: every new point on a curved
 // piece (a new selected point, or one the quality pass inserted; by at most half
-// its shortest segment, or its distance along the pieces to a point on the
-// curve) is moved onto its curve and the constraints are
+// its shortest segment, or, off interior chains, its distance along the pieces
+// to a point on the curve; a point of an interior chain whose move would make
+// pieces cross, touch or fold stays on its chord: keep_pieces_apart) is moved
+// onto its curve and the constraints are
 // triangulated again through the moved points; points that end up outside the
 // domain are dropped (stats "curve_points_projected", "curve_points_dropped_outside",
 // "curve_largest_move"). selection_index: of every output point, -1 for one the

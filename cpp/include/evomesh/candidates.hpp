@@ -55,7 +55,7 @@ struct Ring_candidate {
 int ring_candidates_of(const Mesh_arrays& mesh, const Triangle_fans& fans, const std::vector<double>& f, double reach,
                        std::uint64_t seed, std::size_t p, std::array<Ring_candidate, kRingDirections>& out);
 
-// Settled points (issue 27): delta(p) = 1 and f(p) = the length of p's
+// Settled points: delta(p) = 1 and f(p) = the length of p's
 // shortest mesh edge. Always f(p) <= w_p = delta(p) nn_M(p) <= nn_M(p) <= that
 // length (Lemma 3.1, Eq. 3), so equality says that the request at p is the
 // spacing the mesh already has there: not lowered by the local feature size or

@@ -1,4 +1,4 @@
-// Issue 27 section 2: a step that certainly changes nothing costs a few
+// A step that certainly changes nothing costs a few
 // percent of a full step. frfc() asks empty_scope_frfc first; it answers only
 // when O(n) certificates (empty_scope.cpp, stage by stage) prove that the full
 // step would return its input as the "unchanged" path of finish_step returns

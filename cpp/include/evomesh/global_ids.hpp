@@ -1,5 +1,5 @@
 // Global ids of a step's input (Mesh_arrays::point_gids, triangle_gids,
-// segment_keys; issue 29, docs/distributed-step.md section 2.2): the orders the
+// segment_keys; docs/distributed-step.md section 2.2): the orders the
 // step visits them in.
 #pragma once
 

@@ -1,4 +1,4 @@
-// Issue 13 goal 2, "cost follows the change": FRFC where delta = 1 on most of
+// Cost follows the change: FRFC where delta = 1 on most of
 // the mesh, with the output of the full algorithm (frfc.hpp), bit for bit.
 //
 // The step is the one outline, frfc_over_scope (frfc.cpp), over the scope

@@ -1,4 +1,4 @@
-// Geometry-aware spacing (issue 11): the spacing of a mesh measured within its
+// Geometry-aware spacing: the spacing of a mesh measured within its
 // domain, and the spacing its domain can carry.
 //
 // nn_M(p) of the paper is the distance to the nearest other mesh point, which
@@ -40,7 +40,9 @@ std::vector<std::uint8_t> keep_within_domain(const std::vector<Vec2>& points, co
 //   through the triangles (towards the domain, both ways for an interior
 //   constraint), to the first segment of a chain that neither is its own chain
 //   nor shares a corner with it (Ruppert's local feature size, measured through
-//   the domain: a channel's walls face each other, a slit's do not);
+//   the domain: a channel's walls face each other, a slit's do not); an interior
+//   chain (an interface) also counts its own segments, so a fold of one curve
+//   (a thin filament) is as narrow as a strip between two;
 // - at a corner, the length of its shortest straight chain (two corners are
 //   features of their own: the tip of a slit is as wide as the slit);
 // - with a boundary geometry, at a point of a curved chain, the spacing at which
@@ -69,7 +71,8 @@ struct Chain_point {
 // global ids: `chain_of_segment` per segment of `part` (-1: none), `chain_of_point`
 // per query; two chains are adjacent when equal or when they share an end corner
 // (`ends`: chain id -> the global ids of its two end corners). Returns, per query,
-// the distance local_feature_size finds by its walks (+inf: nothing below
+// the distance local_feature_size finds by its walks (an interior chain counts
+// its own segments, as there) (+inf: nothing below
 // limit[k]; NaN: the chain neighbours coincide, no tangent), and clears
 // certified[k] where a walk reached the part's border, where the whole mesh's
 // answer needs more triangles. Not included: the curved term and the corners'

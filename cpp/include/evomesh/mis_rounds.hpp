@@ -1,4 +1,4 @@
-// The lexical-first MIS in rounds over a partition (issue 29; the argument is
+// The lexical-first MIS in rounds over a partition (the argument is
 // docs/distributed-step.md, section 3.4): the serial MIS of packing.hpp
 // computed by P parts that each see only their own spheres' current states and
 // the others' states as of the end of the previous round, the exchange a

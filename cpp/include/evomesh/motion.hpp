@@ -1,4 +1,4 @@
-// The triangulation of a mesh's points after a Lagrangian motion (issue 28).
+// The triangulation of a mesh's points after a Lagrangian motion.
 //
 // A displacement moves every point of a mesh, boundary and interface points
 // included. Where the moved triangles fold (a triangle turned over or flat),

@@ -20,7 +20,7 @@ enum class Sample_mode : std::uint8_t {
 
 // Radius of a sample's sphere: f(x)/2 from the Apollonius graph, or the paper's
 // cheaper (f(q) + |x - q|)/2 with q the triangle's vertex of smallest f, or
-// (interpolated, issue 11) f(x)/2 except in triangles (segments) with a demoted
+// (interpolated) f(x)/2 except in triangles (segments) with a demoted
 // vertex (packing.hpp, demoted_points), where the size follows the linear
 // interpolation l of f at the vertices: min(f, max(1.2 l, f / 1.3))/2
 // (candidates.cpp). f is a minimum of cones of slope 1 at the old points, so
@@ -43,7 +43,7 @@ struct Quality_options {
   // (n: points handed in), so small input angles cannot make it run long.
   double max_inserted_fraction = 0.5;
   double max_inserted_extra = 1000;
-  // Refine in rounds of independent insertions (issue 29, docs/distributed-step.md
+  // Refine in rounds of independent insertions (docs/distributed-step.md
   // section 3.6): every round splits a lexical-first maximal independent set of
   // the bad triangles and encroached sub-segments of the mesh at its start, so
   // the output is a function of the input sets (any order of points and pieces)
@@ -75,7 +75,7 @@ struct Frfc_options {
   // of old points and is packed with the new points by size (packing.hpp,
   // demoted_points). 0: old points always first (the paper).
   double demote_ratio = 1.1;
-  // Gap repair (issue 11): an input point p with delta(p) >= 1 whose second
+  // Gap repair: an input point p with delta(p) >= 1 whose second
   // nearest output point (the paper's nn_M'(p): its nearest other one when p is
   // kept) lies beyond gap_repair_ratio * delta(p) nn_M(p) gets one more point at
   // distance delta(p) nn_M(p) (spacing_repair.hpp). 0 disables (the paper).
@@ -83,7 +83,7 @@ struct Frfc_options {
   // The same, at this ratio, for points with delta(p) < 1 that were demoted or
   // dropped: where a fresh packing forms, its spacing varies more and a bound
   // of 1.1 adds points that compound over repeated steps (ten steps of delta =
-  // 0.8 at 1.1: 0.57 of 0.8^10; at 1.3: 0.97; benchmarks/README.md, issue 11).
+  // 0.8 at 1.1: 0.57 of 0.8^10; at 1.3: 0.97; benchmarks/README.md).
   // Kept R-points that were not demoted use gap_repair_ratio. 0 disables.
   double refine_gap_ratio = 1.3;
   Sample_mode samples = Sample_mode::random_grid;
@@ -94,7 +94,7 @@ struct Frfc_options {
   // No samples in a triangle (on a segment) whose every vertex is settled:
   // delta = 1 and f = nn_M = its shortest edge, the request there being the
   // spacing the mesh has (candidates.hpp, settled_points). With it a step is
-  // idempotent on its own output (issue 27); false: the paper's sampling.
+  // idempotent on its own output; false: the paper's sampling.
   bool skip_settled = true;
   // Interior samples that certainly overlap a kept sphere are dropped before
   // their radius is computed; the output is the same either way.
@@ -106,7 +106,7 @@ struct Frfc_options {
   // nn_M within the domain and the spacing capped by the local feature size
   // (local_feature_size.hpp); false: the paper's Euclidean nn_M.
   bool within_domain = true;
-  double min_angle = 30.0;      // its angle bound (degrees; issue 11: kMaxMinAngle, was 20)
+  double min_angle = 30.0;      // its angle bound (degrees, up to kMaxMinAngle; was 20)
   // Where delta = 1 on most of the mesh, skip the work that certainly changes
   // nothing there (incremental_step.hpp): the same output, bit for bit, at a
   // cost that follows the change. false: always the full algorithm.

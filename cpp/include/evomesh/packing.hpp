@@ -80,7 +80,7 @@ enum Packing_class : std::uint8_t {
 // the new points of its kind, by size (class_boundary_new on segments, else class_new).
 Packing_class old_point_class(Point_kind kind, bool forced, bool demoted = false);
 
-// Old points whose neighbourhood does not conform to the request (issue 11):
+// Old points whose neighbourhood does not conform to the request:
 // p is demoted when nn_M(q) > demote_ratio * f(q) at p and at every point q
 // that shares a triangle with p, that is where the request refines the whole
 // neighbourhood by more than demote_ratio (delta < 1/demote_ratio at R-points;

@@ -44,7 +44,7 @@ class Spacing_function {
   // `triangles` (optional; indices into `sites`, e.g. the mesh whose points are
   // the sites): their edges are tested for sites hidden by a neighbour (exact);
   // such a site is not inserted when that neighbour comes before it in the
-  // insertion order (issue 13). The graphs are then exactly those built without
+  // insertion order. The graphs are then exactly those built without
   // `triangles` (CGAL would find the site hidden and change nothing), so f, the
   // sites found and n_hidden() are bit for bit the same.
   // `site_ids` (optional; global ids of the sites, Mesh_arrays::point_gids):

@@ -34,7 +34,7 @@ struct Spacing_repair_input {
 // afterwards nn_M'(p) is about 1.2 f(p). Nearest kept points come from a static
 // kd-tree over the kept centres plus a Delaunay triangulation of the points
 // added here (of the options: repair_ratio when ring_samples, the ring's reach
-// from radius_scale, seed, threads). Then the gap repair (issue 11): an input
+// from radius_scale, seed, threads). Then the gap repair: an input
 // point p whose second nearest output point (the paper's nn_M'(p)) lies beyond
 // gap_repair_ratio * delta(p) nn_M(p) (refine_gap_ratio where delta(p) < 1 and
 // p was demoted or dropped)

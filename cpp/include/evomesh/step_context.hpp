@@ -1,4 +1,4 @@
-// How a step runs, as opposed to what it computes (issue 29, docs/distributed-step.md
+// How a step runs, as opposed to what it computes (docs/distributed-step.md
 // section 2.3): the threads, the memory policy, profiling and the site filter of the
 // spacing function. Nothing here changes a step's output bits.
 //
@@ -29,7 +29,7 @@ struct Step_context {
   // faults and kernel time to the stats (diagnostics, Linux; step.hpp).
   bool profile = false;
   // Sites hidden by a mesh neighbour are left out of the Apollonius graph
-  // (issue 13): f is the same either way; false is for benchmarks only.
+  // (f is the same either way); false is for benchmarks only.
   bool filter_sites = true;
   // Between stages, the outline gives the free memory of every malloc arena
   // back to the system (detail::release_free_memory): what a stage freed on

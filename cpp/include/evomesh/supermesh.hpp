@@ -1,4 +1,4 @@
-// A local supermesh of two meshes of the same domain (issue 12): every pair
+// A local supermesh of two meshes of the same domain: every pair
 // (new triangle t, old triangle s) whose intersection has positive area, with
 // that area and the exact mixed mass entries  int_{t n s} phi_a^new phi_b^old.
 //

@@ -11,7 +11,7 @@ namespace evomesh {
 
 // A constraint between two output points. For a boundary piece the domain lies
 // to the left of a -> b; an interior piece has the domain on both sides.
-// The canonical order of triangles (issue 29): each rotated to start at its
+// The canonical order of triangles: each rotated to start at its
 // least point index (orientation kept), then sorted by its three indices.
 // Every path that makes triangles ends with it (a step's finish_step,
 // constrained_delaunay, drfc_refine, the motion's remesh): a triangulation is
@@ -65,8 +65,20 @@ struct Constraint_piece {
 
 // What a step says when two of its constraint pieces cross (CGAL's
 // Intersection_of_constraints_exception while inserting them): a ValueError in
-// Python, never CGAL's bare RuntimeError.
-Input_error crossing_pieces_error();
+// Python, never CGAL's bare RuntimeError, naming the two pieces and where they
+// cross (first_crossing_pieces), and whether the cause is rounding or geometry.
+Input_error crossing_pieces_error(const std::vector<Vec2>& points, const std::vector<Constraint_piece>& pieces);
+
+// The pairs (i < j, sorted) of pieces that cross: their interiors meet at one
+// point, or they overlap along a line (exact predicates); with `touching`, also
+// those where an end of one lies inside the other (which a constrained
+// triangulation splits there). A grid of cells about the mean piece length:
+// O(m) for pieces of similar length.
+std::vector<std::array<Index, 2>> meeting_pieces(const std::vector<Vec2>& points,
+                                                 const std::vector<Constraint_piece>& pieces, bool touching);
+// The first pair of meeting_pieces without touching, {-1, -1} for none.
+std::array<Index, 2> first_crossing_pieces(const std::vector<Vec2>& points,
+                                           const std::vector<Constraint_piece>& pieces);
 
 // Constrained Delaunay triangulation of `points` with `pieces` as constraints;
 // returns the counter-clockwise triangles inside the domain the pieces bound
@@ -116,7 +128,7 @@ std::vector<std::uint8_t> supports_on_left(const std::vector<Vec2>& a, const std
 void check_planar_mesh(const std::vector<Vec2>& points, const std::vector<Triangle>& triangles,
                        const std::vector<Edge>& boundary);
 
-// The reference check (used by Mesh() before issue 13; kept for tests and
+// The reference check (Mesh()'s older check; kept for tests and
 // benchmarks): inserts all points and every edge into a constrained Delaunay
 // triangulation that throws on crossing constraints, then asks that every
 // triangle be a face of it. Throws Input_error for duplicate points, crossing
@@ -177,7 +189,7 @@ std::vector<std::int64_t> tags_of_segments(const std::vector<Edge>& segments, co
 // in the last place of the largest coordinate (points placed on a segment as
 // a + t (b - a) are off its line by an ulp or two; exact collinearity would make
 // every such point a corner). Decides which points are corners, in Mesh() and in
-// every step alike (issue 9).
+// every step alike.
 constexpr double kStraightUlps = 32;
 bool runs_straight_through(const Vec2& u, const Vec2& p, const Vec2& w);
 

@@ -82,7 +82,7 @@ struct Mesh_arrays {
   // step then checks only the edges its update touches (triangulation_update.hpp).
   bool strictly_delaunay = false;
   // Optional, a step's input only (empty: the array positions): global ids
-  // (issue 29, docs/distributed-step.md section 2.2), one per point, triangle
+  // (docs/distributed-step.md section 2.2), one per point, triangle
   // and segment, distinct within each array. The step keys by them what it
   // used to key by position: the random streams of the samples (a triangle's
   // by its id, a segment's by its key, a point's ring and repair by its id),

@@ -1,4 +1,4 @@
-"""Halos by reach (issue 29; docs/distributed-step.md, section 3): which of a
+"""Halos by reach (docs/distributed-step.md, section 3): which of a
 rank's records another rank must hold, decided by the sender from boxes, so a
 halo is complete by construction instead of by a width guess.
 

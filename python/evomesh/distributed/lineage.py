@@ -1,4 +1,4 @@
-"""The lineage of a distributed step (issue 29): where every owned point of
+"""The lineage of a distributed step: where every owned point of
 ``evolve(dmesh, ...)``'s output lies in the mesh the step started from, with
 old triangles named by global id, and nn and f at the old points as the step
 used them. :meth:`~evomesh.DistributedMesh.gather` turns it into the serial

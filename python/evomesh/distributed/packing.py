@@ -1,5 +1,5 @@
 """The lexical-first maximal independent set of a packing, computed by MPI ranks
-that each own some of the spheres (issue 29; the argument is
+that each own some of the spheres (the argument is
 docs/distributed-step.md, section 3.4).
 
 The serial rule (packing.hpp, the paper's lexical-first MIS): spheres are taken

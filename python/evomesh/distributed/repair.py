@@ -1,5 +1,5 @@
 """FRFC's spacing repair (repair_ratio; spacing_repair.hpp) on a distributed
-mesh (issue 29), in rounds over the ranks, exactly as the serial step.
+mesh, in rounds over the ranks, exactly as the serial step.
 
 The serial repair is sequential: the *needy* points (kept R-points, delta < 1,
 whose second nearest kept centre lies beyond the target t(p) = repair_ratio

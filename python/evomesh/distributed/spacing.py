@@ -1,5 +1,5 @@
 """Step 1 of the step on a distributed mesh: nn, the weights and the spacing
-function f, each equal bit for bit to the serial step's (issue 29; the arguments
+function f, each equal bit for bit to the serial step's (the arguments
 are docs/distributed-step.md, sections 3.1 and 3.2).
 
 For a mesh M and delta(p) per point, the serial step computes nn_M(p) (the

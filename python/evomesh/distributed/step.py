@@ -1,4 +1,4 @@
-"""FRFC's step on a distributed mesh (issue 29; docs/distributed-step.md,
+"""FRFC's step on a distributed mesh (docs/distributed-step.md,
 sections 3 and 3.7): the serial step's mesh, on any number of ranks, without
 gathering it. The packing's stages, each the serial one on a rank's part:
 

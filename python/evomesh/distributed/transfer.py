@@ -1,4 +1,4 @@
-"""Field transfers between two :class:`~evomesh.DistributedMesh` (issue 29):
+"""Field transfers between two :class:`~evomesh.DistributedMesh`:
 ``evomesh.transfer`` and ``evomesh.transfer_cells`` dispatch here when given
 distributed meshes. Each rank works on its own part of ``new`` plus the old
 triangles that can touch it; neither mesh is gathered.

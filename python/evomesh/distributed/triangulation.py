@@ -1,5 +1,5 @@
 """The constrained Delaunay triangulation of points and pieces owned by MPI
-ranks (issue 29; docs/distributed-step.md, section 3.5): every rank returns the
+ranks (docs/distributed-step.md, section 3.5): every rank returns the
 triangles whose least global id it owns, and together they are exactly the
 serial ``constrained_delaunay`` of all the points and pieces (inside the domain
 the boundary pieces bound), on any number of ranks.

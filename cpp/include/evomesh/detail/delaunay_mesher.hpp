@@ -212,8 +212,8 @@ inline double target_spacing(const Cdt& tr, Vertex_handle v, const Spacing_data&
 // starting at the lexicographically least (x, then y). In the quality pass's
 // rounds (quality_rounds.cpp) every floating-point quantity derived from a face
 // (its quality, its off-centre) is computed in this rotation, so it does not
-// depend on the rotation the triangulation's history gave the face (issue 29:
-// the pass is a function of its input sets). The serial pass keeps the face's
+// depend on the rotation the triangulation's history gave the face, and
+// the pass is a function of its input sets. The serial pass keeps the face's
 // stored rotation (its pinned outputs).
 inline std::array<Point_2, 3> canonical_rotation(const Point_2& a, const Point_2& b, const Point_2& c) {
   if (b < a && b < c) return {b, c, a};
