@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cstdio>
 #include <memory>
 #include <optional>
 #include <string>
@@ -300,9 +301,20 @@ Evolve_result frfc_over_scope(const Mesh_arrays& input, const Mesh_arrays& mesh,
   // Step 2a: candidates on segments (grid samples and ring candidates, snapped
   // to straight chains) and their spheres.
   const Spacing_queries* queries = scope.grid_queries(mesh, f);
-  check_sample_budget(
-      estimate_sample_count(mesh, f, options.cell_factor, options.max_samples, options.adaptive_cells, queries),
-      options.max_samples, "sampling");
+  try {
+    check_sample_budget(
+        estimate_sample_count(mesh, f, options.cell_factor, options.max_samples, options.adaptive_cells, queries),
+        options.max_samples, "sampling");
+  } catch (const Input_error& error) {
+    // The place where the request is finest (a feature the spacing follows there: an interface's pieces close together).
+    const std::size_t n = std::min(f.size(), mesh.points.size());
+    if (n == 0) throw;
+    const std::size_t k = static_cast<std::size_t>(std::min_element(f.begin(), f.begin() + n) - f.begin());
+    char place[200];
+    std::snprintf(place, sizeof place, "; the finest spacing asked is %.4g, at (%.9g, %.9g)", f[k], mesh.points[k][0],
+                  mesh.points[k][1]);
+    throw Input_error(error.what() + std::string(place));
+  }
   // Points whose request is the spacing they have (candidates.hpp): no grid
   // samples on a segment or in a triangle with every vertex settled.
   const std::vector<std::uint8_t> settled =

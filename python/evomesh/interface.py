@@ -31,6 +31,7 @@
 from __future__ import annotations
 
 import numbers
+import re
 import warnings
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -1077,7 +1078,19 @@ def evolve_with_interface(mesh: Mesh, delta: Any, size: Any, interface: Any, int
     on_interface = np.unique(cut.mesh.segments[(cut.mesh.segment_tags == tag) & ~cut.mesh.segment_is_boundary])
     extent = float(np.ptp(cut.mesh.points, axis=0).max())
     g = _interface_geometry(geometry, tag, cut.curve, extent, cut.mesh.points[on_interface])
-    out = run_step(cut.mesh, cut_delta, geometry=g, **step_arguments)
+    try:
+        out = run_step(cut.mesh, cut_delta, geometry=g, **step_arguments)
+    except ValueError as error:
+        refusal = re.search(r"points \(max_samples is (\S+)\).*the finest spacing asked is (\S+), at "
+                            r"(\([^)]*\))", str(error))
+        if refusal is None:
+            raise
+        limit, finest, place = refusal.groups()
+        raise ValueError(
+            f"the interface step would create more than max_samples = {limit} points: it asks for a "
+            f"spacing of {finest} at {place} (near phi = 0 the spacing follows the distance between the interface's "
+            "pieces, its local feature size, and interface_band); move the pieces apart there, coarsen interface_band "
+            "or raise max_samples") from None
     extra = _placement_report(out, cut.curve, tag, extent)
     extra.update(_angle_report(out, step_arguments, tag))
     return _compose(mesh, cut, out, tag, extra)
