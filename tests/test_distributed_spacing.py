@@ -134,8 +134,12 @@ def test_step_one_equals_the_serial_step(name: str, kind: str, layout: str, with
         assert capped > 0
     if not within:
         assert capped == 0
+    sites_received = COMM.allreduce(int(stats["sites_received"]))
     if SIZE > 1:
-        assert stats["halo_points"] > 0 and stats["sites_received"] > 0
+        assert stats["halo_points"] > 0
+        # (counted over the ranks: a rank whose f its own sites settle receives none; and a front's
+        # cut may fall where every rank's are enough, as on the channel's mesh on two ranks)
+        assert sites_received > 0 or kind == "front"
         if within and name != "disc with a hole":
             assert stats["walk_triangles"] > 0
 
