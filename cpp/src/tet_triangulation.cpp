@@ -261,6 +261,32 @@ void perturb_slivers(Delaunay_3& triangulation, std::vector<Vertex_handle>& hand
   report.slivers_after = cells_where(triangulation, is_sliver).size();
 }
 
+// Inserts a point for tetrahedron t (its circumcentre, or that centre's
+// projection onto a box face, centre_placement) when t is still a cell; returns
+// the new vertex, or a null handle when t is gone, the centre has no place or
+// the point is already there. The caller keeps it (keep_point) or removes it.
+Vertex_handle insert_at_circumcentre(Delaunay_3& triangulation, const std::vector<Vertex_handle>& handles,
+                                     const Tet& t, const Vec3& lo, const Vec3& hi, Vec3& x) {
+  Delaunay_3::Cell_handle cell;
+  if (!find_cell(triangulation, handles, t, cell)) return Vertex_handle();  // gone this round
+  const Point_3 centre = CGAL::circumcenter(cell->vertex(0)->point(), cell->vertex(1)->point(),
+                                            cell->vertex(2)->point(), cell->vertex(3)->point());
+  if (!centre_placement(centre, shortest_edge(cell), lo, hi, x)) return Vertex_handle();
+  const std::size_t before = triangulation.number_of_vertices();
+  const Vertex_handle v = triangulation.insert(Point_3(x[0], x[1], x[2]), cell);
+  if (triangulation.number_of_vertices() == before) return Vertex_handle();  // an existing point
+  return v;
+}
+
+// Numbers an inserted vertex as the next point (its hint: t's first vertex).
+void keep_point(const Vertex_handle& v, const Vec3& x, const Tet& t, std::vector<Vec3>& points,
+                std::vector<Vertex_handle>& handles, Refinement_report& report) {
+  v->info() = static_cast<Index>(points.size());
+  points.push_back(x);
+  handles.push_back(v);
+  report.hints.push_back(t[0]);
+}
+
 // The slivers the perturbation left (four kept points, or new points it
 // could not move far enough): a new point inside each one's circumsphere,
 // which destroys it, at its circumcentre (the sliver's empty sphere keeps it
@@ -274,15 +300,9 @@ std::size_t insert_off_centres(Delaunay_3& triangulation, std::vector<Vertex_han
       triangulation, [&](const Delaunay_3::Cell_handle& cell) { return dihedral_margin(cell) < options.min_dihedral; });
   std::size_t inserted = 0;
   for (const Tet& t : slivers) {
-    Delaunay_3::Cell_handle cell;
-    if (!find_cell(triangulation, handles, t, cell)) continue;  // gone this round
-    const Point_3 centre = CGAL::circumcenter(cell->vertex(0)->point(), cell->vertex(1)->point(),
-                                              cell->vertex(2)->point(), cell->vertex(3)->point());
     Vec3 x;
-    if (!centre_placement(centre, shortest_edge(cell), lo, hi, x)) continue;
-    const std::size_t before = triangulation.number_of_vertices();
-    const Vertex_handle v = triangulation.insert(Point_3(x[0], x[1], x[2]), cell);
-    if (triangulation.number_of_vertices() == before) continue;
+    const Vertex_handle v = insert_at_circumcentre(triangulation, handles, t, lo, hi, x);
+    if (v == Vertex_handle()) continue;
     // Every tetrahedron the insertion makes has v as a vertex: one whose
     // radius-edge ratio the insertion would break is not made (removing v
     // restores the Delaunay tetrahedra it replaced).
@@ -290,10 +310,7 @@ std::size_t insert_off_centres(Delaunay_3& triangulation, std::vector<Vertex_han
       triangulation.remove(v);
       continue;
     }
-    v->info() = static_cast<Index>(points.size());
-    points.push_back(x);
-    handles.push_back(v);
-    report.hints.push_back(t[0]);
+    keep_point(v, x, t, points, handles, report);
     ++inserted;
   }
   return inserted;
@@ -320,19 +337,10 @@ std::vector<Tet> refined_delaunay(std::vector<Vec3>& points, const Vec3& lo, con
     std::size_t inserted = 0;
     for (const Tet& t : bad) {
       if (points.size() - n_input >= budget) break;
-      Delaunay_3::Cell_handle cell;
-      if (!find_cell(triangulation, handles, t, cell)) continue;  // gone this round
-      const Point_3 centre = CGAL::circumcenter(cell->vertex(0)->point(), cell->vertex(1)->point(),
-                                                cell->vertex(2)->point(), cell->vertex(3)->point());
       Vec3 x;
-      if (!centre_placement(centre, shortest_edge(cell), lo, hi, x)) continue;
-      const std::size_t before = triangulation.number_of_vertices();
-      const Vertex_handle v = triangulation.insert(Point_3(x[0], x[1], x[2]), cell);
-      if (triangulation.number_of_vertices() == before) continue;  // an existing point
-      v->info() = static_cast<Index>(points.size());
-      points.push_back(x);
-      handles.push_back(v);
-      report.hints.push_back(t[0]);
+      const Vertex_handle v = insert_at_circumcentre(triangulation, handles, t, lo, hi, x);
+      if (v == Vertex_handle()) continue;
+      keep_point(v, x, t, points, handles, report);
       ++inserted;
     }
     if (inserted == 0) break;
