@@ -163,8 +163,9 @@ Sub_segment sub_segment(Vertex_handle a, Vertex_handle b) {
   return {{a->point(), b->point()}, {a, b}};
 }
 
-// Splits that march along a straight run of input pieces of one length (a
-// side of a structured mesh) are finished in one go. There a split makes bad
+// Splits that march along a run of input pieces of one length (a side of a
+// structured mesh; a run turns by less than 6 degrees where two pieces meet)
+// are finished in one go. There a split makes bad
 // triangles whose points encroach the next piece or the one after, the next
 // split does the same, and the splits march along the run one piece every
 // few rounds (measured: 158 rounds at 1e5 points, four such marches along
