@@ -242,6 +242,19 @@ def test_rounds_are_bounded_where_splits_march_along_a_side():
         assert np.array_equal(x, y)
 
 
+@given(m=st.integers(6, 50), n_extra=st.integers(0, 3), seed=st.integers(0, 2**16),
+       min_angle=st.sampled_from([25.0, 30.0]))
+def test_rounds_on_lattices_are_bounded_and_valid(m, n_extra, seed, min_angle):
+    points, pieces, boundary = staggered_lattice(m)
+    points = np.r_[points, np.random.default_rng(seed).uniform(0.003, 0.997, (n_extra, 2))]
+    rounds = _core.quality_triangulate(points, pieces, boundary, min_angle=min_angle, quality_rounds=True)
+    stats = rounds["stats"]
+    assert stats["rounds"] <= 30
+    assert stats["stalled"] == 0 and stats["round_limit"] == 0 and stats["capped"] == 0
+    check_quality_mesh(points, pieces, rounds, 1.0)
+    assert smallest_angles(rounds["points"], rounds["triangles"]).min() >= min_angle - ANGLE_TOLERANCE
+
+
 def test_a_split_that_does_not_march_splits_no_run():
     # A square grid, one point near a corner: a few splits at the corner, none
     # along the sides (splitting the sides' 396 pieces adds about 1,200 points).
