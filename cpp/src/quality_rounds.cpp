@@ -11,9 +11,9 @@
 //  2. every encroached sub-segment (found by the scan, by the last round's
 //     insertions or by step 1) gets its split point (midpoint, or the
 //     concentric-shell point at a small input angle) and its cavity; so does
-//     every piece of a straight run of equal input pieces that such splits
-//     have been seen to march along (Marching_runs: without it the rounds grow
-//     with the run's length over its pieces');
+//     every piece of a run of equal input pieces that such splits have been
+//     seen to march along (Marching_runs: without it the rounds grow with the
+//     run's length over the pieces' length);
 //  3. the candidates are ordered (sub-segments first, Ruppert's priority, by
 //     their sorted end points; then faces worst first, ties by their sorted
 //     points: no order of the triangulation's history) and the lexical-first
@@ -27,9 +27,11 @@
 // so the faces, cavities and encroachments of a round's start are; the
 // candidates are read as a set and ordered by keys of points; the insertions
 // follow that order, so CGAL's per-insertion state (clusters, edge sides) sees
-// the same sequence. Independence makes the points of a round far apart
-// (cavities that do not touch), which is what keeps the rounds from creating
-// short edges between points that did not know of each other.
+// the same sequence. The runs queued for splitting are read from the rounds'
+// meshes, by walks whose union does not depend on the seeds' order.
+// Independence makes the points of a round far apart (cavities that do not
+// touch), which is what keeps the rounds from creating short edges between
+// points that did not know of each other.
 #include <algorithm>
 #include <array>
 #include <cmath>
