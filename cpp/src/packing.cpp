@@ -9,7 +9,6 @@
 
 #include "evomesh/detail/bits.hpp"
 #include "evomesh/detail/kept_sphere_tree.hpp"
-#include "evomesh/detail/static_kd_tree.hpp"
 #include "evomesh/parallel.hpp"
 
 namespace evomesh {

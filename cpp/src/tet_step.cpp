@@ -15,6 +15,7 @@
 #include "evomesh/nd/cone_envelope.hpp"
 #include "evomesh/nd/kd_tree.hpp"
 #include "evomesh/nd/selected_spheres.hpp"
+#include "evomesh/packing.hpp"
 #include "evomesh/parallel.hpp"
 
 namespace evomesh::tet {
@@ -332,21 +333,20 @@ void apply_clearance(const Box_domain& box, double clearance, std::vector<Candid
 }
 
 // The lexical-first MIS over candidates[first..) in the packing order
-// (class, radius, id), against the spheres in `also` (selected earlier) and
-// among themselves. Required points and corners are kept unconditionally.
+// (class, f, id: the 2-D step's packing_order, ties by index, and ids grow
+// with the index), against the spheres in `also` (selected earlier) and among
+// themselves. Required points and corners are kept unconditionally.
 std::vector<std::size_t> lexical_first_mis(const std::vector<Candidate>& candidates, std::size_t first,
                                            double radius_scale, const Spheres* also, Spheres& spheres) {
-  std::vector<std::size_t> order(candidates.size() - first);
-  std::iota(order.begin(), order.end(), first);
-  std::sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) {
-    const Candidate& u = candidates[a];
-    const Candidate& v = candidates[b];
-    if (u.cls != v.cls) return u.cls < v.cls;
-    if (u.f != v.f) return u.f < v.f;
-    return u.id < v.id;
-  });
+  std::vector<std::uint8_t> classes(candidates.size() - first);
+  std::vector<double> f(candidates.size() - first);
+  for (std::size_t k = first; k < candidates.size(); ++k) {
+    classes[k - first] = static_cast<std::uint8_t>(candidates[k].cls);
+    f[k - first] = candidates[k].f;
+  }
   std::vector<std::size_t> kept;
-  for (std::size_t k : order) {
+  for (Index i : packing_order(std::move(classes), std::move(f))) {
+    const std::size_t k = first + static_cast<std::size_t>(i);
     const Candidate& c = candidates[k];
     const double r = radius_scale * c.f / 2;
     const bool keep = c.cls <= corner_class ||

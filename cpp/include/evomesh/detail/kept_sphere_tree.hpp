@@ -9,15 +9,15 @@
 
 #include "evomesh/detail/bits.hpp"
 #include "evomesh/detail/sphere_conflict.hpp"
-#include "evomesh/detail/static_kd_tree.hpp"
+#include "evomesh/nd/kd_tree.hpp"
 #include "evomesh/parallel.hpp"
 #include "evomesh/types.hpp"
 
 namespace evomesh::detail {
 
-// The kd-tree over sphere centres (detail/static_kd_tree.hpp, leaves of at most
-// 48 spheres) with the centre and radius of every sphere copied in tree order,
-// so a leaf is scanned in one contiguous sweep. Each node keeps, besides its
+// The kd-tree over sphere centres (nd::Static_kd_tree, leaves of at most 48
+// spheres) with the centre and radius of every sphere copied in tree order, so
+// a leaf is scanned in one contiguous sweep. Each node keeps, besides its
 // bounding box, the largest radius among the *kept* spheres below it (-1: none
 // kept yet), and each leaf a mask of its kept spheres.
 //
@@ -99,12 +99,12 @@ class Kept_sphere_tree {
     std::size_t hit = kNone;
     tree_.outward(
         position, [&](std::size_t leaf) { return (hit = leaf_conflicts(leaf, cx, cy, r)) != kNone; },
-        [&](std::size_t node, detail::Kd_stack& stack) {
+        [&](std::size_t node, nd::Kd_stack& stack) {
           const Node& b = tree_.node(node);
           if (b.max_kept_radius < 0) return false;
-          // Pruning never skips a conflict (detail::squared_distance).
+          // Pruning never skips a conflict (nd::squared_distance of a box).
           const double reach = r + b.max_kept_radius;
-          if (detail::squared_distance(b, cx, cy) >= reach * reach) return false;
+          if (nd::squared_distance<2>(b, {cx, cy}) >= reach * reach) return false;
           if (!tree_.is_leaf(node)) {
             stack.push_children(node);
             return false;
@@ -163,7 +163,7 @@ class Kept_sphere_tree {
       }
       return false;
     };
-    tree_.outward(position, scan, [&](std::size_t node, detail::Kd_stack& stack) {
+    tree_.outward(position, scan, [&](std::size_t node, nd::Kd_stack& stack) {
       const Node& b = tree_.node(node);
       // Every pending sphere's radius is at most pending_radius: the pruning
       // of conflicting_kept with that radius for every node never skips a
@@ -171,7 +171,7 @@ class Kept_sphere_tree {
       const double reach_radius = std::max(b.max_kept_radius, pending_radius);
       if (reach_radius < 0) return false;
       const double reach = r + reach_radius;
-      if (detail::squared_distance(b, cx, cy) >= reach * reach) return false;
+      if (nd::squared_distance<2>(b, {cx, cy}) >= reach * reach) return false;
       if (!tree_.is_leaf(node)) {
         stack.push_children(node);
         return false;
@@ -229,7 +229,7 @@ class Kept_sphere_tree {
   struct Slot {
     double x, y, radius;
   };
-  struct Node : detail::Box {
+  struct Node : nd::Box<2> {
     double max_kept_radius = -1;
   };
   // Bit k: position leaf_begin + k is kept; is pending.
@@ -250,7 +250,7 @@ class Kept_sphere_tree {
     return kNone;
   }
 
-  using Tree = detail::Static_kd_tree<Node>;
+  using Tree = nd::Static_kd_tree<2, Node>;
   Tree tree_;
   std::vector<Slot> slots_;                  // in tree order
   std::vector<std::uint32_t> visit_;         // position of each sphere of the visiting order
