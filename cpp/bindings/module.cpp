@@ -654,6 +654,48 @@ PYBIND11_MODULE(_core, m) {
       "edge_over_size_around's L compares, without most of its hypot calls (size_request.hpp).");
 
   m.def(
+      "delta_from_size",
+      [](const Float_array& points, const Int_array& triangles, const Float_array& h, const Float_array& nn,
+         bool keep_fine_clusters, double delta_min, double delta_max, std::optional<std::size_t> n_checked,
+         std::optional<Int_array> ids) {
+        auto [pts, tris] = to_points_and_triangles(points, triangles);
+        auto values = to_vector<double>(h);
+        auto spacing = to_vector<double>(nn);
+        if (values.size() != pts.size() || spacing.size() != pts.size()) throw Input_error("h, nn: one value per point");
+        const std::size_t checked = n_checked.value_or(pts.size());
+        if (checked > pts.size()) throw Input_error("n_checked: at most the number of points");
+        std::vector<std::int64_t> names;
+        if (ids) {
+          names = to_vector<std::int64_t>(*ids);
+          if (names.size() < checked) throw Input_error("ids: one id per checked point");
+        }
+        std::vector<double> delta;
+        {
+          py::gil_scoped_release release;
+          delta = delta_from_size(pts, tris, values, spacing, keep_fine_clusters, delta_min, delta_max, checked,
+                                  ids ? &names : nullptr);
+        }
+        return vector_array(delta);
+      },
+      py::arg("points"), py::arg("triangles"), py::arg("h"), py::arg("nn"), py::arg("keep_fine_clusters"),
+      py::arg("delta_min"), py::arg("delta_max"), py::arg("n_checked") = py::none(), py::arg("ids") = py::none(),
+      "size= as delta, the one rule of every scope (size_request.hpp): delta at every point, the first n_checked "
+      "(default: all) checked to lie in [delta_min, delta_max] (ValueError naming the point by its id).");
+  m.attr("SIZE_RULE_RINGS") = Size_rule::rings;
+
+  m.def(
+      "check_size_delta",
+      [](const Float_array& delta, const Float_array& h, const Float_array& nn, double delta_min, double delta_max) {
+        auto d = to_vector<double>(delta);
+        auto values = to_vector<double>(h);
+        auto spacing = to_vector<double>(nn);
+        if (values.size() != d.size() || spacing.size() != d.size()) throw Input_error("delta, h, nn: one value each");
+        check_size_delta(d, values, spacing, delta_min, delta_max, d.size());
+      },
+      py::arg("delta"), py::arg("h"), py::arg("nn"), py::arg("delta_min"), py::arg("delta_max"),
+      "delta_from_size's check of h / nn as delta (ValueError for the first point outside [delta_min, delta_max]).");
+
+  m.def(
       "near_seeds",
       [](const Int_array& triangles, const Byte_array& points, const Byte_array& seeds, int rings,
          std::optional<Byte_array> through) {
