@@ -1,7 +1,6 @@
-// The static kd-tree over points in D dimensions: one tree for the 2-D core
-// (nearest neighbours, the packing's tree of kept spheres, the boundary's
-// corner search) and the 3-D step (the cone envelope f, the selected spheres,
-// nearest neighbours). A complete binary tree in heap order: node 1 is the
+// The static kd-tree over points in D dimensions: one tree for the 2-D and
+// 3-D steps (nearest neighbours, the packing's tree of kept spheres), the 2-D
+// boundary's corner search and the 3-D cone envelope f. A complete binary tree in heap order: node 1 is the
 // root, node k has children 2k and 2k + 1, the leaves are nodes n_leaves() ..
 // 2 n_leaves() - 1, and leaf L holds the positions [leaf_begin(L),
 // leaf_begin(L + 1)) of the points in tree order. Boxes are the exact bounding
