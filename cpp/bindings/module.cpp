@@ -22,6 +22,7 @@
 #include "evomesh/kernel.hpp"
 #include "evomesh/local_feature_size.hpp"
 #include "evomesh/mesh_walk.hpp"
+#include "evomesh/nd/hilbert_order.hpp"
 #include "evomesh/options.hpp"
 #include "evomesh/packing.hpp"
 #include "evomesh/parallel.hpp"
@@ -1516,24 +1517,12 @@ PYBIND11_MODULE(_core, m) {
         {
           py::gil_scoped_release release;
           for (std::size_t i = 0; i < x.size(); ++i) {
-            std::int64_t a = x[i], b = y[i], key = 0;
-            if (a < 0 || a >= side || b < 0 || b >= side) {
+            if (x[i] < 0 || x[i] >= side || y[i] < 0 || y[i] >= side) {
               keys[i] = -1;
               continue;
             }
-            // the usual xy2d: one bit a level, rotating the quadrant
-            for (std::int64_t s = side >> 1; s > 0; s >>= 1) {
-              const std::int64_t rx = (a & s) > 0 ? 1 : 0, ry = (b & s) > 0 ? 1 : 0;
-              key += s * s * ((3 * rx) ^ ry);
-              if (ry == 0) {
-                if (rx == 1) {
-                  a = side - 1 - a;
-                  b = side - 1 - b;
-                }
-                std::swap(a, b);
-              }
-            }
-            keys[i] = key;
+            keys[i] = static_cast<std::int64_t>(nd::hilbert_index<2, std::uint64_t>(
+                {static_cast<std::uint32_t>(x[i]), static_cast<std::uint32_t>(y[i])}, static_cast<unsigned>(order)));
           }
         }
         for (std::int64_t k : keys) {
@@ -1542,7 +1531,8 @@ PYBIND11_MODULE(_core, m) {
         return vector_array(keys);
       },
       py::arg("ix"), py::arg("iy"), py::arg("order"),
-      "Index along the Hilbert curve of integer cells (ix, iy) in [0, 2^order)^2 (the usual xy2d).");
+      "Index along the Hilbert curve of integer cells (ix, iy) in [0, 2^order)^2 (nd::hilbert_index, the usual "
+      "xy2d).");
 
   bind_options(m);
 

@@ -16,20 +16,19 @@
 
 namespace evomesh::nd {
 
-// Bits of the grid per axis: a 2^bits cube of cells, the key in 32 bits (16
-// in 2-D, 10 in 3-D).
+// Bits of the grid order per axis: a 2^bits cube of cells, the key in 32 bits
+// (16 in 2-D, 10 in 3-D).
 template <std::size_t D>
 constexpr unsigned kHilbertBits = 32 / D;
 
 // The index along the Hilbert curve of the cell with coordinates x (each below
-// 2^kHilbertBits<D>): Skilling's transform ("Programming the Hilbert curve",
-// 2004) from axes to the transposed index, then the bits interleaved, axis 0
-// most significant. In 2-D it is the classic quadrant-rotation index (d +=
-// s^2 ((3 rx) ^ ry), then rotate).
-template <std::size_t D>
-std::uint32_t hilbert_index(std::array<std::uint32_t, D> x) {
-  static_assert(D >= 2 && D <= 32, "a Hilbert curve in 2 to 32 dimensions");
-  constexpr unsigned bits = kHilbertBits<D>;
+// 2^bits; D bits <= the bits of Key) on a 2^bits grid: Skilling's transform
+// ("Programming the Hilbert curve", 2004) from axes to the transposed index,
+// then the bits interleaved, axis 0 most significant. In 2-D it is the usual
+// xy2d (d += s^2 ((3 rx) ^ ry), then rotate the quadrant) for every bits.
+template <std::size_t D, class Key = std::uint32_t>
+Key hilbert_index(std::array<std::uint32_t, D> x, unsigned bits = kHilbertBits<D>) {
+  static_assert(D >= 2, "a Hilbert curve in 2 or more dimensions");
   const std::uint32_t top = std::uint32_t{1} << (bits - 1);
   for (std::uint32_t q = top; q > 1; q >>= 1) {  // the reflections and exchanges, top bit first
     const std::uint32_t p = q - 1;
@@ -49,9 +48,9 @@ std::uint32_t hilbert_index(std::array<std::uint32_t, D> x) {
     if (x[D - 1] & q) t ^= q - 1;
   }
   for (std::size_t i = 0; i < D; ++i) x[i] ^= t;
-  std::uint32_t d = 0;
+  Key d = 0;
   for (unsigned b = bits; b-- > 0;) {
-    for (std::size_t i = 0; i < D; ++i) d = (d << 1) | ((x[i] >> b) & 1u);
+    for (std::size_t i = 0; i < D; ++i) d = static_cast<Key>((d << 1) | ((x[i] >> b) & 1u));
   }
   return d;
 }
