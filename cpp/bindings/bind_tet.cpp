@@ -13,6 +13,7 @@
 #include <vector>
 
 #include "evomesh/tet/tet_step.hpp"
+#include "evomesh/tet/tet_supermesh.hpp"
 
 #include "numpy_arrays.hpp"
 
@@ -208,4 +209,42 @@ void bind_tet(py::module_& m) {
       py::arg("boundary_clearance"),
       py::arg("max_radius_edge"), py::arg("sliver_angle"), py::arg("max_samples"), py::arg("seed"), py::arg("threads"), py::arg("cap") = py::none(),
       "One FRFC step on a box's tetrahedral mesh (evomesh.tet_evolution drives it).");
+
+  m.def(
+      "tet_supermesh",
+      [](const Float_array& old_points, const Int_array& old_tets, const Float_array& new_points,
+         const Int_array& new_tets, const Int_array& origin, const Int_array& parent_tet, int threads) {
+        const auto op = to_points3(old_points, "old_points");
+        const auto ot = to_cells<4>(old_tets, op.size(), "old_tetrahedra");
+        const auto np_ = to_points3(new_points, "new_points");
+        const auto nt = to_cells<4>(new_tets, np_.size(), "new_tetrahedra");
+        const auto org = to_vector<Index>(origin, np_.size(), "origin");
+        const auto parent = to_vector<Index>(parent_tet, np_.size(), "parent_tet");
+        Tet_supermesh s;
+        {
+          py::gil_scoped_release release;
+          s = build_tet_supermesh(op, ot, np_, nt, org, parent, threads);
+        }
+        py::dict out;
+        out["offsets"] = to_array(std::move(s.offsets));
+        out["old_tet"] = to_array(std::move(s.old_tet));
+        out["volume"] = to_array(std::move(s.volume));
+        out["identical"] = s.identical;
+        return out;
+      },
+      py::arg("old_points"), py::arg("old_tetrahedra"), py::arg("new_points"), py::arg("new_tetrahedra"),
+      py::arg("origin"), py::arg("parent_tet"), py::arg("threads") = 0,
+      "Local supermesh of new over old tetrahedra, seeded by the step's origin and parent_tet: dict of offsets "
+      "(n_new_tetrahedra + 1,), old_tet and volume (pairs,) = |t n s|, identical (new tetrahedra that are old "
+      "ones).");
+
+  m.def(
+      "tet_intersection_volume",
+      [](const Float_array& t, const Float_array& s) {
+        const auto a = to_points3(t, "t");
+        const auto b = to_points3(s, "s");
+        if (a.size() != 4 || b.size() != 4) throw Input_error("t and s must have shape (4, 3)");
+        return tet_intersection_volume({a[0], a[1], a[2], a[3]}, {b[0], b[1], b[2], b[3]});
+      },
+      py::arg("t"), py::arg("s"), "Volume of the intersection of two tetrahedra (4, 3) (for the tests).");
 }

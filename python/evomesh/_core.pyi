@@ -554,3 +554,13 @@ def tet_step(
     threads: int,
     cap: Callable[[NDArray[np.float64], NDArray[np.int64]], ArrayLike] | None = None,
 ) -> dict[str, Any]: ...
+def tet_supermesh(
+    old_points: ArrayLike,
+    old_tetrahedra: ArrayLike,
+    new_points: ArrayLike,
+    new_tetrahedra: ArrayLike,
+    origin: ArrayLike,
+    parent_tet: ArrayLike,
+    threads: int = 0,
+) -> dict[str, Any]: ...
+def tet_intersection_volume(t: ArrayLike, s: ArrayLike) -> float: ...
