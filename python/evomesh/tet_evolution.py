@@ -321,7 +321,7 @@ def evolve_tet(mesh: TetMesh, delta: Any = None, *, size: Any = None, seed: int 
                  cpu_seconds=time.process_time() - start)
     lineage = TetLineage(n, mesh.n_tetrahedra, out["parent_tet"])
     return TetMesh._trusted(points, tets, new_faces, face_tags, tet_tags, required, out["kind"], origin, lineage,
-                            stats, (new_faces, new_face_tet))
+                            stats, (new_faces, new_face_tet), mesh.tag_names)
 
 
 def transfer_tet(old: TetMesh, new: TetMesh, values: Any) -> np.ndarray:
