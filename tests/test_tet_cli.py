@@ -3,12 +3,14 @@
 from __future__ import annotations
 
 import csv
+import re
 
 import numpy as np
 import pytest
 
 import evomesh
 import evomesh.io
+from evomesh import _core
 from evomesh.cli import main
 
 
@@ -96,3 +98,22 @@ def test_z_in_a_size_expression_needs_tetrahedra(tmp_path, capsys):
     path = evomesh.io.write_mesh(tmp_path / "square.vtu", evomesh.unit_square_mesh(100))
     assert main(["adapt", str(path), str(tmp_path / "out.vtu"), "--size-expr", "0.1 + z"]) == 2
     assert "uses z" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("field, value, message", [
+    ("cell_factor", -1.0, "cell_factor must be finite and > 0"),
+    ("radius_scale", 1.5, "radius_scale must be in (0, 1]"),
+    ("boundary_clearance", 1.0, "boundary_clearance must be in [0, 1)"),
+    ("max_radius_edge", 0.5, "max_radius_edge must be 0 (none)"),
+    ("sliver_angle", float("nan"), "sliver_angle must be in [0, 30]"),
+    ("max_samples", float("inf"), "max_samples must be finite and > 0"),
+])
+def test_tet_options_and_the_step_check_the_same_ranges(field, value, message):
+    """TetOptions refuses what the C++ step refuses, with the step's own message."""
+    with pytest.raises(ValueError, match=re.escape(message)):
+        evomesh.TetOptions(**{field: value})
+    arguments = dict(cell_factor=2.0, radius_scale=0.75, boundary_clearance=0.5, max_radius_edge=2.0,
+                     sliver_angle=10.0, max_samples=5e7, threads=0)
+    arguments[field] = value
+    with pytest.raises(ValueError, match=re.escape(message)):
+        _core.check_tet_options(**arguments)

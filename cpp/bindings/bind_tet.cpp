@@ -70,6 +70,23 @@ py::array_t<double> points_array(std::vector<Vec3>&& points) {
   return to_array(std::move(flat), {n, 3});
 }
 
+// The step's options from the Python values, checked (Tet_step_options::validate).
+Tet_step_options tet_options(double cell_factor, double radius_scale, double boundary_clearance,
+                             double max_radius_edge, double sliver_angle, double max_samples, std::uint64_t seed,
+                             int threads) {
+  Tet_step_options options;
+  options.cell_factor = cell_factor;
+  options.radius_scale = radius_scale;
+  options.boundary_clearance = boundary_clearance;
+  options.max_radius_edge = max_radius_edge;
+  options.sliver_angle = sliver_angle;
+  options.max_samples = max_samples;
+  options.seed = seed;
+  options.threads = threads;
+  options.validate();
+  return options;
+}
+
 py::array_t<std::int64_t> tets_array(std::vector<Tet>&& tets) {
   const auto m = static_cast<py::ssize_t>(tets.size());
   std::vector<std::int64_t> flat(4 * tets.size());
@@ -160,15 +177,8 @@ void bind_tet(py::module_& m) {
         in.weight = to_vector<double>(weight, n, "weight");
         if (box.ndim() != 1 || box.shape(0) != 6) throw Input_error("box must be (x0, y0, z0, x1, y1, z1)");
         for (int i = 0; i < 3; ++i) in.lo[i] = box.at(i), in.hi[i] = box.at(i + 3);
-        Tet_step_options options;
-        options.cell_factor = cell_factor;
-        options.radius_scale = radius_scale;
-        options.boundary_clearance = boundary_clearance;
-        options.max_radius_edge = max_radius_edge;
-        options.sliver_angle = sliver_angle;
-        options.max_samples = max_samples;
-        options.seed = seed;
-        options.threads = threads;
+        const Tet_step_options options = tet_options(cell_factor, radius_scale, boundary_clearance, max_radius_edge,
+                                                     sliver_angle, max_samples, seed, threads);
         Size_cap size_cap;
         if (cap) {
           size_cap = [&cap](const std::vector<Vec3>& x, const std::vector<Index>& tet, std::vector<double>& out) {
@@ -209,6 +219,17 @@ void bind_tet(py::module_& m) {
       py::arg("boundary_clearance"),
       py::arg("max_radius_edge"), py::arg("sliver_angle"), py::arg("max_samples"), py::arg("seed"), py::arg("threads"), py::arg("cap") = py::none(),
       "One FRFC step on a box's tetrahedral mesh (evomesh.tet_evolution drives it).");
+
+  m.def(
+      "check_tet_options",
+      [](double cell_factor, double radius_scale, double boundary_clearance, double max_radius_edge,
+         double sliver_angle, double max_samples, int threads) {
+        tet_options(cell_factor, radius_scale, boundary_clearance, max_radius_edge, sliver_angle, max_samples, 0,
+                    threads);
+      },
+      py::arg("cell_factor"), py::arg("radius_scale"), py::arg("boundary_clearance"), py::arg("max_radius_edge"),
+      py::arg("sliver_angle"), py::arg("max_samples"), py::arg("threads"),
+      "Raises ValueError naming the first option of the tetrahedral step out of range (the step's own check).");
 
   m.def(
       "tet_supermesh",
