@@ -93,7 +93,31 @@ struct Clip_buffers {
   std::vector<Corners> a, b;
 };
 
-double intersection_volume(const std::array<Half_space, 4>& t, const Corners& s, Clip_buffers& buffers) {
+// Whether every corner of c lies in every half-space (on a plane counts as in).
+bool holds(const std::array<Half_space, 4>& planes, const Corners& c) {
+  for (const Half_space& h : planes)
+    for (const Vec3& x : c)
+      if (h.distance(x) < 0) return false;
+  return true;
+}
+
+// |t n s| for t given by its corners and half-spaces. Before any clipping: s
+// outside one plane of t (all its corners on or beyond it) is disjoint from t,
+// s inside t is s, t inside s is t (most pairs where one mesh is much finer).
+double intersection_volume(const std::array<Half_space, 4>& t, const Corners& t_corners, const Corners& s,
+                           Clip_buffers& buffers) {
+  bool s_in_t = true;
+  for (const Half_space& h : t) {
+    bool any_in = false;
+    for (const Vec3& x : s) {
+      const double d = h.distance(x);
+      any_in = any_in || d > 0;
+      s_in_t = s_in_t && d >= 0;
+    }
+    if (!any_in) return 0.0;
+  }
+  if (s_in_t) return abs_volume(s);
+  if (holds(half_spaces(s), t_corners)) return abs_volume(t_corners);
   buffers.a.assign(1, s);
   for (const Half_space& h : t) {
     buffers.b.clear();
@@ -191,7 +215,7 @@ struct Marks {
 
 double tet_intersection_volume(const std::array<Vec3, 4>& t, const std::array<Vec3, 4>& s) {
   Clip_buffers buffers;
-  return intersection_volume(half_spaces(t), s, buffers);
+  return intersection_volume(half_spaces(t), t, s, buffers);
 }
 
 Tet_supermesh build_tet_supermesh(const std::vector<Vec3>& old_points, const std::vector<Tet>& old_tets,
@@ -293,7 +317,7 @@ Tet_supermesh build_tet_supermesh(const std::vector<Vec3>& old_points, const std
         }
         Corners sv;
         for (int k = 0; k < 4; ++k) sv[k] = sub(old_points[old_tets[s][k]], origin_point);
-        const double volume = intersection_volume(planes, sv, buffers);
+        const double volume = intersection_volume(planes, tv, sv, buffers);
         if (!(volume > 0)) continue;
         ++out.count[t - begin];
         out.old_tet.push_back(s);
