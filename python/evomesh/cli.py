@@ -10,7 +10,7 @@ from typing import Any, Callable, Sequence
 
 import numpy as np
 
-from evomesh.tet_evolution import TetOptions
+from evomesh.tet_evolution import TetOptions, evolve_tet, transfer_tet
 from evomesh.tet_mesh import dihedral_angles, radius_edge_ratios
 
 __all__ = ["main", "build_parser"]
@@ -385,7 +385,7 @@ def _adapt(args: argparse.Namespace) -> int:
             if unknown:
                 raise ValueError(f"unknown option(s) for a tetrahedral mesh: {', '.join(unknown)} (TetOptions has "
                                  f"{', '.join(sorted(_TET_OPTION_NAMES))})")
-            new: Any = evomesh.evolve(mesh, delta, seed=args.seed, options=evomesh.TetOptions(**overrides), **target)
+            new: Any = evolve_tet(mesh, delta, seed=args.seed, options=TetOptions(**overrides), **target)
         else:
             if tet_options:
                 make_options(args.method, base, **overrides)
@@ -393,7 +393,11 @@ def _adapt(args: argparse.Namespace) -> int:
                                  **target, **overrides)
         bar.update(1)
         fields = {name: values for name, values in data.items() if np.asarray(values).dtype.kind in "biufc"}
-        write_mesh(args.output, new, evomesh.transfer(mesh, new, fields) if fields else None)
+        if isinstance(mesh, evomesh.TetMesh):
+            carried = {name: transfer_tet(mesh, new, values) for name, values in fields.items()}
+        else:
+            carried = evomesh.transfer(mesh, new, fields) if fields else {}
+        write_mesh(args.output, new, carried or None)
         bar.update(1)
     if not args.quiet:
         kept = f"{mesh.n_points} -> {new.n_points} points ({int((new.origin >= 0).sum())} kept)"

@@ -574,7 +574,7 @@ class TetSupermesh:
         New tetrahedra that are old ones.
     """
 
-    def __init__(self, old: TetMesh, new: TetMesh, *, threads: int = 0):
+    def __init__(self, old: Mesh | TetMesh, new: Mesh | TetMesh, *, threads: int = 0):
         if not isinstance(old, TetMesh) or not isinstance(new, TetMesh):
             raise TypeError("a transfer between tetrahedral meshes needs two TetMesh")
         lineage = new.lineage

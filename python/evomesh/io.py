@@ -239,8 +239,9 @@ def _medit_meshio(mesh: TetMesh) -> meshio.Mesh:
     """Medit (.mesh) holds the tetrahedra and faces with one reference each (the tags), and nothing else."""
     import meshio
 
-    return meshio.Mesh(np.array(mesh.points), [("tetra", np.array(mesh.tetrahedra)), ("triangle", np.array(mesh.faces))],
-                       cell_data={"medit:ref": [mesh.tet_tags.astype(np.int32), mesh.face_tags.astype(np.int32)]})
+    cells = [("tetra", np.array(mesh.tetrahedra)), ("triangle", np.array(mesh.faces))]
+    tags = [mesh.tet_tags.astype(np.int32), mesh.face_tags.astype(np.int32)]
+    return meshio.Mesh(np.array(mesh.points), cells, cell_data={"medit:ref": tags})
 
 
 #: Where a VTU file's dataset starts: its field data go right after it.
@@ -356,7 +357,8 @@ def write_mesh(path: str | Path, mesh: Mesh | TetMesh, point_data: Mapping[str, 
     _check_point_data(point_data, mesh.n_points, _MESH_POINT_DATA)
     if isinstance(mesh, TetMesh) and file_format == "medit":
         if point_data:
-            raise ValueError(f"Medit files hold no point data: write {path.stem}.vtu or .msh for {', '.join(point_data)}")
+            raise ValueError(f"Medit files hold no point data: write {path.stem}.vtu or .msh for "
+                             f"{', '.join(point_data)}")
         _check_32_bit_tags(mesh, "Medit")
         _write_atomically(path, _medit_meshio(mesh), file_format)
         return path

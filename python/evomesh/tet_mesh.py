@@ -3,9 +3,9 @@ and its quality measures."""
 
 from __future__ import annotations
 
+import warnings
 from enum import IntEnum
 from types import MappingProxyType
-import warnings
 from typing import Any, Mapping, Sequence
 
 import numpy as np

@@ -97,12 +97,15 @@ class GrowingSphere:
         for k, mesh in enumerate(self.meshes):
             files["meshes"].append(write_mesh(folder / f"mesh_{k:03d}.vtu", mesh))
         if figures:
+            from matplotlib.figure import Figure
+
             from evomesh.plotting import plot_tet_slice, save
 
             for k, mesh in enumerate(self.meshes):
                 fig = plot_tet_slice(mesh, axis=2, value=float(self.center[2]), sphere=(self.center, self.radii[k]),
                                      title=f"step {k}: r = {self.radii[k]:.3f}, {mesh.n_points} points, "
                                            f"slice z = {self.center[2]:g}")
+                assert isinstance(fig, Figure)  # (a new figure: no axes were given)
                 files["figures"].append(save(fig, folder / f"slice_{k:03d}.png", dpi=dpi))
         self.files = files
         return files
