@@ -7,11 +7,18 @@
 #include <limits>
 #include <string>
 
+#include "evomesh/detail/cell_stars.hpp"
 #include "evomesh/parallel.hpp"
 
 namespace evomesh::tet {
 
 namespace {
+
+using detail::facet_adjacency;
+using detail::has_vertex;
+using detail::vertex_stars;
+using detail::Vertex_stars;
+using detail::Visit_marks;
 
 using Corners = std::array<Vec3, 4>;
 
@@ -130,49 +137,7 @@ double intersection_volume(const std::array<Half_space, 4>& t, const Corners& t_
   return volume;
 }
 
-// Old vertex -> old tetrahedra (star), compressed, in increasing tetrahedron order.
-struct Vertex_stars {
-  std::vector<Index> start;
-  std::vector<Index> star;
-};
-
-Vertex_stars vertex_stars(std::size_t n_points, const std::vector<Tet>& tets) {
-  Vertex_stars s;
-  s.start.assign(n_points + 1, 0);
-  for (const Tet& t : tets)
-    for (const Index v : t) ++s.start[v + 1];
-  for (std::size_t v = 0; v < n_points; ++v) s.start[v + 1] += s.start[v];
-  s.star.resize(4 * tets.size());
-  std::vector<Index> fill(s.start.begin(), s.start.end() - 1);
-  for (std::size_t k = 0; k < tets.size(); ++k)
-    for (const Index v : tets[k]) s.star[fill[v]++] = static_cast<Index>(k);
-  return s;
-}
-
-inline bool has_vertex(const Tet& t, Index v) { return t[0] == v || t[1] == v || t[2] == v || t[3] == v; }
-
 constexpr std::size_t block_size = 512;
-
-// neighbour[4 s + k]: the old tetrahedron across the face of s opposite its
-// vertex k (-1 on the boundary), found in the star of one of that face's vertices.
-std::vector<Index> face_adjacency(const Vertex_stars& stars, const std::vector<Tet>& tets, int threads) {
-  const std::size_t m = tets.size();
-  std::vector<Index> neighbour(4 * m, -1);
-  parallel_for((m + block_size - 1) / block_size, threads, [&](std::size_t block) {
-    for (std::size_t s = block * block_size, end = std::min(m, s + block_size); s < end; ++s)
-      for (int k = 0; k < 4; ++k) {
-        const Index a = tets[s][(k + 1) % 4], b = tets[s][(k + 2) % 4], c = tets[s][(k + 3) % 4];
-        for (Index i = stars.start[a]; i < stars.start[a + 1]; ++i) {
-          const Index u = stars.star[i];
-          if (static_cast<std::size_t>(u) != s && has_vertex(tets[u], b) && has_vertex(tets[u], c)) {
-            neighbour[4 * s + k] = u;
-            break;
-          }
-        }
-      }
-  });
-  return neighbour;
-}
 
 // The old tetrahedron with the four (kept) vertices' origins, else -1.
 Index identical_old(const Vertex_stars& stars, const std::vector<Tet>& old_tets, const Tet& t,
@@ -195,20 +160,6 @@ struct Block_result {
   std::vector<double> volume;
   std::size_t identical = 0;
   Index orphan = -1;  // a new tetrahedron without any seed
-};
-
-// Visited marks of old tetrahedra, one array per worker thread (a generation
-// counter avoids clearing it between new tetrahedra).
-struct Marks {
-  std::vector<std::uint32_t> stamp;
-  std::uint32_t generation = 0;
-  std::uint32_t next(std::size_t n) {
-    if (stamp.size() != n || generation == std::numeric_limits<std::uint32_t>::max()) {
-      stamp.assign(n, 0);
-      generation = 0;
-    }
-    return ++generation;
-  }
 };
 
 }  // namespace
@@ -239,7 +190,8 @@ Tet_supermesh build_tet_supermesh(const std::vector<Vec3>& old_points, const std
       throw Input_error("kept point " + std::to_string(v) + " moved: it is not at its origin's coordinates");
   }
   const Vertex_stars stars = vertex_stars(n_old, old_tets);
-  const std::vector<Index> neighbour = face_adjacency(stars, old_tets, threads);
+  // neighbour[4 s + k]: the old tetrahedron across the face of s without s[(k + 3) % 4].
+  const std::vector<Index> neighbour = facet_adjacency(stars, old_tets, threads);
   // Seeds: an old tetrahedron at each new point (the first of a kept point's old star).
   std::vector<Index> seed(n_new, -1);
   for (std::size_t v = 0; v < n_new; ++v) {
@@ -266,7 +218,7 @@ Tet_supermesh build_tet_supermesh(const std::vector<Vec3>& old_points, const std
   const std::size_t n_blocks = (m + block_size - 1) / block_size;
   std::vector<Block_result> blocks(n_blocks);
   parallel_for(n_blocks, threads, [&](std::size_t block) {
-    thread_local Marks marks;
+    thread_local Visit_marks marks;
     thread_local Clip_buffers buffers;
     Block_result& out = blocks[block];
     const std::size_t begin = block * block_size, end = std::min(m, begin + block_size);
