@@ -13,6 +13,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import evomesh
+import evomesh.io
 from evomesh.io import read_mesh, write_mesh
 
 
@@ -98,6 +99,15 @@ def test_any_int32_tags_and_names_round_trip(tmp_path_factory, tags, name):
     for suffix in (".msh", ".vtu", ".mesh"):
         back, _ = read_mesh(write_mesh(folder / f"m{suffix}", mesh))
         assert_same(mesh, back, labels=suffix != ".mesh")
+
+
+def test_to_meshio_groups_cells_by_tag_and_from_meshio_reads_them_back():
+    mesh = tagged_cube()
+    m = evomesh.io.to_meshio(mesh, {"u": np.arange(mesh.n_points)})
+    assert [block.type for block in m.cells] == ["tetra", "tetra"] + ["triangle"] * 6
+    back = evomesh.TetMesh.from_meshio(m)
+    assert np.array_equal(np.sort(back.tet_tags), np.sort(mesh.tet_tags))
+    assert dict(back.tag_names) == dict(mesh.tag_names) and back.n_tetrahedra == mesh.n_tetrahedra
 
 
 def test_boundary_faces_a_file_leaves_out_get_tag_0(tmp_path):

@@ -111,9 +111,10 @@ def _vtu_arrays(name: str, values: Any) -> list[tuple[str, np.ndarray]]:
     return [(name, array)]
 
 
-def to_meshio(mesh: Mesh, point_data: Mapping[str, ArrayLike] | None = None) -> meshio.Mesh:
+def to_meshio(mesh: Mesh | TetMesh, point_data: Mapping[str, ArrayLike] | None = None) -> meshio.Mesh:
     """A meshio.Mesh (:meth:`Mesh.to_meshio`: points with z = 0, a "triangle"
-    and a "line" block with their tags as ``gmsh:physical``).
+    and a "line" block with their tags as ``gmsh:physical``; for a
+    :class:`TetMesh`, :meth:`TetMesh.to_meshio`: "tetra" and "triangle" blocks).
 
     Point data always includes ``kind``, ``origin`` and ``required``, then the arrays of
     ``point_data`` (each shape (n,) or (n, ...)), stored as VTU can hold them:
@@ -132,7 +133,8 @@ def to_meshio(mesh: Mesh, point_data: Mapping[str, ArrayLike] | None = None) -> 
         per point or without components; a float / complex dtype wider than
         64-bit parts (VTU would lose precision).
     """
-    _require_mesh(mesh)
+    if not isinstance(mesh, TetMesh):
+        _require_mesh(mesh)
     _check_point_data(point_data, mesh.n_points, _MESH_POINT_DATA)
     out = mesh.to_meshio()
     for name, values in (point_data or {}).items():
