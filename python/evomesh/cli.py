@@ -509,21 +509,10 @@ def _growing_circle(args: argparse.Namespace) -> int:
 def _growing_sphere(args: argparse.Namespace) -> int:
     from evomesh.experiments.growing_sphere import growing_sphere
 
-    result = growing_sphere(
-        steps=args.steps,
-        cells=args.cells,
-        r0=args.r0,
-        r_end=args.r_end,
-        band=args.band,
-        h_min=args.h_min,
-        h_max=args.h_max,
-        grade=args.grade,
-        seed=args.seed,
-        out=args.out,
-        figures=not args.no_figures,
-        progress=False if args.quiet else None,
-        **_parse_options(args.option),
-    )
+    sphere = {name: getattr(args, name) for name in ("steps", "cells", "r0", "r_end", "band", "h_min", "h_max",
+                                                      "grade", "seed", "out")}
+    result = growing_sphere(**sphere, figures=not args.no_figures, progress=False if args.quiet else None,
+                            **_parse_options(args.option))
     if not args.quiet:
         print(result.table())
         print(f"outputs in {args.out}")
