@@ -90,10 +90,21 @@ def _row_keys(rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     equal rows of ``rows`` get the same group number (numbers in sorted order)."""
     if len(rows) == 0:
         return np.zeros(0, np.int64), np.zeros(0, np.int64)
-    order = np.lexsort(rows.T[::-1])
-    sorted_rows = rows[order]
     new_group = np.ones(len(rows), bool)
-    new_group[1:] = (sorted_rows[1:] != sorted_rows[:-1]).any(axis=1)
+    low, span = int(rows.min()), int(rows.max()) - int(rows.min()) + 1
+    if span ** rows.shape[1] < 2**62:
+        # One int64 key per row, in the rows' lexicographic order: a stable
+        # argsort of it is the lexsort's order, several times faster.
+        key = np.zeros(len(rows), np.int64)
+        for column in rows.T:
+            key = key * span + (column.astype(np.int64) - low)
+        order = np.argsort(key, kind="stable")
+        sorted_key = key[order]
+        new_group[1:] = sorted_key[1:] != sorted_key[:-1]
+    else:
+        order = np.lexsort(rows.T[::-1])
+        sorted_rows = rows[order]
+        new_group[1:] = (sorted_rows[1:] != sorted_rows[:-1]).any(axis=1)
     group = np.empty(len(rows), np.int64)
     group[order] = np.cumsum(new_group) - 1
     return order, group
