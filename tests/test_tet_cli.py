@@ -117,3 +117,19 @@ def test_tet_options_and_the_step_check_the_same_ranges(field, value, message):
     arguments[field] = value
     with pytest.raises(ValueError, match=re.escape(message)):
         _core.check_tet_options(**arguments)
+
+
+@pytest.mark.parametrize("axis, value", [(2, 0.5), (0, 0.3), (1, 0.0), (2, 1 / 3)])
+def test_slices_tile_the_cross_section(axis, value):
+    """The polygons of a slice cover the box's cross-section once (also on a grid plane,
+    where faces lie in the plane, and on the boundary), each inside its tetrahedron's shadow."""
+    from evomesh.plotting import tet_slice
+
+    mesh = evomesh.evolve(evomesh.unit_cube_mesh(3), 0.7, seed=2)
+    polygons, tets = tet_slice(mesh.points, mesh.tetrahedra, axis, value)
+    area = 0.0
+    for polygon in polygons:
+        x, y = polygon[~np.isnan(polygon[:, 0])].T
+        area += 0.5 * abs(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1)))
+    assert abs(area - 1.0) < 1e-12
+    assert len(np.unique(tets)) == len(tets)
