@@ -511,10 +511,7 @@ Tet_step_result tet_step(const Tet_step_input& in, const Tet_step_options& optio
   for (double w : in.weight) {
     if (!(w > 0) || !std::isfinite(w)) throw Input_error("weights must be finite and positive");
   }
-  if (!(options.cell_factor > 0) || !(options.boundary_clearance >= 0) ||
-      !(options.radius_scale > 0 && options.radius_scale <= 1)) {
-    throw Input_error("cell_factor must be positive, boundary_clearance non-negative, radius_scale in (0, 1]");
-  }
+  options.validate();
   Thread_limit limit(options.threads);
   const Box_domain box(in.lo, in.hi);
   Tet_step_result result;

@@ -569,3 +569,22 @@ def tet_step(
     threads: int,
     cap: Callable[[NDArray[np.float64], NDArray[np.int64]], ArrayLike] | None = None,
 ) -> dict[str, Any]: ...
+def check_tet_options(
+    cell_factor: float,
+    radius_scale: float,
+    boundary_clearance: float,
+    max_radius_edge: float,
+    sliver_angle: float,
+    max_samples: float,
+    threads: int,
+) -> None: ...
+def tet_supermesh(
+    old_points: ArrayLike,
+    old_tetrahedra: ArrayLike,
+    new_points: ArrayLike,
+    new_tetrahedra: ArrayLike,
+    origin: ArrayLike,
+    parent_tet: ArrayLike,
+    threads: int = 0,
+) -> dict[str, Any]: ...
+def tet_intersection_volume(t: ArrayLike, s: ArrayLike) -> float: ...
