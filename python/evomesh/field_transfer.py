@@ -334,14 +334,15 @@ Frame = Literal["eulerian", "lagrangian"]
 
 @overload
 def transfer(
-    old: Mesh, new: Mesh, values: Mapping[str, ArrayLike], method: Method = "linear", *, frame: Frame = "eulerian"
+    old: Mesh | TetMesh, new: Mesh | TetMesh, values: Mapping[str, ArrayLike], method: Method = "linear", *,
+    frame: Frame = "eulerian"
 ) -> dict[str, np.ndarray]: ...
 @overload
 def transfer(
-    old: Mesh, new: Mesh, values: ArrayLike, method: Method = "linear", *, frame: Frame = "eulerian"
+    old: Mesh | TetMesh, new: Mesh | TetMesh, values: ArrayLike, method: Method = "linear", *, frame: Frame = "eulerian"
 ) -> np.ndarray: ...
 def transfer(
-    old: Mesh, new: Mesh, values: ArrayLike | Mapping[str, ArrayLike], method: Method = "linear", *,
+    old: Any, new: Any, values: ArrayLike | Mapping[str, ArrayLike], method: Method = "linear", *,
     frame: Frame = "eulerian"
 ) -> np.ndarray | dict[str, np.ndarray]:
     """Per-vertex field(s) of ``old`` at the points of ``new``.
