@@ -194,14 +194,11 @@ def test_randomized_interface_runs_finish_closed_and_keep_or_report_their_angles
     randomized_run(seed, (0.1, 0.13), vortex_substeps=1)
 
 
-@pytest.mark.xfail(strict=True, raises=ValueError,
-                   reason="known: at spacings near 0.1 a chord between two kept interface points (0.3-0.4 long) can "
-                          "cross a bulge of the same curve, and the step refuses ('two constraint pieces ... cross')")
 @pytest.mark.parametrize("seed", [40, 48])
 def test_a_long_kept_chord_across_a_bulge_of_the_vortex_drop(seed: int) -> None:
-    """Two vortex runs at spacing 0.08-0.11 that still stop: the fix (split
-    such a chord at its dropped chain points) will make this pass, and then
-    fail as an unexpected pass until the marker goes."""
+    """Two vortex runs at spacing 0.08-0.11 where a chord between two kept
+    interface points (0.3-0.4 long) would cross a bulge of the same curve: the
+    chord gets back the old interface points it passes, and the run finishes."""
     randomized_run(seed, (0.08, 0.11), vortex_substeps=4)
 
 
