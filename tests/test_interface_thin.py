@@ -133,6 +133,51 @@ def test_circles_one_spacing_apart_leave_a_closed_interface(gap: float) -> None:
     assert evomesh.mesh_quality.triangle_angles(new.points, new.triangles).min() > 29.0  # (was a 0.09 degree sliver)
 
 
+def union_of_circles_boundary(centres: list[tuple[float, float]], r: float, step: float) -> np.ndarray:
+    """Samples (step apart) of the boundary of the union of circles of radius r."""
+    out = []
+    for cx, cy in centres:
+        angle = np.linspace(0, 2 * np.pi, int(2 * np.pi * r / step), endpoint=False)
+        p = np.stack([cx + r * np.cos(angle), cy + r * np.sin(angle)], axis=1)
+        outside = np.ones(len(p), dtype=bool)
+        for dx, dy in centres:
+            if (dx, dy) != (cx, cy):
+                outside &= np.hypot(p[:, 0] - dx, p[:, 1] - dy) >= r
+        out.append(p[outside])
+    return np.concatenate(out)
+
+
+def polyline_samples(points: np.ndarray, segments: np.ndarray, step: float) -> np.ndarray:
+    a, b = points[segments[:, 0]], points[segments[:, 1]]
+    k = np.maximum(1, np.ceil(np.hypot(*(b - a).T) / step).astype(int))
+    index = np.repeat(np.arange(len(segments)), k)
+    t = (np.arange(k.sum()) - np.repeat(np.cumsum(k) - k, k)) / np.repeat(k, k)
+    return a[index] + t[:, None] * (b - a)[index]
+
+
+@pytest.mark.parametrize("gap", [1.04, -0.52])
+def test_where_two_circles_meet_the_interface_follows_the_notch(gap: float) -> None:
+    """Two circles one spacing apart, or overlapping by half a spacing (the
+    union's boundary has two corners whose notch is narrower than the
+    spacing): one step from 16,000 points with size=h. The interface is
+    closed and within a quarter spacing of the exact zero set (Hausdorff
+    distance; it was 0.5 h apart and 1.0 h overlapping)."""
+    from scipy.spatial import cKDTree
+
+    mesh = evomesh.unit_square_mesh(16000)
+    h = float(np.median(mesh.nn_spacing))
+    r = 0.18
+    centres = [(0.5 - r - gap * h / 2, 0.5), (0.5 + r + gap * h / 2, 0.5)]
+    left, right = circle(*centres[0], r), circle(*centres[1], r)
+    new, caught = step(mesh, lambda x: np.minimum(left(x), right(x)), size=h)
+    check_closed_and_reported(new, caught)
+    segments = new.segments[(new.segment_tags == INTERFACE_TAG) & ~new.segment_is_boundary]
+    exact = union_of_circles_boundary(centres, r, step=2e-5)
+    polyline = polyline_samples(new.points, segments, step=2e-5)
+    distance = max(cKDTree(exact).query(polyline)[0].max(), cKDTree(polyline).query(exact)[0].max())
+    assert distance < 0.25 * h
+
+
 @pytest.mark.parametrize(
     "name", ["shifted", "scaled up", "scaled down", "arctan", "long gradient"]
 )
@@ -202,12 +247,14 @@ def test_a_long_kept_chord_across_a_bulge_of_the_vortex_drop(seed: int) -> None:
     randomized_run(seed, (0.08, 0.11), vortex_substeps=4)
 
 
-def test_an_interface_finer_than_max_samples_allows_is_refused_naming_the_place_and_the_spacing() -> None:
-    """Two circles 1e-3 apart at spacing 0.03: the spacing between them follows
-    their distance, and max_samples = 1000 does not allow it; the refusal says
-    where and how fine."""
+@pytest.mark.parametrize("gap", [1e-3, 1e-4])
+def test_an_interface_finer_than_max_samples_allows_is_refused_naming_the_place_and_the_spacing(gap: float) -> None:
+    """Two circles 1e-3 or 1e-4 apart at spacing 0.03: the spacing between
+    them follows their distance, and max_samples = 1000 does not allow it;
+    the refusal says where (between the circles, not on the boundary) and how
+    fine."""
     mesh = evomesh.unit_square_mesh(1096)
-    left, right = circle(0.3 - 5e-4, 0.5, 0.2), circle(0.7 + 5e-4, 0.5, 0.2)
+    left, right = circle(0.3 - gap / 2, 0.5, 0.2), circle(0.7 + gap / 2, 0.5, 0.2)
     with pytest.raises(ValueError, match="max_samples") as refused:
         evomesh.evolve(mesh, size=0.03, interface=lambda x: np.minimum(left(x), right(x)), max_samples=1000)
     found = re.search(r"a spacing of ([0-9.e+-]+) at \(([0-9.e+-]+), ([0-9.e+-]+)\)", str(refused.value))
