@@ -252,32 +252,11 @@ def mmg() -> None:
     print(f"\nMMG call: `{call}` (MMG 5.7.0, single thread).")
 
 
-def union_of_circles_boundary(centres: list[tuple[float, float]], r: float, step: float = 2e-5) -> np.ndarray:
-    """Samples (step apart) of the boundary of the union of circles of radius r."""
-    out = []
-    for cx, cy in centres:
-        angle = np.linspace(0, 2 * np.pi, int(2 * np.pi * r / step), endpoint=False)
-        p = np.stack([cx + r * np.cos(angle), cy + r * np.sin(angle)], axis=1)
-        outside = np.ones(len(p), dtype=bool)
-        for dx, dy in centres:
-            if (dx, dy) != (cx, cy):
-                outside &= np.hypot(p[:, 0] - dx, p[:, 1] - dy) >= r
-        out.append(p[outside])
-    return np.concatenate(out)
-
-
-def polyline_samples(points: np.ndarray, segments: np.ndarray, step: float = 2e-5) -> np.ndarray:
-    a, b = points[segments[:, 0]], points[segments[:, 1]]
-    k = np.maximum(1, np.ceil(np.hypot(*(b - a).T) / step).astype(int))
-    index = np.repeat(np.arange(len(segments)), k)
-    t = (np.arange(k.sum()) - np.repeat(np.cumsum(k) - k, k)) / np.repeat(k, k)
-    return a[index] + t[:, None] * (b - a)[index]
-
-
 def notch() -> None:
-    from scipy.spatial import cKDTree
-
     import evomesh.interface as interface
+
+    sys.path.insert(0, str(HERE.parent / "tests"))
+    from invariants import hausdorff_to_union_of_circles
 
     print("\n## Two circles one spacing apart or overlapping (one step, size h = the input's median spacing)\n")
     print("Hausdorff distance between the interface polyline and the exact boundary of the union (both sampled "
@@ -292,7 +271,6 @@ def notch() -> None:
         for gap in (1.04, -0.52):
             centres = [(0.5 - r - gap * h / 2, 0.5), (0.5 + r + gap * h / 2, 0.5)]
             left, right = circle(*centres[0], r), circle(*centres[1], r)
-            exact = union_of_circles_boundary(centres, r)
             for search in (False, True):
                 interface._DOUBLE_CROSSING_ROUNDS = rounds if search else 0
                 t0 = time.perf_counter()
@@ -300,8 +278,7 @@ def notch() -> None:
                     warnings.simplefilter("ignore", evomesh.QualityWarning)  # (the notch's tip is a sharp corner)
                     new = evomesh.evolve(mesh, size=h, interface=lambda x, a=left, b=right: np.minimum(a(x), b(x)))
                 seconds = time.perf_counter() - t0
-                polyline = polyline_samples(new.points, interface_segments(new))
-                distance = max(cKDTree(exact).query(polyline)[0].max(), cKDTree(polyline).query(exact)[0].max())
+                distance = hausdorff_to_union_of_circles(new.points, interface_segments(new), centres, r)
                 what = "apart 1.04 h" if gap > 0 else "overlapping 0.52 h"
                 print(f"| {mesh.n_points} | {h:.4f} | {what} | {'search' if search else 'search off'} | "
                       f"{distance:.2e} | {distance / h:.3f} | {new.stats['interface_phi_calls']:g} | "
