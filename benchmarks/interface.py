@@ -19,10 +19,16 @@ Sections (all by default; pick some with --only):
   5.7.0 from the pymmg 1.0.0 wheel; tools/get-peers.sh, or EVOMESH_MMG2D) on
   the same input mesh and level sets, uniform size h (the input's median
   spacing): interface error, smallest angle, points, old points kept, time.
+* ``notch``: two circles (radius 0.18) one spacing apart (gap 1.04 h) or
+  overlapping (by 0.52 h: the union's boundary has two corners whose notch is
+  narrower than the spacing), one step with size=h from 1.6e4 and 6.4e4
+  points: the Hausdorff distance between the interface and the exact zero set,
+  with the cut's search for notches and corners and without it (the cut
+  before it), phi calls, smallest angle, seconds.
 * ``timing``: the seconds of an interface step against a plain step on the
   same mesh (the ratio is the figure; both run here, one after the other).
 
-    python benchmarks/interface.py [--only convergence,growing,mmg,timing] [--figure PATH]
+    python benchmarks/interface.py [--only convergence,growing,mmg,notch,timing] [--figure PATH]
 """
 
 from __future__ import annotations
@@ -246,6 +252,40 @@ def mmg() -> None:
     print(f"\nMMG call: `{call}` (MMG 5.7.0, single thread).")
 
 
+def notch() -> None:
+    import evomesh.interface as interface
+
+    sys.path.insert(0, str(HERE.parent / "tests"))
+    from invariants import hausdorff_to_union_of_circles
+
+    print("\n## Two circles one spacing apart or overlapping (one step, size h = the input's median spacing)\n")
+    print("Hausdorff distance between the interface polyline and the exact boundary of the union (both sampled "
+          "2e-5 apart). `search off`: the cut without its search for notches and corners.\n")
+    print("| input points | h | circles | cut | Hausdorff | / h | phi calls | min angle | seconds |")
+    print("|---:|---:|---|---|---:|---:|---:|---:|---:|")
+    rounds = interface._DOUBLE_CROSSING_ROUNDS
+    r = 0.18
+    for n in (16000, 64000):
+        mesh = evomesh.unit_square_mesh(n)
+        h = float(np.median(mesh.nn_spacing))
+        for gap in (1.04, -0.52):
+            centres = [(0.5 - r - gap * h / 2, 0.5), (0.5 + r + gap * h / 2, 0.5)]
+            left, right = circle(*centres[0], r), circle(*centres[1], r)
+            for search in (False, True):
+                interface._DOUBLE_CROSSING_ROUNDS = rounds if search else 0
+                t0 = time.perf_counter()
+                with warnings.catch_warnings():
+                    warnings.simplefilter("ignore", evomesh.QualityWarning)  # (the notch's tip is a sharp corner)
+                    new = evomesh.evolve(mesh, size=h, interface=lambda x, a=left, b=right: np.minimum(a(x), b(x)))
+                seconds = time.perf_counter() - t0
+                distance = hausdorff_to_union_of_circles(new.points, interface_segments(new), centres, r)
+                what = "apart 1.04 h" if gap > 0 else "overlapping 0.52 h"
+                print(f"| {mesh.n_points} | {h:.4f} | {what} | {'search' if search else 'search off'} | "
+                      f"{distance:.2e} | {distance / h:.3f} | {new.stats['interface_phi_calls']:g} | "
+                      f"{triangle_angles(new.points, new.triangles).min():.1f} | {seconds:.2f} |", flush=True)
+    interface._DOUBLE_CROSSING_ROUNDS = rounds
+
+
 def timing() -> None:
     print("\n## Time of an interface step against a plain step (same mesh, same delta)\n")
     print("| points | delta | plain (incremental) | plain (full) | interface | interface / full |")
@@ -267,7 +307,7 @@ def timing() -> None:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--only", default="convergence,growing,mmg,timing")
+    parser.add_argument("--only", default="convergence,growing,mmg,notch,timing")
     parser.add_argument("--figure", type=Path, default=HERE / "interface_growing_circle.png")
     args = parser.parse_args()
     sections = args.only.split(",")
@@ -277,6 +317,8 @@ def main() -> None:
         growing(args.figure)
     if "mmg" in sections:
         mmg()
+    if "notch" in sections:
+        notch()
     if "timing" in sections:
         timing()
 

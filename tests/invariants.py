@@ -120,3 +120,25 @@ def spacing_ratio(old: evomesh.Mesh, new: evomesh.Mesh, delta: np.ndarray) -> np
 def integral_inverse_square(mesh: evomesh.Mesh, f, levels: int = 3) -> float:
     """Integral of 1/f^2 over the mesh's domain (evomesh.mesh_quality's, 64 sub-triangles each)."""
     return _integral_inverse_square(mesh.points, mesh.triangles, f, levels=levels)
+
+
+def hausdorff_to_union_of_circles(points: np.ndarray, segments: np.ndarray, centres: list[tuple[float, float]],
+                                  radius: float, step: float = 2e-5) -> float:
+    """The Hausdorff distance between the polyline of `segments` and the
+    boundary of the union of circles of one radius, both sampled `step` apart."""
+    exact = []
+    for cx, cy in centres:
+        angle = np.linspace(0, 2 * np.pi, int(2 * np.pi * radius / step), endpoint=False)
+        p = np.stack([cx + radius * np.cos(angle), cy + radius * np.sin(angle)], axis=1)
+        outside = np.ones(len(p), dtype=bool)
+        for dx, dy in centres:
+            if (dx, dy) != (cx, cy):
+                outside &= np.hypot(p[:, 0] - dx, p[:, 1] - dy) >= radius
+        exact.append(p[outside])
+    on_circles = np.concatenate(exact)
+    a, b = points[segments[:, 0]], points[segments[:, 1]]
+    k = np.maximum(1, np.ceil(np.hypot(*(b - a).T) / step).astype(int))
+    index = np.repeat(np.arange(len(segments)), k)
+    t = (np.arange(k.sum()) - np.repeat(np.cumsum(k) - k, k)) / np.repeat(k, k)
+    on_polyline = a[index] + t[:, None] * (b - a)[index]
+    return float(max(cKDTree(on_circles).query(on_polyline)[0].max(), cKDTree(on_polyline).query(on_circles)[0].max()))

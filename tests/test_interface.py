@@ -242,7 +242,14 @@ def test_two_circles_merge_and_split() -> None:
     for distance in (0.5, 0.34, 0.3, 0.26, 0.3, 0.34, 0.5):
         phi = lambda x, d=distance: np.minimum(circle(0.5 - d / 2, 0.5, 0.15)(x),  # noqa: E731
                                                circle(0.5 + d / 2, 0.5, 0.15)(x))
-        mesh = evomesh.evolve(mesh, 1.0, interface=phi)
+        if distance == 0.3:
+            # touching: phi = 0 has a cusp (two notches of zero angle), which the
+            # cut follows into the spacing; the angles there are reported
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", evomesh.QualityWarning)
+                mesh = evomesh.evolve(mesh, 1.0, interface=phi)
+        else:
+            mesh = evomesh.evolve(mesh, 1.0, interface=phi)
         # where the circles touch or cross, phi = 0 is not a smooth curve: its kinks
         half_chord = np.sqrt(max(0.15**2 - (distance / 2) ** 2, 0.0))
         kinks = np.array([[0.5, 0.5 - half_chord], [0.5, 0.5 + half_chord]])

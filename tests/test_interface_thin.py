@@ -13,7 +13,7 @@ import pytest
 
 import evomesh
 from evomesh.interface import INTERFACE_TAG
-from invariants import check_valid_mesh
+from invariants import check_valid_mesh, hausdorff_to_union_of_circles
 
 
 def circle(cx: float, cy: float, r: float):
@@ -133,6 +133,24 @@ def test_circles_one_spacing_apart_leave_a_closed_interface(gap: float) -> None:
     assert evomesh.mesh_quality.triangle_angles(new.points, new.triangles).min() > 29.0  # (was a 0.09 degree sliver)
 
 
+@pytest.mark.parametrize("gap", [1.04, -0.52])
+def test_where_two_circles_meet_the_interface_follows_the_notch(gap: float) -> None:
+    """Two circles one spacing apart, or overlapping by half a spacing (the
+    union's boundary has two corners whose notch is narrower than the
+    spacing): one step from 16,000 points with size=h. The interface is
+    closed and within a quarter spacing of the exact zero set (Hausdorff
+    distance; it was 0.5 h apart and 1.0 h overlapping)."""
+    mesh = evomesh.unit_square_mesh(16000)
+    h = float(np.median(mesh.nn_spacing))
+    r = 0.18
+    centres = [(0.5 - r - gap * h / 2, 0.5), (0.5 + r + gap * h / 2, 0.5)]
+    left, right = circle(*centres[0], r), circle(*centres[1], r)
+    new, caught = step(mesh, lambda x: np.minimum(left(x), right(x)), size=h)
+    check_closed_and_reported(new, caught)
+    segments = new.segments[(new.segment_tags == INTERFACE_TAG) & ~new.segment_is_boundary]
+    assert hausdorff_to_union_of_circles(new.points, segments, centres, r) < 0.25 * h
+
+
 @pytest.mark.parametrize(
     "name", ["shifted", "scaled up", "scaled down", "arctan", "long gradient"]
 )
@@ -194,23 +212,22 @@ def test_randomized_interface_runs_finish_closed_and_keep_or_report_their_angles
     randomized_run(seed, (0.1, 0.13), vortex_substeps=1)
 
 
-@pytest.mark.xfail(strict=True, raises=ValueError,
-                   reason="known: at spacings near 0.1 a chord between two kept interface points (0.3-0.4 long) can "
-                          "cross a bulge of the same curve, and the step refuses ('two constraint pieces ... cross')")
 @pytest.mark.parametrize("seed", [40, 48])
 def test_a_long_kept_chord_across_a_bulge_of_the_vortex_drop(seed: int) -> None:
-    """Two vortex runs at spacing 0.08-0.11 that still stop: the fix (split
-    such a chord at its dropped chain points) will make this pass, and then
-    fail as an unexpected pass until the marker goes."""
+    """Two vortex runs at spacing 0.08-0.11 where a chord between two kept
+    interface points (0.3-0.4 long) would cross a bulge of the same curve: the
+    chord gets back the old interface points it passes, and the run finishes."""
     randomized_run(seed, (0.08, 0.11), vortex_substeps=4)
 
 
-def test_an_interface_finer_than_max_samples_allows_is_refused_naming_the_place_and_the_spacing() -> None:
-    """Two circles 1e-3 apart at spacing 0.03: the spacing between them follows
-    their distance, and max_samples = 1000 does not allow it; the refusal says
-    where and how fine."""
+@pytest.mark.parametrize("gap", [1e-3, 1e-4])
+def test_an_interface_finer_than_max_samples_allows_is_refused_naming_the_place_and_the_spacing(gap: float) -> None:
+    """Two circles 1e-3 or 1e-4 apart at spacing 0.03: the spacing between
+    them follows their distance, and max_samples = 1000 does not allow it;
+    the refusal says where (between the circles, not on the boundary) and how
+    fine."""
     mesh = evomesh.unit_square_mesh(1096)
-    left, right = circle(0.3 - 5e-4, 0.5, 0.2), circle(0.7 + 5e-4, 0.5, 0.2)
+    left, right = circle(0.3 - gap / 2, 0.5, 0.2), circle(0.7 + gap / 2, 0.5, 0.2)
     with pytest.raises(ValueError, match="max_samples") as refused:
         evomesh.evolve(mesh, size=0.03, interface=lambda x: np.minimum(left(x), right(x)), max_samples=1000)
     found = re.search(r"a spacing of ([0-9.e+-]+) at \(([0-9.e+-]+), ([0-9.e+-]+)\)", str(refused.value))

@@ -181,7 +181,8 @@ Selection select_output(const Mesh_arrays& mesh, const std::vector<std::uint8_t>
 // Constraint pieces between consecutive kept points (input points and segment
 // candidates) along every chain.
 std::vector<Constraint_piece> pieces_along_chains(const Mesh_arrays& mesh, const std::vector<Segment_chain>& chains,
-                                                  const Candidates& on_segments, const std::vector<Index>& out_index) {
+                                                  const Candidates& on_segments, const std::vector<Index>& out_index,
+                                                  std::vector<Piece_span>* spans) {
   // The candidates on segment s are n + [begin[s], begin[s + 1]), sorted along it.
   std::vector<Index> begin(mesh.segments.size() + 1, 0);
   for (Index parent : on_segments.samples.parent) ++begin[parent + 1];
@@ -192,10 +193,57 @@ std::vector<Constraint_piece> pieces_along_chains(const Mesh_arrays& mesh, const
     std::vector<Index> by_position(on_segments.size());
     std::vector<Index> next(begin.begin(), begin.end() - 1);
     for (std::size_t j = 0; j < on_segments.size(); ++j) by_position[next[on_segments.samples.parent[j]]++] = out_index[n + j];
-    return constraint_pieces(chains, out_index, begin, by_position);
+    return constraint_pieces(chains, out_index, begin, by_position, spans);
   }
   for (Index& b : begin) b += static_cast<Index>(mesh.points.size());
-  return constraint_pieces(chains, out_index, begin, out_index);
+  return constraint_pieces(chains, out_index, begin, out_index, spans);
+}
+
+std::size_t keep_crossed_chain_vertices(const Mesh_arrays& mesh, const std::vector<Segment_chain>& chains,
+                                        const Candidates& on_segments, std::vector<Index>& out_index,
+                                        Selection& selection, std::vector<Constraint_piece>& pieces,
+                                        std::vector<std::pair<Index, Vec2>>& moves, std::size_t& undone) {
+  std::vector<Vec2>& points = selection.mesh.points;
+  std::size_t kept = 0;
+  std::vector<Piece_span> spans;
+  std::vector<Index> again;
+  for (;;) {
+    // (moves undone already leave the list: keep_pieces_apart counts each once)
+    moves.erase(std::remove_if(moves.begin(), moves.end(), [&](const auto& m) { return points[m.first] == m.second; }),
+                moves.end());
+    undone += keep_pieces_apart(points, pieces, moves);
+    const auto pairs = meeting_pieces(points, pieces, /*touching=*/false);
+    if (pairs.empty()) return kept;
+    if (spans.empty()) pieces_along_chains(mesh, chains, on_segments, out_index, &spans);
+    again.clear();
+    for (const auto& pair : pairs) {
+      for (const Index p : pair) {
+        const Piece_span& span = spans[p];
+        const Vec2 &a = points[pieces[p].a], &b = points[pieces[p].b];
+        const double dx = b[0] - a[0], dy = b[1] - a[1];
+        Index farthest = -1;
+        double largest = -1;
+        for (Index i = span.first; i < span.last; ++i) {
+          const Vec2& x = mesh.points[chains[span.chain].vertices[i]];
+          const double away = std::abs(dx * (x[1] - a[1]) - dy * (x[0] - a[0]));  // (times the chord's length)
+          if (away > largest) {
+            largest = away;
+            farthest = chains[span.chain].vertices[i];
+          }
+        }
+        if (farthest >= 0) again.push_back(farthest);
+      }
+    }
+    if (again.empty()) return kept;  // (the triangulation names the pair)
+    std::sort(again.begin(), again.end());
+    again.erase(std::unique(again.begin(), again.end()), again.end());
+    for (const Index v : again) {
+      out_index[v] = static_cast<Index>(points.size());
+      selection.add(mesh.points[v], kept_point_kind(mesh.kind[v], /*forced_corner=*/false), v);
+    }
+    kept += again.size();
+    pieces = pieces_along_chains(mesh, chains, on_segments, out_index, &spans);
+  }
 }
 
 }  // namespace frfc_stages
@@ -399,18 +447,22 @@ Evolve_result frfc_over_scope(const Mesh_arrays& input, const Mesh_arrays& mesh,
   }
   std::vector<Index> out_index;
   Selection selection = select_output(mesh, forced, packing, n_seg, repair_points, out_index);
-  selection.pin(mesh.required);
-  const auto pieces = pieces_along_chains(mesh, chains, on_segments, out_index);
+  auto pieces = pieces_along_chains(mesh, chains, on_segments, out_index);
   if (mesh.geometry) {
     // Candidates of interior chains whose moves onto the curve make pieces
-    // cross or touch (a fold narrower than the spacing) stay on their chords.
+    // cross or touch (a fold narrower than the spacing) stay on their chords;
+    // pieces that still cross get chain vertices back.
     std::vector<std::pair<Index, Vec2>> at_output;
     for (const auto& [c, before] : interior_moves) {
       if (out_index[c] >= 0) at_output.emplace_back(out_index[c], before);
     }
-    const std::size_t undone = keep_pieces_apart(selection.mesh.points, pieces, at_output);
+    std::size_t undone = 0;
+    const std::size_t kept_again =
+        keep_crossed_chain_vertices(mesh, chains, on_segments, out_index, selection, pieces, at_output, undone);
     result.stats.emplace_back("curve_samples_left_on_chords", static_cast<double>(undone));
+    result.stats.emplace_back("chain_points_kept_across_crossings", static_cast<double>(kept_again));
   }
+  selection.pin(mesh.required);
   const std::size_t n_demoted = packing.n_demoted;
   packing = Packing();
   out_index = std::vector<Index>();

@@ -99,17 +99,28 @@ std::vector<std::uint8_t> forced_corners(const Mesh_arrays& mesh, const std::vec
 std::vector<Constraint_piece> constraint_pieces(const std::vector<Segment_chain>& chains,
                                                 const std::vector<Index>& out_vertex,
                                                 const std::vector<Index>& segment_begin,
-                                                const std::vector<Index>& out_on_segment) {
+                                                const std::vector<Index>& out_on_segment,
+                                                std::vector<Piece_span>* spans) {
   std::vector<Constraint_piece> pieces;
   std::vector<Index> along;
+  // Where each kept point lies along the chain: 2k at vertex k, 2k + 1 inside segment k.
+  std::vector<Index> at;
+  Index here = 0;
   auto add = [&](Index out) {
-    if (out >= 0) along.push_back(out);
+    if (out < 0) return;
+    along.push_back(out);
+    at.push_back(here);
   };
-  for (const auto& chain : chains) {
+  if (spans) spans->clear();
+  for (std::size_t c = 0; c < chains.size(); ++c) {
+    const Segment_chain& chain = chains[c];
     along.clear();
+    at.clear();
     for (std::size_t k = 0; k < chain.segments.size(); ++k) {
+      here = static_cast<Index>(2 * k);
       add(out_vertex[chain.vertices[k]]);
       if (segment_begin.empty()) continue;
+      here = static_cast<Index>(2 * k + 1);
       const Index s = chain.segments[k];
       const Index b = segment_begin[s], e = segment_begin[s + 1];
       if (chain.forward[k]) {
@@ -118,14 +129,21 @@ std::vector<Constraint_piece> constraint_pieces(const std::vector<Segment_chain>
         for (Index j = e; j-- > b;) add(out_on_segment[j]);
       }
     }
-    if (chain.closed) along.push_back(along.front());
-    else add(out_vertex[chain.vertices.back()]);
+    here = static_cast<Index>(2 * chain.segments.size());
+    if (chain.closed) {
+      along.push_back(along.front());
+      at.push_back(here);
+    } else {
+      add(out_vertex[chain.vertices.back()]);
+    }
     // All segments of a boundary chain are oriented alike (domain on the left).
     const bool flip = chain.boundary && !chain.forward.front();
     for (std::size_t k = 0; k + 1 < along.size(); ++k) {
       Constraint_piece piece{along[k], along[k + 1], chain.boundary, chain.tag};
       if (flip) std::swap(piece.a, piece.b);
       pieces.push_back(piece);
+      // the vertices i with at[k] < 2 i < at[k + 1]
+      if (spans) spans->push_back({static_cast<Index>(c), at[k] / 2 + 1, (at[k + 1] + 1) / 2});
     }
   }
   return pieces;

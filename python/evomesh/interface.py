@@ -6,6 +6,13 @@
    changes sign are found, the crossing points placed on phi = 0 (bracketed
    root finding on the edge for a function, linear interpolation for values
    at the points), and every triangle the zero set crosses is split along it.
+   For a function, parts of the zero set between the points come first
+   (:func:`_split_double_crossings`): edges next to the interface whose ends
+   have one sign but where phi takes the other in between (a notch narrower
+   than the spacing, where two circles meet) are split there, and a corner
+   of the zero set inside a triangle (the notch's tip, where the normals at
+   the triangle's two crossings turn sharply: their tangents meet there)
+   splits the triangle, so that the cut passes through it.
    The previous interface (interior segments of the interface tag) is
    released: its edges become ordinary interior edges and its points ordinary
    interior points, which the step may remove. An old point next to a
@@ -34,7 +41,7 @@ import numbers
 import re
 import warnings
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -437,13 +444,26 @@ def cut_mesh(mesh: Mesh, interface: Any, *, interface_tag: int = INTERFACE_TAG,
     _require_mesh(mesh)
     interface_tag = _tag(interface_tag, "interface_tag")
     phi, level = _level_values(mesh, interface)
-    P, T = mesh.points, mesh.triangles
-    n = mesh.n_points
-    scale = float(np.abs(P).max())
     if not (phi < 0).any() or not (phi > 0).any():
         raise ValueError(
             f"the interface phi does not change sign on the mesh (min {phi.min():.6g}, max {phi.max():.6g} at the "
             "points): there is no zero set to mesh (a zero set between the points is not resolved: refine first)")
+    if level is None or _DOUBLE_CROSSING_ROUNDS == 0:  # (values: nothing to sample between the points)
+        return _cut(mesh, phi, level, interface_tag, regions)
+    fine, fine_phi, refinement, roots = _split_double_crossings(mesh, phi, level, interface_tag)
+    cut = _cut(fine, fine_phi, level, interface_tag, regions, stay=mesh.n_points, roots=roots)
+    return cut if refinement is None else _through_refinement(cut, mesh.n_points, refinement)
+
+
+def _cut(mesh: Mesh, phi: np.ndarray, level: LevelSet | None, interface_tag: int, regions: Any,
+         stay: int | None = None, roots: tuple[np.ndarray, np.ndarray] | None = None) -> Cut:
+    """cut_mesh's body: the cut of ``mesh`` with phi's values at its points.
+    Points from index ``stay`` on (the points _split_double_crossings added,
+    inside a notch of the other sign) do not move onto a crossing next to them:
+    the notch would close again."""
+    P, T = mesh.points, mesh.triangles
+    n = mesh.n_points
+    scale = float(np.abs(P).max())
     edges, side_edge = _unique_edges(T, n)
     # Constraints that stay: boundary segments and interior segments of other tags.
     interior = ~mesh.segment_is_boundary
@@ -454,6 +474,8 @@ def cut_mesh(mesh: Mesh, interface: Any, *, interface_tag: int = INTERFACE_TAG,
     on_constraint[kept_segments.ravel()] = True
     old_kind = mesh.kind
     movable = ~on_constraint & ~mesh.required
+    if stay is not None:
+        movable[stay:] = False
     key_constraint = np.sort(kept_segments, axis=1)
     edge_key = edges[:, 0] * n + edges[:, 1]
     edge_is_constraint = np.isin(edge_key, key_constraint[:, 0] * n + key_constraint[:, 1])
@@ -471,7 +493,16 @@ def cut_mesh(mesh: Mesh, interface: Any, *, interface_tag: int = INTERFACE_TAG,
         fa, fb = values[a_end], values[b_end]
         t = np.where(fb == 0, 1.0, fa / (fa - fb))
     else:
-        t = _edge_roots(level, P[a_end], P[b_end], values[a_end], values[b_end], _ROOT_TOLERANCE * scale)
+        t = np.empty(len(cross))
+        known = np.zeros(len(cross), dtype=bool)
+        if roots is not None and len(roots[0]):  # (found already: _corners)
+            key = a_end * (1 << 31) + b_end
+            at = np.minimum(np.searchsorted(roots[0], key), len(roots[0]) - 1)
+            known = roots[0][at] == key
+            t[known] = roots[1][at[known]]
+        rest = ~known
+        t[rest] = _edge_roots(level, P[a_end[rest]], P[b_end[rest]], values[a_end[rest]], values[b_end[rest]],
+                              _ROOT_TOLERANCE * scale)
     length = np.hypot(*(P[b_end] - P[a_end]).T)
     raw_crossing = _along(P[a_end], P[b_end], t)
 
@@ -665,6 +696,324 @@ def cut_mesh(mesh: Mesh, interface: Any, *, interface_tag: int = INTERFACE_TAG,
                barycentric=barycentric, triangle_parent=triangle_parent, triangle_weights=vertex_weights,
                curve=curve, n_crossings=len(new_index), n_moved=len(moved), regions=(negative_tag, positive_tag),
                scale=scale)
+
+
+# Rounds of _split_double_crossings: each halves the edges that phi crosses
+# twice and tests the edges next to the crossings found, so a notch gets points
+# down to 1/2**rounds of the spacing and as far as `rounds` spacings into it.
+_DOUBLE_CROSSING_ROUNDS = 6
+# Where on an edge _split_double_crossings looks for the other sign (fractions
+# of the edge, nearest the middle first): a notch an eighth of the edge wide.
+_SAMPLE_FRACTIONS = np.array([0.5, 0.375, 0.625, 0.25, 0.75, 0.125, 0.875])
+# A notch shallower than this fraction of its edge (its deepest sample's
+# |phi| over phi's median slope along the crossing edges) is left out: a
+# near-tangency of phi = 0 with an edge would put crossings a rounding apart.
+_NOTCH_DEPTH = 1 / 32
+# A corner of phi = 0 inside a triangle (_corners): the normals at its two
+# crossings turn by more than this (degrees), and the corner lies this
+# fraction of the triangle inside it and this fraction of the crossings'
+# distance off their segment.
+_CORNER_TURN = 60.0
+_CORNER_MARGIN = 1 / 16
+# Zooms of those samples around the one nearest the other sign (each a quarter
+# as far apart): a notch down to 1/512 of the edge where phi comes near it.
+_ZOOM_ROUNDS = 3
+# The pieces of a triangle whose sides (0: v0 -> v1, 1: v1 -> v2, 2: v2 -> v0)
+# are split at their midpoints, in labels 0-2 (corners) and 3-5 (the sides'
+# midpoints), rotated so that the split sides come first; two split sides have
+# two choices of diagonal (v0 - m1 or m0 - v2).
+_ONE_SPLIT = np.array([[0, 3, 2], [3, 1, 2]])
+_TWO_SPLIT = (np.array([[3, 1, 4], [0, 3, 4], [0, 4, 2]]), np.array([[3, 1, 4], [0, 3, 2], [3, 4, 2]]))
+_THREE_SPLIT = np.array([[0, 3, 5], [3, 1, 4], [5, 4, 2], [3, 4, 5]])
+
+
+@dataclass(frozen=True)
+class _Refinement:
+    """A mesh with some edges split at their midpoints, in the mesh it came
+    from: the old triangle of every triangle and the barycentric coordinates
+    of its vertices there; the old triangle and coordinates of every midpoint."""
+
+    triangle_parent: np.ndarray
+    triangle_weights: np.ndarray
+    point_parent: np.ndarray
+    point_weights: np.ndarray
+
+
+def _split_double_crossings(mesh: Mesh, phi: np.ndarray, level: LevelSet, interface_tag: int
+                            ) -> tuple[Mesh, np.ndarray, _Refinement | None, tuple[np.ndarray, np.ndarray]]:
+    """The mesh with the edges phi crosses twice split between their crossings,
+    and the triangles holding a corner of phi = 0 split at it.
+
+    A part of phi's zero set narrower than the spacing (the notch where two
+    circles meet) can hold no mesh point: an edge across it has ends of one
+    sign. Every round samples phi on the edges next to the interface (an end
+    on an edge where phi changes sign, or both ends close to phi = 0 for
+    their length) whose ends have the same sign and that no earlier round
+    tested (:func:`_other_sign_on_edges`, 1 to 1 + _ZOOM_ROUNDS calls); where
+    phi has the other sign at least _NOTCH_DEPTH of the edge deep, the edge is
+    split at its deepest sample (its triangles into 2-4), so the cut crosses
+    it twice. Edges on constraints that stay (the boundary, segments of other
+    tags) are not split; the previous interface's segments are. At most
+    _DOUBLE_CROSSING_ROUNDS rounds. Then :func:`_corners` (the notch's tip
+    inside a triangle). Returns the refined mesh, phi at its points (0 at the
+    corners), its lineage in ``mesh`` (None: nothing split) and the roots on
+    the edges phi crosses, which the cut reuses."""
+    P, T = np.array(mesh.points), np.array(mesh.triangles)
+    n0 = n = mesh.n_points
+    values = phi.copy()
+    segments, segment_tags = np.array(mesh.segments), np.array(mesh.segment_tags)
+    segment_boundary = np.array(mesh.segment_is_boundary, dtype=bool)
+    released = ~segment_boundary & (segment_tags == interface_tag)
+    fixed = np.sort(segments[~released], axis=1)
+    fixed_key = fixed[:, 0].astype(np.int64) * n0 + fixed[:, 1]
+    parent = np.arange(len(T))
+    weights = np.broadcast_to(np.eye(3), (len(T), 3, 3)).copy()
+    point_parent: list[np.ndarray] = []
+    point_weights: list[np.ndarray] = []
+    tested = np.zeros(0, dtype=np.int64)  # the keys of the edges whose midpoints were evaluated
+    for _ in range(_DOUBLE_CROSSING_ROUNDS):
+        edges, side_edge = _unique_edges(T, n)
+        neg = values < 0
+        crossing = neg[edges[:, 0]] != neg[edges[:, 1]]
+        near = np.zeros(n, dtype=bool)
+        near[edges[crossing].ravel()] = True
+        key = edges[:, 0] * (1 << 31) + edges[:, 1]  # (the same edge keeps its key from round to round)
+        # an edge whose ends are closer to phi = 0 than its length allows at twice the median
+        # slope of phi along the crossing edges may cross twice, too
+        length = np.hypot(*(P[edges[:, 1]] - P[edges[:, 0]]).T)
+        slope = np.median(np.abs(values[edges[crossing, 0]] - values[edges[crossing, 1]]) / length[crossing])
+        close = np.abs(values[edges[:, 0]]) + np.abs(values[edges[:, 1]]) <= 2 * slope * length
+        candidate = ~crossing & (near[edges[:, 0]] | near[edges[:, 1]] | close) & ~np.isin(key, tested)
+        old = np.flatnonzero(edges.max(axis=1) < n0)  # (the constraints that stay are old edges)
+        candidate[old[np.isin(edges[old, 0] * n0 + edges[old, 1], fixed_key)]] = False
+        where = np.flatnonzero(candidate)
+        if not len(where):
+            break
+        tested = np.concatenate([tested, key[where]])
+        found, t_found, value = _other_sign_on_edges(level, P[edges[where, 0]], P[edges[where, 1]],
+                                                     neg[edges[where, 0]], slope)
+        where, t_found, value = where[found], t_found[found], value[found]
+        if not len(where):
+            break
+        t_edge = np.full(len(edges), 0.5)
+        t_edge[where] = t_found
+        middle = _along(P[edges[where, 0]], P[edges[where, 1]], t_found)
+        # the split's position along every side (from its first vertex)
+        side_t = np.where(T == edges[side_edge, 0], t_edge[side_edge], 1 - t_edge[side_edge])
+        edge_middle = np.full(len(edges), -1, dtype=np.int64)
+        edge_middle[where] = n + np.arange(len(where))
+        # the midpoints in the old mesh: from a triangle with their edge as side
+        owner = np.full(len(edges), -1, dtype=np.int64)
+        owner[side_edge.ravel()[::-1]] = (np.arange(side_edge.size) // 3)[::-1]
+        slot = np.full(len(edges), -1, dtype=np.int64)
+        slot[side_edge.ravel()[::-1]] = (np.arange(side_edge.size) % 3)[::-1]
+        o, k = owner[where], slot[where]
+        point_parent.append(parent[o])
+        along = side_t[o, k][:, None]
+        point_weights.append((1 - along) * weights[o, k] + along * weights[o, (k + 1) % 3])
+        # split the triangles
+        mid = edge_middle[side_edge]
+        split = mid >= 0
+        count = split.sum(axis=1)
+        rotation = np.where(count == 1, np.argmax(split, axis=1),
+                            np.where(count == 2, (np.argmin(split, axis=1) + 1) % 3, 0))
+        turn = (rotation[:, None] + np.arange(3)) % 3
+        rows = np.arange(len(T))[:, None]
+        labels = np.concatenate([T[rows, turn], mid[rows, turn]], axis=1)  # (m, 6)
+        corner_w = weights[rows, turn]  # (m, 3, 3) in the rotated order
+        along = side_t[rows, turn][:, :, None]
+        label_w = np.concatenate([corner_w, (1 - along) * corner_w + along * np.roll(corner_w, -1, axis=1)], axis=1)
+        pieces, piece_of = [T[count == 0]], [np.flatnonzero(count == 0)]
+        piece_w = [weights[count == 0]]
+        two = np.flatnonzero(count == 2)
+        P = np.concatenate([P, middle])
+        x = P[labels[two]]  # the diagonals v0 - m1 and m0 - v2
+        first = np.hypot(*(x[:, 0] - x[:, 4]).T) <= np.hypot(*(x[:, 3] - x[:, 2]).T)
+        for rows_of, template in ((np.flatnonzero(count == 1), _ONE_SPLIT), (two[first], _TWO_SPLIT[0]),
+                                  (two[~first], _TWO_SPLIT[1]), (np.flatnonzero(count == 3), _THREE_SPLIT)):
+            for local in template:
+                pieces.append(labels[rows_of][:, local])
+                piece_of.append(rows_of)
+                piece_w.append(label_w[rows_of][:, local])
+        T = np.concatenate(pieces)
+        source = np.concatenate(piece_of)
+        parent = parent[source]
+        weights = np.concatenate(piece_w)
+        # the previous interface's segments split too
+        key = np.sort(segments, axis=1)
+        at = np.searchsorted(edges[:, 0] * n + edges[:, 1], key[:, 0] * n + key[:, 1])
+        cut_at = edge_middle[np.minimum(at, len(edges) - 1)]
+        halves = released & (cut_at >= 0)
+        segments = np.concatenate([segments[~halves], np.stack([segments[halves, 0], cut_at[halves]], axis=1),
+                                   np.stack([cut_at[halves], segments[halves, 1]], axis=1)])
+        segment_tags = np.concatenate([segment_tags[~halves], segment_tags[halves], segment_tags[halves]])
+        segment_boundary = np.concatenate([segment_boundary[~halves], segment_boundary[halves],
+                                           segment_boundary[halves]])
+        released = np.concatenate([released[~halves], released[halves], released[halves]])
+        values = np.concatenate([values, value])
+        n += len(where)
+    # Corners of phi = 0 inside a triangle: split there (into three), with phi = 0 at the corner.
+    roots, inside, corner = _corners(level, P, T, values)
+    if len(inside):
+        a, b, c = T[inside, 0], T[inside, 1], T[inside, 2]
+        x = n + np.arange(len(inside))
+        rest = np.ones(len(T), dtype=bool)
+        rest[inside] = False
+        corner_weights = _barycentric(P[a], P[b], P[c], corner)
+        point_parent.append(parent[inside])
+        point_weights.append(np.einsum("ki,kij->kj", corner_weights, weights[inside]))
+        child_weights = [np.stack([weights[inside, i], weights[inside, j], point_weights[-1]], axis=1)
+                         for i, j in ((0, 1), (1, 2), (2, 0))]
+        T = np.concatenate([T[rest], np.stack([a, b, x], 1), np.stack([b, c, x], 1), np.stack([c, a, x], 1)])
+        parent = np.concatenate([parent[rest], parent[inside], parent[inside], parent[inside]])
+        weights = np.concatenate([weights[rest], *child_weights])
+        P = np.concatenate([P, corner])
+        values = np.concatenate([values, np.zeros(len(inside))])
+        n += len(inside)
+    if n == n0:
+        return mesh, phi, None, roots
+    kind = np.concatenate([np.asarray(mesh.kind), np.full(n - n0, _STEINER, dtype=np.asarray(mesh.kind).dtype)])
+    required = np.concatenate([mesh.required, np.zeros(n - n0, dtype=bool)])
+    fine = Mesh._trusted(P, T, segments, segment_boundary, kind, np.r_[np.arange(n0), np.full(n - n0, -1)], {},
+                         None, None, segment_tags, mesh.triangle_tags[parent], required if required.any() else None,
+                         tag_names=mesh.tag_names)
+    return (fine, values, _Refinement(parent, weights, np.concatenate(point_parent), np.concatenate(point_weights)),
+            roots)
+
+
+def _barycentric(a: np.ndarray, b: np.ndarray, c: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """The barycentric coordinates (k, 3) of the points x in the triangles (a, b, c)."""
+    def cross(u: np.ndarray, v: np.ndarray) -> np.ndarray:
+        return u[:, 0] * v[:, 1] - u[:, 1] * v[:, 0]
+
+    area = cross(b - a, c - a)
+    wb, wc = cross(x - a, c - a) / area, cross(b - a, x - a) / area
+    return np.stack([1 - wb - wc, wb, wc], axis=1)
+
+
+def _corners(level: LevelSet, P: np.ndarray, T: np.ndarray, values: np.ndarray
+             ) -> tuple[tuple[np.ndarray, np.ndarray], np.ndarray, np.ndarray]:
+    """Corners of phi = 0 inside the triangles it crosses (the tip of the
+    notch where two circles meet), where the cut's straight segment between
+    the two crossings would cut the corner off.
+
+    The crossings of every edge where phi changes sign are found (the roots
+    the cut uses: returned as (keys of (negative end, other end), t), sorted);
+    phi's gradient at them in one call. In a triangle whose two crossings'
+    normals turn by more than _CORNER_TURN, the tangents there meet at the
+    corner's estimate, which moves onto phi = 0 by Newton; it is a corner where
+    it lies inside the triangle (_CORNER_MARGIN of it away from the sides)
+    and more than _CORNER_MARGIN of the crossings' distance off their
+    segment. Returns the roots, the triangles with a corner, and the corners."""
+    scale = float(np.abs(P).max())
+    edges, side_edge = _unique_edges(T, len(P))
+    neg = values < 0
+    cross = np.flatnonzero(neg[edges[:, 0]] != neg[edges[:, 1]])
+    first_negative = neg[edges[cross, 0]]
+    a_end = np.where(first_negative, edges[cross, 0], edges[cross, 1])
+    b_end = np.where(first_negative, edges[cross, 1], edges[cross, 0])
+    t = _edge_roots(level, P[a_end], P[b_end], values[a_end], values[b_end], _ROOT_TOLERANCE * scale)
+    key = a_end * (1 << 31) + b_end
+    order = np.argsort(key)
+    roots = (key[order], t[order])
+    none = (roots, np.zeros(0, dtype=np.int64), np.zeros((0, 2)))
+    crossing_of = np.full(len(edges), -1, dtype=np.int64)
+    crossing_of[cross] = np.arange(len(cross))
+    sides = crossing_of[side_edge]
+    inside = np.flatnonzero((sides >= 0).sum(axis=1) == 2)
+    if not len(inside):
+        return none
+    first = np.argmax(sides[inside] >= 0, axis=1)
+    second = 2 - np.argmax((sides[inside] >= 0)[:, ::-1], axis=1)
+    c1, c2 = sides[inside, first], sides[inside, second]
+    used, local = np.unique(np.concatenate([c1, c2]), return_inverse=True)
+    at = _along(P[a_end[used]], P[b_end[used]], t[used])
+    extent = float(np.ptp(P, axis=0).max())
+    _, gradient = level._value_and_gradient(at, np.cbrt(np.finfo(np.float64).eps) * extent)
+    norm = np.hypot(*gradient.T)
+    known = norm > 0
+    unit = gradient / np.where(known, norm, 1.0)[:, None]
+    k1, k2 = local[: len(inside)], local[len(inside):]
+    x1, x2, n1, n2 = at[k1], at[k2], unit[k1], unit[k2]
+    det = n1[:, 0] * n2[:, 1] - n1[:, 1] * n2[:, 0]
+    turned = known[k1] & known[k2] & ((n1 * n2).sum(axis=1) < np.cos(np.radians(_CORNER_TURN))) & (det != 0)
+    if not turned.any():
+        return none
+    inside, x1, x2, n1, n2, det = (v[turned] for v in (inside, x1, x2, n1, n2, det))
+    # the tangents (y - x1) . n1 = 0 and (y - x2) . n2 = 0 meet at y
+    r1, r2 = (x1 * n1).sum(axis=1), (x2 * n2).sum(axis=1)
+    estimate = np.stack([r1 * n2[:, 1] - r2 * n1[:, 1], n1[:, 0] * r2 - n2[:, 0] * r1], axis=1) / det[:, None]
+    estimate = np.where(np.isfinite(estimate), estimate, x1)
+    corner, settled = level._newton(estimate, extent)
+    chord = np.hypot(*(x2 - x1).T)
+    off = np.abs((x2[:, 0] - x1[:, 0]) * (corner[:, 1] - x1[:, 1]) - (x2[:, 1] - x1[:, 1]) * (corner[:, 0] - x1[:, 0]))
+    weights = _barycentric(P[T[inside, 0]], P[T[inside, 1]], P[T[inside, 2]], corner)
+    keep = settled & (weights.min(axis=1) >= _CORNER_MARGIN) & (off > _CORNER_MARGIN * chord * chord)
+    return roots, inside[keep], corner[keep]
+
+
+def _other_sign_on_edges(level: LevelSet, a: np.ndarray, b: np.ndarray, negative: np.ndarray, slope: float
+                         ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Where phi takes the other sign than at the ends on the edges a - b
+    (whose ends have one sign, negative or not): (found, t, phi there). phi is
+    sampled at _SAMPLE_FRACTIONS of every edge in one call; on an edge where
+    it does not change sign but its sample nearest the other sign is within
+    reach of it (closer than twice `slope` times the samples' spacing), the
+    samples zoom in around that one, a quarter as far apart, up to
+    _ZOOM_ROUNDS times (one call each, for all such edges together)."""
+    k = len(a)
+    found = np.zeros(k, dtype=bool)
+    t = np.full(k, 0.5)
+    at = np.zeros(k)
+    centre, spacing = np.full(k, 0.5), np.full(k, 0.125)
+    length = np.hypot(*(b - a).T)
+    sign = np.where(negative, 1.0, -1.0)  # (sign * phi > 0 on the other side)
+    active = np.arange(k)
+    for _ in range(1 + _ZOOM_ROUNDS):
+        offsets = (_SAMPLE_FRACTIONS - 0.5) / 0.125  # (-3 .. 3, nearest the middle first)
+        u = np.clip(centre[active][None, :] + offsets[:, None] * spacing[active][None, :], 0.0, 1.0)
+        m = len(offsets)
+        samples = level.value(_along(np.tile(a[active], (m, 1)), np.tile(b[active], (m, 1)), u.ravel())).reshape(m, -1)
+        toward = sign[active] * samples  # (> 0: the other sign)
+        best = np.argmax(toward, axis=0)  # (the first of equals: nearest the middle)
+        rows = np.arange(len(active))
+        # a notch counts where it is at least _NOTCH_DEPTH of the edge deep
+        # (at phi's median slope), and is split at its deepest sample
+        depth = _NOTCH_DEPTH * slope * length[active]
+        hit = toward[best, rows] >= depth
+        found[active[hit]] = True
+        t[active[hit]] = u[best[hit], rows[hit]]
+        at[active[hit]] = samples[best[hit], rows[hit]]
+        reach = 2 * slope * spacing[active] * length[active]
+        keep = ~hit & (depth - toward[best, rows] <= reach)
+        centre[active] = u[best, rows]
+        spacing[active] *= 0.25
+        active = active[keep]
+        if not len(active):
+            break
+    return found, t, at
+
+
+def _through_refinement(cut: Cut, n0: int, refinement: _Refinement) -> Cut:
+    """A cut of a refined mesh (:func:`_split_double_crossings`) with its
+    lineage taken to the mesh before the refinement."""
+    old_index = np.where(cut.old_index < n0, cut.old_index, -1)
+    parent = cut.parent_triangle.copy()
+    weights = cut.barycentric.copy()
+    located = np.flatnonzero(parent >= 0)
+    parent[located] = refinement.triangle_parent[cut.parent_triangle[located]]
+    weights[located] = np.einsum("ki,kij->kj", cut.barycentric[located],
+                                 refinement.triangle_weights[cut.parent_triangle[located]])
+    midpoint = np.flatnonzero(cut.old_index >= n0)
+    parent[midpoint] = refinement.point_parent[cut.old_index[midpoint] - n0]
+    weights[midpoint] = refinement.point_weights[cut.old_index[midpoint] - n0]
+    triangle_parent = cut.triangle_parent.copy()
+    triangle_weights = cut.triangle_weights.copy()
+    known = np.flatnonzero(triangle_parent >= 0)
+    triangle_parent[known] = refinement.triangle_parent[cut.triangle_parent[known]]
+    triangle_weights[known] = cut.triangle_weights[known] @ refinement.triangle_weights[cut.triangle_parent[known]]
+    return replace(cut, old_index=old_index, parent_triangle=parent, barycentric=weights,
+                   triangle_parent=triangle_parent, triangle_weights=triangle_weights)
 
 
 def _tag(value: Any, name: str) -> int:
@@ -1090,14 +1439,52 @@ def evolve_with_interface(mesh: Mesh, delta: Any, size: Any, interface: Any, int
         if refusal is None:
             raise
         limit, finest, place = refusal.groups()
+        gap, where = _closest_facing_pieces(cut.mesh, tag)
+        if gap < float(finest):  # (the interface's own feature is finer than the request anywhere)
+            finest, place = f"{gap:.4g}", f"({where[0]:.9g}, {where[1]:.9g})"
+            cause = (f"the interface's pieces come within {finest} of each other at {place}, and near phi = 0 the "
+                     "spacing follows the distance between them (its local feature size)")
+        else:
+            cause = ("near phi = 0 the spacing follows the distance between the interface's pieces, its local feature "
+                     "size, and interface_band")
         raise ValueError(
             f"the interface step would create more than max_samples = {limit} points: it asks for a "
-            f"spacing of {finest} at {place} (near phi = 0 the spacing follows the distance between the interface's "
-            "pieces, its local feature size, and interface_band); move the pieces apart there, coarsen interface_band "
+            f"spacing of {finest} at {place} ({cause}); move the pieces apart there, coarsen interface_band "
             "or raise max_samples") from None
     extra = _placement_report(out, cut.curve, tag, extent)
     extra.update(_angle_report(out, step_arguments, tag))
     return _compose(mesh, cut, out, tag, extra)
+
+
+def _closest_facing_pieces(mesh: Mesh, interface_tag: int) -> tuple[float, np.ndarray]:
+    """The least distance between two points of the interface that face each
+    other (the line between them at more than 60 degrees to the interface's
+    direction at the first: across a gap or a filament, not along the curve),
+    and the middle of the two; (inf, NaN) where none do."""
+    segments = mesh.segments[(mesh.segment_tags == interface_tag) & ~mesh.segment_is_boundary]
+    on = np.unique(segments)
+    if len(on) < 3:
+        return np.inf, np.full(2, np.nan)
+    P = mesh.points
+    # the directions of a point's segments, as the mean of their outer products
+    # (s s^T: a^T (s s^T) a is the square of a's component along s, whichever way s runs)
+    step = P[segments[:, 1]] - P[segments[:, 0]]
+    step /= np.maximum(np.hypot(*step.T), np.finfo(np.float64).tiny)[:, None]
+    outer = step[:, :, None] * step[:, None, :]
+    directions = np.zeros((mesh.n_points, 2, 2))
+    np.add.at(directions, segments[:, 0], outer)
+    np.add.at(directions, segments[:, 1], outer)
+    directions = directions[on] / np.bincount(segments.ravel(), minlength=mesh.n_points)[on][:, None, None]
+    distance, nearest = cKDTree(P[on]).query(P[on], k=min(9, len(on)))
+    away = P[on][nearest] - P[on][:, None, :]
+    along2 = np.einsum("ikj,ijl,ikl->ik", away, directions, away)
+    facing = (nearest != np.arange(len(on))[:, None]) & (along2 < 0.25 * distance**2)
+    if not facing.any():
+        return np.inf, np.full(2, np.nan)
+    distance = np.where(facing, distance, np.inf)
+    k = int(np.argmin(distance.min(axis=1)))
+    j = int(np.argmin(distance[k]))
+    return float(distance[k, j]), 0.5 * (P[on[k]] + P[on[nearest[k, j]]])
 
 
 def _placement_report(out: Mesh, curve: Any, interface_tag: int, extent: float) -> dict[str, float]:

@@ -36,9 +36,17 @@ std::vector<std::uint8_t> forced_corners(const Mesh_arrays& mesh, const std::vec
 // strictly inside segment s, sorted from its first to its second end, are
 // out_on_segment[segment_begin[s] .. segment_begin[s + 1]) (-1: not kept);
 // segment_begin empty: none. Boundary pieces have the domain on their left.
+// `spans` (if given) receives, for every piece, the chain vertices strictly
+// between its ends (all of them not kept).
+struct Piece_span {
+  Index chain;
+  Index first;  // chains[chain].vertices[first .. last)
+  Index last;
+};
 std::vector<Constraint_piece> constraint_pieces(const std::vector<Segment_chain>& chains,
                                                 const std::vector<Index>& out_vertex,
                                                 const std::vector<Index>& segment_begin = {},
-                                                const std::vector<Index>& out_on_segment = {});
+                                                const std::vector<Index>& out_on_segment = {},
+                                                std::vector<Piece_span>* spans = nullptr);
 
 }  // namespace evomesh

@@ -149,8 +149,24 @@ void second_packing_pass(Candidates& inside, Packing& packing);
 Selection select_output(const Mesh_arrays& mesh, const std::vector<std::uint8_t>& forced, const Packing& packing,
                         std::size_t n_seg, const std::vector<Vec2>& repair_points, std::vector<Index>& out_index);
 
-// Constraint pieces between consecutive kept points along every chain.
+// Constraint pieces between consecutive kept points along every chain (and,
+// if asked, the chain vertices between their ends: constraint_pieces).
 std::vector<Constraint_piece> pieces_along_chains(const Mesh_arrays& mesh, const std::vector<Segment_chain>& chains,
-                                                  const Candidates& on_segments, const std::vector<Index>& out_index);
+                                                  const Candidates& on_segments, const std::vector<Index>& out_index,
+                                                  std::vector<Piece_span>* spans = nullptr);
+
+// With a geometry, after the moves of segment candidates onto their curves:
+// undoes the moves of interior chains that make pieces cross or touch
+// (keep_pieces_apart, counted in `undone`; `moves` as there), and a piece that
+// still crosses another (a chord between kept chain points across a bulge or
+// fold of a curve that the spacing does not resolve) gets back the dropped
+// chain vertex farthest from it, kept again at the end of the selection, its
+// pieces rebuilt; until no pieces cross, or no crossing piece has a dropped
+// vertex. That ends at the latest when the crossing pieces lie on the input's
+// segments, which do not cross. Returns the number of vertices kept again.
+std::size_t keep_crossed_chain_vertices(const Mesh_arrays& mesh, const std::vector<Segment_chain>& chains,
+                                        const Candidates& on_segments, std::vector<Index>& out_index,
+                                        Selection& selection, std::vector<Constraint_piece>& pieces,
+                                        std::vector<std::pair<Index, Vec2>>& moves, std::size_t& undone);
 
 }  // namespace evomesh::frfc_stages
