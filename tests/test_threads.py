@@ -7,6 +7,7 @@ import multiprocessing
 import os
 import subprocess
 import sys
+import threading
 import warnings
 from pathlib import Path
 
@@ -146,3 +147,53 @@ def test_a_step_keeps_to_its_threads():
         # is just started, to wait for one) may be seen running for a moment
         assert two["workers_that_worked"] <= 1 and two["peak"] <= 3, (method, two)
         assert one["bits"] == two["bits"], method
+
+
+def test_a_thread_limit_opened_from_python_holds_for_core_calls():
+    """_core.ThreadLimit (what a step on MPI ranks opens around its core calls):
+    the loops of a core call run on exactly its threads (1: none on a second
+    thread), an inner limit is in force until it is left, and the results do
+    not change. The core's counts of its loops show it."""
+    points = np.random.default_rng(4).uniform(0, 1, (200_000, 2))
+    results, counts = [], []
+    for threads in (1, 3):
+        with evomesh._core.ThreadLimit(threads):
+            evomesh._core._parallel_counts(reset=True)
+            results.append(np.asarray(evomesh._core.nn_spacing(points)))
+            counts.append(evomesh._core._parallel_counts(reset=True))
+    assert counts[0]["regions"] == 0, counts
+    assert counts[1]["widest"] == 3 and counts[1]["peak_running"] <= 3, counts
+    assert np.array_equal(results[0], results[1])
+    with evomesh._core.ThreadLimit(3):
+        with evomesh._core.ThreadLimit(1):
+            evomesh._core._parallel_counts(reset=True)
+            evomesh._core.nn_spacing(points)
+            assert evomesh._core._parallel_counts(reset=True)["regions"] == 0
+        evomesh._core.nn_spacing(points)
+        assert evomesh._core._parallel_counts(reset=True)["widest"] == 3
+
+
+def test_a_thread_limit_refuses_to_be_left_wrongly():
+    with pytest.raises(ValueError, match="threads"):
+        evomesh._core.ThreadLimit(-1)
+    outer, inner = evomesh._core.ThreadLimit(1), evomesh._core.ThreadLimit(2)
+    outer.__enter__()
+    inner.__enter__()
+    with pytest.raises(RuntimeError, match="before a limit entered after it"):
+        outer.__exit__(None, None, None)
+    inner.__exit__(None, None, None)
+    errors = []
+
+    def leave():
+        try:
+            outer.__exit__(None, None, None)
+        except RuntimeError as error:
+            errors.append(str(error))
+
+    other = threading.Thread(target=leave)
+    other.start()
+    other.join()
+    assert errors and "another thread" in errors[0]
+    outer.__exit__(None, None, None)
+    with pytest.raises(RuntimeError, match="without being entered"):
+        outer.__exit__(None, None, None)

@@ -463,6 +463,7 @@ PYBIND11_MODULE(_core, m) {
   void bind_mis_rounds(pybind11::module_&); bind_mis_rounds(m);  // cpp/bindings/bind_mis_rounds.cpp
   void bind_quality(pybind11::module_&); bind_quality(m);  // cpp/bindings/bind_quality.cpp
   void bind_tet(pybind11::module_&); bind_tet(m);  // cpp/bindings/bind_tet.cpp (tetrahedral meshes)
+  void bind_threads(pybind11::module_&); bind_threads(m);  // cpp/bindings/bind_threads.cpp
   m.doc() = "evomesh C++ core (CGAL): spacing functions, sampling, lexical-first MIS, FRFC";
 
   m.def(

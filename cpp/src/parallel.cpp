@@ -145,15 +145,28 @@ int cgroup_cpus() {
 
 #endif
 
-int compute_default_thread_count() {
+int compute_environment_thread_count() {
   if (const int n = detail::parse_thread_count(std::getenv("EVOMESH_NUM_THREADS"))) return n;
-  if (const int n = detail::parse_thread_count(std::getenv("OMP_NUM_THREADS"))) return n;
+  return detail::parse_thread_count(std::getenv("OMP_NUM_THREADS"));
+}
+
+int compute_available_cpu_count() {
   int cpus = static_cast<int>(std::thread::hardware_concurrency());
 #if defined(__linux__)
   if (const int affinity = affinity_cpus()) cpus = affinity;
   if (const int quota = cgroup_cpus()) cpus = cpus > 0 ? std::min(cpus, quota) : quota;
 #endif
   return std::max(cpus, 1);
+}
+
+// ---- Counts of the parallel regions (detail::parallel_counts) ----
+
+std::atomic<std::size_t> g_regions{0}, g_widest{0}, g_running{0}, g_peak_running{0};
+
+void raise_to(std::atomic<std::size_t>& maximum, std::size_t value) {
+  std::size_t seen = maximum.load(std::memory_order_relaxed);
+  while (seen < value && !maximum.compare_exchange_weak(seen, value, std::memory_order_relaxed)) {
+  }
 }
 
 // ---- The pool ----
@@ -182,11 +195,17 @@ struct Job {
   void* context;
   detail::Thread_context caller;
   std::atomic<std::size_t> next{0};
+  std::atomic<std::size_t> entered{0};  // threads that ran run(), the caller included
   std::mutex error_mutex;
   std::exception_ptr error;
 
   void run() noexcept {
     const Region_guard guard;
+    entered.fetch_add(1, std::memory_order_relaxed);
+    raise_to(g_peak_running, g_running.fetch_add(1, std::memory_order_relaxed) + 1);
+    struct Leave {
+      ~Leave() { g_running.fetch_sub(1, std::memory_order_relaxed); }
+    } leave;
     try {
       const detail::Working_under working(caller, /*unit_taken=*/true);
       for (std::size_t i = next++; i < n; i = next++) item(context, i);
@@ -289,14 +308,32 @@ Pool& pool() {
 
 }  // namespace
 
-int default_thread_count() {
-  static const int count = compute_default_thread_count();
+int environment_thread_count() {
+  static const int count = compute_environment_thread_count();
   return count;
+}
+
+int available_cpu_count() {
+  static const int count = compute_available_cpu_count();
+  return count;
+}
+
+int default_thread_count() {
+  const int named = environment_thread_count();
+  return named > 0 ? named : available_cpu_count();
 }
 
 namespace detail {
 
 bool in_parallel_region() { return t_in_region; }
+
+Parallel_counts parallel_counts(bool reset) {
+  Parallel_counts counts;
+  counts.regions = reset ? g_regions.exchange(0) : g_regions.load();
+  counts.widest = reset ? g_widest.exchange(0) : g_widest.load();
+  counts.peak_running = reset ? g_peak_running.exchange(0) : g_peak_running.load();
+  return counts;
+}
 
 std::size_t Thread_budget::take_up_to(std::size_t wanted) {
   std::lock_guard<std::mutex> lock(mutex_);
@@ -367,6 +404,10 @@ void run_parallel(std::size_t n, std::size_t threads, Item_function item, void* 
     }
     job.run();
     for (auto& thread : extra) thread.join();
+  }
+  if (job.entered > 1) {
+    g_regions.fetch_add(1, std::memory_order_relaxed);
+    raise_to(g_widest, job.entered);
   }
   if (job.error) std::rethrow_exception(job.error);
 }

@@ -164,7 +164,8 @@ def evolve(mesh: Any, delta: Any = None, *, size: Any = None, method: str = "frf
         evomesh.distributed.step); tags, required points, origin and the
         lineage come along, and a step that returns its input keeps its order.
         Every other argument (a scalar delta or size too, and their kind) must
-        be the same on every rank, but ``threads``: a difference raises the
+        be the same on every rank, but ``threads`` (each rank's own thread
+        limit, see ``threads`` below): a difference raises the
         same ValueError on every rank before any work, naming the argument
         and the ranks. The quality pass (with ``quality``, the default) runs
         on rank 0 on the gathered kept points and pieces
@@ -293,7 +294,10 @@ def evolve(mesh: Any, delta: Any = None, *, size: Any = None, method: str = "frf
             the calling thread. At most this many threads work at once, also
             counting those the step starts beside its stages (several
             processes per node can so share the cores). Results do not
-            depend on it.
+            depend on it. On a DistributedMesh it is each rank's own (ranks
+            may differ); None there: EVOMESH_NUM_THREADS (else
+            OMP_NUM_THREADS) per rank, else the rank's share of its node's
+            CPUs (evomesh.distributed.threads.rank_thread_count).
         quality : bool, default True
             The quality pass (Section 6's suggestion, for both methods): a
             point that sees a segment under more than 120 degrees is dropped and

@@ -23,6 +23,13 @@ namespace evomesh {
 // affinity mask and its cgroup CPU quota; elsewhere hardware concurrency).
 // Invalid values are ignored. At least 1; read once, on first use.
 int default_thread_count();
+// Its two sources, each read once: the count the environment names
+// (EVOMESH_NUM_THREADS, else OMP_NUM_THREADS; 0 when neither holds a valid
+// count), and the CPUs this process may use (at least 1). A caller that shares
+// the CPUs with other processes divides the second, never the first (MPI ranks
+// on one node: evomesh.distributed.threads).
+int environment_thread_count();
+int available_cpu_count();
 
 namespace detail {
 
@@ -134,6 +141,20 @@ int parse_cpu_max(const std::string& text);
 // Whether the calling thread is running parallel_for work items: a nested
 // parallel_for then runs inline (the outer loop already has the threads).
 bool in_parallel_region();
+
+// What the parallel regions (parallel_for calls run on more than one thread)
+// of this process did, for tests that a thread limit holds: their number, the
+// most threads one region ran on (the caller and every helper it got, whether
+// or not a helper found an item left: independent of timing), and the most
+// threads running regions' items at once, over all regions (a lower bound of
+// what could run at once: it depends on timing). Counted since the last reset.
+struct Parallel_counts {
+  std::size_t regions = 0;
+  std::size_t widest = 0;
+  std::size_t peak_running = 0;
+};
+// The counts so far; with `reset`, they start again from zero.
+Parallel_counts parallel_counts(bool reset = false);
 
 using Item_function = void (*)(void* context, std::size_t i);
 // Runs item(context, i) for i in [0, n) on the caller and up to threads - 1

@@ -5,7 +5,8 @@
 * :mod:`evomesh.distributed.step` -- FRFC's step on a DistributedMesh (what ``evolve`` runs for one);
 * its stages: :mod:`~evomesh.distributed.spacing` (nn, f and size), :mod:`~evomesh.distributed.packing`
   (the lexical-first MIS in rounds), :mod:`~evomesh.distributed.repair`,
-  :mod:`~evomesh.distributed.triangulation`, :mod:`~evomesh.distributed.lineage`;
+  :mod:`~evomesh.distributed.triangulation`, :mod:`~evomesh.distributed.lineage`, and its thread limit,
+  :mod:`~evomesh.distributed.threads`;
 * :mod:`evomesh.distributed.transfer` -- ``transfer`` and ``transfer_cells`` between DistributedMeshes.
 
 The design and its correctness arguments: docs/distributed-step.md. mpi4py is imported only when a

@@ -46,6 +46,7 @@ from .mesh import _NOT_GIVEN, DistributedMesh, _collective, _exchange, _fingerpr
 from .packing import lexical_first_mis
 from .repair import gap_repair, spacing_repair
 from .spacing import DistributedSpacing, boundary_flags, delta_from_size, segment_skeleton
+from .threads import rank_thread_limit
 
 __all__ = ["evolve_distributed", "packing", "step", "with_curve_kinds"]
 
@@ -233,7 +234,8 @@ def packing(dmesh: DistributedMesh, delta: Any, options: Any = None, *, stats: d
     (points (k, 2), input_gid (k,)): the kept points this rank contributes, and
     for each the global id of the input point it keeps (-1 for a new point).
     """
-    packed = _pack(dmesh, delta, options, stats)
+    with rank_thread_limit(dmesh.comm, getattr(options, "threads", None), stats):
+        packed = _pack(dmesh, delta, options, stats)
     return packed["points"], packed["input_gid"]
 
 
@@ -596,7 +598,18 @@ def step(dmesh: DistributedMesh, delta: Any, options: Any = None, *, stats: dict
     a kept input point and -1 for a new one; kinds, required points and tags as
     the serial step gives them. ``gather`` returns the serial step's mesh (the
     quality pass off) array for array. The input is not modified.
+
+    Every core call runs under this rank's thread limit
+    (evomesh.distributed.threads.rank_thread_count: ``options.threads``, else
+    EVOMESH_NUM_THREADS, else the rank's share of its node's CPUs), stored as
+    ``stats["threads"]``; the result does not depend on it.
     """
+    with rank_thread_limit(dmesh.comm, getattr(options, "threads", None), stats):
+        return _step(dmesh, delta, options, stats, geometry)
+
+
+def _step(dmesh: DistributedMesh, delta: Any, options: Any, stats: dict[str, Any] | None,
+          geometry: Any) -> DistributedMesh:
     MPI = _mpi()
     comm = dmesh.comm
     if options is None:
@@ -973,7 +986,9 @@ def evolve_distributed(dmesh: DistributedMesh, delta: Any = None, *, size: Any =
     Before any work the ranks agree on every argument but the per-point
     values (:func:`_request_fingerprints`; a difference raises the same
     ValueError on every rank, naming the argument and the ranks), then check
-    and convert them (a failure on one rank raises on all)."""
+    and convert them (a failure on one rank raises on all). The rest (size's
+    conversion, the step, the rebalance) runs under this rank's thread limit
+    (:func:`evomesh.distributed.threads.rank_thread_count`)."""
     arguments = {"options": options} if arguments is None else arguments
 
     def check() -> tuple[Any, Any]:
@@ -998,8 +1013,9 @@ def evolve_distributed(dmesh: DistributedMesh, delta: Any = None, *, size: Any =
 
     o, g = _same_everywhere(dmesh.comm, "evolve",
                             lambda: _request_fingerprints(delta, size, method, geometry, arguments), check)
-    out = step(dmesh, delta if size is None else delta_from_size(dmesh, size), o, stats=stats, geometry=g)
-    return out.rebalance(renumber=False)  # (the lineage moves along)
+    with rank_thread_limit(dmesh.comm, o.threads, stats):  # (size's conversion and the rebalance too)
+        out = step(dmesh, delta if size is None else delta_from_size(dmesh, size), o, stats=stats, geometry=g)
+        return out.rebalance(renumber=False)  # (the lineage moves along)
 
 
 _INTERFACE_ARGUMENTS = ("interface_tag", "interface_regions", "interface_band")
