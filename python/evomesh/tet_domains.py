@@ -119,28 +119,16 @@ def polyhedral_domain(mesh: TetMesh) -> PolyhedralDomain:
     n_facets, label = connected_components(graph, directed=False)
     if n_facets > 64:
         raise ValueError(f"the domain has {n_facets} planar facets; at most 64 are supported")
-    # A canonical facet order: normal to an axis first, by (axis, plane
-    # coordinate); then by their lowest point.
-    first_triangle = points[faces[np.unique(label, return_index=True)[1]]]  # (F, 3, 3)
-    aligned = (first_triangle == first_triangle[:, :1]).all(axis=1)  # (F, 3)
-    axis = np.where(aligned.any(axis=1), np.argmax(aligned, axis=1), 3)
-    value = np.where(axis < 3, first_triangle[np.arange(n_facets), 0, np.minimum(axis, 2)], 0.0)
-    lowest = np.full(n_facets, np.iinfo(np.int64).max)
-    np.minimum.at(lowest, label, faces.min(axis=1))
-    rank = np.empty(n_facets, np.int64)
-    rank[np.lexsort((lowest, value, axis))] = np.arange(n_facets)
-    label = rank[label]
     # The facets at each point (a conforming boundary: a point on a facet is a
     # vertex of that facet's triangles).
     point_facets = np.zeros(len(points), np.int64)
     np.bitwise_or.at(point_facets, faces.ravel(), np.repeat(np.left_shift(1, label), 3))
-    corner_mask = _popcount(point_facets) >= 3
-    corners = np.flatnonzero(corner_mask)
+    corners = np.flatnonzero(_popcount(point_facets) >= 3)
     corner_facets = point_facets[corners]
+    # Three corners of each facet, chosen by their coordinates: the first
+    # (lexicographically), the farthest from it, the one spanning the largest
+    # triangle with those two.
     facets = np.empty((n_facets, 3, 3))
-    # A point inside each facet: the fourth vertex of a tetrahedron on it.
-    some = np.unique(label, return_index=True)[1]
-    inside = points[mesh.tetrahedra[face_tet[some]].sum(axis=1) - faces[some].sum(axis=1)]
     for f in range(n_facets):
         own = corners[(corner_facets >> f) & 1 == 1]
         if len(own) < 3:
@@ -150,10 +138,26 @@ def polyhedral_domain(mesh: TetMesh) -> PolyhedralDomain:
         b = c[int(np.argmax(((c - a) ** 2).sum(axis=1)))]
         third = c[int(np.argmax((np.cross(b - a, c - a) ** 2).sum(axis=1)))]
         facets[f] = a, b, third
-    # Outward: the inside sees them clockwise.
-    sign = _quads_orientation(np.concatenate([facets, inside[:, None]], axis=1))
-    flip = sign > 0
+    # Outward: a point inside (the fourth vertex of a tetrahedron on the
+    # facet) sees them clockwise.
+    some = np.unique(label, return_index=True)[1]
+    inside = points[mesh.tetrahedra[face_tet[some]].sum(axis=1) - faces[some].sum(axis=1)]
+    flip = _quads_orientation(np.concatenate([facets, inside[:, None]], axis=1)) > 0
     facets[flip] = facets[flip][:, [0, 2, 1]]
+    # A canonical facet order, by geometry only (the same facets get the same
+    # numbers step after step): normal to an axis first, by (axis, plane
+    # coordinate); then by their three corners.
+    aligned = (facets == facets[:, :1]).all(axis=1)  # (F, 3)
+    axis = np.where(aligned.any(axis=1), np.argmax(aligned, axis=1), 3)
+    value = np.where(axis < 3, facets[np.arange(n_facets), 0, np.minimum(axis, 2)], 0.0)
+    by = np.lexsort(tuple(facets.reshape(n_facets, 9).T[::-1]) + (value, axis))
+    rank = np.empty(n_facets, np.int64)
+    rank[by] = np.arange(n_facets)
+    label = rank[label]
+    facets = facets[by]
+    point_facets = np.zeros(len(points), np.int64)
+    np.bitwise_or.at(point_facets, faces.ravel(), np.repeat(np.left_shift(1, label), 3))
+    corner_facets = point_facets[corners]
     # Convex: every corner on the inner side of every facet's plane.
     quads = np.concatenate([np.repeat(facets, len(corners), axis=0),
                             np.tile(points[corners], (n_facets, 1))[:, None]], axis=1)
@@ -280,12 +284,20 @@ def convex_polyhedron_mesh(vertices: Any, size: float, *, seed: int = 0) -> TetM
         raise ValueError("the vertices are coplanar: they span no volume")
     used = np.bincount(tets.ravel(), minlength=len(corners)) > 0
     if not used.all():
-        raise ValueError(f"vertex {int(np.argmin(used))} lies inside the hull of the others (not a corner)")
-    coarse = TetMesh(corners, tets)
+        raise ValueError(f"vertex {int(np.argmin(used))} is not a corner of the hull (it lies inside it, or on one of its "
+                         "edges or facets)")
+    try:
+        coarse = TetMesh(corners, tets)
+    except ValueError as error:
+        if "flat" not in str(error):
+            raise
+        raise ValueError("four vertices are nearly but not exactly coplanar in float64 (their hull has a nearly flat "
+                         "tetrahedron): give each facet's vertices exactly coplanar coordinates with few significant "
+                         "bits (multiples of a power of two)") from error
     domain = polyhedral_domain(coarse)
     if (_popcount(domain.point_facets) < 3).any():
         k = int(np.argmax(_popcount(domain.point_facets) < 3))
-        raise ValueError(f"vertex {k} lies on an edge or a facet of the hull of the others (not a corner)")
+        raise ValueError(f"vertex {k} is not a corner of the hull (it lies inside it, or on one of its edges or facets)")
     mesh = evolve_tet(coarse, size=float(size), seed=seed)
     kind = np.where(mesh.kind >= TetPointKind.STEINER, TetPointKind.ORIGINAL, mesh.kind).astype(np.uint8)
     return TetMesh._trusted(mesh.points, mesh.tetrahedra, mesh.faces, kind=kind, boundary=mesh.boundary_faces)
