@@ -223,3 +223,12 @@ def test_unsupported_domains_are_refused_clearly():
         evomesh.convex_polyhedron_mesh([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, np.nan]], 0.3)
     with pytest.raises(ValueError, match="size"):
         evomesh.octahedron_mesh(-1.0)
+
+
+def test_non_convex_domains_are_refused_until_boundary_recovery_exists():
+    # a box with a through hole (its top and bottom facets have a hole)
+    blocks = [evomesh.box_mesh((x0, y0, 0), (x0 + 1, y0 + 1, 1), 1) for x0 in (0, 1, 2) for y0 in (0, 1, 2)
+              if (x0, y0) != (1, 1)]
+    points, tets = _merged(blocks)
+    with pytest.raises(ValueError, match="not convex.*reflex.*not implemented"):
+        evomesh.evolve(evomesh.TetMesh(points, tets), 1.0)

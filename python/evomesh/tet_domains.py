@@ -158,38 +158,46 @@ def polyhedral_domain(mesh: TetMesh) -> PolyhedralDomain:
     point_facets = np.zeros(len(points), np.int64)
     np.bitwise_or.at(point_facets, faces.ravel(), np.repeat(np.left_shift(1, label), 3))
     corner_facets = point_facets[corners]
-    # Convex: every corner on the inner side of every facet's plane.
+    # Interior angles at every boundary edge between two facets: reflex
+    # where the second triangle's far vertex lies outside the first's plane.
+    normal = np.cross(facets[:, 1] - facets[:, 0], facets[:, 2] - facets[:, 0])
+    normal /= np.linalg.norm(normal, axis=1)[:, None]
+    between = label[t1] != label[t2]
+    f1, f2 = label[t1[between]], label[t2[between]]
+    reflex = _quads_orientation(np.concatenate([facets[f1], points[far[second[between]]][:, None]], axis=1)) > 0
+    turn = np.degrees(np.arccos(np.clip((normal[f1] * normal[f2]).sum(axis=1), -1.0, 1.0)))
+    angle = np.where(reflex, 180.0 + turn, 180.0 - turn)
+    if (angle < MIN_FACET_ANGLE - 1e-9).any():
+        e = int(np.argmin(angle))
+        p = points[edge_rows[first[between]][e]]
+        raise ValueError(f"facets {f1[e]} and {f2[e]} meet at {angle[e]:.3g} degrees along the edge through "
+                         f"{p[0].tolist()} and {p[1].tolist()}: angles below {MIN_FACET_ANGLE:g} degrees are not "
+                         "supported (they need protecting balls)")
+    # Convex: no reflex edge, every corner on the inner side of every facet's plane.
     quads = np.concatenate([np.repeat(facets, len(corners), axis=0),
                             np.tile(points[corners], (n_facets, 1))[:, None]], axis=1)
     outside = _quads_orientation(quads).reshape(n_facets, len(corners)) > 0
-    if outside.any():
-        f, c = np.argwhere(outside)[0]
-        raise ValueError(f"evolve on a TetMesh supports convex polyhedra only: corner {points[corners[c]].tolist()} "
-                         f"lies outside the plane of facet {f} (non-convex domains are not supported yet)")
+    if reflex.any() or outside.any():
+        where = (f"a reflex edge between facets {f1[np.argmax(reflex)]} and {f2[np.argmax(reflex)]}" if reflex.any()
+                 else f"corner {points[corners[np.argwhere(outside)[0][1]]].tolist()} outside a facet's plane")
+        raise ValueError(f"evolve on a TetMesh supports convex polyhedra only, and this domain is not convex ({where}): "
+                         "non-convex polyhedra (an L-shaped block, a box with a hole) need conforming boundary "
+                         "recovery, which is not implemented yet")
     neighbours = np.zeros(n_facets, np.int64)
     for f in range(n_facets):
         at = (corner_facets >> f) & 1 == 1
         neighbours[f] = np.bitwise_or.reduce(corner_facets[at]) if at.any() else 0
-    # Edges: the facet pairs that meet across a boundary edge.
-    pair = np.sort(np.stack([label[t1], label[t2]], axis=1), axis=1)
-    pairs = np.unique(pair[pair[:, 0] != pair[:, 1]], axis=0)
+    # Edges: the facet pairs that meet across a boundary edge, between two
+    # corners (a convex polyhedron's facets meet along one segment at most).
+    pairs = np.unique(np.sort(np.stack([f1, f2], axis=1), axis=1), axis=0)
     ends = np.empty((len(pairs), 2, 3))
-    normal = np.cross(facets[:, 1] - facets[:, 0], facets[:, 2] - facets[:, 0])
-    normal /= np.linalg.norm(normal, axis=1)[:, None]
     for e, (f, g) in enumerate(pairs):
         at = corners[((corner_facets >> f) & 1 == 1) & ((corner_facets >> g) & 1 == 1)]
         if len(at) != 2:
-            raise ValueError(f"facets {f} and {g} meet along a line through {len(at)} corners (two expected: "
-                             "a non-convex domain?)")
+            raise RuntimeError(f"facets {f} and {g} of a convex polyhedron meet at {len(at)} corners")  # a bug
         p = points[at]
         direction = np.argmax(np.abs(p[1] - p[0]))
         ends[e] = p if p[0, direction] < p[1, direction] else p[::-1]
-        # Interior angle between the facets: 180 degrees minus the angle of their outward normals.
-        angle = 180.0 - np.degrees(np.arccos(np.clip(normal[f] @ normal[g], -1.0, 1.0)))
-        if angle < MIN_FACET_ANGLE - 1e-9:
-            raise ValueError(f"facets {f} and {g} meet at {angle:.3g} degrees along the edge from {p[0].tolist()} to "
-                             f"{p[1].tolist()}: angles below {MIN_FACET_ANGLE:g} degrees are not supported (they need "
-                             "protecting balls)")
     # Edge order: along an axis first, by (axis, coordinates across it), then by facets.
     direction = np.argmax(np.abs(ends[:, 1] - ends[:, 0]), axis=1)
     d = ends[:, 1] - ends[:, 0]
