@@ -14,6 +14,7 @@ multiples of a power of two, as the constructors here make them).
 from __future__ import annotations
 
 import dataclasses
+from fractions import Fraction
 from typing import Any, Sequence
 
 import numpy as np
@@ -180,7 +181,7 @@ def polyhedral_domain(mesh: TetMesh) -> PolyhedralDomain:
     if reflex.any() or outside.any():
         where = (f"a reflex edge between facets {f1[np.argmax(reflex)]} and {f2[np.argmax(reflex)]}" if reflex.any()
                  else f"corner {points[corners[np.argwhere(outside)[0][1]]].tolist()} outside a facet's plane")
-        raise ValueError(f"evolve on a TetMesh supports convex polyhedra only, and this domain is not convex ({where}): "
+        raise ValueError(f"evolve on a TetMesh supports convex polyhedra only; this domain is not convex ({where}): "
                          "non-convex polyhedra (an L-shaped block, a box with a hole) need conforming boundary "
                          "recovery, which is not implemented yet")
     neighbours = np.zeros(n_facets, np.int64)
@@ -283,8 +284,7 @@ def convex_polyhedron_mesh(vertices: Any, size: float, *, seed: int = 0) -> TetM
     corners = _as_points3(vertices)
     if len(corners) < 4:
         raise ValueError(f"a polyhedron needs at least 4 vertices, got {len(corners)}")
-    if not (np.isscalar(size) and np.isfinite(size) and size > 0):
-        raise ValueError(f"size must be a finite positive number, got {size!r}")
+    size = _positive_number(size, "size")
     if len(np.unique(corners, axis=0)) != len(corners):
         raise ValueError("vertices contain duplicates")
     tets = _core.delaunay_tetrahedra(corners)
@@ -292,8 +292,7 @@ def convex_polyhedron_mesh(vertices: Any, size: float, *, seed: int = 0) -> TetM
         raise ValueError("the vertices are coplanar: they span no volume")
     used = np.bincount(tets.ravel(), minlength=len(corners)) > 0
     if not used.all():
-        raise ValueError(f"vertex {int(np.argmin(used))} is not a corner of the hull (it lies inside it, or on one of its "
-                         "edges or facets)")
+        raise ValueError(f"vertex {int(np.argmin(used))} {_NOT_A_CORNER}")
     try:
         coarse = TetMesh(corners, tets)
     except ValueError as error:
@@ -305,10 +304,21 @@ def convex_polyhedron_mesh(vertices: Any, size: float, *, seed: int = 0) -> TetM
     domain = polyhedral_domain(coarse)
     if (_popcount(domain.point_facets) < 3).any():
         k = int(np.argmax(_popcount(domain.point_facets) < 3))
-        raise ValueError(f"vertex {k} is not a corner of the hull (it lies inside it, or on one of its edges or facets)")
-    mesh = evolve_tet(coarse, size=float(size), seed=seed)
+        raise ValueError(f"vertex {k} {_NOT_A_CORNER}")
+    mesh = evolve_tet(coarse, size=size, seed=seed)
     kind = np.where(mesh.kind >= TetPointKind.STEINER, TetPointKind.ORIGINAL, mesh.kind).astype(np.uint8)
     return TetMesh._trusted(mesh.points, mesh.tetrahedra, mesh.faces, kind=kind, boundary=mesh.boundary_faces)
+
+
+_NOT_A_CORNER = "is not a corner of the hull (it lies inside it, or on one of its edges or facets)"
+
+
+def _positive_number(value: Any, name: str) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
+        raise TypeError(f"{name} must be a number, got {type(value).__name__}")
+    if not (np.isfinite(value) and value > 0):
+        raise ValueError(f"{name} must be a finite positive number, got {value!r}")
+    return float(value)
 
 
 def _quaternion_matrix(q: Sequence[int]) -> np.ndarray:
@@ -339,17 +349,21 @@ def tilted_box_mesh(size: float, lengths: Sequence[float] = (1.0, 0.75, 0.5), *,
     sides = np.asarray(lengths, dtype=np.float64)
     if sides.shape != (3,) or not (np.isfinite(sides).all() and (sides > 0).all()):
         raise ValueError("lengths must be three finite positive numbers")
-    norm = int((q.astype(np.int64) ** 2).sum())
-    k = int(np.ceil(np.log2(norm)))
-    matrix = _quaternion_matrix(q).astype(np.float64) * 2.0**-k
-    cube = np.array([[i, j, l] for i in (0, 1) for j in (0, 1) for l in (0, 1)], dtype=np.float64) * sides
+    quaternion = [int(v) for v in q]
+    norm = sum(v * v for v in quaternion)
+    bits = int(np.ceil(np.log2(norm)))
+    integer = _quaternion_matrix(quaternion)
+    matrix = integer.astype(np.float64) * 2.0**-bits
+    cube = np.array([[i, j, k] for i in (0, 1) for j in (0, 1) for k in (0, 1)], dtype=np.float64) * sides
     # Each corner a sum of three exact products; checked exact below (rational arithmetic).
-    corners = cube @ matrix.T + np.asarray(origin, dtype=np.float64)
-    from fractions import Fraction
+    shift = np.asarray(origin, dtype=np.float64)
+    if shift.shape != (3,) or not np.isfinite(shift).all():
+        raise ValueError("origin must be three finite coordinates")
+    corners = cube @ matrix.T + shift
     for corner, base in zip(corners, cube):
         for i in range(3):
-            exact = sum(Fraction(int(_quaternion_matrix(q)[i, j])) * Fraction(float(base[j])) for j in range(3))
-            if Fraction(float(corner[i])) != exact * Fraction(1, 2**k) + Fraction(float(origin[i])):
+            exact = sum((Fraction(int(integer[i, j])) * Fraction(float(base[j])) for j in range(3)), Fraction(0))
+            if Fraction(float(corner[i])) != exact / 2**bits + Fraction(float(shift[i])):
                 raise ValueError("the tilted box's corners are not exact in float64: give lengths and origin with "
                                  "fewer significant bits (multiples of a power of two)")
     return convex_polyhedron_mesh(corners, size, seed=seed)
@@ -362,7 +376,5 @@ def octahedron_mesh(size: float, radius: float = 1.0, *, centre: Sequence[float]
     c = np.asarray(centre, dtype=np.float64)
     if c.shape != (3,) or not np.isfinite(c).all():
         raise ValueError("centre must be three finite coordinates")
-    if not (np.isscalar(radius) and np.isfinite(radius) and radius > 0):
-        raise ValueError(f"radius must be a finite positive number, got {radius!r}")
-    eye = np.eye(3) * float(radius)
+    eye = np.eye(3) * _positive_number(radius, "radius")
     return convex_polyhedron_mesh(np.concatenate([c + eye, c - eye]), size, seed=seed)

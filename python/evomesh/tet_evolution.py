@@ -251,9 +251,9 @@ def evolve_tet(mesh: TetMesh, delta: Any = None, *, size: Any = None, seed: int 
     steiner = (mesh.kind >= TetPointKind.STEINER).astype(np.uint8)
     threads = 0 if options.threads is None else options.threads
     out = _core.tet_step(mesh.points, mesh.tetrahedra, faces, face_tet, steiner, mesh.required.astype(np.uint8),
-                         weight, *domain.arrays, domain.triangle_facet, options.cell_factor, options.radius_scale, options.boundary_clearance,
-                         options.max_radius_edge, options.sliver_angle, options.max_samples, int(seed),
-                         threads, cap)
+                         weight, *domain.arrays, domain.triangle_facet, options.cell_factor, options.radius_scale,
+                         options.boundary_clearance, options.max_radius_edge, options.sliver_angle,
+                         options.max_samples, int(seed), threads, cap)
     points, tets, origin = out["points"], out["tetrahedra"], out["origin"]
     new_faces, new_face_tet = boundary_faces(tets)
     face_tags = None
