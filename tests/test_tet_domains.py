@@ -232,3 +232,23 @@ def test_non_convex_domains_are_refused_until_boundary_recovery_exists():
     points, tets = _merged(blocks)
     with pytest.raises(ValueError, match="not convex.*reflex.*not implemented"):
         evomesh.evolve(evomesh.TetMesh(points, tets), 1.0)
+
+
+def test_a_sliver_of_old_points_in_a_thin_slab_gets_an_off_centre():
+    # Step 3 of this run once left a sliver of four old points (two on the
+    # slab's bottom, two mid-way) whose circumcentre had no place: a random
+    # point near the centre destroys it now.
+    def size(centre):
+        return lambda x: np.minimum(0.08 * np.sqrt(2), 0.02 + 0.3 * np.abs(np.linalg.norm(x - centre, axis=1) - 0.25
+                                                                           * np.sqrt(2)))
+
+    centres = [np.array([0.3 + 0.05 * np.sqrt(2) * k, 0.5, 0.03]) for k in range(4)]
+    factor = np.linspace(0.8, 0.82, 6)[2]
+    mesh = evomesh.box_mesh((0, 0, 0), (1, 1, 0.0625), (8, 8, 1))
+    for k in range(3):
+        mesh = evomesh.evolve(mesh, size=size(centres[0]), seed=k, size_factor=factor)
+    for step in (1, 2, 3):
+        mesh = evomesh.evolve(mesh, size=size(centres[step]), seed=10 + step, size_factor=factor)
+        dihedral = dihedral_angles(mesh.points, mesh.tetrahedra)
+        assert dihedral.min() >= 10 and dihedral.max() <= 170, (step, dihedral.min(), dihedral.max())
+        assert mesh.stats["slivers_after"] == 0

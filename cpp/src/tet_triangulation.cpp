@@ -189,6 +189,20 @@ std::uint64_t mix(std::uint64_t z) {
   return z ^ (z >> 31);
 }
 
+// A uniform point u of the unit ball (rejection from the cube; counter-based
+// draws from `draw`).
+void unit_ball_point(std::uint64_t draw, double u[3]) {
+  double norm;
+  do {
+    norm = 0;
+    for (int i = 0; i < 3; ++i) {
+      draw = mix(draw);
+      u[i] = 2.0 * (static_cast<double>(draw >> 11) * 0x1.0p-53) - 1.0;
+      norm += u[i] * u[i];
+    }
+  } while (norm > 1.0);
+}
+
 // Picking regions for new points (Chew; Li and Teng): each sliver (a
 // dihedral angle below the bound or above 180 degrees minus it) with a
 // movable vertex (a new point: inside the domain, or on one facet, where it
@@ -236,17 +250,8 @@ void perturb_slivers(Delaunay_3& triangulation, std::vector<Vertex_handle>& hand
         const double start = best.first;
         Point_3 best_point = home;
         for (int attempt = 0; attempt < options.attempts; ++attempt) {
-          // A uniform point of the ball (rejection from the cube, counter-based draws).
-          double u[3], norm;
-          std::uint64_t draw = mix(mix(options.seed ^ static_cast<std::uint64_t>(index)) + static_cast<std::uint64_t>(round * 64 + attempt));
-          do {
-            norm = 0;
-            for (double& c : u) {
-              draw = mix(draw);
-              c = 2.0 * (static_cast<double>(draw >> 11) * 0x1.0p-53) - 1.0;
-              norm += c * c;
-            }
-          } while (norm > 1.0);
+          double u[3];
+          unit_ball_point(mix(mix(options.seed ^ static_cast<std::uint64_t>(index)) + static_cast<std::uint64_t>(round * 64 + attempt)), u);
           Vec3 x{home.x() + reach * u[0], home.y() + reach * u[1], home.z() + reach * u[2]};
           if (facet >= 0 && !domain.snap_to_facet(static_cast<std::size_t>(facet), x)) continue;
           if (!domain.strictly_inside(x, facet >= 0 ? Polyhedral_domain::Mask{1} << facet : 0)) continue;
@@ -281,12 +286,22 @@ void perturb_slivers(Delaunay_3& triangulation, std::vector<Vertex_handle>& hand
 // projection onto a facet or an edge, centre_placement) when t is still a cell; returns
 // the new vertex, or a null handle when t is gone, the centre has no place or
 // the point is already there. The caller keeps it (keep_point) or removes it.
+// With picking > 0 the point is drawn at random (`draw`) in the ball of
+// radius picking times the circumradius around the centre instead (Li's
+// random off-centres).
 Vertex_handle insert_at_circumcentre(Delaunay_3& triangulation, const std::vector<Vertex_handle>& handles,
-                                     const Tet& t, const Polyhedral_domain& domain, Vec3& x) {
+                                     const Tet& t, const Polyhedral_domain& domain, Vec3& x, double picking = 0,
+                                     std::uint64_t draw = 0) {
   Delaunay_3::Cell_handle cell;
   if (!find_cell(triangulation, handles, t, cell)) return Vertex_handle();  // gone this round
-  const Point_3 centre = CGAL::circumcenter(cell->vertex(0)->point(), cell->vertex(1)->point(),
-                                            cell->vertex(2)->point(), cell->vertex(3)->point());
+  Point_3 centre = CGAL::circumcenter(cell->vertex(0)->point(), cell->vertex(1)->point(),
+                                      cell->vertex(2)->point(), cell->vertex(3)->point());
+  if (picking > 0) {
+    double u[3];
+    unit_ball_point(draw, u);
+    const double reach = picking * std::sqrt(squared(centre, cell->vertex(0)->point()));
+    centre = Point_3(centre.x() + reach * u[0], centre.y() + reach * u[1], centre.z() + reach * u[2]);
+  }
   if (!centre_placement(centre, shortest_edge(cell), domain, x)) return Vertex_handle();
   const std::size_t before = triangulation.number_of_vertices();
   const Vertex_handle v = triangulation.insert(Point_3(x[0], x[1], x[2]), cell);
@@ -315,19 +330,29 @@ std::size_t insert_off_centres(Delaunay_3& triangulation, std::vector<Vertex_han
   const std::vector<Tet> slivers = cells_where(
       triangulation, [&](const Delaunay_3::Cell_handle& cell) { return dihedral_margin(cell) < options.min_dihedral; });
   std::size_t inserted = 0;
+  Delaunay_3::Cell_handle cell;
   for (const Tet& t : slivers) {
-    Vec3 x;
-    const Vertex_handle v = insert_at_circumcentre(triangulation, handles, t, domain, x);
-    if (v == Vertex_handle()) continue;
-    // Every tetrahedron the insertion makes has v as a vertex: one whose
-    // radius-edge ratio the insertion would break is not made (removing v
-    // restores the Delaunay tetrahedra it replaced).
-    if (star_quality(triangulation, v).second > options.max_radius_edge) {
-      triangulation.remove(v);
-      continue;
+    // The centre first; where it has no place or would break the ratio,
+    // random points around it (they must destroy the sliver).
+    for (int attempt = 0; attempt <= options.attempts; ++attempt) {
+      if (!find_cell(triangulation, handles, t, cell)) break;
+      Vec3 x;
+      const std::uint64_t draw = mix(mix(options.seed ^ 0x0ffcull) + static_cast<std::uint64_t>(t[0] * 131 + t[1]) * 64 +
+                                     static_cast<std::uint64_t>(attempt));
+      const Vertex_handle v = insert_at_circumcentre(triangulation, handles, t, domain, x, attempt ? 0.5 : 0.0, draw);
+      if (v == Vertex_handle()) continue;
+      // Every tetrahedron the insertion makes has v as a vertex: one whose
+      // radius-edge ratio the insertion would break is not made (removing v
+      // restores the Delaunay tetrahedra it replaced).
+      if ((attempt > 0 && find_cell(triangulation, handles, t, cell)) ||
+          star_quality(triangulation, v).second > options.max_radius_edge) {
+        triangulation.remove(v);
+        continue;
+      }
+      keep_point(v, x, t, points, handles, report);
+      ++inserted;
+      break;
     }
-    keep_point(v, x, t, points, handles, report);
-    ++inserted;
   }
   return inserted;
 }
