@@ -252,3 +252,11 @@ def test_a_sliver_of_old_points_in_a_thin_slab_gets_an_off_centre():
         dihedral = dihedral_angles(mesh.points, mesh.tetrahedra)
         assert dihedral.min() >= 10 and dihedral.max() <= 170, (step, dihedral.min(), dihedral.max())
         assert mesh.stats["slivers_after"] == 0
+
+
+def test_steps_on_an_octahedron_give_the_same_bits_on_any_thread_count(octahedron):
+    size = graded(np.array([0.3, -0.2, 0.1]))
+    one = evomesh.evolve(octahedron, size=size, seed=4, threads=1)
+    two = evomesh.evolve(octahedron, size=size, seed=4, threads=2)
+    assert np.array_equal(one.points.view(np.uint64), two.points.view(np.uint64))
+    assert np.array_equal(one.tetrahedra, two.tetrahedra) and np.array_equal(one.origin, two.origin)

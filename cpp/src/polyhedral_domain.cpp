@@ -40,8 +40,17 @@ double test_parameter(int k, double ratio, int bits) {
   return std::ldexp(m, -bits);
 }
 
-constexpr int kLatticeBits[] = {40, 36, 32, 28, 24, 20, 16, 12};
-constexpr int kLatticeTests = 16;
+// The finest lattice resolution 2^-bits (bits = 40, 36, ..., 12) at which
+// exact(bits, k) holds for the 16 test points k; 0 when none does.
+template <class Exact>
+int lattice_bits(Exact exact) {
+  for (const int bits : {40, 36, 32, 28, 24, 20, 16, 12}) {
+    bool all = true;
+    for (int k = 0; k < 16 && all; ++k) all = exact(bits, k);
+    if (all) return bits;
+  }
+  return 0;
+}
 
 }  // namespace
 
@@ -76,17 +85,10 @@ Polyhedral_domain::Polyhedral_domain(const std::vector<std::array<Vec3, 3>>& fac
     facets_.push_back(facet);
     if (facet.axis >= 0) continue;
     Facet& added = facets_.back();
-    for (const int bits : kLatticeBits) {
-      bool exact = true;
-      for (int k = 0; k < kLatticeTests && exact; ++k) {
-        Vec3 x;
-        exact = lattice_point(added, test_parameter(k, 0.6180339887498949, bits), test_parameter(k, 0.7548776662466927, bits), x);
-      }
-      if (exact) {
-        added.bits = bits;
-        break;
-      }
-    }
+    added.bits = lattice_bits([&](int bits, int k) {
+      Vec3 x;
+      return lattice_point(added, test_parameter(k, 0.6180339887498949, bits), test_parameter(k, 0.7548776662466927, bits), x);
+    });
     if (added.bits == 0) {
       throw Input_error("facet " + std::to_string(f) + " is not normal to an axis and holds no float64 lattice of points "
                         "exactly on its plane: give its corners fewer significant bits (e.g. multiples of a power of two)");
@@ -106,18 +108,11 @@ Polyhedral_domain::Polyhedral_domain(const std::vector<std::array<Vec3, 3>>& fac
     edges_.push_back(edge);
     if (edge.aligned) continue;
     Domain_edge& added = edges_.back();
-    for (const int bits : kLatticeBits) {
-      bool exact = true;
-      for (int k = 0; k < kLatticeTests && exact; ++k) {
-        const double l = test_parameter(k, 0.6180339887498949, bits);
-        const Vec3 x{added.p[0] + l * added.d[0], added.p[1] + l * added.d[1], added.p[2] + l * added.d[2]};
-        exact = CGAL::collinear(to_point(added.p), to_point(added.q), to_point(x));
-      }
-      if (exact) {
-        added.bits = bits;
-        break;
-      }
-    }
+    added.bits = lattice_bits([&](int bits, int k) {
+      const double l = test_parameter(k, 0.6180339887498949, bits);
+      const Vec3 x{added.p[0] + l * added.d[0], added.p[1] + l * added.d[1], added.p[2] + l * added.d[2]};
+      return CGAL::collinear(to_point(added.p), to_point(added.q), to_point(x));
+    });
     if (added.bits == 0) {
       throw Input_error("edge " + std::to_string(e) + " holds no float64 lattice of points exactly on it: give its "
                         "corners fewer significant bits (e.g. multiples of a power of two)");
