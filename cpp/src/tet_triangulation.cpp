@@ -148,9 +148,16 @@ std::pair<double, double> star_quality(const Delaunay_3& triangulation, Vertex_h
 // whose circumradius exceeds twice its shortest edge s moves by less than
 // s, so the point keeps more than s from every point of the (empty)
 // circumsphere.
-bool centre_placement(const Point_3& centre, double shortest, const Polyhedral_domain& domain, Vec3& x) {
+enum class Placement { centre, facet, edge };
+// A centre moved onto a facet or an edge keeps this fraction of the
+// tetrahedron's shortest edge from every point (insert_at_circumcentre).
+constexpr double kProjectedClearance = 0.4;
+
+bool centre_placement(const Point_3& centre, double shortest, const Polyhedral_domain& domain, Vec3& x,
+                      Placement& placed) {
   using Mask = Polyhedral_domain::Mask;
   x = {centre.x(), centre.y(), centre.z()};
+  placed = Placement::centre;
   int near = -1;
   double near_distance = 0.5 * shortest;
   for (std::size_t f = 0; f < domain.n_facets(); ++f) {
@@ -161,6 +168,7 @@ bool centre_placement(const Point_3& centre, double shortest, const Polyhedral_d
   if (near < 0) return true;
   const auto facet = static_cast<std::size_t>(near);
   if (!domain.snap_to_facet(facet, x)) return false;
+  placed = Placement::facet;
   const auto too_near = [&](const Vec3& y, Mask facets) {
     Mask out = 0;
     for (std::size_t g = 0; g < domain.n_facets(); ++g) {
@@ -176,6 +184,7 @@ bool centre_placement(const Point_3& centre, double shortest, const Polyhedral_d
   if (edge < 0) return false;
   const auto e = static_cast<std::size_t>(edge);
   if (!domain.edge_point(e, x[static_cast<std::size_t>(domain.edge_axis(e))], x)) return false;
+  placed = Placement::edge;
   const auto [f0, f1] = domain.edge_facets(e);
   const Mask ends = domain.neighbours(static_cast<std::size_t>(f0)) & domain.neighbours(static_cast<std::size_t>(f1)) &
                     ~((Mask{1} << f0) | (Mask{1} << f1));
@@ -302,7 +311,22 @@ Vertex_handle insert_at_circumcentre(Delaunay_3& triangulation, const std::vecto
     const double reach = picking * std::sqrt(squared(centre, cell->vertex(0)->point()));
     centre = Point_3(centre.x() + reach * u[0], centre.y() + reach * u[1], centre.z() + reach * u[2]);
   }
-  if (!centre_placement(centre, shortest_edge(cell), domain, x)) return Vertex_handle();
+  const double shortest = shortest_edge(cell);
+  Placement placed;
+  if (!centre_placement(centre, shortest, domain, x, placed)) return Vertex_handle();
+  // A centre moved onto a facet or an edge may land next to a point (the
+  // empty circumsphere says nothing about where it moved to, say right
+  // under an interior point near the facet): a placement closer than
+  // kProjectedClearance times the tetrahedron's shortest edge to a point is
+  // refused. Without it, splits cascaded to ever shorter edges on coarse
+  // meshes of an octahedron and a tilted box (edges of 0.003, dihedrals of
+  // 1.5 degrees); with the whole shortest edge as the bound, bad tetrahedra
+  // next to box edges were left again. 0.4 measured best (docs/implementation.md).
+  const Point_3 target(x[0], x[1], x[2]);
+  if (placed != Placement::centre && squared(triangulation.nearest_vertex(target, cell)->point(), target) <
+                                         kProjectedClearance * kProjectedClearance * shortest * shortest) {
+    return Vertex_handle();
+  }
   const std::size_t before = triangulation.number_of_vertices();
   const Vertex_handle v = triangulation.insert(Point_3(x[0], x[1], x[2]), cell);
   if (triangulation.number_of_vertices() == before) return Vertex_handle();  // an existing point
