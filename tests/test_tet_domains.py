@@ -260,3 +260,28 @@ def test_steps_on_an_octahedron_give_the_same_bits_on_any_thread_count(octahedro
     two = evomesh.evolve(octahedron, size=size, seed=4, threads=2)
     assert np.array_equal(one.points.view(np.uint64), two.points.view(np.uint64))
     assert np.array_equal(one.tetrahedra, two.tetrahedra) and np.array_equal(one.origin, two.origin)
+
+
+@pytest.mark.parametrize("seed", [97, 98])
+def test_refinement_on_coarse_polyhedra_does_not_cascade(seed):
+    # Coarse meshes and a request that coarsens (delta 1.4) away from a fine
+    # ball: splits projected onto facets once cascaded to edges of 0.003
+    # (dihedrals of 1.5 degrees). Now no edge is much shorter than before
+    # and every dihedral is within [10, 170]; the radius-edge ratio may stay
+    # above 2 on a few tetrahedra, which stats report.
+    rng = np.random.default_rng(seed)
+    rng.integers(3, 6)
+    base = evomesh.octahedron_mesh(0.25) if seed % 3 == 1 else evomesh.tilted_box_mesh(0.2)
+    centre = base.points[rng.integers(base.n_points)]
+    delta = np.where(np.linalg.norm(base.points - centre, axis=1) < 0.35, 0.35, 1.4)
+    new = evomesh.evolve(base, delta, seed=seed)
+    dihedral = dihedral_angles(new.points, new.tetrahedra)
+    assert dihedral.min() >= 10 and dihedral.max() <= 170
+    ratio = radius_edge_ratios(new.points, new.tetrahedra)
+    assert (ratio > 2).sum() <= 3 and new.stats["radius_edge_unresolved"] <= 3
+
+    def shortest(mesh):
+        e = mesh.tetrahedra[:, [[0, 1], [0, 2], [0, 3], [1, 2], [1, 3], [2, 3]]].reshape(-1, 2)
+        return np.linalg.norm(mesh.points[e[:, 0]] - mesh.points[e[:, 1]], axis=1).min()
+
+    assert shortest(new) > 0.2 * shortest(base)
