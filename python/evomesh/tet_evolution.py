@@ -196,6 +196,15 @@ def evolve_tet(mesh: TetMesh, delta: Any = None, *, size: Any = None, seed: int 
         With ``origin`` (index in ``mesh``, -1 new; kept points have
         bit-identical coordinates), ``kind``, ``lineage`` (for
         :func:`evomesh.transfer`) and ``stats``.
+
+    Raises
+    ------
+    ValueError
+        A bad request, or a domain the step does not support: not convex
+        (an L-shaped block, a box with a hole), facets meeting below 90
+        degrees, a non-manifold boundary, a tilted facet whose corners leave
+        no float64 points exactly on it, face tags that vary within a facet,
+        several regions (tet_tags).
     """
     start = time.process_time()
     if not isinstance(mesh, TetMesh):
