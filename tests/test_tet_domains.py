@@ -63,7 +63,7 @@ def octahedron_facets(r: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 
 def tilted_box_facets(lengths, rotation=(7, 3, 2, 1)) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
-    from evomesh.tet_domains import _quaternion_matrix
+    from evomesh.tet_polyhedra import _quaternion_matrix
 
     norm = sum(int(v) ** 2 for v in rotation)
     scale = norm / 2.0 ** np.ceil(np.log2(norm))

@@ -25,9 +25,9 @@ from evomesh.mesh import Lineage, Mesh, PointKind
 from evomesh.mesh_quality import Quality, quality
 from evomesh.packing import lexical_first_mis
 from evomesh.spacing_function import SpacingFunction, nn_spacing, spacing
-from evomesh.tet_domains import convex_polyhedron_mesh, octahedron_mesh, tilted_box_mesh
 from evomesh.tet_evolution import TetOptions
 from evomesh.tet_mesh import TetLineage, TetMesh, TetPointKind, box_mesh, unit_cube_mesh
+from evomesh.tet_polyhedra import convex_polyhedron_mesh, octahedron_mesh, tilted_box_mesh
 
 __all__ = [
     "Mesh",
