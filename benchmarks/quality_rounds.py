@@ -6,7 +6,8 @@ evolved so the band moves by 0.1 (delta in [0.5, 2]: refining on one side of
 the band, coarsening on the other). The same step runs twice per size, once
 with each pass, same seed. Reported per pass: the points the pass inserted,
 the smallest angle, the median and 10th percentile of the triangles'
-smallest angles, the rounds (the serial pass has none), and the seconds of the
+smallest angles, the share of triangles below the bound (percent), the rounds
+(the serial pass has none), and the seconds of the
 quality stage (``stats["seconds_quality"]``) and of the whole step, with the
 rounds' times as ratios to the serial ones measured in the same process.
 
@@ -55,6 +56,7 @@ def run_pass(graded: evomesh.Mesh, delta: np.ndarray, rounds: bool, min_angle: f
         "min_angle": float(angles.min()),
         "median_angle": float(np.median(angles)),
         "p10_angle": float(np.percentile(angles, 10)),
+        "below_percent": float(100.0 * np.mean(angles < min_angle - 1e-9)),
         "rounds": int(stats.get("quality_rounds", 0)),
         "capped": bool(stats["quality_capped"]),
         "stalled": bool(stats.get("quality_stalled", 0)),
@@ -73,7 +75,7 @@ def main() -> None:
     args = parser.parse_args()
     rows = []
     header = (f"{'size':>8} {'angle':>5} {'pass':>7} {'points':>8} {'inserted':>8} {'min':>7} {'median':>7} "
-              f"{'p10':>7} {'rounds':>6} {'t_qual':>7} {'t_step':>7} {'ratio_q':>7}")
+              f"{'p10':>7} {'below%':>7} {'rounds':>6} {'t_qual':>7} {'t_step':>7} {'ratio_q':>7}")
     print(header)
     for size in (float(s) for s in args.sizes.split(",")):
         graded, delta, _ = graded_case(size, None)
@@ -86,7 +88,7 @@ def main() -> None:
                 flags = "".join(f" {k}" for k in ("capped", "stalled", "round_limit") if r[k])
                 ratio = f"{r['quality_ratio']:7.2f}" if "quality_ratio" in r else f"{'':>7}"
                 print(f"{len(graded.points):8d} {min_angle:5.1f} {name:>7} {r['points']:8d} {r['inserted']:8d} "
-                      f"{r['min_angle']:7.3f} {r['median_angle']:7.3f} {r['p10_angle']:7.3f} {r['rounds']:6d} "
+                      f"{r['min_angle']:7.3f} {r['median_angle']:7.3f} {r['p10_angle']:7.3f} {r['below_percent']:7.3f} {r['rounds']:6d} "
                       f"{r['quality_seconds']:7.3f} {r['step_seconds']:7.3f} {ratio}{flags}", flush=True)
             rows.append({"input_points": len(graded.points), "min_angle": min_angle, "serial": serial,
                          "rounds": rounds})

@@ -158,8 +158,8 @@ def test_a_time_loop_on_ranks_gives_the_serial_meshes(name: str, layout: str, wi
 
 @pytest.mark.parametrize("name", ["L-shape", "disc with a hole"])
 def test_size_requests_on_ranks_give_the_serial_meshes(name: str) -> None:
-    """evolve(dmesh, size=h): delta_from_size on the ranks (two rings of
-    triangles, then three and one more by halo exchanges) equals the serial
+    """evolve(dmesh, size=h): delta_from_size on the ranks (the core's rule
+    on each rank's part with SIZE_RULE_RINGS halo rings) equals the serial
     one bit for bit, and so do the meshes, step after step: refining half the
     domain, coarsening the other, then the same request again (it stays put)."""
     from evomesh.distributed.spacing import delta_from_size

@@ -204,6 +204,73 @@ def test_quality_triangulate_rejects_bad_input():
         _core.quality_triangulate(points, pieces, boundary, min_angle=40.0, quality_rounds=True)
 
 
+def staggered_lattice(m: int):
+    """The unit square cut into m equal pieces a side, with interior points in
+    columns h / 2 apart (h = 1 / m), every other column shifted by h / 2: the
+    lattice a graded mesh has next to its coarse sides. Splitting a side's
+    piece there makes triangles whose points encroach the next piece but one,
+    so Delaunay refinement at 30 degrees splits every other piece of a side,
+    one after the other."""
+    h = 1.0 / m
+    columns = []
+    for j in range(1, 2 * m - 1):
+        ys = np.arange(1, m) * h if j % 2 == 1 and j > 1 else (np.arange(m) + 0.5) * h
+        columns.append(np.c_[np.full(len(ys), j * h / 2), ys])
+    t = np.arange(m) * h
+    loop = np.r_[np.c_[t, 0 * t], np.c_[0 * t + 1, t], np.c_[1 - t, 0 * t + 1], np.c_[0 * t, 1 - t]]
+    pieces = np.c_[np.arange(len(loop)), (np.arange(len(loop)) + 1) % len(loop)]
+    return np.concatenate([loop, *columns]), pieces, np.ones(len(pieces), np.uint8)
+
+
+def test_rounds_are_bounded_where_splits_march_along_a_side():
+    # (12,882 points; before runs of equal pieces were split in one go: 83
+    # rounds, the splits marching along the sides)
+    points, pieces, boundary = staggered_lattice(80)
+    serial = _core.quality_triangulate(points, pieces, boundary, quality_rounds=False)
+    rounds = _core.quality_triangulate(points, pieces, boundary, quality_rounds=True)
+    stats = rounds["stats"]
+    assert stats["rounds"] <= 30
+    assert stats["stalled"] == 0 and stats["round_limit"] == 0 and stats["capped"] == 0
+    check_quality_mesh(points, pieces, rounds, 1.0)
+    angles = smallest_angles(rounds["points"], rounds["triangles"])
+    assert angles.min() >= MIN_ANGLE - ANGLE_TOLERANCE
+    # the sides' pieces split at once: at most one extra point a piece (and the
+    # triangles' points near it) over the serial pass's
+    assert stats["points_added"] <= 1.5 * serial["stats"]["points_added"]
+    again = _core.quality_triangulate(*shuffled(points, pieces, boundary, 5), quality_rounds=True)
+    for x, y in zip(canonical(rounds), canonical(again)):
+        assert np.array_equal(x, y)
+
+
+@given(m=st.integers(6, 50), n_extra=st.integers(0, 3), seed=st.integers(0, 2**16),
+       min_angle=st.sampled_from([25.0, 30.0]))
+def test_rounds_on_lattices_are_bounded_and_valid(m, n_extra, seed, min_angle):
+    points, pieces, boundary = staggered_lattice(m)
+    points = np.r_[points, np.random.default_rng(seed).uniform(0.003, 0.997, (n_extra, 2))]
+    rounds = _core.quality_triangulate(points, pieces, boundary, min_angle=min_angle, quality_rounds=True)
+    stats = rounds["stats"]
+    assert stats["rounds"] <= 30
+    assert stats["stalled"] == 0 and stats["round_limit"] == 0 and stats["capped"] == 0
+    check_quality_mesh(points, pieces, rounds, 1.0)
+    assert smallest_angles(rounds["points"], rounds["triangles"]).min() >= min_angle - ANGLE_TOLERANCE
+
+
+def test_a_split_that_does_not_march_splits_no_run():
+    # A square grid, one point near a corner: a few splits at the corner, none
+    # along the sides (splitting the sides' 396 pieces adds about 1,200 points).
+    g = np.linspace(0.0, 1.0, 100)
+    x, y = np.meshgrid(g, g)
+    points = np.r_[np.c_[x.ravel(), y.ravel()], [[0.004, 0.003]]]
+    index = np.arange(100 * 100).reshape(100, 100)
+    loop = np.r_[index[0, :-1], index[:-1, -1], index[-1, :0:-1], index[:0:-1, 0]]
+    pieces = np.c_[loop, np.roll(loop, -1)]
+    boundary = np.ones(len(pieces), np.uint8)
+    serial = _core.quality_triangulate(points, pieces, boundary, quality_rounds=False)
+    rounds = _core.quality_triangulate(points, pieces, boundary, quality_rounds=True)
+    assert rounds["stats"]["points_added"] <= serial["stats"]["points_added"] + 10
+    assert smallest_angles(rounds["points"], rounds["triangles"]).min() >= MIN_ANGLE - ANGLE_TOLERANCE
+
+
 def graded_step(side: int = 24):
     mesh = grid_mesh(side, side, jitter=0.3, seed=4, hole=True)
     x = mesh.points[:, 0]

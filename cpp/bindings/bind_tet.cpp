@@ -13,6 +13,7 @@
 #include <vector>
 
 #include "evomesh/tet/tet_step.hpp"
+#include "evomesh/tet/tet_supermesh.hpp"
 
 #include "numpy_arrays.hpp"
 
@@ -94,6 +95,23 @@ py::array_t<double> points_array(std::vector<Vec3>&& points) {
   std::vector<double> flat(3 * points.size());
   if (!points.empty()) std::memcpy(flat.data(), points.data(), flat.size() * sizeof(double));
   return to_array(std::move(flat), {n, 3});
+}
+
+// The step's options from the Python values, checked (Tet_step_options::validate).
+Tet_step_options tet_options(double cell_factor, double radius_scale, double boundary_clearance,
+                             double max_radius_edge, double sliver_angle, double max_samples, std::uint64_t seed,
+                             int threads) {
+  Tet_step_options options;
+  options.cell_factor = cell_factor;
+  options.radius_scale = radius_scale;
+  options.boundary_clearance = boundary_clearance;
+  options.max_radius_edge = max_radius_edge;
+  options.sliver_angle = sliver_angle;
+  options.max_samples = max_samples;
+  options.seed = seed;
+  options.threads = threads;
+  options.validate();
+  return options;
 }
 
 py::array_t<std::int64_t> tets_array(std::vector<Tet>&& tets) {
@@ -192,15 +210,8 @@ void bind_tet(py::module_& m) {
           if (f < 0 || static_cast<std::size_t>(f) >= in.domain.n_facets()) throw Input_error("boundary_facet out of range");
           in.boundary_facet.push_back(static_cast<int>(f));
         }
-        Tet_step_options options;
-        options.cell_factor = cell_factor;
-        options.radius_scale = radius_scale;
-        options.boundary_clearance = boundary_clearance;
-        options.max_radius_edge = max_radius_edge;
-        options.sliver_angle = sliver_angle;
-        options.max_samples = max_samples;
-        options.seed = seed;
-        options.threads = threads;
+        const Tet_step_options options = tet_options(cell_factor, radius_scale, boundary_clearance, max_radius_edge,
+                                                     sliver_angle, max_samples, seed, threads);
         Size_cap size_cap;
         if (cap) {
           size_cap = [&cap](const std::vector<Vec3>& x, const std::vector<Index>& tet, std::vector<double>& out) {
@@ -260,4 +271,53 @@ void bind_tet(py::module_& m) {
       py::arg("points"), py::arg("facets"), py::arg("edge_facets"), py::arg("edge_ends"), py::arg("neighbours"),
       "Checks the domain (its facets' exact lattices) and returns the facets each point lies on exactly, as a bit "
       "mask per point.");
+
+  m.def(
+      "check_tet_options",
+      [](double cell_factor, double radius_scale, double boundary_clearance, double max_radius_edge,
+         double sliver_angle, double max_samples, int threads) {
+        tet_options(cell_factor, radius_scale, boundary_clearance, max_radius_edge, sliver_angle, max_samples, 0,
+                    threads);
+      },
+      py::arg("cell_factor"), py::arg("radius_scale"), py::arg("boundary_clearance"), py::arg("max_radius_edge"),
+      py::arg("sliver_angle"), py::arg("max_samples"), py::arg("threads"),
+      "Raises ValueError naming the first option of the tetrahedral step out of range (the step's own check).");
+
+  m.def(
+      "tet_supermesh",
+      [](const Float_array& old_points, const Int_array& old_tets, const Float_array& new_points,
+         const Int_array& new_tets, const Int_array& origin, const Int_array& parent_tet, int threads) {
+        const auto op = to_points3(old_points, "old_points");
+        const auto ot = to_cells<4>(old_tets, op.size(), "old_tetrahedra");
+        const auto np_ = to_points3(new_points, "new_points");
+        const auto nt = to_cells<4>(new_tets, np_.size(), "new_tetrahedra");
+        const auto org = to_vector<Index>(origin, np_.size(), "origin");
+        const auto parent = to_vector<Index>(parent_tet, np_.size(), "parent_tet");
+        Tet_supermesh s;
+        {
+          py::gil_scoped_release release;
+          s = build_tet_supermesh(op, ot, np_, nt, org, parent, threads);
+        }
+        py::dict out;
+        out["offsets"] = to_array(std::move(s.offsets));
+        out["old_tet"] = to_array(std::move(s.old_tet));
+        out["volume"] = to_array(std::move(s.volume));
+        out["identical"] = s.identical;
+        return out;
+      },
+      py::arg("old_points"), py::arg("old_tetrahedra"), py::arg("new_points"), py::arg("new_tetrahedra"),
+      py::arg("origin"), py::arg("parent_tet"), py::arg("threads") = 0,
+      "Local supermesh of new over old tetrahedra, seeded by the step's origin and parent_tet: dict of offsets "
+      "(n_new_tetrahedra + 1,), old_tet and volume (pairs,) = |t n s|, identical (new tetrahedra that are old "
+      "ones).");
+
+  m.def(
+      "tet_intersection_volume",
+      [](const Float_array& t, const Float_array& s) {
+        const auto a = to_points3(t, "t");
+        const auto b = to_points3(s, "s");
+        if (a.size() != 4 || b.size() != 4) throw Input_error("t and s must have shape (4, 3)");
+        return tet_intersection_volume({a[0], a[1], a[2], a[3]}, {b[0], b[1], b[2], b[3]});
+      },
+      py::arg("t"), py::arg("s"), "Volume of the intersection of two tetrahedra (4, 3) (for the tests).");
 }

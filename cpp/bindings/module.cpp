@@ -22,6 +22,7 @@
 #include "evomesh/kernel.hpp"
 #include "evomesh/local_feature_size.hpp"
 #include "evomesh/mesh_walk.hpp"
+#include "evomesh/nd/hilbert_order.hpp"
 #include "evomesh/options.hpp"
 #include "evomesh/packing.hpp"
 #include "evomesh/parallel.hpp"
@@ -652,6 +653,48 @@ PYBIND11_MODULE(_core, m) {
       py::arg("points"), py::arg("triangles"), py::arg("h"), py::arg("above"), py::arg("below"), py::arg("at_least"),
       "Bits per point (uint8): 1 where L > above, 2 where L < below, 4 where L >= at_least, exactly as "
       "edge_over_size_around's L compares, without most of its hypot calls (size_request.hpp).");
+
+  m.def(
+      "delta_from_size",
+      [](const Float_array& points, const Int_array& triangles, const Float_array& h, const Float_array& nn,
+         bool keep_fine_clusters, double delta_min, double delta_max, std::optional<std::size_t> n_checked,
+         std::optional<Int_array> ids) {
+        auto [pts, tris] = to_points_and_triangles(points, triangles);
+        auto values = to_vector<double>(h);
+        auto spacing = to_vector<double>(nn);
+        if (values.size() != pts.size() || spacing.size() != pts.size()) throw Input_error("h, nn: one value per point");
+        const std::size_t checked = n_checked.value_or(pts.size());
+        if (checked > pts.size()) throw Input_error("n_checked: at most the number of points");
+        std::vector<std::int64_t> names;
+        if (ids) {
+          names = to_vector<std::int64_t>(*ids);
+          if (names.size() < checked) throw Input_error("ids: one id per checked point");
+        }
+        std::vector<double> delta;
+        {
+          py::gil_scoped_release release;
+          delta = delta_from_size(pts, tris, values, spacing, keep_fine_clusters, delta_min, delta_max, checked,
+                                  ids ? &names : nullptr);
+        }
+        return vector_array(delta);
+      },
+      py::arg("points"), py::arg("triangles"), py::arg("h"), py::arg("nn"), py::arg("keep_fine_clusters"),
+      py::arg("delta_min"), py::arg("delta_max"), py::arg("n_checked") = py::none(), py::arg("ids") = py::none(),
+      "size= as delta, the one rule of every scope (size_request.hpp): delta at every point, the first n_checked "
+      "(default: all) checked to lie in [delta_min, delta_max] (ValueError naming the point by its id).");
+  m.attr("SIZE_RULE_RINGS") = Size_rule::rings;
+
+  m.def(
+      "check_size_delta",
+      [](const Float_array& delta, const Float_array& h, const Float_array& nn, double delta_min, double delta_max) {
+        auto d = to_vector<double>(delta);
+        auto values = to_vector<double>(h);
+        auto spacing = to_vector<double>(nn);
+        if (values.size() != d.size() || spacing.size() != d.size()) throw Input_error("delta, h, nn: one value each");
+        check_size_delta(d, values, spacing, delta_min, delta_max, d.size());
+      },
+      py::arg("delta"), py::arg("h"), py::arg("nn"), py::arg("delta_min"), py::arg("delta_max"),
+      "delta_from_size's check of h / nn as delta (ValueError for the first point outside [delta_min, delta_max]).");
 
   m.def(
       "near_seeds",
@@ -1474,24 +1517,12 @@ PYBIND11_MODULE(_core, m) {
         {
           py::gil_scoped_release release;
           for (std::size_t i = 0; i < x.size(); ++i) {
-            std::int64_t a = x[i], b = y[i], key = 0;
-            if (a < 0 || a >= side || b < 0 || b >= side) {
+            if (x[i] < 0 || x[i] >= side || y[i] < 0 || y[i] >= side) {
               keys[i] = -1;
               continue;
             }
-            // the usual xy2d: one bit a level, rotating the quadrant
-            for (std::int64_t s = side >> 1; s > 0; s >>= 1) {
-              const std::int64_t rx = (a & s) > 0 ? 1 : 0, ry = (b & s) > 0 ? 1 : 0;
-              key += s * s * ((3 * rx) ^ ry);
-              if (ry == 0) {
-                if (rx == 1) {
-                  a = side - 1 - a;
-                  b = side - 1 - b;
-                }
-                std::swap(a, b);
-              }
-            }
-            keys[i] = key;
+            keys[i] = static_cast<std::int64_t>(nd::hilbert_index<2, std::uint64_t>(
+                {static_cast<std::uint32_t>(x[i]), static_cast<std::uint32_t>(y[i])}, static_cast<unsigned>(order)));
           }
         }
         for (std::int64_t k : keys) {
@@ -1500,7 +1531,8 @@ PYBIND11_MODULE(_core, m) {
         return vector_array(keys);
       },
       py::arg("ix"), py::arg("iy"), py::arg("order"),
-      "Index along the Hilbert curve of integer cells (ix, iy) in [0, 2^order)^2 (the usual xy2d).");
+      "Index along the Hilbert curve of integer cells (ix, iy) in [0, 2^order)^2 (nd::hilbert_index, the usual "
+      "xy2d).");
 
   bind_options(m);
 

@@ -175,7 +175,7 @@ Mis_part::Mis_part(const std::vector<Vec2>& centers, const std::vector<double>& 
   }
   ranks_of(order, "Mis_part");
   check_spheres(centers, radii, "Mis_part");
-  tree_ = std::make_unique<detail::Kept_sphere_tree>(centers, radii, std::vector<Index>(order), /*threads=*/1);
+  tree_ = std::make_unique<detail::Kept_sphere_tree<2>>(centers, radii, std::vector<Index>(order), /*threads=*/1);
   for (std::size_t i = 0; i < n; ++i) undecided_ += owned[i] != 0;
 }
 
@@ -188,20 +188,20 @@ Mis_part::~Mis_part() = default;
 // never put there): out if a kept one conflicts, else undecided if a pending
 // one does, else in.
 std::uint8_t Mis_part::decide(std::size_t position) const {
-  std::size_t hit = detail::Kept_sphere_tree::kNone;
-  detail::Kept_sphere_tree::Met met;
+  std::size_t hit = detail::Kept_sphere_tree<2>::kNone;
+  detail::Kept_sphere_tree<2>::Met met;
   if (!tree_->conflicting_kept_or_pending(position, hit, met)) {
     // (more pending conflicts than the query lists: undecided unless a kept one conflicts)
-    return tree_->conflicting_kept(position) != detail::Kept_sphere_tree::kNone ? out : unknown;
+    return tree_->conflicting_kept(position) != detail::Kept_sphere_tree<2>::kNone ? out : unknown;
   }
-  if (hit != detail::Kept_sphere_tree::kNone) return out;
+  if (hit != detail::Kept_sphere_tree<2>::kNone) return out;
   return met.size > 0 ? unknown : in;
 }
 
 std::vector<Index> Mis_part::sweep(std::vector<std::uint8_t>& state) {
   const std::size_t n = radii_.size();
   if (state.size() != n) throw Input_error("Mis_part::sweep: one state per sphere");
-  detail::Kept_sphere_tree& tree = *tree_;
+  detail::Kept_sphere_tree<2>& tree = *tree_;
   tree.reset();
   // Pending spheres are the undecided ones: the largest of their radii bounds
   // the pruning of the pending search (Kept_sphere_tree::set_pending_radius).

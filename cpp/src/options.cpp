@@ -3,6 +3,8 @@
 #include <cmath>
 #include <string>
 
+#include "evomesh/tet/tet_step.hpp"
+
 namespace evomesh {
 
 namespace {
@@ -20,6 +22,15 @@ void validate_common(double radius_scale, double max_samples, int threads) {
 }
 
 }  // namespace
+
+void tet::Tet_step_options::validate() const {
+  require(positive(cell_factor), "cell_factor", "finite and > 0");
+  require(boundary_clearance >= 0 && boundary_clearance < 1, "boundary_clearance", "in [0, 1)");
+  require(max_radius_edge == 0 || (std::isfinite(max_radius_edge) && max_radius_edge > 1), "max_radius_edge",
+          "0 (none) or a finite number above 1");
+  require(sliver_angle >= 0 && sliver_angle <= 30, "sliver_angle", "in [0, 30] degrees");
+  validate_common(radius_scale, max_samples, threads);
+}
 
 void Quality_options::validate() const {
   require(min_angle > 0 && min_angle <= kMaxMinAngle, "min_angle", "in (0, 30] degrees");

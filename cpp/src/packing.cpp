@@ -9,7 +9,6 @@
 
 #include "evomesh/detail/bits.hpp"
 #include "evomesh/detail/kept_sphere_tree.hpp"
-#include "evomesh/detail/static_kd_tree.hpp"
 #include "evomesh/parallel.hpp"
 
 namespace evomesh {
@@ -18,11 +17,12 @@ using detail::Kept_sphere_tree;
 
 namespace {
 
-constexpr std::size_t kNone = Kept_sphere_tree::kNone;
+constexpr std::size_t kNone = Kept_sphere_tree<2>::kNone;
 
 // The visiting loop: each sphere is kept unless a kept one conflicts (the
 // first `n_forced` always).
-void mis_sequential(Kept_sphere_tree& tree, std::size_t n_forced, std::vector<std::uint8_t>& kept,
+template <std::size_t D>
+void mis_sequential(Kept_sphere_tree<D>& tree, std::size_t n_forced, std::vector<std::uint8_t>& kept,
                     std::vector<Index>* blocker) {
   // The loop prefetches a few spheres ahead: which sphere comes next never
   // depends on the decisions.
@@ -61,7 +61,8 @@ void mis_sequential(Kept_sphere_tree& tree, std::size_t n_forced, std::vector<st
 // sequential query instead, on the tree that then holds S_a + K_k. So every
 // decision and every blocker equals the sequential one, for any block size
 // and thread count.
-void mis_in_blocks(Kept_sphere_tree& tree, std::size_t n_forced, std::vector<std::uint8_t>& kept,
+template <std::size_t D>
+void mis_in_blocks(Kept_sphere_tree<D>& tree, std::size_t n_forced, std::vector<std::uint8_t>& kept,
                    std::vector<Index>* blocker, int threads, std::size_t block, detail::Mis_block_counts* counts) {
   const std::size_t m = tree.n_visits();
   for (std::size_t k = 0; k < n_forced; ++k) {
@@ -141,7 +142,7 @@ void mis_in_blocks(Kept_sphere_tree& tree, std::size_t n_forced, std::vector<std
       const std::size_t begin = a + q * kChunk, end = std::min(b, begin + kChunk);
       auto& list = met[q];
       list.clear();
-      Kept_sphere_tree::Met found;
+      typename Kept_sphere_tree<D>::Met found;
       for (std::size_t k = begin; k < end; ++k) {
         if (k + kAhead < end) tree.prefetch(tree.visit(k + kAhead));
         std::size_t h = kNone;
@@ -214,7 +215,8 @@ constexpr std::size_t kMinParallel = 32768;
 // `permutation`, all of them); spheres not listed are neither kept nor met.
 // `block` > 0: mis_in_blocks with that block size whatever the size and the
 // thread count (tests).
-std::vector<std::uint8_t> mis_in_order(const std::vector<Vec2>& centers, const std::vector<double>& radii,
+template <std::size_t D>
+std::vector<std::uint8_t> mis_in_order(const std::vector<nd::Point<D>>& centers, const std::vector<double>& radii,
                                        std::vector<Index> order, std::size_t n_forced,
                                        std::vector<Index>* blocker, bool permutation, int threads,
                                        std::size_t block = 0, detail::Mis_block_counts* counts = nullptr) {
@@ -232,12 +234,13 @@ std::vector<std::uint8_t> mis_in_order(const std::vector<Vec2>& centers, const s
     kept[i] = 1;
   }
   for (std::size_t i = 0; i < n; ++i) {
-    if (!std::isfinite(centers[i][0]) || !std::isfinite(centers[i][1])) throw Input_error("sphere centres must be finite");
+    for (double x : centers[i])
+      if (!std::isfinite(x)) throw Input_error("sphere centres must be finite");
     if (!std::isfinite(radii[i]) || !(radii[i] > 0)) throw Input_error("sphere radii must be finite and > 0");
   }
   std::fill(kept.begin(), kept.end(), 0);
   const std::size_t m = order.size();
-  Kept_sphere_tree tree(centers, radii, std::move(order), threads);
+  Kept_sphere_tree<D> tree(centers, radii, std::move(order), threads);
   if (blocker) {
     blocker->clear();
     detail::parallel_resize(*blocker, n, Index{-1});
@@ -415,9 +418,13 @@ Packing_class new_point_class(bool on_segment, int round) {
   return static_cast<Packing_class>((on_segment ? class_boundary_ring : class_ring) + round);
 }
 
-std::vector<std::uint8_t> extend_packing(const std::vector<Vec2>& centers, const std::vector<double>& radii,
-                                         const std::vector<Index>& first_order, const std::vector<std::uint8_t>& kept,
-                                         std::vector<Index> more_order, int threads) {
+namespace {
+
+template <std::size_t D>
+std::vector<std::uint8_t> extend_packing_in(const std::vector<nd::Point<D>>& centers, const std::vector<double>& radii,
+                                            const std::vector<Index>& first_order,
+                                            const std::vector<std::uint8_t>& kept, std::vector<Index> more_order,
+                                            int threads) {
   std::size_t n_first = 0;
   for (Index c : first_order) n_first += kept[c] != 0;
   std::vector<Index> order;
@@ -434,6 +441,27 @@ std::vector<std::uint8_t> extend_packing(const std::vector<Vec2>& centers, const
   });
   more_order = std::vector<Index>();
   return mis_in_order(centers, radii, std::move(order), n_first, nullptr, /*permutation=*/false, threads);
+}
+
+}  // namespace
+
+std::vector<std::uint8_t> extend_packing(const std::vector<Vec2>& centers, const std::vector<double>& radii,
+                                         const std::vector<Index>& first_order, const std::vector<std::uint8_t>& kept,
+                                         std::vector<Index> more_order, int threads) {
+  return extend_packing_in(centers, radii, first_order, kept, std::move(more_order), threads);
+}
+
+std::vector<std::uint8_t> lexical_first_mis_3(const std::vector<std::array<double, 3>>& centers,
+                                              const std::vector<double>& radii, const std::vector<Index>& order,
+                                              std::size_t n_forced, int threads) {
+  return mis_in_order(centers, radii, order, n_forced, nullptr, /*permutation=*/false, threads);
+}
+
+std::vector<std::uint8_t> extend_packing_3(const std::vector<std::array<double, 3>>& centers,
+                                           const std::vector<double>& radii, const std::vector<Index>& first_order,
+                                           const std::vector<std::uint8_t>& kept, std::vector<Index> more_order,
+                                           int threads) {
+  return extend_packing_in(centers, radii, first_order, kept, std::move(more_order), threads);
 }
 
 }  // namespace evomesh

@@ -10,7 +10,10 @@
 //     sub-segment is (Ruppert's rule; CGAL's cluster rule may drop the face);
 //  2. every encroached sub-segment (found by the scan, by the last round's
 //     insertions or by step 1) gets its split point (midpoint, or the
-//     concentric-shell point at a small input angle) and its cavity;
+//     concentric-shell point at a small input angle) and its cavity; so does
+//     every piece of a run of equal input pieces that such splits have been
+//     seen to march along (Marching_runs: without it the rounds grow with the
+//     run's length over the pieces' length);
 //  3. the candidates are ordered (sub-segments first, Ruppert's priority, by
 //     their sorted end points; then faces worst first, ties by their sorted
 //     points: no order of the triangulation's history) and the lexical-first
@@ -24,11 +27,16 @@
 // so the faces, cavities and encroachments of a round's start are; the
 // candidates are read as a set and ordered by keys of points; the insertions
 // follow that order, so CGAL's per-insertion state (clusters, edge sides) sees
-// the same sequence. Independence makes the points of a round far apart
-// (cavities that do not touch), which is what keeps the rounds from creating
-// short edges between points that did not know of each other.
+// the same sequence. The runs queued for splitting are read from the rounds'
+// meshes, by walks whose union does not depend on the seeds' order.
+// Independence makes the points of a round far apart (cavities that do not
+// touch), which is what keeps the rounds from creating short edges between
+// points that did not know of each other.
 #include <algorithm>
 #include <array>
+#include <cmath>
+#include <limits>
+#include <set>
 #include <unordered_set>
 #include <utility>
 #include <vector>
@@ -87,6 +95,133 @@ bool same_face(const Face_handle& f, const std::array<Vertex_handle, 3>& v) {
   return f->has_vertex(v[0]) && f->has_vertex(v[1]) && f->has_vertex(v[2]);
 }
 
+// The other end of the constrained edge at v that continues the chain from
+// `from` through v: v must be on exactly two constrained edges.
+bool next_in_chain(const Cdt& tr, Vertex_handle from, Vertex_handle v, Vertex_handle& next) {
+  int n = 0;
+  auto e = tr.incident_edges(v), done = e;
+  do {
+    if (tr.is_infinite(*e) || !e->first->is_constrained(e->second)) continue;
+    const Vertex_handle a = e->first->vertex(Cdt::cw(e->second)), b = e->first->vertex(Cdt::ccw(e->second));
+    const Vertex_handle other = a == v ? b : a;
+    if (other == from) continue;
+    next = other;
+    ++n;
+  } while (++e != done);
+  return n == 1;
+}
+
+// Whether v -> w continues u -> v straight (turning by less than 6 degrees).
+bool goes_straight(const Point_2& u, const Point_2& v, const Point_2& w) {
+  const double ax = v.x() - u.x(), ay = v.y() - u.y(), bx = w.x() - v.x(), by = w.y() - v.y();
+  const double dot = ax * bx + ay * by, cross = ax * by - ay * bx;
+  return dot > 0 && std::abs(cross) <= 0.1 * dot;
+}
+
+// Whether a -> b and c -> d are equally long to rounding (1024 units of
+// rounding of their largest coordinate: the pieces of a structured mesh's
+// side, whose ends were each rounded once). A choice of which pieces to split,
+// not a combinatorial predicate: floating point.
+bool same_length(const Point_2& a, const Point_2& b, const Point_2& c, const Point_2& d) {
+  const double reach = std::max({std::abs(a.x()), std::abs(a.y()), std::abs(b.x()), std::abs(b.y()), std::abs(c.x()),
+                                 std::abs(c.y()), std::abs(d.x()), std::abs(d.y())});
+  const double first = std::sqrt(squared_distance(a, b)), second = std::sqrt(squared_distance(c, d));
+  return std::abs(first - second) <= 1024 * std::numeric_limits<double>::epsilon() * reach;
+}
+
+bool is_input(const Vertex_handle& v) { return v->info().index >= 0; }
+
+// The input pieces of the length of from -> at that continue it straight
+// beyond `at` and were split (a sub-segment of them has an inserted end),
+// among the next `reach` such pieces: the chain of sub-segments is walked
+// piece by piece (input point to input point), stopping at a turn, at a
+// piece of another length or at a vertex on more than two constraints.
+int split_pieces_beyond(const Cdt& tr, Vertex_handle from, Vertex_handle at, int reach) {
+  const Point_2 seed_from = from->point(), seed_to = at->point();
+  int split = 0;
+  for (int k = 0; k < reach; ++k) {
+    const Vertex_handle start = at;
+    bool inserted = false;
+    Vertex_handle next;
+    do {
+      if (!next_in_chain(tr, from, at, next) || !goes_straight(seed_from, start->point(), next->point())) {
+        return split;
+      }
+      from = at;
+      at = next;
+      inserted = inserted || !is_input(at);
+    } while (!is_input(at));
+    if (!same_length(seed_from, seed_to, start->point(), at->point())) return split;
+    split += inserted ? 1 : 0;
+  }
+  return split;
+}
+
+// A sub-segment by its sorted end points, with its ends.
+using Sub_segment = std::pair<std::array<Point_2, 2>, std::array<Vertex_handle, 2>>;
+
+Sub_segment sub_segment(Vertex_handle a, Vertex_handle b) {
+  if (b->point() < a->point()) std::swap(a, b);
+  return {{a->point(), b->point()}, {a, b}};
+}
+
+// Splits that march along a run of input pieces of one length (a side of a
+// structured mesh; a run turns by less than 6 degrees where two pieces meet)
+// are finished in one go. There a split makes bad
+// triangles whose points encroach the next piece or the one after, the next
+// split does the same, and the splits march along the run one piece every
+// few rounds (measured: 158 rounds at 1e5 points, four such marches along
+// two sides of the square, every other piece split). When a piece is to be
+// split with at least two split pieces of its run among the four beyond one
+// of its ends, the rest of the run the other way is queued for splitting
+// too: its pieces are split in the next rounds (as independent candidates,
+// sub-segments first), whether or not the march would have reached them.
+// Only input pieces are queued, each once, so the extra points are at most
+// one per input piece. Which pieces are queued is a function of the round's
+// mesh: a walk from a seed in one direction follows the run to its end, and
+// a walk that meets a piece another walk of the round took the same way
+// stops there (it would go on alike).
+class Marching_runs {
+ public:
+  // Queues the runs that the splits of `seeds` march along.
+  void add_marching_runs(const Cdt& tr, const std::vector<Sub_segment>& seeds) {
+    walked_.clear();
+    for (const auto& [ends, v] : seeds) {
+      Edge e;
+      if (!is_input(v[0]) || !is_input(v[1]) || !constrained_edge(tr, v[0], v[1], e)) continue;
+      for (int dir = 0; dir < 2; ++dir) {
+        if (split_pieces_beyond(tr, v[1 - dir], v[dir], kReach) < kMarch) continue;
+        Vertex_handle from = v[dir], at = v[1 - dir], next;
+        while (next_in_chain(tr, from, at, next) && is_input(next) &&
+               goes_straight(from->point(), at->point(), next->point()) &&
+               same_length(from->point(), at->point(), at->point(), next->point())) {
+          if (!walked_.insert({at->point(), next->point()}).second) break;
+          Sub_segment s = sub_segment(at, next);
+          if (queued_.insert(s.first).second) pending_.push_back(s);
+          from = at;
+          at = next;
+        }
+      }
+    }
+  }
+  // Appends the queued pieces not split yet to `edges` (and forgets the others).
+  void append_pending(const Cdt& tr, std::vector<Sub_segment>& edges) {
+    Edge e;
+    pending_.erase(std::remove_if(pending_.begin(), pending_.end(),
+                                  [&](const Sub_segment& s) { return !constrained_edge(tr, s.second[0], s.second[1], e); }),
+                   pending_.end());
+    edges.insert(edges.end(), pending_.begin(), pending_.end());
+  }
+
+ private:
+  static constexpr int kReach = 4;  // pieces looked at beyond a seed
+  static constexpr int kMarch = 2;  // split pieces among them that make a march
+
+  std::set<std::array<Point_2, 2>> walked_;  // this round's walks: pieces, directed as walked
+  std::set<std::array<Point_2, 2>> queued_;  // every piece queued so far, by sorted ends
+  std::vector<Sub_segment> pending_;         // queued pieces, until split
+};
+
 }  // namespace
 
 Rounds_report Mesher::run_in_rounds(std::size_t budget, std::size_t max_rounds) {
@@ -95,6 +230,7 @@ Rounds_report Mesher::run_in_rounds(std::size_t budget, std::size_t max_rounds) 
   auto& edge_visitor = visitor_.previous_level();
   std::vector<Candidate> candidates;
   std::unordered_set<const void*> blocked;  // faces of chosen cavities and their neighbours
+  Marching_runs runs;
   while (true) {
     candidates.clear();
     std::size_t dropped = 0;
@@ -142,14 +278,14 @@ Rounds_report Mesher::run_in_rounds(std::size_t budget, std::size_t max_rounds) 
       candidates.push_back(std::move(c));
     }
     // 2. The encroached sub-segments: CGAL's edge queue, read as a set.
-    std::vector<std::pair<std::array<Point_2, 2>, std::array<Vertex_handle, 2>>> edges;
+    std::vector<Sub_segment> edges;
     while (!edges_.no_longer_element_to_refine()) {
       const Edge e = edges_.get_next_element();
       edges_.pop_next_element();
-      Vertex_handle a = e.first->vertex(Cdt::cw(e.second)), b = e.first->vertex(Cdt::ccw(e.second));
-      if (b->point() < a->point()) std::swap(a, b);
-      edges.push_back({{a->point(), b->point()}, {a, b}});
+      edges.push_back(sub_segment(e.first->vertex(Cdt::cw(e.second)), e.first->vertex(Cdt::ccw(e.second))));
     }
+    runs.add_marching_runs(tr, edges);
+    runs.append_pending(tr, edges);
     std::sort(edges.begin(), edges.end(), [](const auto& x, const auto& y) { return x.first < y.first; });
     edges.erase(std::unique(edges.begin(), edges.end(), [](const auto& x, const auto& y) { return x.first == y.first; }),
                 edges.end());

@@ -3,6 +3,8 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <cstdio>
+#include <string>
 #include <cstdint>
 
 namespace evomesh {
@@ -210,6 +212,68 @@ std::vector<std::uint8_t> sharing_a_triangle(const std::vector<Triangle>& triang
     sharing[t[2]] |= c;
   }
   return sharing;
+}
+
+void check_size_delta(const std::vector<double>& delta, const std::vector<double>& h, const std::vector<double>& nn,
+                      double delta_min, double delta_max, std::size_t n_checked,
+                      const std::vector<std::int64_t>* ids) {
+  for (std::size_t p = 0; p < n_checked; ++p) {
+    if (delta[p] >= delta_min && delta[p] <= delta_max) continue;
+    char buffer[320];
+    std::snprintf(buffer, sizeof buffer,
+                  "size %g at point %lld is %g times its current spacing %g; one step changes the spacing by a "
+                  "factor in [%g, %g]",
+                  h[p], static_cast<long long>(ids ? (*ids)[p] : static_cast<std::int64_t>(p)), delta[p], nn[p],
+                  delta_min, delta_max);
+    throw Input_error(buffer);
+  }
+}
+
+std::vector<double> delta_from_size(const std::vector<Vec2>& points, const std::vector<Triangle>& triangles,
+                                    const std::vector<double>& h, const std::vector<double>& nn,
+                                    bool keep_fine_clusters, double delta_min, double delta_max,
+                                    std::size_t n_checked, const std::vector<std::int64_t>* ids) {
+  using Rule = Size_rule;
+  const std::size_t n = points.size();
+  const std::vector<std::uint8_t> classes = edge_over_size_classes(
+      points, triangles, h, Rule::coarse_tolerance, 1 / Rule::fine_tolerance, 1 / Rule::meets);
+  std::vector<std::uint8_t> too_fine(n), meets(n);
+  bool any_too_fine = false;
+  for (std::size_t p = 0; p < n; ++p) {
+    too_fine[p] = (classes[p] & Edge_over_size_below) != 0;
+    meets[p] = (classes[p] & Edge_over_size_at_least) != 0;
+    any_too_fine = any_too_fine || too_fine[p];
+  }
+  if (any_too_fine) {
+    if (keep_fine_clusters) {
+      // A too-fine pocket within the rings of points that meet the request is
+      // a settled cluster, kept unless joined (through too-fine points, within
+      // the rings) to a coarsening region of at least two points.
+      const std::vector<std::uint8_t> pocket = near_seeds(triangles, too_fine, meets, Rule::clearance_rings);
+      std::vector<std::uint8_t> open(n);
+      for (std::size_t p = 0; p < n; ++p) open[p] = too_fine[p] && !pocket[p];
+      const std::vector<std::uint8_t> coarsening = sharing_a_triangle(triangles, open);
+      too_fine = near_seeds(triangles, too_fine, coarsening, Rule::clearance_rings, &too_fine);
+    }
+    // The neighbours of a coarsening point finer than 1 / meets coarsen with it.
+    std::vector<std::uint8_t> not_meeting(n);
+    for (std::size_t p = 0; p < n; ++p) not_meeting[p] = !meets[p];
+    const std::vector<std::uint8_t> around = near_seeds(triangles, not_meeting, too_fine, 1);
+    for (std::size_t p = 0; p < n; ++p) too_fine[p] = too_fine[p] || around[p];
+  }
+  std::vector<double> delta(n);
+  for (std::size_t p = 0; p < n; ++p) {
+    const double refine = h[p] / (Rule::edge_over_nn_refined * nn[p]);
+    if ((classes[p] & Edge_over_size_above) && refine < Rule::refine_below) {
+      delta[p] = refine;
+    } else if (too_fine[p]) {
+      delta[p] = std::max(1.0, h[p] / (Rule::edge_over_nn_coarsened * nn[p]));
+    } else {
+      delta[p] = 1.0;
+    }
+  }
+  check_size_delta(delta, h, nn, delta_min, delta_max, n_checked, ids);
+  return delta;
 }
 
 }  // namespace evomesh

@@ -17,9 +17,10 @@
 #include <stdexcept>
 
 #include "evomesh/detail/apollonius_filter.hpp"
-#include "evomesh/detail/point_tree.hpp"
 #include "evomesh/detail/spatial_order.hpp"
 #include "evomesh/kernel.hpp"
+#include "evomesh/nd/hilbert_order.hpp"
+#include "evomesh/nd/kd_tree.hpp"
 #include "evomesh/parallel.hpp"
 
 namespace evomesh {
@@ -27,7 +28,7 @@ namespace evomesh {
 std::vector<double> nn_spacing(const std::vector<Vec2>& points) {
   const std::size_t n = points.size();
   if (n < 2) throw Input_error("nn spacing needs at least two points");
-  const auto nn2 = detail::Point_tree(points).squared_nn(0);
+  const auto nn2 = nd::Point_tree<2>(points).squared_nn(0);
   std::vector<double> nn(n);
   for (std::size_t i = 0; i < n; ++i) nn[i] = std::sqrt(nn2[i]);
   return nn;
@@ -61,8 +62,8 @@ std::vector<double> nn_spacing_after_change(const std::vector<Vec2>& input_point
   std::vector<double> nn(n, nan);
   std::vector<std::uint8_t> open(n, 0);
   {
-    const std::optional<detail::Point_tree> changed_tree =
-        changed.empty() ? std::nullopt : std::make_optional<detail::Point_tree>(changed);
+    const std::optional<nd::Point_tree<2>> changed_tree =
+        changed.empty() ? std::nullopt : std::make_optional<nd::Point_tree<2>>(changed);
     parallel_for(n_chunks, 0, [&](std::size_t c) {
       for (std::size_t i = c * kChunk; i < std::min(n, (c + 1) * kChunk); ++i) {
         const double d = origin[i] >= 0 ? input_nn[origin[i]] : nan;
@@ -110,7 +111,7 @@ std::vector<double> nn_spacing_after_change(const std::vector<Vec2>& input_point
   largest *= 1 + 1e-12;
   std::vector<std::uint8_t> near(n, 0);
   {
-    const detail::Point_tree open_tree(open_points);
+    const nd::Point_tree<2> open_tree(open_points);
     parallel_for(n_chunks, 0, [&](std::size_t c) {
       for (std::size_t i = c * kChunk; i < std::min(n, (c + 1) * kChunk); ++i) {
         near[i] = open[i] || open_tree.has_point_within(points[i], largest);
@@ -121,7 +122,7 @@ std::vector<double> nn_spacing_after_change(const std::vector<Vec2>& input_point
   for (std::size_t i = 0; i < n; ++i) {
     if (near[i]) near_points.push_back(points[i]);
   }
-  const detail::Point_tree near_tree(near_points);
+  const nd::Point_tree<2> near_tree(near_points);
   std::vector<double> exact(open_index.size());
   parallel_for((open_index.size() + kChunk - 1) / kChunk, 0, [&](std::size_t c) {
     for (std::size_t k = c * kChunk; k < std::min(open_index.size(), (c + 1) * kChunk); ++k) {
@@ -589,7 +590,7 @@ void Spacing_function::evaluate(const Vec2* queries, std::size_t n, double* f_ou
   std::vector<detail::Ordered_point> sorted;
   std::vector<std::uint32_t> grid_order;
   if (certified) sorted = detail::spatial_order(queries, n, detail::Spatial_order::hilbert, threads);
-  else grid_order = detail::hilbert_grid_permutation(queries, n, threads);
+  else grid_order = nd::hilbert_grid_permutation<2>(queries, n, threads);
   const Impl& impl = *impl_;
   const auto& sites = impl.sites;
   const auto& weights = impl.weights;

@@ -11,9 +11,9 @@
 
 #include <CGAL/Delaunay_triangulation_2.h>
 
-#include "evomesh/detail/point_tree.hpp"
 #include "evomesh/kernel.hpp"
 #include "evomesh/mesh_walk.hpp"
+#include "evomesh/nd/kd_tree.hpp"
 #include "evomesh/parallel.hpp"
 #include "evomesh/sampling.hpp"
 
@@ -22,7 +22,7 @@ namespace evomesh {
 namespace {
 
 // The kept centres' nearest distances (squared_nearest, squared_two_nearest),
-// as detail::Point_tree answers them, without building the tree for queries
+// as nd::Point_tree<2> answers them, without building the tree for queries
 // where the centres are spread evenly (most of them): the centres are bucketed
 // in a uniform grid (about two a cell, O(n)) and a query searches rings of
 // cells around its own until every cell not searched lies farther than the
@@ -121,7 +121,7 @@ class Kept_centres {
     }
     return false;
   }
-  const detail::Point_tree& tree() const {
+  const nd::Point_tree<2>& tree() const {
     std::call_once(tree_built_, [&]() { tree_.emplace(points_); });
     return *tree_;
   }
@@ -134,7 +134,7 @@ class Kept_centres {
   std::vector<std::int64_t> start_;
   std::vector<Vec2> members_;
   mutable std::once_flag tree_built_;
-  mutable std::optional<detail::Point_tree> tree_;
+  mutable std::optional<nd::Point_tree<2>> tree_;
 };
 
 // The gap repair: the paper's nn_M'(p) of an input point is the

@@ -8,6 +8,7 @@
 #include <cstdint>
 #include <limits>
 
+#include "evomesh/nd/hilbert_order.hpp"
 #include "evomesh/parallel.hpp"
 
 namespace evomesh::detail {
@@ -94,76 +95,8 @@ void multiscale_sort(Ordered_point* begin, Ordered_point* end, int threads) {
   hilbert_sort(middle, end, 4, threads);
 }
 
-// Index of the cell (x, y) of a 2^16 x 2^16 grid along the Hilbert curve.
-std::uint32_t hilbert_index(std::uint32_t x, std::uint32_t y) {
-  std::uint32_t d = 0;
-  for (std::uint32_t s = 1u << 15; s > 0; s >>= 1) {
-    const std::uint32_t rx = (x & s) > 0, ry = (y & s) > 0;
-    d += s * s * ((3 * rx) ^ ry);
-    if (ry == 0) {  // rotate the quadrant
-      if (rx == 1) {
-        x = s - 1 - x;
-        y = s - 1 - y;
-      }
-      std::swap(x, y);
-    }
-  }
-  return d;
-}
-
-}  // namespace
-
-// Keys in parallel; the indices by the keys' high half (a stable counting
-// sort), then each bucket by (low half, index): the indices sorted by (key,
-// index), as two stable radix passes would give, with 8 bytes a point instead
-// of 12 (the sample radii sort all candidates: that was the stage's peak).
-std::vector<std::uint32_t> hilbert_grid_permutation(const Vec2* points, std::size_t n, int threads) {
-  if (n >= std::numeric_limits<std::uint32_t>::max()) throw Input_error("too many points (at most 2^32 - 2)");
-  double lo_x = std::numeric_limits<double>::infinity(), lo_y = lo_x, hi_x = -lo_x, hi_y = -lo_x;
-  for (std::size_t i = 0; i < n; ++i) {
-    lo_x = std::min(lo_x, points[i][0]);
-    lo_y = std::min(lo_y, points[i][1]);
-    hi_x = std::max(hi_x, points[i][0]);
-    hi_y = std::max(hi_y, points[i][1]);
-  }
-  const double extent = std::max(hi_x - lo_x, hi_y - lo_y);
-  const double scale = extent > 0 ? 65535.0 / extent : 0.0;
-  std::vector<std::uint32_t> key, order;
-  parallel_resize(key, n);
-  parallel_resize(order, n);
-  constexpr std::size_t kBlock = 1 << 16;
-  parallel_for((n + kBlock - 1) / kBlock, threads, [&](std::size_t b) {
-    for (std::size_t i = b * kBlock; i < std::min(n, (b + 1) * kBlock); ++i) {
-      const auto qx = static_cast<std::uint32_t>(std::min(65535.0, (points[i][0] - lo_x) * scale));
-      const auto qy = static_cast<std::uint32_t>(std::min(65535.0, (points[i][1] - lo_y) * scale));
-      key[i] = hilbert_index(qx, qy);
-    }
-  });
-  constexpr std::size_t kBuckets = 65536;
-  std::vector<std::size_t> start(kBuckets + 1, 0);
-  for (std::size_t i = 0; i < n; ++i) ++start[(key[i] >> 16) + 1];
-  for (std::size_t d = 0; d < kBuckets; ++d) start[d + 1] += start[d];
-  {
-    std::vector<std::size_t> next(start.begin(), start.end() - 1);
-    for (std::size_t i = 0; i < n; ++i) order[next[key[i] >> 16]++] = static_cast<std::uint32_t>(i);
-  }
-  constexpr std::size_t kBucketChunk = 256;
-  parallel_for(kBuckets / kBucketChunk, threads, [&](std::size_t c) {
-    for (std::size_t d = c * kBucketChunk; d < (c + 1) * kBucketChunk; ++d) {
-      std::sort(order.begin() + static_cast<std::ptrdiff_t>(start[d]),
-                order.begin() + static_cast<std::ptrdiff_t>(start[d + 1]), [&](std::uint32_t u, std::uint32_t v) {
-                  const std::uint32_t ku = key[u] & 0xffff, kv = key[v] & 0xffff;
-                  return ku < kv || (ku == kv && u < v);
-                });
-    }
-  });
-  return order;
-}
-
-namespace {
-
 std::vector<Ordered_point> hilbert_grid_order(const Vec2* points, std::size_t n, int threads) {
-  const std::vector<std::uint32_t> order = hilbert_grid_permutation(points, n, threads);
+  const std::vector<std::uint32_t> order = nd::hilbert_grid_permutation<2>(points, n, threads);
   std::vector<Ordered_point> sorted(n);
   constexpr std::size_t kBlock = 1 << 16;
   parallel_for((n + kBlock - 1) / kBlock, threads, [&](std::size_t b) {

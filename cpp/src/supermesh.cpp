@@ -8,11 +8,17 @@
 #include <string>
 #include <utility>
 
+#include "evomesh/detail/cell_stars.hpp"
 #include "evomesh/parallel.hpp"
 
 namespace evomesh {
 
 namespace {
+
+using detail::facet_adjacency;
+using detail::vertex_stars;
+using detail::Vertex_stars;
+using detail::Visit_marks;
 
 inline double cross(const Vec2& a, const Vec2& b) { return a[0] * b[1] - a[1] * b[0]; }
 inline Vec2 sub(const Vec2& a, const Vec2& b) { return {a[0] - b[0], a[1] - b[1]}; }
@@ -92,69 +98,13 @@ void polygon_mass(const Polygon& poly, const std::array<Vec2, 3>& tv, double t_t
   for (int k = 0; k < 9; ++k) mass[k] = sum[k];
 }
 
-// Old vertex -> old triangles (star), compressed: star[start[v] .. start[v+1]) in increasing triangle order.
-struct Vertex_stars {
-  std::vector<Index> start;
-  std::vector<Index> star;
-};
-
-Vertex_stars vertex_stars(std::size_t n_points, const std::vector<Triangle>& tris) {
-  Vertex_stars s;
-  s.start.assign(n_points + 1, 0);
-  for (const Triangle& t : tris)
-    for (const Index v : t) ++s.start[v + 1];
-  for (std::size_t v = 0; v < n_points; ++v) s.start[v + 1] += s.start[v];
-  s.star.resize(3 * tris.size());
-  std::vector<Index> fill(s.start.begin(), s.start.end() - 1);
-  for (std::size_t k = 0; k < tris.size(); ++k)
-    for (const Index v : tris[k]) s.star[fill[v]++] = static_cast<Index>(k);
-  return s;
-}
-
 constexpr std::size_t block_size = 1024;
-
-// Old triangle adjacency: neighbour[3 s + k] across the edge (s[k], s[k+1]), -1
-// on the boundary: the other triangle of the star of s[k] that has s[k+1].
-std::vector<Index> adjacency(std::size_t n_points, const std::vector<Triangle>& tris, int threads) {
-  const Vertex_stars stars = vertex_stars(n_points, tris);
-  std::vector<Index> neighbour(3 * tris.size(), -1);
-  const std::size_t m = tris.size();
-  parallel_for((m + block_size - 1) / block_size, threads, [&](std::size_t block) {
-    for (std::size_t s = block * block_size, end = std::min(m, s + block_size); s < end; ++s)
-      for (int k = 0; k < 3; ++k) {
-        const Index a = tris[s][k], b = tris[s][(k + 1) % 3];
-        for (Index i = stars.start[a]; i < stars.start[a + 1]; ++i) {
-          const Index u = stars.star[i];
-          const Triangle& other = tris[u];
-          if (static_cast<std::size_t>(u) != s && (other[0] == b || other[1] == b || other[2] == b)) {
-            neighbour[3 * s + k] = u;
-            break;
-          }
-        }
-      }
-  });
-  return neighbour;
-}
 
 struct Block_result {
   std::vector<Index> count;  // pairs per triangle of the block
   std::vector<Index> old_triangle;
   std::vector<double> area;
   std::vector<double> mass;
-};
-
-// Visited marks of old triangles, one array per worker thread (a generation
-// counter avoids clearing it between new triangles).
-struct Marks {
-  std::vector<std::uint32_t> stamp;
-  std::uint32_t generation = 0;
-  std::uint32_t next(std::size_t n) {
-    if (stamp.size() != n || generation == std::numeric_limits<std::uint32_t>::max()) {
-      stamp.assign(n, 0);
-      generation = 0;
-    }
-    return ++generation;
-  }
 };
 
 }  // namespace
@@ -199,7 +149,9 @@ Supermesh build_supermesh(const std::vector<Vec2>& old_points, const std::vector
     throw Input_error("identical must have one entry per new triangle");
   for (const Index s : identical)
     if (s < -1 || s >= n_old_tri) throw Input_error("identical refers to an old triangle out of range");
-  const std::vector<Index> neighbour = adjacency(old_points.size(), old_triangles, threads);
+  // neighbour[3 s + k]: the old triangle across the edge (s[k], s[k+1]), -1 on the boundary.
+  const std::vector<Index> neighbour =
+      facet_adjacency(vertex_stars(old_points.size(), old_triangles), old_triangles, threads);
   // Bounding boxes of the old triangles.
   std::vector<std::array<double, 4>> box(old_triangles.size());
   parallel_for((old_triangles.size() + block_size - 1) / block_size, threads, [&](std::size_t block) {
@@ -217,7 +169,7 @@ Supermesh build_supermesh(const std::vector<Vec2>& old_points, const std::vector
   std::vector<Index> orphan(n_blocks, -1);     // a new triangle without any seed
   std::vector<Index> mismatch(n_blocks, -1);   // a new triangle whose identical old triangle is not
   parallel_for(n_blocks, threads, [&](std::size_t block) {
-    thread_local Marks marks;
+    thread_local Visit_marks marks;
     Block_result& out = blocks[block];
     const std::size_t begin = block * block_size, end = std::min(m, begin + block_size);
     out.count.assign(end - begin, 0);

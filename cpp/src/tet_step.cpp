@@ -11,10 +11,11 @@
 #include <numeric>
 #include <unordered_map>
 
+#include "evomesh/detail/kept_sphere_tree.hpp"
 #include "evomesh/kernel.hpp"
 #include "evomesh/nd/cone_envelope.hpp"
 #include "evomesh/nd/kd_tree.hpp"
-#include "evomesh/nd/selected_spheres.hpp"
+#include "evomesh/packing.hpp"
 #include "evomesh/parallel.hpp"
 
 namespace evomesh::tet {
@@ -23,7 +24,7 @@ namespace {
 
 using Point_3 = Kernel::Point_3;
 using Envelope = nd::Cone_envelope<3>;
-using Spheres = nd::Selected_spheres<3>;
+using Spheres = detail::Kept_sphere_tree<3>;  // the kept spheres, for their drop filter (covers)
 using Mask = Polyhedral_domain::Mask;
 
 Point_3 to_cgal(const Vec3& p) { return Point_3(p[0], p[1], p[2]); }
@@ -322,37 +323,51 @@ void apply_clearance(const Polyhedral_domain& domain, double clearance, std::vec
   }
 }
 
-// The lexical-first MIS over candidates[first..) in the packing order
-// (class, radius, id), against the spheres in `also` (selected earlier) and
-// among themselves. Required points and corners are kept unconditionally.
-std::vector<std::size_t> lexical_first_mis(const std::vector<Candidate>& candidates, std::size_t first,
-                                           double radius_scale, const Spheres* also, Spheres& spheres) {
-  std::vector<std::size_t> order(candidates.size() - first);
-  std::iota(order.begin(), order.end(), first);
-  std::sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) {
-    const Candidate& u = candidates[a];
-    const Candidate& v = candidates[b];
-    if (u.cls != v.cls) return u.cls < v.cls;
-    if (u.f != v.f) return u.f < v.f;
-    return u.id < v.id;
-  });
-  std::vector<std::size_t> kept;
-  for (std::size_t k : order) {
-    const Candidate& c = candidates[k];
-    const double r = radius_scale * c.f / 2;
-    const bool keep = c.cls <= corner_class ||
-                      (!c.rejected && !spheres.conflicts(c.x, r) && !(also && also->conflicts(c.x, r)));
-    if (!keep) continue;
-    spheres.select(k - first, r);
-    kept.push_back(k);
+// The packing order of candidates[first..) (class, f, id: packing_order, the
+// 2-D step's, ties by index, and ids grow with the index), as indices into
+// candidates; the rejected ones left out (never kept, they meet nothing).
+std::vector<Index> packing_order_of(const std::vector<Candidate>& candidates, std::size_t first) {
+  std::vector<std::uint8_t> classes(candidates.size() - first);
+  std::vector<double> f(candidates.size() - first);
+  for (std::size_t k = first; k < candidates.size(); ++k) {
+    classes[k - first] = static_cast<std::uint8_t>(candidates[k].cls);
+    f[k - first] = candidates[k].f;
   }
-  return kept;
+  std::vector<Index> order;
+  for (Index i : packing_order(std::move(classes), std::move(f))) {
+    const std::size_t k = first + static_cast<std::size_t>(i);
+    if (!candidates[k].rejected) order.push_back(static_cast<Index>(k));
+  }
+  return order;
 }
 
-std::vector<nd::Point<3>> centres(const std::vector<Candidate>& candidates, std::size_t first) {
-  std::vector<nd::Point<3>> out(candidates.size() - first);
-  for (std::size_t k = first; k < candidates.size(); ++k) out[k - first] = candidates[k].x;
+std::vector<nd::Point<3>> centres(const std::vector<Candidate>& candidates) {
+  std::vector<nd::Point<3>> out(candidates.size());
+  for (std::size_t k = 0; k < candidates.size(); ++k) out[k] = candidates[k].x;
   return out;
+}
+
+std::vector<double> radii(const std::vector<Candidate>& candidates, double radius_scale) {
+  std::vector<double> out(candidates.size());
+  for (std::size_t k = 0; k < candidates.size(); ++k) out[k] = radius_scale * candidates[k].f / 2;
+  return out;
+}
+
+// The kept spheres, for the drop filter (Spheres::covers).
+Spheres kept_spheres(const std::vector<Candidate>& candidates, const std::vector<std::uint8_t>& kept,
+                     double radius_scale, int threads) {
+  std::vector<nd::Point<3>> x;
+  std::vector<double> r;
+  for (std::size_t k = 0; k < kept.size(); ++k) {
+    if (!kept[k]) continue;
+    x.push_back(candidates[k].x);
+    r.push_back(radius_scale * candidates[k].f / 2);
+  }
+  std::vector<Index> order(x.size());
+  std::iota(order.begin(), order.end(), Index{0});
+  Spheres spheres(x, r, std::move(order), threads);
+  for (std::size_t k = 0; k < spheres.n_visits(); ++k) spheres.keep(spheres.visit(k));
+  return spheres;
 }
 
 Tet_point_kind output_kind(const Candidate& c, const Tet_step_input& in) {
@@ -487,10 +502,7 @@ Tet_step_result tet_step(const Tet_step_input& in, const Tet_step_options& optio
   for (double w : in.weight) {
     if (!(w > 0) || !std::isfinite(w)) throw Input_error("weights must be finite and positive");
   }
-  if (!(options.cell_factor > 0) || !(options.boundary_clearance >= 0) ||
-      !(options.radius_scale > 0 && options.radius_scale <= 1)) {
-    throw Input_error("cell_factor must be positive, boundary_clearance non-negative, radius_scale in (0, 1]");
-  }
+  options.validate();
   Thread_limit limit(options.threads);
   Tet_step_result result;
   auto stat = [&](const char* name, double value) { result.stats.emplace_back(name, value); };
@@ -537,8 +549,14 @@ Tet_step_result tet_step(const Tet_step_input& in, const Tet_step_options& optio
   std::size_t sample_evaluations = 0;
   evaluate_f(envelope, in, candidates, n, cap, options.threads, sample_evaluations);
   apply_clearance(in.domain, options.boundary_clearance, candidates, 0);
-  Spheres first_spheres(centres(candidates, 0));
-  std::vector<std::size_t> kept = lexical_first_mis(candidates, 0, options.radius_scale, nullptr, first_spheres);
+  // The lexical-first MIS of the 2-D step (packing.hpp), required points and
+  // corners forced (the lowest classes: first in the order, never rejected).
+  const std::vector<Index> first_order = packing_order_of(candidates, 0);
+  const auto n_forced = static_cast<std::size_t>(std::count_if(
+      candidates.begin(), candidates.end(), [](const Candidate& c) { return c.cls <= corner_class; }));
+  std::vector<std::uint8_t> kept_flags = lexical_first_mis_3(centres(candidates), radii(candidates, options.radius_scale),
+                                                             first_order, n_forced, options.threads);
+  const Spheres first_spheres = kept_spheres(candidates, kept_flags, options.radius_scale, options.threads);
   stat("edge_samples", static_cast<double>(n_edge_samples));
   stat("face_samples", static_cast<double>(n_boundary_samples - n_edge_samples));
 
@@ -548,10 +566,9 @@ Tet_step_result tet_step(const Tet_step_input& in, const Tet_step_options& optio
   for (std::size_t k = first_sample; k < candidates.size(); ++k) candidates[k].id = static_cast<Index>(k);
   evaluate_f(envelope, in, candidates, first_sample, cap, options.threads, sample_evaluations);
   apply_clearance(in.domain, options.boundary_clearance, candidates, first_sample);
-  Spheres sample_spheres(centres(candidates, first_sample));
-  const std::vector<std::size_t> kept_samples = lexical_first_mis(candidates, first_sample, options.radius_scale, &first_spheres,
-                                                                         sample_spheres);
-  kept.insert(kept.end(), kept_samples.begin(), kept_samples.end());
+  // The samples after every sphere the first pass kept (extend_packing).
+  kept_flags = extend_packing_3(centres(candidates), radii(candidates, options.radius_scale), first_order, kept_flags,
+                                packing_order_of(candidates, first_sample), options.threads);
   const std::size_t n_queries = candidates.size() - n;
   stat("interior_samples", static_cast<double>(candidates.size() - first_sample));
   stat("samples_dropped", static_cast<double>(n_dropped));
@@ -559,8 +576,8 @@ Tet_step_result tet_step(const Tet_step_input& in, const Tet_step_options& optio
   stat("packing_seconds", seconds_since(start));
 
   // The kept points: old ones in their order, then the new ones by id.
-  std::sort(kept.begin(), kept.end());
-  for (std::size_t k : kept) {
+  for (std::size_t k = 0; k < candidates.size(); ++k) {
+    if (!kept_flags[k]) continue;
     const Candidate& c = candidates[k];
     result.points.push_back(c.x);
     result.origin.push_back(c.origin);

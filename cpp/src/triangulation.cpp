@@ -18,8 +18,8 @@
 #include "evomesh/detail/domain.hpp"
 #include "evomesh/detail/insert_points.hpp"
 #include "evomesh/detail/spatial_order.hpp"
-#include "evomesh/detail/static_kd_tree.hpp"
 #include "evomesh/kernel.hpp"
+#include "evomesh/nd/kd_tree.hpp"
 #include "evomesh/parallel.hpp"
 
 namespace evomesh {
@@ -558,7 +558,7 @@ std::array<Index, 2> first_pinched_boundary(const std::vector<Vec2>& points, con
   for (std::size_t k = 0; k < vertex.size(); ++k) local[k] = points[static_cast<std::size_t>(vertex[k])];
   if (local.empty()) return {-1, -1};
   std::vector<Vec2> tree_points;
-  const detail::Static_kd_tree<> tree(local, 8, tree_points);
+  const nd::Static_kd_tree<2> tree(local, 8, tree_points);
   const auto& point_at = tree.point_at();
   const auto reach_of = [](const Vec2& p) { return std::max(std::abs(p[0]), std::abs(p[1])); };
   for (std::size_t s = 0; s < boundary.size(); ++s) {
@@ -569,21 +569,21 @@ std::array<Index, 2> first_pinched_boundary(const std::vector<Vec2>& points, con
     const double reach_ab = std::max(reach_of(a), reach_of(b));
     Index best = -1;
     double best_ratio = min_ulps;
-    tree.depth_first(1, [&](std::size_t m, detail::Kd_stack& stack) {
-      const detail::Box& box = tree.node(m);
+    tree.depth_first(1, [&](std::size_t m, nd::Kd_stack& stack) {
+      const nd::Box<2>& box = tree.node(m);
       // Generous pruning (twice the tolerance at the box's largest coordinate):
       // it must never skip a point that the exact test below would report.
-      const double reach = std::max({reach_ab, std::abs(box.lo_x), std::abs(box.hi_x), std::abs(box.lo_y),
-                                     std::abs(box.hi_y)});
+      const double reach = std::max({reach_ab, std::abs(box.lo[0]), std::abs(box.hi[0]), std::abs(box.lo[1]),
+                                     std::abs(box.hi[1])});
       const double slack = 2 * min_ulps * eps * reach;
-      if (box.lo_x > std::max(a[0], b[0]) + slack || box.hi_x < std::min(a[0], b[0]) - slack ||
-          box.lo_y > std::max(a[1], b[1]) + slack || box.hi_y < std::min(a[1], b[1]) - slack) {
+      if (box.lo[0] > std::max(a[0], b[0]) + slack || box.hi[0] < std::min(a[0], b[0]) - slack ||
+          box.lo[1] > std::max(a[1], b[1]) + slack || box.hi[1] < std::min(a[1], b[1]) - slack) {
         return false;
       }
       if (length > 0) {  // the box's corners against the edge's line
         double lo = std::numeric_limits<double>::infinity(), hi = -lo;
-        for (double x : {box.lo_x, box.hi_x}) {
-          for (double y : {box.lo_y, box.hi_y}) {
+        for (double x : {box.lo[0], box.hi[0]}) {
+          for (double y : {box.lo[1], box.hi[1]}) {
             const double side = (dx * (y - a[1]) - dy * (x - a[0])) / length;
             lo = std::min(lo, side);
             hi = std::max(hi, side);

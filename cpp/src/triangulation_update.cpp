@@ -9,8 +9,8 @@
 #include <unordered_set>
 #include <utility>
 
-#include "evomesh/detail/spatial_order.hpp"
 #include "evomesh/kernel.hpp"
+#include "evomesh/nd/hilbert_order.hpp"
 #include "evomesh/parallel.hpp"
 #include "evomesh/triangulation.hpp"
 
@@ -89,7 +89,7 @@ std::optional<std::vector<Triangle>> updated_constrained_delaunay(const Old_mesh
   }
   std::vector<Vec2> fresh_points(fresh.size());
   for (std::size_t k = 0; k < fresh.size(); ++k) fresh_points[k] = points[fresh[k]];
-  const std::vector<std::uint32_t> order = detail::hilbert_grid_permutation(fresh_points.data(), fresh_points.size());
+  const std::vector<std::uint32_t> order = nd::hilbert_grid_permutation<2>(fresh_points.data(), fresh_points.size());
   std::vector<Index> stack;
   std::vector<Index> seen_at(m_in, -1);  // the new point (position in `order`) that last visited a triangle
   Index at = old_mesh.triangle_at(T[0][0]);

@@ -13,7 +13,7 @@
 
 #include "check.hpp"
 #include "evomesh/candidates.hpp"
-#include "evomesh/detail/point_tree.hpp"
+#include "evomesh/nd/kd_tree.hpp"
 #include "evomesh/kernel.hpp"
 #include "evomesh/mesh_walk.hpp"
 #include "evomesh/parent_map.hpp"
@@ -170,7 +170,7 @@ int main() {
     for (std::size_t n : {0, 1, 2, 3, 17, 500}) {
       std::vector<Vec2> points(n);
       for (auto& p : points) p = {u(rng), u(rng)};
-      const detail::Point_tree tree(points);
+      const nd::Point_tree<2> tree(points);
       int wrong = 0;
       for (int q = 0; q < 300; ++q) {
         const Vec2 x = q % 3 == 0 && n > 0 ? points[q % n] : Vec2{u(rng), u(rng)};

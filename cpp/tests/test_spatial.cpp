@@ -1,6 +1,7 @@
 // The spatial orders (detail/spatial_order.hpp) against the CGAL sorts they
-// reproduce, and the nearest-point queries of the static kd-tree
-// (detail/point_tree.hpp) against brute force.
+// reproduce, the Hilbert index in 2-D and 3-D (nd/hilbert_order.hpp), and the
+// nearest-point queries of the static kd-tree (nd/kd_tree.hpp) in 2-D and 3-D
+// against brute force.
 #include <CGAL/Exact_predicates_inexact_constructions_kernel.h>
 #include <CGAL/Spatial_sort_traits_adapter_2.h>
 #include <CGAL/hilbert_sort.h>
@@ -17,8 +18,9 @@
 #include <vector>
 
 #include "check.hpp"
-#include "evomesh/detail/point_tree.hpp"
 #include "evomesh/detail/spatial_order.hpp"
+#include "evomesh/nd/hilbert_order.hpp"
+#include "evomesh/nd/kd_tree.hpp"
 #include "evomesh/parallel.hpp"
 
 using namespace evomesh;
@@ -96,7 +98,7 @@ void check_orders(const char* name, const std::vector<Vec2>& points) {
 
 // squared_nearest and squared_nn against brute force.
 void check_tree(const char* name, const std::vector<Vec2>& points, unsigned seed) {
-  const detail::Point_tree tree(points);
+  const nd::Point_tree<2> tree(points);
   std::mt19937_64 rng(seed);
   std::uniform_real_distribution<double> u(-0.2, 1.2);
   std::size_t wrong = 0;
@@ -126,6 +128,96 @@ void check_tree(const char* name, const std::vector<Vec2>& points, unsigned seed
   }
 }
 
+// The quadrant-rotation form of the 2-D Hilbert index (the core's 2-D grid
+// order before it was dimension-generic): nd::hilbert_index<2> must equal it.
+std::uint32_t quadrant_hilbert_index(std::uint32_t x, std::uint32_t y) {
+  std::uint32_t d = 0;
+  for (std::uint32_t s = 1u << 15; s > 0; s >>= 1) {
+    const std::uint32_t rx = (x & s) > 0, ry = (y & s) > 0;
+    d += s * s * ((3 * rx) ^ ry);
+    if (ry == 0) {
+      if (rx == 1) {
+        x = s - 1 - x;
+        y = s - 1 - y;
+      }
+      std::swap(x, y);
+    }
+  }
+  return d;
+}
+
+// A Hilbert curve starts at the origin and fills the cube of side 2^k there
+// with its first 2^(D k) cells, each a unit step from the one before.
+template <std::size_t D>
+void check_hilbert_curve(std::uint32_t side) {
+  std::size_t cells = 1;
+  for (std::size_t i = 0; i < D; ++i) cells *= side;
+  std::vector<std::array<std::uint32_t, D>> at(cells);
+  std::vector<std::uint8_t> seen(cells, 0);
+  bool inside = true;
+  for (std::size_t c = 0; c < cells; ++c) {
+    std::array<std::uint32_t, D> x;
+    std::size_t rest = c;
+    for (std::size_t i = 0; i < D; ++i) x[i] = static_cast<std::uint32_t>(rest % side), rest /= side;
+    const std::uint32_t d = nd::hilbert_index<D>(x);
+    if (d >= cells || seen[d]) {
+      inside = false;
+      continue;
+    }
+    seen[d] = 1;
+    at[d] = x;
+  }
+  CHECK(inside) << D << "-D: the first cells of the curve are not the cube at the origin";
+  std::size_t jumps = 0;
+  for (std::size_t d = 1; inside && d < cells; ++d) {
+    std::uint32_t step = 0;
+    for (std::size_t i = 0; i < D; ++i) step += at[d][i] > at[d - 1][i] ? at[d][i] - at[d - 1][i] : at[d - 1][i] - at[d][i];
+    jumps += step != 1;
+  }
+  CHECK(jumps == 0) << D << "-D: " << jumps << " consecutive cells of the curve are not neighbours";
+}
+
+void check_hilbert() {
+  std::mt19937_64 rng(7);
+  std::size_t wrong = 0;
+  for (int k = 0; k < 100000; ++k) {
+    const auto x = static_cast<std::uint32_t>(rng() & 0xffff), y = static_cast<std::uint32_t>(rng() & 0xffff);
+    wrong += nd::hilbert_index<2>({x, y}) != quadrant_hilbert_index(x, y);
+  }
+  CHECK(wrong == 0) << "the 2-D Hilbert index differs from the quadrant form at " << wrong << " cells";
+  check_hilbert_curve<2>(64);
+  check_hilbert_curve<3>(16);
+  // The 3-D grid order: a permutation, the same for any thread count.
+  std::uniform_real_distribution<double> u(-1, 1);
+  std::vector<nd::Point<3>> points(5000);
+  for (auto& p : points) p = {u(rng), u(rng), u(rng)};
+  auto order = nd::hilbert_grid_permutation<3>(points.data(), points.size(), 2);
+  CHECK(order == nd::hilbert_grid_permutation<3>(points.data(), points.size(), 1)) << "3-D order depends on threads";
+  std::sort(order.begin(), order.end());
+  bool permutation = true;
+  for (std::size_t k = 0; k < order.size(); ++k) permutation = permutation && order[k] == k;
+  CHECK(permutation) << "the 3-D grid order is not a permutation";
+  std::printf("hilbert index: 2-D as the quadrant form, 2-D and 3-D curves continuous\n");
+}
+
+// The 3-D tree's nearest-neighbour distances against brute force.
+void check_tree_3(std::size_t n, unsigned seed) {
+  std::mt19937_64 rng(seed);
+  std::uniform_real_distribution<double> u(0, 1);
+  std::vector<nd::Point<3>> points(n);
+  for (auto& p : points) p = {u(rng), u(rng), std::floor(4 * u(rng)) / 4};  // layers: ties along z
+  const std::vector<double> nn = nd::nearest_neighbour_distances<3>(points, 2);
+  std::size_t wrong = 0;
+  for (std::size_t i = 0; i < n; ++i) {
+    double best = std::numeric_limits<double>::infinity();
+    for (std::size_t j = 0; j < n; ++j) {
+      if (j != i) best = std::min(best, nd::squared_distance<3>(points[i], points[j]));
+    }
+    wrong += nn[i] != std::sqrt(best);
+  }
+  CHECK(wrong == 0) << "3-D nearest neighbours differ from brute force at " << wrong << " points";
+}
+
 }  // namespace
 
 int main() {
@@ -145,10 +237,12 @@ int main() {
     check_orders("lattice 90000", make_points(90000, Layout::lattice, seed++));
     check_orders("clustered 300000", make_points(300000, Layout::clustered, seed++));
     check_tree("tree clustered 3000", make_points(3000, Layout::clustered, seed), seed + 1);
+    check_hilbert();
+    for (std::size_t n : {2, 9, 1000}) check_tree_3(n, seed++);
 
     bool threw = false;
     try {
-      detail::Point_tree(std::vector<Vec2>{{0.0, 0.0}, {1.0, 1.0}, {0.0, 0.0}}).squared_nn(1);
+      nd::Point_tree<2>(std::vector<Vec2>{{0.0, 0.0}, {1.0, 1.0}, {0.0, 0.0}}).squared_nn(1);
     } catch (const Input_error&) {
       threw = true;
     }

@@ -213,6 +213,21 @@ def edge_over_size_around(points: ArrayLike, triangles: ArrayLike, h: ArrayLike)
 def edge_over_size_classes(
     points: ArrayLike, triangles: ArrayLike, h: ArrayLike, above: float, below: float, at_least: float
 ) -> NDArray[np.uint8]: ...
+def delta_from_size(
+    points: ArrayLike,
+    triangles: ArrayLike,
+    h: ArrayLike,
+    nn: ArrayLike,
+    keep_fine_clusters: bool,
+    delta_min: float,
+    delta_max: float,
+    n_checked: int | None = None,
+    ids: ArrayLike | None = None,
+) -> NDArray[np.float64]: ...
+
+SIZE_RULE_RINGS: int
+
+def check_size_delta(delta: ArrayLike, h: ArrayLike, nn: ArrayLike, delta_min: float, delta_max: float) -> None: ...
 def near_seeds(
     triangles: ArrayLike, points: ArrayLike, seeds: ArrayLike, rings: int, through: ArrayLike | None = None
 ) -> NDArray[np.uint8]: ...
@@ -561,3 +576,22 @@ def tet_step(
 def tet_domain_incidences(
     points: ArrayLike, facets: ArrayLike, edge_facets: ArrayLike, edge_ends: ArrayLike, neighbours: ArrayLike
 ) -> NDArray[np.int64]: ...
+def check_tet_options(
+    cell_factor: float,
+    radius_scale: float,
+    boundary_clearance: float,
+    max_radius_edge: float,
+    sliver_angle: float,
+    max_samples: float,
+    threads: int,
+) -> None: ...
+def tet_supermesh(
+    old_points: ArrayLike,
+    old_tetrahedra: ArrayLike,
+    new_points: ArrayLike,
+    new_tetrahedra: ArrayLike,
+    origin: ArrayLike,
+    parent_tet: ArrayLike,
+    threads: int = 0,
+) -> dict[str, Any]: ...
+def tet_intersection_volume(t: ArrayLike, s: ArrayLike) -> float: ...

@@ -4,12 +4,18 @@ from __future__ import annotations
 
 import argparse
 import ast
+import dataclasses
 import sys
 from typing import Any, Callable, Sequence
 
 import numpy as np
 
+from evomesh.tet_evolution import TetOptions, evolve_tet, transfer_tet
+from evomesh.tet_mesh import dihedral_angles, radius_edge_ratios
+
 __all__ = ["main", "build_parser"]
+
+_TET_OPTION_NAMES = frozenset(f.name for f in dataclasses.fields(TetOptions))
 
 
 def _positive_int(text: str) -> int:
@@ -64,11 +70,43 @@ def build_parser() -> argparse.ArgumentParser:
     gc.add_argument("--no-figures", action="store_true", help="do not draw the PNG figures")
     gc.add_argument("--quiet", action="store_true", help="no table, no progress bar")
 
+    from evomesh.experiments.growing_sphere import GROWING_SPHERE_DEFAULTS as S
+
+    gs = commands.add_parser(
+        "growing-sphere",
+        help="the growing-circle experiment one dimension up: a sphere growing in the unit cube (tetrahedra)",
+        description=(
+            "Evolve a tetrahedral mesh of the unit cube while a sphere grows from near the centre until it "
+            "touches the box: refined in a band around the sphere, coarsened behind it. Prints a table per step "
+            "(points, kept, dihedral angles, slivers, radius-edge ratios) and writes table.csv, VTU meshes and one "
+            "PNG per mesh (the slice z = 0.5) into the output folder."
+        ),
+    )
+    gs.add_argument("--steps", type=_positive_int, default=S["steps"], help="number of steps (default %(default)s)")
+    gs.add_argument("--cells", type=_positive_int, default=S["cells"],
+                    help="cells per side of the initial cube mesh (default %(default)s)")
+    gs.add_argument("--band", type=float, default=S["band"],
+                    help="full width of the band where h = h_min (default %(default)s)")
+    gs.add_argument("--h-min", type=float, default=S["h_min"], help="spacing at the sphere (default %(default)s)")
+    gs.add_argument("--h-max", type=float, default=S["h_max"], help="far-field spacing (default %(default)s)")
+    gs.add_argument("--grade", type=float, default=S["grade"],
+                    help="growth dh/dd outside the band (default %(default)s)")
+    gs.add_argument("--r0", type=float, default=S["r0"], help="radius at time 0 (default %(default)s)")
+    gs.add_argument("--r-end", type=float, default=S["r_end"],
+                    help="radius at the last step (default: the sphere touches the box)")
+    gs.add_argument("--seed", type=int, default=0, help="seed of the sampling (default %(default)s)")
+    gs.add_argument("--option", action="append", default=[], metavar="NAME=VALUE",
+                    help="a TetOptions field, e.g. --option sliver_angle=12 (repeatable)")
+    gs.add_argument("--out", default="evomesh-growing-sphere", help="output folder (default %(default)s)")
+    gs.add_argument("--no-figures", action="store_true", help="do not draw the PNG figures")
+    gs.add_argument("--quiet", action="store_true", help="no table, no progress bar")
+
     adapt = commands.add_parser(
         "adapt",
         help="one adaptation step of a mesh file: refine and coarsen to a size or a factor",
         description=(
-            "Read a triangle mesh (any format meshio reads: .msh, .vtu, .xdmf, ...), evolve it once towards an "
+            "Read a triangle or tetrahedral mesh (any format meshio reads: .msh, .vtu, .mesh, .xdmf, ...), evolve "
+            "it once towards an "
             "absolute spacing (--size FIELD or --size-expr EXPR) or a factor of its current spacing (--delta "
             "FIELD), carry its point data over (linear interpolation, exact at kept points) and write it (format "
             "from OUT's suffix)."
@@ -80,14 +118,16 @@ def build_parser() -> argparse.ArgumentParser:
     target.add_argument("--size", metavar="FIELD", help="point data of IN holding the absolute target spacing")
     target.add_argument("--delta", metavar="FIELD", help="point data of IN holding the factor delta (<1 refine)")
     target.add_argument("--size-expr", metavar="EXPR",
-                        help="absolute spacing as an expression in x and y, e.g. '0.02 + 0.1*x': numbers, pi, e, "
+                        help="absolute spacing as an expression in x and y (and z for tetrahedra), e.g. "
+                             "'0.02 + 0.1*x': numbers, pi, e, "
                              "+ - * / **, comparisons and abs sqrt exp log log10 sin cos tan tanh arctan2 hypot "
                              "minimum maximum clip where; at most 1000 characters")
     adapt.add_argument("--method", choices=("frfc", "drfc"), default="frfc", help="default %(default)s")
     adapt.add_argument("--seed", type=int, default=0, help="seed of the sampling (default %(default)s)")
     adapt.add_argument("--paper", action="store_true", help="the paper's algorithm exactly (options preset paper())")
     adapt.add_argument("--option", action="append", default=[], metavar="NAME=VALUE",
-                       help="any evolve option, e.g. --option min_angle=25 --option quality=False (repeatable)")
+                       help="any evolve option, e.g. --option min_angle=25 --option quality=False, or a TetOptions "
+                            "field for a tetrahedral mesh (repeatable)")
     adapt.add_argument("--circle", action="append", default=[], metavar="TAG:CX,CY,R",
                        help="segments of TAG lie on the circle of centre (CX, CY) and radius R: a curved boundary "
                             "(repeatable; frfc only)")
@@ -95,7 +135,8 @@ def build_parser() -> argparse.ArgumentParser:
                        help="with --circle: vertices turning by more than DEG stay corners (default 30)")
     adapt.add_argument("--quiet", action="store_true", help="no progress bar, no summary")
 
-    info = commands.add_parser("info", help="points, triangles, segments, kinds, tags and quality of a mesh file")
+    info = commands.add_parser("info", help="points, cells, kinds, tags and quality of a mesh file (triangles or "
+                                            "tetrahedra)")
     info.add_argument("input", metavar="IN", help="mesh file")
     return parser
 
@@ -111,7 +152,8 @@ _EXPR_FUNCTIONS: dict[str, tuple[Any, int]] = {
     "where": (np.where, 3),
 }
 _EXPR_CONSTANTS = {"pi": np.pi, "e": np.e}
-_EXPR_NAMES = ("x", "y", *_EXPR_CONSTANTS, *_EXPR_FUNCTIONS)
+_EXPR_COORDINATES = ("x", "y", "z")
+_EXPR_NAMES = (*_EXPR_COORDINATES, *_EXPR_CONSTANTS, *_EXPR_FUNCTIONS)
 # Bounds that keep parsing and evaluation short whatever the text: its length,
 # its number of syntax nodes and how deeply they nest (each node is one numpy
 # operation over the points, in float64: no Python integer power can run away).
@@ -155,43 +197,47 @@ def _size_expression(text: str) -> Callable[[np.ndarray], np.ndarray]:
             if depth[id(child)] > _EXPR_MAX_DEPTH:
                 raise ValueError(f"--size-expr nests deeper than {_EXPR_MAX_DEPTH} levels")
     evaluate = _compile_expression(tree.body)
+    uses_z = any(isinstance(n, ast.Name) and n.id == "z" for n in nodes)
 
     def size(points: np.ndarray) -> np.ndarray:
-        x = np.ascontiguousarray(points[:, 0], dtype=np.float64)
-        y = np.ascontiguousarray(points[:, 1], dtype=np.float64)
+        dim = points.shape[1]
+        if uses_z and dim < 3:
+            raise ValueError("--size-expr uses z, but the mesh is two-dimensional")
+        xyz = [np.ascontiguousarray(points[:, k], dtype=np.float64) for k in range(dim)]
         with np.errstate(all="ignore"):  # judged on the result below, point by point
-            values = np.broadcast_to(np.asarray(evaluate(x, y), dtype=np.float64), (len(points),))
+            values = np.broadcast_to(np.asarray(evaluate(*xyz), dtype=np.float64), (len(points),))
         bad = ~(np.isfinite(values) & (values > 0))
         if bad.any():
             k = int(np.argmax(bad))
-            raise ValueError(f"--size-expr gives {values[k]:.6g} at point {k} (x = {x[k]:.6g}, y = {y[k]:.6g}); "
+            where = ", ".join(f"{name} = {c[k]:.6g}" for name, c in zip(_EXPR_COORDINATES, xyz))
+            raise ValueError(f"--size-expr gives {values[k]:.6g} at point {k} ({where}); "
                              "a size must be a finite number > 0")
         return values
 
     return size
 
 
-def _compile_expression(node: ast.AST) -> Callable[[np.ndarray, np.ndarray], Any]:
-    """A function (x, y) -> values for one checked node of an --size-expr tree;
-    parts without x or y are folded into one float64 constant, which must be
-    finite (so 9**9**9 and 1/0 are refused here)."""
+def _compile_expression(node: ast.AST) -> Callable[..., Any]:
+    """A function (x, y[, z]) -> values for one checked node of an --size-expr
+    tree; parts without coordinates are folded into one float64 constant, which
+    must be finite (so 9**9**9 and 1/0 are refused here)."""
     evaluate = _compile_node(node)
     if not _uses_coordinates(node):
         with np.errstate(all="ignore"):
-            value = np.asarray(evaluate(np.zeros(1), np.zeros(1)), dtype=np.float64)
+            value = np.asarray(evaluate(np.zeros(1), np.zeros(1), np.zeros(1)), dtype=np.float64)
         if not np.isfinite(value).all():
             raise ValueError(f"--size-expr: {ast.unparse(node)} is not a finite number in float64 "
                              f"(it is {float(value.reshape(-1)[0])})")
         constant = value.reshape(-1)[0] if value.size == 1 else value
-        return lambda x, y: constant
+        return lambda *xyz: constant
     return evaluate
 
 
 def _uses_coordinates(node: ast.AST) -> bool:
-    return any(isinstance(n, ast.Name) and n.id in ("x", "y") for n in ast.walk(node))
+    return any(isinstance(n, ast.Name) and n.id in _EXPR_COORDINATES for n in ast.walk(node))
 
 
-def _compile_node(node: ast.AST) -> Callable[[np.ndarray, np.ndarray], Any]:
+def _compile_node(node: ast.AST) -> Callable[..., Any]:
     allowed = f"allowed: numbers, {', '.join(_EXPR_NAMES)}, + - * / ** and comparisons"
     if isinstance(node, ast.Constant):
         value = node.value
@@ -203,34 +249,33 @@ def _compile_node(node: ast.AST) -> Callable[[np.ndarray, np.ndarray], Any]:
             number = np.float64(np.inf)
         if not np.isfinite(number):
             raise ValueError("--size-expr has a number beyond float64's range (about 1.8e308)")
-        return lambda x, y: number
+        return lambda *xyz: number
     if isinstance(node, ast.Name):
-        if node.id == "x":
-            return lambda x, y: x
-        if node.id == "y":
-            return lambda x, y: y
+        if node.id in _EXPR_COORDINATES:
+            axis = _EXPR_COORDINATES.index(node.id)
+            return lambda *xyz: xyz[axis]
         if node.id in _EXPR_CONSTANTS:
             constant = np.float64(_EXPR_CONSTANTS[node.id])
-            return lambda x, y: constant
+            return lambda *xyz: constant
         if node.id in _EXPR_FUNCTIONS:
             raise ValueError(f"--size-expr uses the function {node.id!r} without calling it")
         raise ValueError(f"--size-expr uses unknown name {node.id!r}; {allowed}")
     if isinstance(node, ast.BinOp) and type(node.op) in _EXPR_BINARY:
         op = _EXPR_BINARY[type(node.op)]
         left, right = _compile_expression(node.left), _compile_expression(node.right)
-        return lambda x, y: op(left(x, y), right(x, y))
+        return lambda *xyz: op(left(*xyz), right(*xyz))
     if isinstance(node, ast.UnaryOp) and isinstance(node.op, (ast.USub, ast.UAdd)):
         operand = _compile_expression(node.operand)
         if isinstance(node.op, ast.USub):
-            return lambda x, y: np.negative(operand(x, y))
+            return lambda *xyz: np.negative(operand(*xyz))
         return operand
     if isinstance(node, ast.Compare) and all(type(op) in _EXPR_COMPARE for op in node.ops):
         # a < b < c means a < b and b < c, element by element
         terms = [_compile_expression(n) for n in (node.left, *node.comparators)]
         ops = [_EXPR_COMPARE[type(op)] for op in node.ops]
 
-        def compare(x: np.ndarray, y: np.ndarray) -> Any:
-            values = [term(x, y) for term in terms]
+        def compare(*xyz: np.ndarray) -> Any:
+            values = [term(*xyz) for term in terms]
             result = ops[0](values[0], values[1])
             for k in range(1, len(ops)):
                 result = np.logical_and(result, ops[k](values[k], values[k + 1]))
@@ -248,7 +293,7 @@ def _compile_node(node: ast.AST) -> Callable[[np.ndarray, np.ndarray], Any]:
             raise ValueError(f"--size-expr: {name} takes {arity} argument{'s' if arity > 1 else ''} "
                              "(no keywords)")
         arguments = [_compile_expression(a) for a in node.args]
-        return lambda x, y: function(*(argument(x, y) for argument in arguments))
+        return lambda *xyz: function(*(argument(*xyz) for argument in arguments))
     raise ValueError(f"--size-expr may not use {ast.unparse(node)[:40]!r} ({type(node).__name__}); {allowed}")
 
 
@@ -319,7 +364,9 @@ def _adapt(args: argparse.Namespace) -> int:
     size_function = _size_expression(args.size_expr) if args.size_expr else None
     overrides = _parse_options(args.option)
     base = (evomesh.FrfcOptions if args.method == "frfc" else evomesh.DrfcOptions).paper() if args.paper else None
-    make_options(args.method, base, **overrides)
+    tet_options = bool(overrides) and set(overrides) <= _TET_OPTION_NAMES
+    if not tet_options:  # (TetOptions fields are checked once the file shows tetrahedra)
+        make_options(args.method, base, **overrides)
     geometry = _parse_circles(args.circle, args.corner_angle)
     if geometry is not None and args.method != "frfc":
         raise ValueError("--circle (a curved boundary) needs --method frfc")
@@ -330,16 +377,37 @@ def _adapt(args: argparse.Namespace) -> int:
         if field is not None and field not in data:
             raise ValueError(f"{args.input} has no point data {field!r}; it has: {', '.join(data) or 'none'}")
         target = {"size": size_function} if size_function else {"size": data[field]} if args.size else {}
-        new = evomesh.evolve(mesh, data[field] if args.delta else None, method=args.method, seed=args.seed,
-                             options=base, geometry=geometry, **target, **overrides)
+        delta = data[field] if args.delta else None
+        if isinstance(mesh, evomesh.TetMesh):
+            if args.paper or geometry is not None or args.method != "frfc":
+                raise ValueError("a tetrahedral mesh takes no --paper, --circle or --method drfc (yet)")
+            unknown = sorted(set(overrides) - _TET_OPTION_NAMES)
+            if unknown:
+                raise ValueError(f"unknown option(s) for a tetrahedral mesh: {', '.join(unknown)} (TetOptions has "
+                                 f"{', '.join(sorted(_TET_OPTION_NAMES))})")
+            new: Any = evolve_tet(mesh, delta, seed=args.seed, options=TetOptions(**overrides), **target)
+        else:
+            if tet_options:
+                make_options(args.method, base, **overrides)
+            new = evomesh.evolve(mesh, delta, method=args.method, seed=args.seed, options=base, geometry=geometry,
+                                 **target, **overrides)
         bar.update(1)
         fields = {name: values for name, values in data.items() if np.asarray(values).dtype.kind in "biufc"}
-        write_mesh(args.output, new, evomesh.transfer(mesh, new, fields) if fields else None)
+        if isinstance(mesh, evomesh.TetMesh):
+            carried = {name: transfer_tet(mesh, new, values) for name, values in fields.items()}
+        else:
+            carried = evomesh.transfer(mesh, new, fields) if fields else {}
+        write_mesh(args.output, new, carried or None)
         bar.update(1)
     if not args.quiet:
-        q = evomesh.quality(new)
-        print(f"{mesh.n_points} -> {new.n_points} points ({int((new.origin >= 0).sum())} kept), "
-              f"{new.n_triangles} triangles, min angle {q.min_angle:.2f} deg; wrote {args.output}")
+        kept = f"{mesh.n_points} -> {new.n_points} points ({int((new.origin >= 0).sum())} kept)"
+        if isinstance(new, evomesh.TetMesh):
+            angles = dihedral_angles(new.points, new.tetrahedra)
+            print(f"{kept}, {new.n_tetrahedra} tetrahedra, dihedral angles {angles.min():.2f} to {angles.max():.2f} "
+                  f"deg; wrote {args.output}")
+        else:
+            q = evomesh.quality(new)
+            print(f"{kept}, {new.n_triangles} triangles, min angle {q.min_angle:.2f} deg; wrote {args.output}")
     return 0
 
 
@@ -348,6 +416,8 @@ def _info(args: argparse.Namespace) -> int:
     from evomesh.io import read_mesh
 
     mesh, data = read_mesh(args.input)
+    if isinstance(mesh, evomesh.TetMesh):
+        return _info_tet(args.input, mesh, data)
     q = evomesh.quality(mesh)
     counts = np.bincount(mesh.kind, minlength=5)
     nn = mesh.nn_spacing
@@ -364,20 +434,44 @@ def _info(args: argparse.Namespace) -> int:
     return 0
 
 
-def _tag_lines(mesh: Any) -> list[str]:
-    """The segment and triangle tags of a mesh with their counts and names
-    (``tag "name": count``, in increasing tag order), and the names of tags no
-    segment or triangle carries."""
+def _info_tet(path: str, mesh: Any, data: dict) -> int:
+    import evomesh
+
+    counts = np.bincount(mesh.kind, minlength=len(evomesh.TetPointKind))
+    nn = mesh.nn_spacing
+    angles = dihedral_angles(mesh.points, mesh.tetrahedra)
+    slivers = int(((angles < 10.0) | (angles > 170.0)).any(axis=1).sum())
+    ratio = radius_edge_ratios(mesh.points, mesh.tetrahedra)
+    print(f"{path}")
+    kinds = ", ".join(f"{k.name.lower()} {int(c)}" for k, c in zip(evomesh.TetPointKind, counts) if c)
+    print(f"  points       {mesh.n_points}  ({kinds})")
+    print(f"  tetrahedra   {mesh.n_tetrahedra}, volume {mesh.volumes.sum():.6g}")
+    print(f"  faces        {len(mesh.faces)} ({len(mesh.boundary_faces[0])} boundary)")
+    for line in _tag_lines(mesh, ((2, "faces     ", mesh.face_tags), (3, "tetrahedra", mesh.tet_tags))):
+        print(f"  {line}")
+    print(f"  spacing      nn min {nn.min():.4g}, median {np.median(nn):.4g}, max {nn.max():.4g}")
+    print(f"  quality      dihedral angles {angles.min():.2f} to {angles.max():.2f} deg, {slivers} tetrahedra outside "
+          f"[10, 170], radius/edge median {np.median(ratio):.3f}, max {ratio.max():.3f}")
+    print(f"  point data   {', '.join(data) or 'none'}")
+    return 0
+
+
+def _tag_lines(mesh: Any, cells: Sequence[tuple[int, str, np.ndarray]] | None = None) -> list[str]:
+    """The tags of a mesh's cells with their counts and names (``tag "name":
+    count``, in increasing tag order), and the names of tags no cell carries;
+    ``cells``: (dim, label, tags), default a triangle mesh's segments and triangles."""
     lines = []
     names = mesh.tag_names
-    for dim, what, tags in ((1, "segments ", mesh.segment_tags), (2, "triangles", mesh.triangle_tags)):
+    if cells is None:
+        cells = ((1, "segments ", mesh.segment_tags), (2, "triangles", mesh.triangle_tags))
+    for k, (dim, what, tags) in enumerate(cells):
         values, counts = np.unique(tags, return_counts=True)
         used = set(values.tolist())
         listed = ", ".join(f"{v}{_quoted(names.get((dim, v)))}: {c}" for v, c in zip(values.tolist(), counts.tolist()))
         unused = sorted(tag for d, tag in names if d == dim and tag not in used)
         if unused:
             listed += f" (named, unused: {', '.join(f'{v}{_quoted(names[(dim, v)])}' for v in unused)})"
-        lines.append(f"{'tags' if dim == 1 else '':<11}{what} {listed or 'none'}")
+        lines.append(f"{'tags' if k == 0 else '':<{11 if len(cells[0][1]) < 10 else 13}}{what} {listed or 'none'}")
     return lines
 
 
@@ -412,6 +506,19 @@ def _growing_circle(args: argparse.Namespace) -> int:
     return 0
 
 
+def _growing_sphere(args: argparse.Namespace) -> int:
+    from evomesh.experiments.growing_sphere import growing_sphere
+
+    sphere = {name: getattr(args, name) for name in ("steps", "cells", "r0", "r_end", "band", "h_min", "h_max",
+                                                      "grade", "seed", "out")}
+    result = growing_sphere(**sphere, figures=not args.no_figures, progress=False if args.quiet else None,
+                            **_parse_options(args.option))
+    if not args.quiet:
+        print(result.table())
+        print(f"outputs in {args.out}")
+    return 0
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``evomesh`` command; returns the exit status
     (0 success, 2 bad arguments or failure, with a one-line message; also for
@@ -421,6 +528,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         if args.command == "growing-circle":
             return _growing_circle(args)
+        if args.command == "growing-sphere":
+            return _growing_sphere(args)
         if args.command == "adapt":
             return _adapt(args)
         if args.command == "info":

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import copy
 import numbers
-from typing import Any
+from typing import TYPE_CHECKING, Any, overload
 
 import numpy as np
 
@@ -16,6 +16,9 @@ from evomesh.motion import after_step, step_input
 from evomesh.spacing_function import _require_mesh, as_delta, delta_from_size
 from evomesh.tet_evolution import evolve_tet
 from evomesh.tet_mesh import TetMesh
+
+if TYPE_CHECKING:  # mpi4py is optional: the distributed mesh is imported for the type only
+    from evomesh.distributed.mesh import DistributedMesh
 
 __all__ = ["evolve", "delaunay_refine", "make_options", "FRFC_DEFAULTS", "DRFC_DEFAULTS", "FrfcOptions", "DrfcOptions",
            "SampleMode", "RadiusRule", "QualityWarning"]
@@ -127,10 +130,25 @@ def _check_seed(seed: Any) -> int:
     return int(seed)
 
 
+@overload
+def evolve(mesh: TetMesh, delta: Any = None, *, size: Any = None, method: str = "frfc", seed: int | None = None,
+           options: Any = None, geometry: Any = None, displacement: Any = None, interface: Any = None,
+           interface_tag: int | None = None, interface_regions: Any = None, interface_band: Any = None,
+           **overrides: Any) -> TetMesh: ...
+@overload
+def evolve(mesh: DistributedMesh, delta: Any = None, *, size: Any = None, method: str = "frfc", seed: int | None = None,
+           options: Any = None, geometry: Any = None, displacement: Any = None, interface: Any = None,
+           interface_tag: int | None = None, interface_regions: Any = None, interface_band: Any = None,
+           **overrides: Any) -> DistributedMesh: ...
+@overload
 def evolve(mesh: Mesh, delta: Any = None, *, size: Any = None, method: str = "frfc", seed: int | None = None,
            options: Any = None, geometry: Any = None, displacement: Any = None, interface: Any = None,
            interface_tag: int | None = None, interface_regions: Any = None, interface_band: Any = None,
-           **overrides: Any) -> Mesh:
+           **overrides: Any) -> Mesh: ...
+def evolve(mesh: Any, delta: Any = None, *, size: Any = None, method: str = "frfc", seed: int | None = None,
+           options: Any = None, geometry: Any = None, displacement: Any = None, interface: Any = None,
+           interface_tag: int | None = None, interface_regions: Any = None, interface_band: Any = None,
+           **overrides: Any) -> Any:
     """Evolve a mesh one step: new spacing delta(p) * nn_M(p) at every point p
     (or the target edge length ``size``).
 
@@ -501,7 +519,7 @@ def evolve(mesh: Mesh, delta: Any = None, *, size: Any = None, method: str = "fr
             return o
 
         # Every argument goes to the ranks' agreement (displacement and interface are refused there, on every rank).
-        return evolve_distributed(mesh, delta, size=size, method=method,  # type: ignore[return-value]
+        return evolve_distributed(mesh, delta, size=size, method=method,
                                   build_options=build_options, geometry=geometry, arguments=dict(
                                       seed=seed, options=options, overrides=overrides, displacement=displacement,
                                       interface=interface, interface_tag=interface_tag,

@@ -17,7 +17,7 @@ from evomesh.tet_evolution import transfer_tet
 from evomesh.tet_mesh import TetMesh
 
 __all__ = ["transfer", "transfer_cells", "domain_change", "DomainChange", "region_exchange", "RegionExchange",
-           "Interpolation", "Supermesh"]
+           "Interpolation", "Supermesh", "TetSupermesh"]
 
 # A new point that the core does not locate in the old mesh is accepted on the
 # nearest old boundary edge if it lies within _outside_tolerance of it:
@@ -334,14 +334,15 @@ Frame = Literal["eulerian", "lagrangian"]
 
 @overload
 def transfer(
-    old: Mesh, new: Mesh, values: Mapping[str, ArrayLike], method: Method = "linear", *, frame: Frame = "eulerian"
+    old: Mesh | TetMesh, new: Mesh | TetMesh, values: Mapping[str, ArrayLike], method: Method = "linear", *,
+    frame: Frame = "eulerian"
 ) -> dict[str, np.ndarray]: ...
 @overload
 def transfer(
-    old: Mesh, new: Mesh, values: ArrayLike, method: Method = "linear", *, frame: Frame = "eulerian"
+    old: Mesh | TetMesh, new: Mesh | TetMesh, values: ArrayLike, method: Method = "linear", *, frame: Frame = "eulerian"
 ) -> np.ndarray: ...
 def transfer(
-    old: Mesh, new: Mesh, values: ArrayLike | Mapping[str, ArrayLike], method: Method = "linear", *,
+    old: Any, new: Any, values: ArrayLike | Mapping[str, ArrayLike], method: Method = "linear", *,
     frame: Frame = "eulerian"
 ) -> np.ndarray | dict[str, np.ndarray]:
     """Per-vertex field(s) of ``old`` at the points of ``new``.
@@ -458,11 +459,12 @@ def transfer(
 
 
 @overload
-def transfer_cells(old: Mesh, new: Mesh, values: Mapping[str, ArrayLike]) -> dict[str, np.ndarray]: ...
+def transfer_cells(old: Mesh | TetMesh, new: Mesh | TetMesh,
+                   values: Mapping[str, ArrayLike]) -> dict[str, np.ndarray]: ...
 @overload
-def transfer_cells(old: Mesh, new: Mesh, values: ArrayLike) -> np.ndarray: ...
+def transfer_cells(old: Mesh | TetMesh, new: Mesh | TetMesh, values: ArrayLike) -> np.ndarray: ...
 def transfer_cells(
-    old: Mesh, new: Mesh, values: ArrayLike | Mapping[str, ArrayLike]
+    old: Mesh | TetMesh, new: Mesh | TetMesh, values: ArrayLike | Mapping[str, ArrayLike]
 ) -> np.ndarray | dict[str, np.ndarray]:
     """Per-triangle field(s) of ``old`` on the triangles of ``new``, conservatively.
 
@@ -492,16 +494,22 @@ def transfer_cells(
     the steps' rounding). There is no direct ``m0 -> m2`` transfer: ``m2`` has
     no lineage from ``m0``.
 
+    On tetrahedral meshes (:class:`TetMesh`) the same projection runs over the
+    exact intersections of the old and new tetrahedra (a local
+    :class:`TetSupermesh`, clipped volumes): ``sum_t |t| new[t] = sum_s |s| old[s]``
+    to rounding (measured below 1e-14 relative) and constants are reproduced
+    exactly; the domain does not change there, so nothing is gained or lost.
+
     Parameters
     ----------
-    old, new : Mesh
+    old, new : Mesh or TetMesh
         ``new = evolve(old, ...)`` (``new.lineage`` must refer to old).
-    values : array_like, shape (n_old_triangles,) or (n_old_triangles, ...), or a mapping of them
+    values : array_like, shape (n_old_cells,) or (n_old_cells, ...), or a mapping of them
         Floating and complex dtypes are kept; integer fields become float64.
 
     Returns
     -------
-    ndarray, shape (n_new_triangles,) + values.shape[1:], or dict of them
+    ndarray, shape (n_new_cells,) + values.shape[1:], or dict of them
 
     Raises
     ------
@@ -510,10 +518,91 @@ def transfer_cells(
     """
     if "DistributedMesh" in (type(old).__name__, type(new).__name__):  # (mpi4py is optional: not imported here)
         return _distributed("transfer_cells")(old, new, values)
-    supermesh = Supermesh(old, new, mass=False)
+    supermesh: Supermesh | TetSupermesh
+    if isinstance(old, TetMesh) or isinstance(new, TetMesh):
+        supermesh = TetSupermesh(old, new)
+    else:
+        supermesh = Supermesh(old, new, mass=False)
     if isinstance(values, Mapping):
         return {name: _named(supermesh.project_cells, name, v) for name, v in values.items()}
     return supermesh.project_cells(values)
+
+
+def _first_pair_cell(offsets: np.ndarray, old_cell: np.ndarray) -> np.ndarray:
+    """The old cell of each new cell's first pair (-1 for a new cell without pairs)."""
+    nonempty = np.diff(offsets) > 0
+    first = np.full(len(offsets) - 1, -1, dtype=np.int64)
+    first[nonempty] = old_cell[offsets[:-1][nonempty]]
+    return first
+
+
+def _p0_average(flat: np.ndarray, offsets: np.ndarray, old_cell: np.ndarray, measure: np.ndarray,
+                new_cell: np.ndarray, denominator: np.ndarray, reference_cell: np.ndarray) -> np.ndarray:
+    """The P0 projection ``sum_s |t n s| old[s] / denominator[t]`` of flat (n_old, k) values over
+    a supermesh's pairs (CSR by new cell: offsets, old_cell, measure, new_cell), written relative
+    to the value of one old cell per new cell (``reference_cell``): a constant field gives
+    differences 0, hence exactly itself."""
+    reference = flat[reference_cell]
+    nonempty = np.diff(offsets) > 0
+    weights = (measure / denominator[new_cell])[:, None]
+    mixed = np.zeros((len(offsets) - 1, flat.shape[1]), dtype=flat.dtype)
+    if nonempty.any():
+        terms = weights * (flat[old_cell] - reference[new_cell])
+        mixed[nonempty] = np.add.reduceat(terms, offsets[:-1][nonempty])
+    return reference + mixed
+
+
+class TetSupermesh:
+    """The intersections of the tetrahedra of ``new = evolve(old, ...)`` with those of ``old``.
+
+    Built by the C++ core without a global search, as :class:`Supermesh` in
+    2-D: a new tetrahedron whose four kept points have origins forming an old
+    tetrahedron is that tetrahedron (one pair, its own volume, no clipping);
+    every other one floods over the old face adjacency from the old
+    tetrahedra at its vertices (the old star of a kept point, the lineage's
+    parent of a new one) and clips each old tetrahedron by its four planes
+    (at most three tetrahedra per clip), summing the pieces' volumes.
+    Parallel over fixed blocks of new tetrahedra: independent of the thread count.
+
+    Attributes
+    ----------
+    offsets : ndarray of int, shape (n_new_tetrahedra + 1,)
+    new_tet, old_tet : ndarray of int, shape (pairs,)
+        The overlapping pairs, grouped by new tetrahedron.
+    volume : ndarray, shape (pairs,)
+        |t n s| per pair (exact up to the rounding of the cut points).
+    identical : int
+        New tetrahedra that are old ones.
+    """
+
+    def __init__(self, old: Mesh | TetMesh, new: Mesh | TetMesh, *, threads: int = 0):
+        if not isinstance(old, TetMesh) or not isinstance(new, TetMesh):
+            raise TypeError("a transfer between tetrahedral meshes needs two TetMesh")
+        lineage = new.lineage
+        if lineage is None or not lineage.matches(old):
+            raise ValueError(
+                "conservative transfer needs new = evolve(old, ...): new.lineage "
+                + ("is None" if lineage is None else "refers to a mesh of another size")
+            )
+        raw = _core.tet_supermesh(old.points, old.tetrahedra, new.points, new.tetrahedra, new.origin,
+                                  lineage.parent_tet, threads)
+        self.old = old
+        self.new = new
+        self.offsets = raw["offsets"]
+        self.old_tet = raw["old_tet"]
+        self.volume = raw["volume"]
+        self.identical = int(raw["identical"])
+        self.new_tet = np.repeat(np.arange(new.n_tetrahedra), np.diff(self.offsets))
+
+    def project_cells(self, values: Any) -> np.ndarray:
+        """P0 projection of per-tetrahedron values (see :func:`transfer_cells`)."""
+        array, flat, dtype = _numeric(values, self.old.n_tetrahedra, "tetrahedron")
+        n_new = self.new.n_tetrahedra
+        # Divided by the covered volume (the weights of a new tetrahedron sum to 1 to rounding).
+        denominator = np.bincount(self.new_tet, self.volume, minlength=n_new)
+        first = _first_pair_cell(self.offsets, self.old_tet)
+        out = _p0_average(flat, self.offsets, self.old_tet, self.volume, self.new_tet, denominator, first)
+        return out.astype(dtype, copy=False).reshape((n_new,) + array.shape[1:])
 
 
 def _numeric(values: Any, rows: int, what: str) -> tuple[np.ndarray, np.ndarray, np.dtype]:
@@ -628,24 +717,15 @@ class Supermesh:
         # constant field gives differences 0, hence exactly itself. The part of
         # a new triangle that no old one covers (a curved boundary moved the
         # domain) takes the value of that nearest old triangle.
-        counts = np.diff(self.offsets)
-        nonempty = counts > 0
-        first = np.full(n_new, -1, dtype=np.int64)
-        first[nonempty] = self.old_triangle[self.offsets[:-1][nonempty]]
+        first = _first_pair_cell(self.offsets, self.old_triangle)
         first[self.gap_triangle] = self.gap_old_triangle
-        reference = flat[first]
         # Divided by the covered area where the old triangles cover t (so the
         # weights sum to 1 to rounding), by |t| where a gap is left: there the
         # gap's own term, (old[s*] - reference) |gap| / |t|, is 0 by the choice of reference.
         denominator = np.bincount(self.new_triangle, self.area, minlength=n_new)
         denominator[self.gap_triangle] = self._new_area[self.gap_triangle]
-        weights = (self.area / denominator[self.new_triangle])[:, None]
-        mixed = np.zeros((n_new, flat.shape[1]), dtype=flat.dtype)
-        if nonempty.any():
-            terms = weights * (flat[self.old_triangle] - reference[self.new_triangle])
-            mixed[nonempty] = np.add.reduceat(terms, self.offsets[:-1][nonempty])
-        out = (reference + mixed).astype(dtype, copy=False)
-        return out.reshape((n_new,) + array.shape[1:])
+        out = _p0_average(flat, self.offsets, self.old_triangle, self.area, self.new_triangle, denominator, first)
+        return out.astype(dtype, copy=False).reshape((n_new,) + array.shape[1:])
 
     def _find_domain_change(self, parent: np.ndarray) -> None:
         """Where the new domain covers area the old one did not (a step with curved

@@ -1074,7 +1074,11 @@ def evolve_with_interface(mesh: Mesh, delta: Any, size: Any, interface: Any, int
     if band is not None:
         width, spacing, grade = band
         h = np.minimum(h, spacing + grade * np.maximum(0.0, _distance_to_interface(cut, tag) - 0.5 * width))
-    cut_delta = np.clip(h / cut.mesh.nn_spacing, DELTA_MIN, DELTA_MAX)
+    # h over the cut's own spacing, checked as every scope checks a size
+    # (size_request.hpp): a request out of range raises, never clipped.
+    cut_nn = cut.mesh.nn_spacing
+    cut_delta = h / cut_nn
+    _core.check_size_delta(cut_delta, h, cut_nn, DELTA_MIN, DELTA_MAX)
     on_interface = np.unique(cut.mesh.segments[(cut.mesh.segment_tags == tag) & ~cut.mesh.segment_is_boundary])
     extent = float(np.ptp(cut.mesh.points, axis=0).max())
     g = _interface_geometry(geometry, tag, cut.curve, extent, cut.mesh.points[on_interface])

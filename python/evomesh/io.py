@@ -18,6 +18,7 @@ from numpy.typing import ArrayLike
 
 from evomesh.mesh import Mesh
 from evomesh.spacing_function import _require_mesh, nn_spacing
+from evomesh.tet_mesh import TetMesh
 from evomesh.time_loop import Run, front_at
 
 if TYPE_CHECKING:
@@ -110,9 +111,10 @@ def _vtu_arrays(name: str, values: Any) -> list[tuple[str, np.ndarray]]:
     return [(name, array)]
 
 
-def to_meshio(mesh: Mesh, point_data: Mapping[str, ArrayLike] | None = None) -> meshio.Mesh:
+def to_meshio(mesh: Mesh | TetMesh, point_data: Mapping[str, ArrayLike] | None = None) -> meshio.Mesh:
     """A meshio.Mesh (:meth:`Mesh.to_meshio`: points with z = 0, a "triangle"
-    and a "line" block with their tags as ``gmsh:physical``).
+    and a "line" block with their tags as ``gmsh:physical``; for a
+    :class:`TetMesh`, :meth:`TetMesh.to_meshio`: "tetra" and "triangle" blocks).
 
     Point data always includes ``kind``, ``origin`` and ``required``, then the arrays of
     ``point_data`` (each shape (n,) or (n, ...)), stored as VTU can hold them:
@@ -131,7 +133,8 @@ def to_meshio(mesh: Mesh, point_data: Mapping[str, ArrayLike] | None = None) -> 
         per point or without components; a float / complex dtype wider than
         64-bit parts (VTU would lose precision).
     """
-    _require_mesh(mesh)
+    if not isinstance(mesh, TetMesh):
+        _require_mesh(mesh)
     _check_point_data(point_data, mesh.n_points, _MESH_POINT_DATA)
     out = mesh.to_meshio()
     for name, values in (point_data or {}).items():
@@ -219,13 +222,28 @@ def check_writable_format(path: str | Path) -> str:
     return file_format
 
 
-def _check_gmsh_tags(mesh: Mesh) -> None:
-    """Gmsh files hold 32-bit tags: a larger one would be wrapped, so it is refused."""
-    for name, tags in (("segment", mesh.segment_tags), ("triangle", mesh.triangle_tags)):
+def _tags_of(mesh: Mesh | TetMesh) -> tuple[tuple[str, np.ndarray], ...]:
+    if isinstance(mesh, TetMesh):
+        return (("face", mesh.face_tags), ("tetrahedron", mesh.tet_tags))
+    return (("segment", mesh.segment_tags), ("triangle", mesh.triangle_tags))
+
+
+def _check_32_bit_tags(mesh: Mesh | TetMesh, files: str) -> None:
+    """Gmsh and Medit files hold 32-bit tags: a larger one would be wrapped, so it is refused."""
+    for name, tags in _tags_of(mesh):
         if len(tags) and (tags.min() < _INT32.min or tags.max() > _INT32.max):
             bad = int(tags[(tags < _INT32.min) | (tags > _INT32.max)][0])
-            raise ValueError(f"{name} tag {bad} does not fit in the 32-bit tags of Gmsh files; write .vtu or .xdmf "
+            raise ValueError(f"{name} tag {bad} does not fit in the 32-bit tags of {files} files; write .vtu or .xdmf "
                              "(64-bit tags), or renumber the tags")
+
+
+def _medit_meshio(mesh: TetMesh) -> meshio.Mesh:
+    """Medit (.mesh) holds the tetrahedra and faces with one reference each (the tags), and nothing else."""
+    import meshio
+
+    cells = [("tetra", np.array(mesh.tetrahedra)), ("triangle", np.array(mesh.faces))]
+    tags = [mesh.tet_tags.astype(np.int32), mesh.face_tags.astype(np.int32)]
+    return meshio.Mesh(np.array(mesh.points), cells, cell_data={"medit:ref": tags})
 
 
 #: Where a VTU file's dataset starts: its field data go right after it.
@@ -281,8 +299,15 @@ def _write_atomically(path: Path, out: meshio.Mesh, file_format: str) -> None:
         shutil.rmtree(scratch, ignore_errors=True)
 
 
-def write_mesh(path: str | Path, mesh: Mesh, point_data: Mapping[str, ArrayLike] | None = None) -> Path:
+def write_mesh(path: str | Path, mesh: Mesh | TetMesh, point_data: Mapping[str, ArrayLike] | None = None) -> Path:
     """Write a mesh with meshio (format from the suffix; ``.vtu`` for ParaView).
+
+    A :class:`TetMesh` is written as "tetra" and "triangle" cells (its faces),
+    the tetrahedron (region) and face tags per cell and the tag names as for
+    a triangle mesh, in ``.msh`` (Gmsh 2.2), ``.vtu`` and ``.xdmf`` files with
+    ``kind``, ``origin``, ``required`` and the point data; a Medit ``.mesh``
+    file holds the tetrahedra and faces with their tags (32-bit) only: no tag
+    names and no point data (``point_data`` is refused there).
 
     Per-point data: ``kind``, ``origin``, ``required`` and the arrays of
     ``point_data`` (each shape (n,) or (n, ...)), converted and checked as in
@@ -328,11 +353,19 @@ def write_mesh(path: str | Path, mesh: Mesh, point_data: Mapping[str, ArrayLike]
         The folder does not exist or cannot be written.
     """
     path = Path(path)
-    _require_mesh(mesh)
+    if not isinstance(mesh, TetMesh):
+        _require_mesh(mesh)
     file_format = check_writable_format(path)
     _check_point_data(point_data, mesh.n_points, _MESH_POINT_DATA)
+    if isinstance(mesh, TetMesh) and file_format == "medit":
+        if point_data:
+            raise ValueError(f"Medit files hold no point data: write {path.stem}.vtu or .msh for "
+                             f"{', '.join(point_data)}")
+        _check_32_bit_tags(mesh, "Medit")
+        _write_atomically(path, _medit_meshio(mesh), file_format)
+        return path
     if file_format == "gmsh":
-        _check_gmsh_tags(mesh)
+        _check_32_bit_tags(mesh, "Gmsh")
         arrays = [a for name, values in (point_data or {}).items() for a in _gmsh_arrays(name, values)]
         file_format = "gmsh22"  # tags per cell, read back by meshio and Gmsh alike
     else:
@@ -347,22 +380,25 @@ def write_mesh(path: str | Path, mesh: Mesh, point_data: Mapping[str, ArrayLike]
     return path
 
 
-def read_mesh(path: str | Path) -> tuple[Mesh, dict[str, np.ndarray]]:
+def read_mesh(path: str | Path) -> tuple[Mesh | TetMesh, dict[str, np.ndarray]]:
     """Read a mesh written by :func:`write_mesh`.
 
     Parameters
     ----------
     path : str or Path
         Any format meshio reads; points may have a z coordinate, which must
-        then be 0 everywhere.
+        then be 0 everywhere, unless the file has tetrahedra.
 
     Returns
     -------
-    mesh : Mesh
-        With the file's kind, origin, interior segments (line cells), tags,
-        tag names (Gmsh's physical names, a VTU's field data), and the order
-        of its triangles and segments (:meth:`Mesh.from_meshio`): a file of
-        :func:`write_mesh` steps as the mesh that was written.
+    mesh : Mesh or TetMesh
+        A :class:`TetMesh` when the file has "tetra" cells
+        (:meth:`TetMesh.from_meshio`: tags, tag names, faces, kind, origin and
+        required as written). Else a Mesh with the file's kind, origin,
+        interior segments (line cells), tags, tag names (Gmsh's physical
+        names, a VTU's field data), and the order of its triangles and
+        segments (:meth:`Mesh.from_meshio`): a file of :func:`write_mesh`
+        steps as the mesh that was written.
     point_data : dict of ndarray
         The other point data, as stored (a complex field written by
         :func:`write_mesh` comes back as ``<name>_real`` and ``<name>_imag``).
@@ -372,8 +408,9 @@ def read_mesh(path: str | Path) -> tuple[Mesh, dict[str, np.ndarray]]:
     FileNotFoundError
         If there is no such file.
     ValueError
-        If the file cannot be read, has no triangles, has a point with z != 0
-        (the mesh is not planar: dropping z would change it), has ``kind`` or
+        If the file cannot be read, has no triangles (or tetrahedra), has a
+        point with z != 0 and no tetrahedra (the mesh is not planar: dropping z
+        would change it), has ``kind`` or
         ``origin`` values that are not integers (floats are accepted when
         integral: some writers store them as floats), or does not hold a
         valid mesh.
@@ -397,14 +434,15 @@ def read_mesh(path: str | Path) -> tuple[Mesh, dict[str, np.ndarray]]:
         raise ValueError(f"cannot read mesh file {path}: {error}") from error
     except Exception as error:  # parsers of the many formats raise many things
         raise ValueError(f"cannot read mesh file {path}: {type(error).__name__}: {error}") from error
+    reader = TetMesh._from_meshio if any(block.type == "tetra" for block in m.cells) else Mesh._from_meshio
     try:
-        mesh, used = Mesh._from_meshio(m)
+        mesh, used = reader(m)
     except ValueError as error:
         raise ValueError(f"mesh file {path}: {error}") from None
     data = {
         name: np.asarray(v)[used]
         for name, v in m.point_data.items()
-        if name not in _MESH_POINT_DATA and not name.startswith("gmsh:")
+        if name not in _MESH_POINT_DATA and not name.startswith(("gmsh:", "medit:"))
     }
     return mesh, data
 

@@ -6,7 +6,7 @@ import re
 import warnings
 from enum import IntEnum
 from types import MappingProxyType
-from typing import Any, Mapping
+from typing import Any, Mapping, Sequence
 
 import numpy as np
 
@@ -74,12 +74,13 @@ def _as_array(values: Any, name: str) -> np.ndarray:
         raise ValueError(f"{name} must be a rectangular array, not a ragged nested sequence") from error
 
 
-def _as_points(points: Any) -> np.ndarray:
+def _as_points(points: Any, dim: int = 2) -> np.ndarray:
+    """Checked coordinates, shape (n, dim), as a new float64 array."""
     array = _as_array(points, "points")
     if array.dtype == object or array.dtype.kind not in "fiu":
         raise TypeError(f"points must be a real numeric array, got dtype {array.dtype}")
-    if array.ndim != 2 or array.shape[1] != 2:
-        raise ValueError(f"points must have shape (n, 2), got {array.shape}")
+    if array.ndim != 2 or array.shape[1] != dim:
+        raise ValueError(f"points must have shape (n, {dim}), got {array.shape}")
     with np.errstate(over="ignore"):  # long double beyond float64 becomes inf, rejected below
         array = array.astype(np.float64)  # always a copy: the caller's array is never touched
     finite = np.isfinite(array).all(axis=1)
@@ -232,7 +233,25 @@ def check_mesh_limits(points: np.ndarray, triangles: np.ndarray, nn: np.ndarray 
     return nn
 
 
-class Mesh:
+class _ImmutableMesh:
+    """What Mesh and TetMesh share: immutability (steps return new meshes;
+    copies are the mesh itself) and the point count."""
+
+    __slots__ = ()
+    points: np.ndarray
+
+    @property
+    def n_points(self) -> int:
+        return len(self.points)
+
+    def __setattr__(self, name: str, value: Any) -> None:
+        raise AttributeError(f"{type(self).__name__} is immutable; evolve() returns a new mesh")
+
+    def __copy__(self) -> Any:
+        return self  # immutable
+
+
+class Mesh(_ImmutableMesh):
     """A valid 2-D triangle mesh with constraint segments; immutable.
 
     Parameters
@@ -473,9 +492,6 @@ class Mesh:
         computing them); empty when not computed yet."""
         return {} if self._nn is None else {"nn": self._nn, "nn_grew": self._nn_grew}
 
-    def __setattr__(self, name: str, value: Any) -> None:
-        raise AttributeError("Mesh is immutable; evolve() returns a new mesh")
-
     def __reduce__(self):
         # Pickle and deepcopy round-trip every array bit for bit (checkpoints).
         # Tag names only when there are some: a pickle then reads as before.
@@ -485,9 +501,6 @@ class Mesh:
              dict(self.stats), self.lineage, self._nn, self.segment_tags, self.triangle_tags, self.required,
              self._nn_grew) + ((dict(self.tag_names),) if self.tag_names else ()),
         )
-
-    def __copy__(self) -> "Mesh":
-        return self  # immutable
 
     def __deepcopy__(self, memo: dict) -> "Mesh":
         return _unpickle_mesh(*self.__reduce__()[1])
@@ -612,42 +625,12 @@ class Mesh:
     def _to_meshio(self, in_order: bool) -> Any:
         """to_meshio(); ``in_order``: one block per cell type, in the mesh's
         order, tags per cell (not for Gmsh 4.1, which keeps one tag per block)."""
-        import meshio
-
         points = np.c_[self.points, np.zeros(self.n_points)]
-        blocks: list[tuple[str, np.ndarray, np.ndarray]] = []  # (type, cells, their tags)
-        for kind, cells, cell_tags in (("triangle", self.triangles, self.triangle_tags),
-                                       ("line", self.segments, self.segment_tags)):
-            if len(cells) == 0:
-                continue
-            if in_order:
-                blocks.append((kind, np.array(cells), np.array(cell_tags)))
-                continue
-            order = np.argsort(cell_tags, kind="stable")
-            sorted_tags = cell_tags[order]
-            starts = np.flatnonzero(np.r_[True, sorted_tags[1:] != sorted_tags[:-1]])
-            for first, last in zip(starts, np.r_[starts[1:], len(order)]):
-                blocks.append((kind, np.array(cells[order[first:last]]), sorted_tags[first:last]))
-        # Gmsh entities: one per block (geometrical tag k + 1 of block k). Every
-        # entity must hold a point (meshio's Gmsh 4.1 writer lists only those),
-        # and meshio's 4.1 reader keeps points and point data in step only when
-        # the points come in entity order: so the points are spread over the
-        # entities in index order, sorted by (dim, tag). This classification
-        # means nothing else; the cells carry the tags.
-        dims = np.array([2 if kind == "triangle" else 1 for kind, _, _ in blocks], dtype=np.int32)
-        entities = np.lexsort((np.arange(len(blocks)), dims))
-        if self.n_points < len(blocks):
-            warnings.warn(f"the mesh has more tags ({len(blocks)} blocks of cells) than points: meshio cannot write it "
-                          "as Gmsh 4.1 (write Gmsh 2.2 or VTU)", UserWarning, stacklevel=2)
-        entity = entities[np.arange(self.n_points, dtype=np.int64) * len(blocks) // self.n_points]
-        dim_tags = np.c_[dims[entity], entity + 1].astype(np.int32)
-        cell_data = {"gmsh:physical": [np.asarray(tags, np.int64) for _, _, tags in blocks],
-                     "gmsh:geometrical": [np.full(len(c), k + 1, np.int32) for k, (_, c, _) in enumerate(blocks)]}
         point_data = {"kind": np.array(self.kind, dtype=np.int32), "origin": np.array(self.origin),
-                      "required": np.array(self.required, dtype=np.uint8), "gmsh:dim_tags": dim_tags}
-        field_data = {name: np.array([tag, dim], dtype=np.int64) for (dim, tag), name in self.tag_names.items()}
-        return meshio.Mesh(points, [(kind, c) for kind, c, _ in blocks], point_data=point_data, cell_data=cell_data,
-                           field_data=field_data)
+                      "required": np.array(self.required, dtype=np.uint8)}
+        return _tagged_meshio(points, [("triangle", 2, self.triangles, self.triangle_tags),
+                                       ("line", 1, self.segments, self.segment_tags)], in_order, point_data,
+                              self.tag_names)
 
     @staticmethod
     def skfem_names(m: Any) -> "tuple[dict[int, str], dict[int, str]]":
@@ -801,10 +784,6 @@ class Mesh:
         return m
 
     @property
-    def n_points(self) -> int:
-        return len(self.points)
-
-    @property
     def n_triangles(self) -> int:
         return len(self.triangles)
 
@@ -873,12 +852,59 @@ def _check_repeated_segments_agree(segments: np.ndarray, tags: np.ndarray) -> No
                          f"row {j} has tag {int(tags[j])}; a segment has one tag")
 
 
+def _tagged_meshio(points: np.ndarray, cell_types: Sequence[tuple[str, int, np.ndarray, np.ndarray]], in_order: bool,
+                   point_data: dict[str, np.ndarray], tag_names: Mapping[tuple[int, int], str]) -> Any:
+    """A meshio.Mesh of ``points`` (n, 3) and cells given as (meshio type, dim,
+    cells, tags), highest dimension first, with Gmsh's tags (``gmsh:physical``,
+    ``gmsh:geometrical``, point data ``gmsh:dim_tags``) and the tag names as
+    ``field_data`` (name -> [tag, dim]). ``in_order``: one block per cell type
+    in the given order, tags per cell; else one block per (type, tag), in
+    increasing tag order (Gmsh 4.1 keeps one physical tag per block)."""
+    import meshio
+
+    n_points = len(points)
+    blocks: list[tuple[str, int, np.ndarray, np.ndarray]] = []  # (type, dim, cells, their tags)
+    for kind, dim, cells, cell_tags in cell_types:
+        if len(cells) == 0:
+            continue
+        if in_order:
+            blocks.append((kind, dim, np.array(cells), np.array(cell_tags)))
+            continue
+        order = np.argsort(cell_tags, kind="stable")
+        sorted_tags = cell_tags[order]
+        starts = np.flatnonzero(np.r_[True, sorted_tags[1:] != sorted_tags[:-1]])
+        for first, last in zip(starts, np.r_[starts[1:], len(order)]):
+            blocks.append((kind, dim, np.array(cells[order[first:last]]), sorted_tags[first:last]))
+    # Gmsh entities: one per block (geometrical tag k + 1 of block k). Every
+    # entity must hold a point (meshio's Gmsh 4.1 writer lists only those),
+    # and meshio's 4.1 reader keeps points and point data in step only when
+    # the points come in entity order: so the points are spread over the
+    # entities in index order, sorted by (dim, tag). This classification
+    # means nothing else; the cells carry the tags.
+    dims = np.array([dim for _, dim, _, _ in blocks], dtype=np.int32)
+    entities = np.lexsort((np.arange(len(blocks)), dims))
+    if n_points < len(blocks):
+        warnings.warn(f"the mesh has more tags ({len(blocks)} blocks of cells) than points: meshio cannot write it "
+                      "as Gmsh 4.1 (write Gmsh 2.2 or VTU)", UserWarning, stacklevel=3)
+    entity = entities[np.arange(n_points, dtype=np.int64) * len(blocks) // n_points]
+    dim_tags = np.c_[dims[entity], entity + 1].astype(np.int32)
+    cell_data = {"gmsh:physical": [np.asarray(tags, np.int64) for _, _, _, tags in blocks],
+                 "gmsh:geometrical": [np.full(len(c), k + 1, np.int32) for k, (_, _, c, _) in enumerate(blocks)]}
+    field_data = {name: np.array([tag, dim], dtype=np.int64) for (dim, tag), name in tag_names.items()}
+    return meshio.Mesh(points, [(kind, c) for kind, _, c, _ in blocks], point_data={**point_data,
+                       "gmsh:dim_tags": dim_tags}, cell_data=cell_data, field_data=field_data)
+
+
+#: The dimensions a triangle mesh's tag names refer to.
+_TRIANGLE_MESH_TAG_DIMS = {1: "segment", 2: "triangle"}
 #: Characters a tag name may not hold: Gmsh writes names in double quotes, one a line.
 _BAD_TAG_NAME_CHARACTER = re.compile(r'["\x00-\x1f\x7f]')
 
 
-def _as_tag_names(names: Any) -> dict[tuple[int, int], str]:
-    """Checked tag names: (dim, tag) -> name, dim 1 (segments) or 2 (triangles)."""
+def _as_tag_names(names: Any, dims: Mapping[int, str] | None = None) -> dict[tuple[int, int], str]:
+    """Checked tag names: (dim, tag) -> name, dim one of ``dims`` (dim -> what
+    it tags; default 1 segments, 2 triangles)."""
+    dims = _TRIANGLE_MESH_TAG_DIMS if dims is None else dims
     if names is None:
         return {}
     if not isinstance(names, Mapping):
@@ -889,8 +915,9 @@ def _as_tag_names(names: Any) -> dict[tuple[int, int], str]:
                 or not all(isinstance(k, (int, np.integer)) and not isinstance(k, bool) for k in key)):
             raise TypeError(f"tag_names keys must be (dim, tag) pairs of integers, got {key!r}")
         dim, tag = int(key[0]), int(key[1])
-        if dim not in (1, 2):
-            raise ValueError(f"tag_names key {key!r}: dim must be 1 (segment tags) or 2 (triangle tags)")
+        if dim not in dims:
+            allowed = " or ".join(f"{d} ({what} tags)" for d, what in dims.items())
+            raise ValueError(f"tag_names key {key!r}: dim must be {allowed}")
         if not -(2**63) <= tag < 2**63:
             raise ValueError(f"tag_names key {key!r}: the tag must fit in int64")
         if not isinstance(name, str) or not name:
@@ -933,16 +960,16 @@ def _with_region_borders(triangles: np.ndarray, tags: np.ndarray, segments: np.n
     return np.concatenate([base, border]), np.concatenate([base_tags, np.zeros(len(border), np.int64)])
 
 
-def _names_from_field_data(field_data: Mapping[str, Any]) -> dict[tuple[int, int], str]:
-    """Gmsh's physical names (meshio field_data, name -> [tag, dim]) of
-    dimension 1 and 2, as tag_names; other entries are not names of tags."""
+def _names_from_field_data(field_data: Mapping[str, Any], dims: Sequence[int] = (1, 2)) -> dict[tuple[int, int], str]:
+    """Gmsh's physical names (meshio field_data, name -> [tag, dim]) of the
+    dimensions ``dims``, as tag_names; other entries are not names of tags."""
     names: dict[tuple[int, int], str] = {}
     for name, value in field_data.items():
         array = np.asarray(value)
         if array.shape != (2,) or array.dtype.kind not in "iuf" or not np.isfinite(array).all():
             continue
         tag, dim = (int(v) for v in array)
-        if dim in (1, 2) and isinstance(name, str) and name and not _BAD_TAG_NAME_CHARACTER.search(name):
+        if dim in dims and isinstance(name, str) and name and not _BAD_TAG_NAME_CHARACTER.search(name):
             names.setdefault((dim, tag), name)
     return names
 

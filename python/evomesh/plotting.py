@@ -16,7 +16,7 @@ if TYPE_CHECKING:
     from matplotlib.axes import Axes
     from matplotlib.figure import Figure, SubFigure
 
-__all__ = ["plot_step", "plot_mesh", "draw_front"]
+__all__ = ["plot_step", "plot_mesh", "draw_front", "plot_tet_slice", "tet_slice"]
 
 _FRONT_STYLE: dict[str, Any] = {"color": "crimson", "linewidth": 1.4, "linestyle": "--", "zorder": 5}
 _KEPT_COLOR = "0.55"
@@ -211,3 +211,68 @@ def save(fig: Figure, path: str | Path, dpi: int = 110) -> Path:
     fig.savefig(path, dpi=dpi)
     fig.clear()
     return path
+
+
+# The six edges of a tetrahedron, as vertex pairs.
+_TET_EDGES = np.array([[0, 1], [0, 2], [0, 3], [1, 2], [1, 3], [2, 3]])
+
+
+def tet_slice(points: np.ndarray, tetrahedra: np.ndarray, axis: int, value: float) -> tuple[np.ndarray, np.ndarray]:
+    """The cut of each tetrahedron by the plane x[axis] = value: polygons of 3
+    or 4 corners in the other two coordinates (rows padded with NaN to 4,
+    counter-clockwise about their centre), shape (k, 4, 2), and the index of
+    the tetrahedron of each."""
+    p = np.asarray(points, dtype=np.float64)[np.asarray(tetrahedra)]
+    side = p[:, :, axis] - value
+    # Half-open (a point on the plane counts as below): every point of the
+    # plane inside the mesh is in exactly one polygon, also where faces lie on it.
+    cut = (side.min(axis=1) <= 0) & (side.max(axis=1) > 0)
+    p, side = p[cut], side[cut]
+    others = [a for a in range(3) if a != axis]
+    a, b = _TET_EDGES[:, 0], _TET_EDGES[:, 1]
+    sa, sb = side[:, a], side[:, b]
+    crossing = (sa <= 0) != (sb <= 0)  # exactly one end below the plane
+    with np.errstate(invalid="ignore", divide="ignore"):
+        t = np.where(crossing, sa / (sa - sb), np.nan)
+    corners = p[:, a][:, :, others] + t[:, :, None] * (p[:, b][:, :, others] - p[:, a][:, :, others])
+    centre = np.nanmean(corners, axis=1)
+    angle = np.arctan2(corners[:, :, 1] - centre[:, None, 1], corners[:, :, 0] - centre[:, None, 0])
+    order = np.argsort(np.where(crossing, angle, np.inf), axis=1)[:, :4]
+    polygons = np.take_along_axis(corners, order[:, :, None], axis=1)
+    return polygons, np.flatnonzero(cut)
+
+
+def plot_tet_slice(mesh: Any, *, axis: int = 2, value: float = 0.5, sphere: tuple[Any, float] | None = None,
+                   ax: Axes | None = None, title: str | None = None) -> Figure | SubFigure:
+    """A slice of a :class:`evomesh.TetMesh`: its tetrahedra cut by the plane
+    x[axis] = value, drawn as polygons (those with a new point in orange), and
+    the circle of a sphere (centre, radius) on that plane; returns the Figure."""
+    from matplotlib.collections import PolyCollection
+
+    fig: Figure | SubFigure
+    if ax is None:
+        fig, (ax,) = _figure(1)
+    else:
+        fig = ax.figure
+    polygons, tets = tet_slice(mesh.points, mesh.tetrahedra, axis, value)
+    new = (mesh.origin[mesh.tetrahedra[tets]] < 0).any(axis=1)
+    shapes = [poly[~np.isnan(poly[:, 0])] for poly in polygons]
+    faces = np.where(new[:, None], np.array([1.0, 0.85, 0.7, 1.0]), np.array([0.93, 0.93, 0.93, 1.0]))
+    ax.add_collection(PolyCollection(shapes, facecolors=faces, edgecolors="0.2", linewidths=0.3))
+    others = [a for a in range(3) if a != axis]
+    lo, hi = mesh.points.min(axis=0), mesh.points.max(axis=0)
+    ax.set_xlim(lo[others[0]], hi[others[0]])
+    ax.set_ylim(lo[others[1]], hi[others[1]])
+    ax.set_aspect("equal")
+    names = "xyz"
+    ax.set_xlabel(names[others[0]])
+    ax.set_ylabel(names[others[1]])
+    if sphere is not None:
+        centre, radius = np.asarray(sphere[0], dtype=np.float64), float(sphere[1])
+        gap = radius**2 - (value - centre[axis]) ** 2
+        if gap > 0:
+            _circles(ax, centre[others][None], np.array([np.sqrt(gap)]), facecolors="none",
+                     edgecolors=_FRONT_STYLE["color"], linewidths=_FRONT_STYLE["linewidth"], linestyles="--", zorder=5)
+    if title:
+        ax.set_title(title, fontsize=10)
+    return fig

@@ -61,40 +61,8 @@ def as_delta(mesh: Mesh, delta: ArrayLike) -> NDArray[np.float64]:
     return array
 
 
-# size= (delta_from_size). Calibration, measured by benchmarks/stays_put.py on
-# unit_square_mesh and on evomesh's own output: a refining step's edges are
-# 1.25-1.4 times its new spacing delta nn_M for delta in [0.4, 0.9], a
-# coarsening step's about 1.0 times (0.9-1.1). Refining aims at 1.35: with
-# 1.3 the refined neighbourhood landed at L of about 1.08, one refined point
-# in seven above 1.15, a fringe the next step refined again (about a tenth
-# of it each step: 2 % of the points changed at the second repeated step on
-# a graded request, 0.08-0.1 % at the third); 1.4 puts the median edge of a
-# 0.7 times finer request on a jittered lattice at 0.89 of it.
-_EDGE_OVER_NN_REFINED = 1.35
-_EDGE_OVER_NN_COARSENED = 1.0
-# Where the request is met (delta = 1 exactly). Around p, the mean length of
-# its and its neighbours' edges over the request: above _COARSE_TOLERANCE the
-# mesh is refined where that asks for delta < _REFINE_BELOW (a step asked for
-# less adds a point here and there, step after step); below 1 /
-# _FINE_TOLERANCE it is coarsened, except within _CLEARANCE_RINGS edges of a
-# point where the mean is at least 1 / _MEETS: a cluster that the segments'
-# Gabriel condition, small angles or required points make finer than the
-# request (measured on evomesh's output: 1 % of the points below 0.7) is put
-# back by the quality pass whenever a step coarsens it. The band is symmetric,
-# [1 / 1.25, 1.25]: with 1.15 above, the points a refining step inserts
-# between its refined points and the settled ones (the edges there grade from
-# one to the other) were refined again by the next step; at 1.25 they are not
-# (benchmarks/stays_put.py, 1e4-5e4 points: 0.04-0.05 % changed at the second
-# repeated step on a graded request, none at the third). _REFINE_BELOW 0.8,
-# not 0.85: what is left above the band after a refining step is its fringe,
-# asking for delta 0.6-0.82 (half of it above 0.8), a point here and there.
-_COARSE_TOLERANCE = 1.25
-_REFINE_BELOW = 0.8
-_FINE_TOLERANCE = 1.25
-_MEETS = 1.1
-_CLEARANCE_RINGS = 3
-# The bits of _core.edge_over_size_classes (size_request.hpp).
-_ABOVE, _BELOW, _AT_LEAST = 1, 2, 4
+# size= (delta_from_size): the rule and its calibration are the core's
+# (size_request.hpp, Size_rule), the same in every scope.
 
 
 def _size_values(mesh: Mesh, size: Any) -> NDArray[np.float64]:
@@ -186,60 +154,14 @@ def delta_from_size(mesh: Mesh, size: ArrayLike | Callable[[np.ndarray], ArrayLi
         factor outside [DELTA_MIN, DELTA_MAX] at a point.
     """
     _require_mesh(mesh)
-    points = np.asarray(mesh.points)
-    triangles = np.asarray(mesh.triangles)
     h = _size_values(mesh, size)
-    # L(p): each edge against the request at its midpoint (h taken as linear
-    # along it), the mean over the edges at p (each counted once per triangle
-    # corner at p: an interior edge twice), then over p and its neighbours; in
-    # the core (size_request.hpp), with the bits of the numpy sums it replaced.
-    # Only how L compares with the band's ends is read, and the core says
-    # that exactly (edge_over_size_classes) without computing every L exactly.
-    classes = _core.edge_over_size_classes(points, triangles, h, _COARSE_TOLERANCE, 1 / _FINE_TOLERANCE, 1 / _MEETS)
-    nn = mesh.nn_spacing
-    with np.errstate(over="ignore"):
-        refine = h / (_EDGE_OVER_NN_REFINED * nn)
-        coarsen = np.maximum(1.0, h / (_EDGE_OVER_NN_COARSENED * nn))
-    too_coarse = (classes & _ABOVE).astype(bool) & (refine < _REFINE_BELOW)  # L > 1.25
-    too_fine = (classes & _BELOW).astype(bool)  # L < 1 / 1.25
-    if too_fine.any():
-        meets = (classes & _AT_LEAST).astype(bool)  # L >= 1 / 1.1
-        if keep_fine_clusters:
-            # (near_seeds in the core: the points within the rings of a seed)
-            pocket = _core.near_seeds(triangles, too_fine, meets, _CLEARANCE_RINGS).view(bool)
-            # A too-fine point with no too-fine neighbour left: coarsening acts on
-            # a neighbourhood (f near p is capped by its neighbours' cones, nn(q)
-            # + |p - q|, about 2 nn(p)), and on its own it is a point the step
-            # keeps anyway or none that a step would change: a corner, a boundary
-            # point between two close ones
-            # (a short last piece of a split input segment: L = 0.44, delta = 3.8
-            # on benchmarks/stays_put.py's L-shape), the end of a settled cluster
-            # just beyond its rings. Asked step after step, it only kept the step
-            # off its empty scope (empty_scope.cpp, C1: delta == 1).
-            coarsening = _core.sharing_a_triangle(triangles, too_fine & ~pocket).view(bool)
-            # A pocket joined to a coarsening region (through too-fine points,
-            # within the rings) is that region's edge, not a cluster among
-            # settled points: it coarsens with it. Kept, it held the region's
-            # rim fine for ever, and each step that coarsened a too-fine region
-            # made new settled points next to what was left of it (a region a
-            # fine request had left: median edge 0.62 of the request, 20 % more
-            # points than a fresh mesh; benchmarks/coarsen_back.py).
-            too_fine = _core.near_seeds(triangles, too_fine, coarsening, _CLEARANCE_RINGS, too_fine).view(bool)
-        # Where the mesh coarsens, its neighbours finer than 1 / 1.1 coarsen
-        # to the request with it: left at delta = 1 inside the band, each
-        # holds its spacing around it (f <= nn(q) + |x - q|, and the gap repair
-        # puts a point back at nn(q) from it when it is dropped), and the
-        # coarsened region settles at L of about 0.87, in the band for good.
-        too_fine |= _core.near_seeds(triangles, ~meets, too_fine, 1).view(bool)
-    delta = np.where(too_coarse, refine, np.where(too_fine, coarsen, 1.0))
-    bad = (delta < DELTA_MIN) | (delta > DELTA_MAX)
-    if bad.any():
-        k = int(np.argmax(bad))
-        raise ValueError(
-            f"size {h[k]:g} at point {k} is {delta[k]:g} times its current spacing {nn[k]:g}; one step "
-            f"changes the spacing by a factor in [{DELTA_MIN:g}, {DELTA_MAX:g}]"
-        )
-    return delta
+    # L(p) (each edge against the request at its midpoint, h taken as linear
+    # along it; the mean over the edges at p, each counted once per triangle
+    # corner at p, then over p and its neighbours), the band, the settled
+    # clusters and the check: the core's one rule (size_request.hpp), which
+    # the distributed step and the interface step call too.
+    return _core.delta_from_size(np.asarray(mesh.points), np.asarray(mesh.triangles), h, mesh.nn_spacing,
+                                 keep_fine_clusters, DELTA_MIN, DELTA_MAX)
 
 
 def _as_sites(x: Any, name: str) -> np.ndarray:

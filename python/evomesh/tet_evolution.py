@@ -5,6 +5,7 @@ linear transfer of fields through its lineage. :func:`evomesh.evolve` calls
 from __future__ import annotations
 
 import dataclasses
+import numbers
 import time
 from typing import Any, Callable
 
@@ -88,25 +89,24 @@ class TetOptions:
     seed: int = 0
 
     def __post_init__(self) -> None:
-        for name in ("cell_factor", "size_factor", "size_tolerance", "max_samples"):
+        for field in dataclasses.fields(self):
+            value = getattr(self, field.name)
+            if field.name not in ("threads", "seed") and (not isinstance(value, numbers.Real)
+                                                          or isinstance(value, bool)):
+                raise ValueError(f"{field.name} must be a number, got {value!r}")
+        for name in ("size_factor", "size_tolerance"):
             value = getattr(self, name)
-            if not isinstance(value, (int, float)) or isinstance(value, bool) or not (np.isfinite(value) and value > 0):
+            if not (np.isfinite(value) and value > 0):
                 raise ValueError(f"{name} must be a finite positive number, got {value!r}")
         if self.size_tolerance < 1:
             raise ValueError(f"size_tolerance must be at least 1, got {self.size_tolerance!r}")
-        if not isinstance(self.radius_scale, (int, float)) or not 0 < self.radius_scale <= 1:
-            raise ValueError(f"radius_scale must be in (0, 1], got {self.radius_scale!r}")
-        if not isinstance(self.boundary_clearance, (int, float)) or not 0 <= self.boundary_clearance < 1:
-            raise ValueError(f"boundary_clearance must be in [0, 1), got {self.boundary_clearance!r}")
-        ratio = self.max_radius_edge
-        if not isinstance(ratio, (int, float)) or not (ratio == 0 or 1 < ratio < np.inf):
-            raise ValueError(f"max_radius_edge must be 0 (none) or a finite number above 1, got {ratio!r}")
-        if not isinstance(self.sliver_angle, (int, float)) or not 0 <= self.sliver_angle <= 30:
-            raise ValueError(f"sliver_angle must be in [0, 30] degrees, got {self.sliver_angle!r}")
         if self.threads is not None and (not isinstance(self.threads, int) or self.threads < 1):
             raise ValueError(f"threads must be a positive integer or None, got {self.threads!r}")
         if not isinstance(self.seed, (int, np.integer)) or self.seed < 0:
             raise ValueError(f"seed must be a non-negative integer, got {self.seed!r}")
+        # The ranges of the step's own options: checked where the step checks them.
+        _core.check_tet_options(self.cell_factor, self.radius_scale, self.boundary_clearance, self.max_radius_edge,
+                                self.sliver_angle, self.max_samples, self.threads or 0)
 
 
 def _per_point(value: Any, n: int, name: str) -> np.ndarray:
@@ -281,7 +281,7 @@ def evolve_tet(mesh: TetMesh, delta: Any = None, *, size: Any = None, seed: int 
                  cpu_seconds=time.process_time() - start)
     lineage = TetLineage(n, mesh.n_tetrahedra, out["parent_tet"])
     return TetMesh._trusted(points, tets, new_faces, face_tags, tet_tags, required, out["kind"], origin, lineage,
-                            stats, (new_faces, new_face_tet))
+                            stats, (new_faces, new_face_tet), mesh.tag_names)
 
 
 def transfer_tet(old: TetMesh, new: TetMesh, values: Any) -> np.ndarray:

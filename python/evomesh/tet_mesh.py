@@ -3,6 +3,7 @@ and its quality measures."""
 
 from __future__ import annotations
 
+import warnings
 from enum import IntEnum
 from types import MappingProxyType
 from typing import Any, Mapping, Sequence
@@ -10,12 +11,27 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 
 from evomesh import _core
-from evomesh.mesh import _as_array, _as_indices, _as_mask, _as_tags, _frozen, _frozen_constant
+from evomesh.mesh import (
+    _as_indices,
+    _as_mask,
+    _as_points,
+    _as_tag_names,
+    _as_tags,
+    _frozen,
+    _frozen_constant,
+    _ImmutableMesh,
+    _integral_values,
+    _names_from_field_data,
+    _tagged_meshio,
+)
 
 __all__ = ["TetMesh", "TetPointKind", "TetLineage", "unit_cube_mesh", "box_mesh", "radius_edge_ratios",
            "dihedral_angles"]
 
-_MAX_COORDINATE = 1e75
+#: The dimensions a tetrahedral mesh's tag names refer to.
+TET_MESH_TAG_DIMS = {2: "face", 3: "tetrahedron"}
+#: Cell data that hold tags in files, in the order they are looked for.
+_TAG_CELL_DATA = ("gmsh:physical", "medit:ref", "tag", "tags")
 # A tetrahedron whose volume is below this fraction of its longest edge cubed
 # is degenerate for floating point (its smallest dihedral angle is ~1e-8 deg).
 _MIN_RELATIVE_VOLUME = 1e-10
@@ -65,21 +81,8 @@ class TetLineage:
     def __setattr__(self, name: str, value: Any) -> None:
         raise AttributeError("TetLineage is immutable")
 
-
-def _as_points3(points: Any) -> np.ndarray:
-    array = _as_array(points, "points")
-    if array.dtype == object or array.dtype.kind not in "fiu":
-        raise TypeError(f"points must be a real numeric array, got dtype {array.dtype}")
-    if array.ndim != 2 or array.shape[1] != 3:
-        raise ValueError(f"points must have shape (n, 3), got {array.shape}")
-    with np.errstate(over="ignore"):
-        array = array.astype(np.float64)  # a copy: the caller's array is never touched
-    finite = np.isfinite(array).all(axis=1)
-    if not finite.all():
-        raise ValueError(f"points contain NaN or infinite coordinates (first at row {int(np.argmin(finite))})")
-    if array.size and np.abs(array).max() > _MAX_COORDINATE:
-        raise ValueError(f"point coordinates must be below {_MAX_COORDINATE:g} in magnitude")
-    return array
+    def __reduce__(self):
+        return (TetLineage, (self.n_old_points, self.n_old_tetrahedra, self.parent_tet))
 
 
 def _row_keys(rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -87,10 +90,21 @@ def _row_keys(rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     equal rows of ``rows`` get the same group number (numbers in sorted order)."""
     if len(rows) == 0:
         return np.zeros(0, np.int64), np.zeros(0, np.int64)
-    order = np.lexsort(rows.T[::-1])
-    sorted_rows = rows[order]
     new_group = np.ones(len(rows), bool)
-    new_group[1:] = (sorted_rows[1:] != sorted_rows[:-1]).any(axis=1)
+    low, span = int(rows.min()), int(rows.max()) - int(rows.min()) + 1
+    if span ** rows.shape[1] < 2**62:
+        # One int64 key per row, in the rows' lexicographic order: a stable
+        # argsort of it is the lexsort's order, several times faster.
+        key = np.zeros(len(rows), np.int64)
+        for column in rows.T:
+            key = key * span + (column.astype(np.int64) - low)
+        order = np.argsort(key, kind="stable")
+        sorted_key = key[order]
+        new_group[1:] = sorted_key[1:] != sorted_key[:-1]
+    else:
+        order = np.lexsort(rows.T[::-1])
+        sorted_rows = rows[order]
+        new_group[1:] = (sorted_rows[1:] != sorted_rows[:-1]).any(axis=1)
     group = np.empty(len(rows), np.int64)
     group[order] = np.cumsum(new_group) - 1
     return order, group
@@ -195,7 +209,7 @@ def _check_cells(points: np.ndarray, tetrahedra: np.ndarray) -> None:
                          f"(at least {_MIN_RELATIVE_VOLUME:g} is needed)")
 
 
-class TetMesh:
+class TetMesh(_ImmutableMesh):
     """An immutable tetrahedral mesh.
 
     Parameters
@@ -215,10 +229,15 @@ class TetMesh:
         One region tag per tetrahedron (default 0).
     required : array_like of bool, shape (n,), optional
         Points every step keeps.
+    tag_names : mapping of (int, int) to str, optional
+        Names of tags: ``(2, tag)`` a face tag, ``(3, tag)`` a tetrahedron
+        (region) tag, as Gmsh's physical names; kept by every step and by
+        Gmsh and VTU files.
 
     Attributes
     ----------
     points, tetrahedra, faces, face_tags, tet_tags, required : ndarray (read-only)
+    tag_names : Mapping[tuple[int, int], str]
     kind : ndarray of uint8, shape (n,)
         :class:`TetPointKind` of each point (box strata on an axis-aligned box).
     origin : ndarray of int64, shape (n,)
@@ -242,7 +261,7 @@ class TetMesh:
     """
 
     __slots__ = ("points", "tetrahedra", "faces", "face_tags", "tet_tags", "required", "kind", "origin", "lineage",
-                 "stats", "_nn", "_boundary")
+                 "stats", "tag_names", "_nn", "_boundary")
 
     points: np.ndarray
     tetrahedra: np.ndarray
@@ -254,12 +273,13 @@ class TetMesh:
     origin: np.ndarray
     lineage: TetLineage | None
     stats: Mapping[str, float]
+    tag_names: Mapping[tuple[int, int], str]
     _nn: np.ndarray | None
     _boundary: tuple[np.ndarray, np.ndarray] | None
 
     def __init__(self, points: Any, tetrahedra: Any, faces: Any = None, *, face_tags: Any = None,
-                 tet_tags: Any = None, required: Any = None):
-        pts = _as_points3(points)
+                 tet_tags: Any = None, required: Any = None, tag_names: Any = None):
+        pts = _as_points(points, 3)
         n = len(pts)
         if n < 4:
             raise ValueError(f"a tetrahedral mesh needs at least 4 points, got {n}")
@@ -268,6 +288,7 @@ class TetMesh:
             raise ValueError("a tetrahedral mesh needs at least one tetrahedron")
         tet_t = None if tet_tags is None else _as_tags(tet_tags, len(tets), "tet_tags", "tetrahedra")
         req = None if required is None else _as_mask(required, n)
+        names = _as_tag_names(tag_names, TET_MESH_TAG_DIMS)
         _check_cells(pts, tets)
         nn = _core.tet_nn_spacing(pts)  # raises on duplicate points
         bnd, bnd_tet = boundary_faces(tets)
@@ -279,10 +300,10 @@ class TetMesh:
             fcs = _as_indices(faces, 3, "faces", n)
             f_tags = None if face_tags is None else _as_tags(face_tags, len(fcs), "face_tags", "faces")
             _check_faces(tets, fcs, bnd)
-        self._assign(pts, tets, fcs, f_tags, tet_t, req, None, None, None, {}, nn, (bnd, bnd_tet))
+        self._assign(pts, tets, fcs, f_tags, tet_t, req, None, None, None, {}, nn, (bnd, bnd_tet), names)
 
     def _assign(self, points, tetrahedra, faces, face_tags, tet_tags, required, kind, origin, lineage, stats,
-                nn=None, boundary=None) -> None:
+                nn=None, boundary=None, tag_names=None) -> None:
         set_ = object.__setattr__
         n, m = len(points), len(tetrahedra)
         set_(self, "points", _frozen(np.asarray(points, dtype=np.float64)))
@@ -303,20 +324,26 @@ class TetMesh:
              else _frozen(np.asarray(origin, dtype=np.int64)))
         set_(self, "lineage", lineage)
         set_(self, "stats", MappingProxyType(dict(stats)))
+        set_(self, "tag_names", MappingProxyType(dict(tag_names or {})))
         set_(self, "_nn", None if nn is None else _frozen(np.asarray(nn, dtype=np.float64)))
 
     @classmethod
     def _trusted(cls, points, tetrahedra, faces, face_tags=None, tet_tags=None, required=None, kind=None,
-                 origin=None, lineage=None, stats=None, boundary=None) -> TetMesh:
+                 origin=None, lineage=None, stats=None, boundary=None, tag_names=None, nn=None) -> TetMesh:
         """Wrap arrays that evomesh itself produced (already valid); no checks."""
         mesh = cls.__new__(cls)
         mesh._assign(points, tetrahedra, faces, face_tags, tet_tags, required, kind, origin, lineage, stats or {},
-                     None, boundary)
+                     nn, boundary, tag_names)
         return mesh
 
-    @property
-    def n_points(self) -> int:
-        return len(self.points)
+    def __reduce__(self):
+        # Pickle and deepcopy keep every array bit for bit (checkpoints).
+        return (_unpickle_tet_mesh, (self.points, self.tetrahedra, self.faces, self.face_tags, self.tet_tags,
+                                     self.required, self.kind, self.origin, self.lineage, dict(self.stats),
+                                     dict(self.tag_names), self._nn))
+
+    def __deepcopy__(self, memo: dict) -> TetMesh:
+        return _unpickle_tet_mesh(*self.__reduce__()[1])
 
     @property
     def n_tetrahedra(self) -> int:
@@ -342,11 +369,128 @@ class TetMesh:
     def volumes(self) -> np.ndarray:
         return tet_volumes(self.points, self.tetrahedra)
 
-    def __setattr__(self, name: str, value: Any) -> None:
-        raise AttributeError("TetMesh is immutable; evolve() returns a new mesh")
+    def to_meshio(self) -> Any:
+        """A ``meshio.Mesh`` that Gmsh and VTU files hold with its tags: a
+        "tetra" and a "triangle" block per tag (increasing), tags as cell data
+        ``gmsh:physical``, ``tag_names`` as ``field_data`` (name -> [tag,
+        dim]), point data ``kind``, ``origin`` and ``required``.
+        :func:`evomesh.io.write_mesh` writes one block per cell type in the
+        mesh's order instead (tags per cell)."""
+        return self._to_meshio(in_order=False)
+
+    def _to_meshio(self, in_order: bool) -> Any:
+        point_data = {"kind": np.array(self.kind, dtype=np.int32), "origin": np.array(self.origin),
+                      "required": np.array(self.required, dtype=np.uint8)}
+        return _tagged_meshio(np.array(self.points), [("tetra", 3, self.tetrahedra, self.tet_tags),
+                                                      ("triangle", 2, self.faces, self.face_tags)], in_order,
+                              point_data, self.tag_names)
+
+    @classmethod
+    def from_meshio(cls, m: Any, *, tags: str | None = None) -> TetMesh:
+        """A TetMesh from a ``meshio.Mesh`` with "tetra" cells.
+
+        Tetrahedron blocks are concatenated (in the file's order), triangle
+        cells become ``faces``; boundary triangles the file does not list are
+        added with tag 0 (a Medit or Gmsh file may list only the tagged ones).
+        Tags come from the cell data ``tags`` (default: the first of
+        ``gmsh:physical``, ``medit:ref``, ``tag``, ``tags``), tag names from
+        Gmsh's physical names (``field_data``) of dimension 2 and 3, point data
+        ``kind``, ``origin`` and ``required`` when present (integral floats
+        accepted). Points used by no tetrahedron are removed with a warning;
+        line and vertex cells are ignored; other cell types are refused
+        (ValueError), as is anything :class:`TetMesh` refuses (inverted
+        tetrahedra among them: the file's orientation is never changed).
+        """
+        return cls._from_meshio(m, tags)[0]
+
+    @classmethod
+    def _from_meshio(cls, m: Any, tags: str | None = None) -> tuple[TetMesh, np.ndarray]:
+        """The TetMesh and the mask of the meshio points it kept."""
+        points = np.asarray(m.points)
+        if points.ndim != 2 or points.shape[1] != 3:
+            raise ValueError(f"a tetrahedral mesh needs points of shape (n, 3), got {points.shape}")
+        if tags is None:
+            tags = next((name for name in _TAG_CELL_DATA if name in m.cell_data), None)
+        elif tags not in m.cell_data:
+            raise ValueError(f"meshio mesh has no cell data {tags!r}; it has: {', '.join(m.cell_data) or 'none'}")
+        cells: dict[str, list[np.ndarray]] = {"tetra": [], "triangle": []}
+        cell_tags: dict[str, list[np.ndarray]] = {"tetra": [], "triangle": []}
+        for k, block in enumerate(m.cells):
+            if block.type in cells:
+                cells[block.type].append(np.asarray(block.data))
+                if tags is not None:
+                    cell_tags[block.type].append(np.asarray(m.cell_data[tags][k]).reshape(-1))
+            elif block.type not in ("vertex", "line"):
+                raise ValueError(f"cells of type {block.type!r} are not supported: a TetMesh holds linear "
+                                 "tetrahedra (and triangles as faces)")
+        if not cells["tetra"]:
+            raise ValueError("meshio mesh has no tetra cells")
+        tets = np.concatenate(cells["tetra"]).astype(np.int64)
+        faces = np.concatenate(cells["triangle"]).astype(np.int64) if cells["triangle"] else None
+        tet_tags = face_tags = None
+        if tags is not None:
+            tet_tags = _integral_values(np.concatenate(cell_tags["tetra"]), tags, "cell data", "tetrahedron")
+            if faces is not None:
+                face_tags = _integral_values(np.concatenate(cell_tags["triangle"]), tags, "cell data", "triangle")
+        data = {name: np.asarray(v) for name, v in m.point_data.items() if name in ("kind", "origin", "required")}
+        used = np.zeros(len(points), dtype=bool)
+        if tets.size and tets.min() >= 0 and tets.max() < len(points):
+            used[tets.ravel()] = True
+            if not used.all():
+                if faces is not None and faces.size and (faces.min() < 0 or faces.max() >= len(points)
+                                                         or not used[faces.ravel()].all()):
+                    raise ValueError("a triangle cell uses a point that no tetrahedron uses")
+                remap = np.cumsum(used) - 1
+                warnings.warn(f"removed {int((~used).sum())} points used by no tetrahedron", UserWarning, stacklevel=3)
+                points, tets = points[used], remap[tets]
+                faces = None if faces is None else remap[faces]
+                data = {name: v[used] for name, v in data.items()}
+        if faces is not None:
+            faces, face_tags = _with_boundary(tets, faces, face_tags)
+        names = _names_from_field_data(getattr(m, "field_data", None) or {}, tuple(TET_MESH_TAG_DIMS)) \
+            if tags == "gmsh:physical" else {}
+        required = data.get("required")
+        mesh = cls(points, tets, faces, face_tags=face_tags, tet_tags=tet_tags, tag_names=names,
+                   required=None if required is None else _integral_values(required, "required").astype(bool))
+        kind, origin = data.get("kind"), data.get("origin")
+        if kind is None and origin is None:
+            return mesh, used
+        if kind is not None:
+            kind = _integral_values(kind, "kind").reshape(-1)
+            if len(kind) != mesh.n_points or kind.min() < 0 or kind.max() > max(TetPointKind):
+                raise ValueError(f"point data 'kind' must hold one TetPointKind (0 to {int(max(TetPointKind))}) "
+                                 "per point")
+        if origin is not None:
+            origin = _integral_values(origin, "origin").reshape(-1)
+            if len(origin) != mesh.n_points:
+                raise ValueError("point data 'origin' must hold one value per point")
+        labelled = cls._trusted(mesh.points, mesh.tetrahedra, mesh.faces, mesh.face_tags, mesh.tet_tags,
+                                mesh.required, mesh.kind if kind is None else kind, origin, None, None,
+                                mesh.boundary_faces, mesh.tag_names, mesh._nn)
+        return labelled, used
 
     def __repr__(self) -> str:
         return f"TetMesh({self.n_points} points, {self.n_tetrahedra} tetrahedra, {len(self.faces)} faces)"
+
+
+def _unpickle_tet_mesh(points, tetrahedra, faces, face_tags, tet_tags, required, kind, origin, lineage, stats,
+                       tag_names, nn) -> TetMesh:
+    return TetMesh._trusted(points, tetrahedra, faces, face_tags, tet_tags, required, kind, origin, lineage, stats,
+                            None, tag_names, nn)
+
+
+def _with_boundary(tetrahedra: np.ndarray, faces: np.ndarray, face_tags: np.ndarray | None
+                   ) -> tuple[np.ndarray, np.ndarray | None]:
+    """faces (and tags) with the boundary triangles they miss added (tag 0)."""
+    boundary, _ = boundary_faces(tetrahedra)
+    _, group = _row_keys(np.sort(np.concatenate([faces, boundary]), axis=1))
+    listed = np.zeros(group.max() + 1, bool)
+    listed[group[:len(faces)]] = True
+    missing = boundary[~listed[group[len(faces):]]]
+    if len(missing) == 0:
+        return faces, face_tags
+    tags = np.zeros(len(faces), np.int64) if face_tags is None else np.asarray(face_tags, np.int64)
+    return np.concatenate([faces, missing]), np.concatenate([tags, np.zeros(len(missing), np.int64)])
 
 
 def _check_faces(tetrahedra: np.ndarray, faces: np.ndarray, boundary: np.ndarray) -> None:

@@ -11,9 +11,10 @@ from typing import Any, Sequence
 import numpy as np
 
 from evomesh import _core
+from evomesh.mesh import _as_points
 from evomesh.tet_domains import _popcount, polyhedral_domain
 from evomesh.tet_evolution import evolve_tet
-from evomesh.tet_mesh import TetMesh, TetPointKind, _as_points3
+from evomesh.tet_mesh import TetMesh, TetPointKind
 
 __all__ = ["convex_polyhedron_mesh", "tilted_box_mesh", "octahedron_mesh"]
 
@@ -44,7 +45,7 @@ def convex_polyhedron_mesh(vertices: Any, size: float, *, seed: int = 0) -> TetM
         the others, facets meeting below 90 degrees, facets whose corners
         leave no exact lattice.
     """
-    corners = _as_points3(vertices)
+    corners = _as_points(vertices, 3)
     if len(corners) < 4:
         raise ValueError(f"a polyhedron needs at least 4 vertices, got {len(corners)}")
     size = _positive_number(size, "size")

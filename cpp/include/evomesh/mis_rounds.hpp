@@ -18,6 +18,7 @@
 namespace evomesh {
 
 namespace detail {
+template <std::size_t D>
 class Kept_sphere_tree;
 }
 
@@ -84,7 +85,7 @@ class Mis_part {
   // those, the earlier ones (no conflict lists: a candidate overlaps dozens of
   // others, and the kept ones form a packing).
   std::uint8_t decide(std::size_t position) const;
-  std::unique_ptr<detail::Kept_sphere_tree> tree_;
+  std::unique_ptr<detail::Kept_sphere_tree<2>> tree_;
   std::vector<double> radii_;
   std::vector<std::uint8_t> owned_;
   std::vector<std::uint8_t> reported_;

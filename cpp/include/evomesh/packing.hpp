@@ -1,6 +1,7 @@
 // Lexical-first maximal independent set of a sphere system (Section 3.2, steps 4-5).
 #pragma once
 
+#include <array>
 #include <cstddef>
 #include <cstdint>
 #include <vector>
@@ -107,5 +108,17 @@ Packing_class new_point_class(bool on_segment, int round = -1);
 std::vector<std::uint8_t> extend_packing(const std::vector<Vec2>& centers, const std::vector<double>& radii,
                                          const std::vector<Index>& first_order, const std::vector<std::uint8_t>& kept,
                                          std::vector<Index> more_order, int threads = 0);
+
+// The same MIS in 3-D (the tetrahedral step; the kd-tree of kept spheres is
+// one template in D): lexical_first_mis_3 over the spheres listed in `order`
+// (distinct; one not listed is neither kept nor met), the first n_forced kept
+// unconditionally; extend_packing_3 as extend_packing.
+std::vector<std::uint8_t> lexical_first_mis_3(const std::vector<std::array<double, 3>>& centers,
+                                              const std::vector<double>& radii, const std::vector<Index>& order,
+                                              std::size_t n_forced = 0, int threads = 0);
+std::vector<std::uint8_t> extend_packing_3(const std::vector<std::array<double, 3>>& centers,
+                                           const std::vector<double>& radii, const std::vector<Index>& first_order,
+                                           const std::vector<std::uint8_t>& kept, std::vector<Index> more_order,
+                                           int threads = 0);
 
 }  // namespace evomesh

@@ -1,6 +1,8 @@
-// size= (python/evomesh/spacing_function.py, delta_from_size): how a mesh's
-// edges compare with a requested edge length h. The per-point means run here;
-// the decision from them (the hysteresis, the settled clusters) stays in Python.
+// size= as delta (python/evomesh/spacing_function.py, delta_from_size, says
+// what the rule does and why): how a mesh's edges compare with a requested
+// edge length h, and the one function that turns h into delta and checks it,
+// called by every scope (the whole mesh, a rank's part with its halo, the mesh
+// cut by an interface).
 #pragma once
 
 #include <cstdint>
@@ -36,6 +38,68 @@ constexpr std::uint8_t Edge_over_size_at_least = 4;
 std::vector<std::uint8_t> edge_over_size_classes(const std::vector<Vec2>& points,
                                                  const std::vector<Triangle>& triangles, const std::vector<double>& h,
                                                  double above, double below, double at_least);
+
+// The calibration of the size rule. Measured by benchmarks/stays_put.py on
+// unit_square_mesh and on evomesh's own output: a refining step's edges are
+// 1.25-1.4 times its new spacing delta nn_M for delta in [0.4, 0.9], a
+// coarsening step's about 1.0 times (0.9-1.1). Refining aims at 1.35: with
+// 1.3 the refined neighbourhood landed at L of about 1.08, one refined point
+// in seven above 1.15, a fringe the next step refined again; 1.4 puts the
+// median edge of a 0.7 times finer request on a jittered lattice at 0.89 of it.
+//
+// Where the request is met (delta = 1 exactly): around p, L(p) the mean
+// length of its and its neighbours' edges over the request: above
+// coarse_tolerance the mesh is refined where that asks for delta <
+// refine_below (a step asked for less adds a point here and there, step after
+// step); below 1 / fine_tolerance it is coarsened, except within
+// clearance_rings edges of a point where L is at least 1 / meets: a cluster
+// that the segments' Gabriel condition, small angles or required points make
+// finer than the request is put back by the quality pass whenever a step
+// coarsens it. The band is symmetric, [1 / 1.25, 1.25]: with 1.15 above, the
+// points a refining step inserts between its refined points and the settled
+// ones were refined again by the next step; at 1.25 they are not
+// (benchmarks/stays_put.py, 1e4-5e4 points: 0.04-0.05 % changed at the second
+// repeated step on a graded request, none at the third). refine_below 0.8,
+// not 0.85: what is left above the band after a refining step is its fringe,
+// asking for delta 0.6-0.82, a point here and there.
+struct Size_rule {
+  static constexpr double edge_over_nn_refined = 1.35;
+  static constexpr double edge_over_nn_coarsened = 1.0;
+  static constexpr double coarse_tolerance = 1.25;
+  static constexpr double refine_below = 0.8;
+  static constexpr double fine_tolerance = 1.25;
+  static constexpr double meets = 1.1;
+  static constexpr int clearance_rings = 3;
+  // The rings of triangles around a point that its delta depends on: L reads
+  // two, the clusters 2 clearance_rings + 2 more. A part of a mesh with this
+  // many halo rings around its own points gives them the whole mesh's delta.
+  static constexpr int rings = 2 + 2 * clearance_rings + 2;
+};
+
+// delta(p) for the request h (delta_from_size), bit for bit as its numpy form
+// computed it: L(p) through edge_over_size_classes; too coarse (L > 1.25 and
+// h / (1.35 nn) < 0.8): delta = h / (1.35 nn); too fine (L < 1 / 1.25, with the
+// clusters' exceptions when keep_fine_clusters): max(1, h / nn); else 1.
+// `nn`: nn_M at the points. On a part of a mesh (a rank's points and the
+// halo), the points with Size_rule::rings halo rings around them get the
+// whole mesh's delta if the points and triangles are in the whole mesh's
+// order. Then check_size_delta on the points [0, n_checked) (ids: their names
+// in its message; null: their indices). O(n + rings m). Preconditions as
+// edge_over_size_around's, nn.size() == points.size().
+std::vector<double> delta_from_size(const std::vector<Vec2>& points, const std::vector<Triangle>& triangles,
+                                    const std::vector<double>& h, const std::vector<double>& nn,
+                                    bool keep_fine_clusters, double delta_min, double delta_max,
+                                    std::size_t n_checked, const std::vector<std::int64_t>* ids = nullptr);
+
+// The check of a size request turned into delta, the same in every scope:
+// Input_error naming the first of the points [0, n_checked) whose delta is
+// outside [delta_min, delta_max] ("size h at point id is delta times its
+// current spacing nn; one step changes the spacing by a factor in [min,
+// max]"; id: ids[p], or p). Preconditions: the vectors of one length at least
+// n_checked (ids too, if given).
+void check_size_delta(const std::vector<double>& delta, const std::vector<double>& h, const std::vector<double>& nn,
+                      double delta_min, double delta_max, std::size_t n_checked,
+                      const std::vector<std::int64_t>* ids = nullptr);
 
 // Of the points marked in `points`, those within `rings` edges (triangle
 // sides) of a point marked in `seeds`: delta_from_size's settled clusters.

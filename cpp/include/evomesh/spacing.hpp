@@ -12,7 +12,7 @@ namespace evomesh {
 
 // nn_M(p): distance from every point to its nearest other point (all points,
 // not only mesh neighbours), from a static kd-tree queried in parallel
-// (detail/point_tree.hpp).
+// (nd/kd_tree.hpp).
 // Precondition: at least two points, no duplicates (throws Input_error).
 std::vector<double> nn_spacing(const std::vector<Vec2>& points);
 

@@ -497,33 +497,15 @@ def _longest_edges(dmesh: DistributedMesh) -> np.ndarray:
     return longest[: dmesh.n_owned]
 
 
-def _star_any(dmesh: DistributedMesh, flag: np.ndarray, include_self: bool) -> np.ndarray:
-    """Per owned point: whether a point sharing a triangle with it (or itself,
-    with include_self) is flagged, from `flag` over the owned points. An owned
-    point's triangles are all held, and the halo's flags come from their owners."""
-    held = dmesh.exchange_halo(flag.astype(np.uint8)).astype(bool)
-    triangles = np.concatenate([dmesh.triangles, dmesh.halo_triangles]).reshape(-1, 3)
-    hit = np.zeros(len(dmesh.points), dtype=bool)
-    for k in range(3):
-        for other in (1, 2):
-            a, b = triangles[:, k], triangles[:, (k + other) % 3]
-            hit[a[held[b]]] = True
-    out = hit[: dmesh.n_owned]
-    return out | flag.astype(bool) if include_self else out
-
-
 def delta_from_size(dmesh: DistributedMesh, size: Any) -> np.ndarray:
     """:func:`evomesh.delta_from_size` on a distributed mesh: delta at the owned
-    points, equal bit for bit to the serial function's on the gathered mesh.
-    Collective.
+    points, equal bit for bit to the serial function's on the gathered mesh, and
+    the same ValueError for a request out of range. Collective.
 
-    The serial rule reads two rings of triangles around a point (the mean edge
-    over request L, `_core.edge_over_size_classes`), then three rings of the
-    result (`near_seeds`), one more (`sharing_a_triangle`), three through
-    too-fine points and one for the coarsening region's neighbours: the first
-    on a view of the mesh with two halo rings (points and triangles in
-    global-id order, so the core's sums run in the serial order), the others
-    one ring at a time with a halo exchange between rings.
+    The rule is the core's (`_core.delta_from_size`, size_request.hpp), run on
+    this rank's points with `_core.SIZE_RULE_RINGS` halo rings (all that an
+    owned point's delta reads), its triangles in global-id order (so the sums
+    of L run in the serial order), the owned points checked.
 
     Parameters
     ----------
@@ -538,49 +520,22 @@ def delta_from_size(dmesh: DistributedMesh, size: Any) -> np.ndarray:
         return sf._size_values(cast(Any, SimpleNamespace(n_points=n_owned, points=dmesh.owned_points)), size)
 
     h = _collective(comm, values)
-    # Two halo rings, same owners: the serial L at every owned point.
+    nn = DistributedSpacing(dmesh, 1.0).nn
     wide = DistributedMesh.from_local(dmesh.points, dmesh.triangles, dmesh.global_ids, comm, owners=dmesh.owners,
-                                      halo_rings=2)
-    held_h = wide.exchange_halo(h[np.searchsorted(dmesh.global_ids[:n_owned], wide.global_ids[: wide.n_owned])])
-    order = np.argsort(wide.global_ids, kind="stable")
-    rank_of = np.empty(len(order), dtype=np.int64)
-    rank_of[order] = np.arange(len(order))
+                                      halo_rings=_core.SIZE_RULE_RINGS)
+    # (the same owned points, maybe in another order; the halo after them)
+    owned = np.searchsorted(dmesh.global_ids[:n_owned], wide.global_ids[: wide.n_owned])
     tri = np.concatenate([wide.triangles, wide.halo_triangles]).reshape(-1, 3)
     tri_gid = np.concatenate([wide.triangle_global_ids, wide.halo_triangle_global_ids])
-    tri = rank_of[tri[np.argsort(tri_gid, kind="stable")]]
-    classes = _core.edge_over_size_classes(np.ascontiguousarray(wide.points[order]), np.ascontiguousarray(tri),
-                                           np.ascontiguousarray(held_h[order]), sf._COARSE_TOLERANCE,
-                                           1 / sf._FINE_TOLERANCE, 1 / sf._MEETS)
-    owned_classes = np.empty(n_owned, dtype=np.uint8)
-    owned_classes[np.searchsorted(dmesh.global_ids[:n_owned], wide.global_ids[: wide.n_owned])] = \
-        np.asarray(classes)[rank_of[: wide.n_owned]]
-    nn = DistributedSpacing(dmesh, 1.0).nn
-    with np.errstate(over="ignore"):
-        refine = h / (sf._EDGE_OVER_NN_REFINED * nn)
-        coarsen = np.maximum(1.0, h / (sf._EDGE_OVER_NN_COARSENED * nn))
-    too_coarse = (owned_classes & sf._ABOVE).astype(bool) & (refine < sf._REFINE_BELOW)
-    too_fine = (owned_classes & sf._BELOW).astype(bool)
-    MPI = _mpi()
-    if comm.allreduce(bool(too_fine.any()), op=MPI.LOR):
-        meets = (owned_classes & sf._AT_LEAST).astype(bool)
-        pocket = meets
-        for _ in range(sf._CLEARANCE_RINGS):
-            pocket = _star_any(dmesh, pocket, include_self=True)
-        coarsening = too_fine & ~pocket
-        coarsening &= _star_any(dmesh, coarsening, include_self=False)
-        for _ in range(sf._CLEARANCE_RINGS):  # (through too-fine points)
-            coarsening = too_fine & _star_any(dmesh, coarsening, include_self=True)
-        too_fine = coarsening | (~meets & _star_any(dmesh, coarsening, include_self=True))
-    delta = np.where(too_coarse, refine, np.where(too_fine, coarsen, 1.0))
+    tri = np.ascontiguousarray(tri[np.argsort(tri_gid, kind="stable")])
 
-    def check() -> None:
-        bad = (delta < sf.DELTA_MIN) | (delta > sf.DELTA_MAX)
-        if bad.any():
-            k = int(np.argmax(bad))
-            raise ValueError(
-                f"size {h[k]:g} at the point of global id {int(dmesh.global_ids[k])} is {delta[k]:g} times its "
-                f"current spacing {nn[k]:g}; one step changes the spacing by a factor in "
-                f"[{sf.DELTA_MIN:g}, {sf.DELTA_MAX:g}]")
+    held_h = wide.exchange_halo(h[owned])
+    held_nn = wide.exchange_halo(nn[owned])
 
-    _collective(comm, check)
+    def rule() -> np.ndarray:
+        return _core.delta_from_size(np.ascontiguousarray(wide.points), tri, held_h, held_nn, True, sf.DELTA_MIN,
+                                     sf.DELTA_MAX, n_checked=wide.n_owned, ids=wide.global_ids)
+
+    delta = np.empty(n_owned)
+    delta[owned] = _collective(comm, rule)[: wide.n_owned]
     return delta

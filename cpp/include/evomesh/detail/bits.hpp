@@ -5,7 +5,7 @@
 
 // Inlines a function into every caller (where the compiler supports it): for
 // search loops that take their visit as a lambda over the caller's state, which
-// then stays in registers (detail/static_kd_tree.hpp: up to 7% on queries).
+// then stays in registers (nd/kd_tree.hpp: up to 7% on queries).
 #if defined(__GNUC__) || defined(__clang__)
 #define EVOMESH_ALWAYS_INLINE inline __attribute__((always_inline))
 #else

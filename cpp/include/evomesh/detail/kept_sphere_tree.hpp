@@ -1,23 +1,25 @@
 // The kd-tree of spheres that the lexical-first MIS queries for a kept (or
-// pending) sphere in conflict: the serial packing (packing.cpp) and one rank's
-// share of the MIS in rounds (mis_rounds.cpp).
+// pending) sphere in conflict, in D dimensions: the serial packing
+// (packing.cpp; the 2-D and the 3-D step) and one rank's share of the MIS in
+// rounds (mis_rounds.cpp).
 #pragma once
 
 #include <algorithm>
+#include <cstddef>
 #include <cstdint>
 #include <vector>
 
 #include "evomesh/detail/bits.hpp"
 #include "evomesh/detail/sphere_conflict.hpp"
-#include "evomesh/detail/static_kd_tree.hpp"
+#include "evomesh/nd/kd_tree.hpp"
 #include "evomesh/parallel.hpp"
 #include "evomesh/types.hpp"
 
 namespace evomesh::detail {
 
-// The kd-tree over sphere centres (detail/static_kd_tree.hpp, leaves of at most
-// 48 spheres) with the centre and radius of every sphere copied in tree order,
-// so a leaf is scanned in one contiguous sweep. Each node keeps, besides its
+// The kd-tree over sphere centres (nd::Static_kd_tree, leaves of at most 48
+// spheres) with the centre and radius of every sphere copied in tree order, so
+// a leaf is scanned in one contiguous sweep. Each node keeps, besides its
 // bounding box, the largest radius among the *kept* spheres below it (-1: none
 // kept yet), and each leaf a mask of its kept spheres.
 //
@@ -41,13 +43,14 @@ namespace evomesh::detail {
 // "pending" (the next ones of the visiting order, not decided yet): a frozen
 // query then reports the first kept conflict and, before it in T_p, every
 // pending sphere that conflicts.
+template <std::size_t D>
 class Kept_sphere_tree {
  public:
   // `order`: the visiting order (distinct sphere indices; the tree holds every
   // sphere), consumed: the tree keeps the position of each instead.
-  Kept_sphere_tree(const std::vector<Vec2>& centers, const std::vector<double>& radii, std::vector<Index>&& order,
-                   int threads)
-      : tree_(centers, kLeafSize, Tree::Boxes_later{}) {
+  Kept_sphere_tree(const std::vector<nd::Point<D>>& centers, const std::vector<double>& radii,
+                   std::vector<Index>&& order, int threads)
+      : tree_(centers, kLeafSize, typename Tree::Boxes_later{}) {
     const std::size_t n = centers.size();
     const auto& sphere_at = tree_.point_at();
     // Gathers and a scatter over all spheres, in chunks on `threads` threads.
@@ -70,10 +73,10 @@ class Kept_sphere_tree {
     detail::parallel_resize(slots_, n);
     chunks(n, [&](std::size_t k) {
       const std::size_t i = sphere_at[k];
-      slots_[k] = {centers[i][0], centers[i][1], radii[i]};
+      slots_[k] = {centers[i], radii[i]};
     });
     // The nodes' boxes from the slots, in order (the same boxes).
-    tree_.set_boxes([this](std::size_t k) { return Vec2{slots_[k].x, slots_[k].y}; });
+    tree_.set_boxes([this](std::size_t k) -> const nd::Point<D>& { return slots_[k].centre; });
     leaf_masks_.assign(tree_.n_leaves(), Leaf_masks{});
   }
 
@@ -95,21 +98,22 @@ class Kept_sphere_tree {
   // (the first found), or kNone.
   std::size_t conflicting_kept(std::size_t position) const {
     const Slot& s = slots_[position];
-    const double cx = s.x, cy = s.y, r = s.radius;
+    const nd::Point<D>& c = s.centre;
+    const double r = s.radius;
     std::size_t hit = kNone;
     tree_.outward(
-        position, [&](std::size_t leaf) { return (hit = leaf_conflicts(leaf, cx, cy, r)) != kNone; },
-        [&](std::size_t node, detail::Kd_stack& stack) {
+        position, [&](std::size_t leaf) { return (hit = leaf_conflicts(leaf, c, r)) != kNone; },
+        [&](std::size_t node, nd::Kd_stack& stack) {
           const Node& b = tree_.node(node);
           if (b.max_kept_radius < 0) return false;
-          // Pruning never skips a conflict (detail::squared_distance).
+          // Pruning never skips a conflict (nd::squared_distance of a box).
           const double reach = r + b.max_kept_radius;
-          if (detail::squared_distance(b, cx, cy) >= reach * reach) return false;
+          if (nd::squared_distance<D>(b, c) >= reach * reach) return false;
           if (!tree_.is_leaf(node)) {
             stack.push_children(node);
             return false;
           }
-          hit = leaf_conflicts(tree_.leaf(node), cx, cy, r);
+          hit = leaf_conflicts(tree_.leaf(node), c, r);
           return hit != kNone;
         });
     return hit;
@@ -130,7 +134,8 @@ class Kept_sphere_tree {
   // are then meaningless). Reads the tree only.
   bool conflicting_kept_or_pending(std::size_t position, std::size_t& hit, Met& met) const {
     const Slot& s = slots_[position];
-    const double cx = s.x, cy = s.y, r = s.radius;
+    const nd::Point<D>& c = s.centre;
+    const double r = s.radius;
     const double pending_radius = pending_radius_;
     hit = kNone;
     met.size = 0;
@@ -145,10 +150,7 @@ class Kept_sphere_tree {
            mask &= mask - 1) {
         const int bit = detail::count_trailing_zeros(mask);
         const Slot& t = first[bit];
-        const double ex = t.x - cx;
-        const double ey = t.y - cy;
-        const double sum = r + t.radius;
-        if (!spheres_conflict(ex, ey, sum)) continue;
+        if (!spheres_conflict<D>(t.centre, c, r + t.radius)) continue;
         const std::size_t at = begin + static_cast<std::size_t>(bit);
         if ((kept >> bit) & 1) {
           hit = at;
@@ -163,7 +165,7 @@ class Kept_sphere_tree {
       }
       return false;
     };
-    tree_.outward(position, scan, [&](std::size_t node, detail::Kd_stack& stack) {
+    tree_.outward(position, scan, [&](std::size_t node, nd::Kd_stack& stack) {
       const Node& b = tree_.node(node);
       // Every pending sphere's radius is at most pending_radius: the pruning
       // of conflicting_kept with that radius for every node never skips a
@@ -171,7 +173,7 @@ class Kept_sphere_tree {
       const double reach_radius = std::max(b.max_kept_radius, pending_radius);
       if (reach_radius < 0) return false;
       const double reach = r + reach_radius;
-      if (detail::squared_distance(b, cx, cy) >= reach * reach) return false;
+      if (nd::squared_distance<D>(b, c) >= reach * reach) return false;
       if (!tree_.is_leaf(node)) {
         stack.push_children(node);
         return false;
@@ -212,6 +214,29 @@ class Kept_sphere_tree {
     pending_radius_ = -1;
   }
 
+  // Whether x lies strictly inside a kept sphere: then B(x, r) conflicts with
+  // it for every r >= 0 ((s + r)^2 >= s^2 after rounding), so a candidate
+  // there can be dropped before its radius is known.
+  bool covers(const nd::Point<D>& x) const {
+    return tree_.depth_first(1, [&](std::size_t node, nd::Kd_stack& stack) {
+      const Node& b = tree_.node(node);
+      if (b.max_kept_radius < 0 || !(nd::squared_distance<D>(b, x) < b.max_kept_radius * b.max_kept_radius)) {
+        return false;
+      }
+      if (!tree_.is_leaf(node)) {
+        stack.push_children(node);
+        return false;
+      }
+      const std::size_t leaf = tree_.leaf(node);
+      const Slot* first = &slots_[tree_.leaf_begin(leaf)];
+      for (std::uint64_t mask = leaf_masks_[leaf].kept; mask != 0; mask &= mask - 1) {
+        const Slot& t = first[detail::count_trailing_zeros(mask)];
+        if (nd::squared_distance<D>(t.centre, x) < t.radius * t.radius) return true;
+      }
+      return false;
+    });
+  }
+
   void keep(std::size_t position) {
     const double r = slots_[position].radius;
     const std::size_t leaf = tree_.leaf_of(position);
@@ -227,9 +252,10 @@ class Kept_sphere_tree {
   // Leaves hold at most kLeafSize + 1 spheres: one bit each in the leaf masks.
   static_assert(kLeafSize < 64, "leaf masks are 64 bits");
   struct Slot {
-    double x, y, radius;
+    nd::Point<D> centre;
+    double radius;
   };
-  struct Node : detail::Box {
+  struct Node : nd::Box<D> {
     double max_kept_radius = -1;
   };
   // Bit k: position leaf_begin + k is kept; is pending.
@@ -237,20 +263,17 @@ class Kept_sphere_tree {
     std::uint64_t kept = 0, pending = 0;
   };
 
-  std::size_t leaf_conflicts(std::size_t leaf, double cx, double cy, double r) const {
+  std::size_t leaf_conflicts(std::size_t leaf, const nd::Point<D>& c, double r) const {
     const std::size_t begin = tree_.leaf_begin(leaf);
     const Slot* first = &slots_[begin];
     for (std::uint64_t mask = leaf_masks_[leaf].kept; mask != 0; mask &= mask - 1) {
       const Slot& s = first[detail::count_trailing_zeros(mask)];
-      const double ex = s.x - cx;
-      const double ey = s.y - cy;
-      const double sum = r + s.radius;
-      if (spheres_conflict(ex, ey, sum)) return begin + static_cast<std::size_t>(&s - first);
+      if (spheres_conflict<D>(s.centre, c, r + s.radius)) return begin + static_cast<std::size_t>(&s - first);
     }
     return kNone;
   }
 
-  using Tree = detail::Static_kd_tree<Node>;
+  using Tree = nd::Static_kd_tree<D, Node>;
   Tree tree_;
   std::vector<Slot> slots_;                  // in tree order
   std::vector<std::uint32_t> visit_;         // position of each sphere of the visiting order

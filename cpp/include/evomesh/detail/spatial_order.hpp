@@ -27,18 +27,15 @@ enum class Spatial_order {
   // Hilbert sort on the rounds of a biased randomised insertion order).
   brio,
   // The Hilbert curve on a 2^16 x 2^16 grid over the bounding box, ties in
-  // input order: O(n), and walks about as short.
+  // input order: O(n), and walks about as short. Its permutation alone (4
+  // bytes a point instead of an Ordered_point's 24):
+  // nd::hilbert_grid_permutation (nd/hilbert_order.hpp).
   hilbert_grid,
 };
 
 // The n points in the order `how`. The order never depends on `threads`
 // (0: the default, see parallel.hpp).
 std::vector<Ordered_point> spatial_order(const Vec2* points, std::size_t n, Spatial_order how, int threads = 0);
-
-// The permutation of Spatial_order::hilbert_grid alone (point indices in that
-// order): 4 bytes a point instead of an Ordered_point's 24, for callers that
-// read the points themselves. Fewer than 2^32 - 1 points.
-std::vector<std::uint32_t> hilbert_grid_permutation(const Vec2* points, std::size_t n, int threads = 0);
 
 inline std::vector<Ordered_point> spatial_order(const std::vector<Vec2>& points, Spatial_order how, int threads = 0) {
   return spatial_order(points.data(), points.size(), how, threads);

@@ -1,6 +1,10 @@
 // The packing's conflict test, written once.
 #pragma once
 
+#include <cstddef>
+
+#include "evomesh/nd/kd_tree.hpp"
+
 namespace evomesh::detail {
 
 // Spheres B(a, r_a) and B(b, r_b) conflict (their interiors overlap) when
@@ -11,5 +15,12 @@ namespace evomesh::detail {
 // one expression compiled without contraction (-ffp-contract=off,
 // CMakeLists.txt) guarantees on every platform.
 inline bool spheres_conflict(double ex, double ey, double sum) { return ex * ex + ey * ey < sum * sum; }
+
+// The same test in D dimensions, e = a - b: the squared length summed in axis
+// order from 0 (nd::squared_distance), in 2-D the expression above to the bit.
+template <std::size_t D>
+inline bool spheres_conflict(const nd::Point<D>& a, const nd::Point<D>& b, double sum) {
+  return nd::squared_distance<D>(a, b) < sum * sum;
+}
 
 }  // namespace evomesh::detail

@@ -61,6 +61,10 @@ struct Tet_step_options {
   double max_samples = 5e7;
   std::uint64_t seed = 0;
   int threads = 0;  // 0: the default (parallel.hpp); results never depend on it
+
+  // Throws Input_error naming the first field out of range (options.cpp, with
+  // the 2-D options' checks).
+  void validate() const;
 };
 
 struct Tet_step_input {
