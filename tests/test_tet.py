@@ -252,15 +252,15 @@ def test_step_rejects_bad_requests(cube):
         evomesh.evolve(cube, size=fails_at_samples)
 
 
-def test_step_refuses_a_domain_that_is_not_a_box():
+def test_step_refuses_a_domain_that_is_not_convex():
     mesh = evomesh.unit_cube_mesh(2)
     keep = mesh.points[mesh.tetrahedra].mean(axis=1).sum(axis=1) < 1.6  # a corner cut off
     tets = mesh.tetrahedra[keep]
     used = np.unique(tets)
     remap = np.full(mesh.n_points, -1)
     remap[used] = np.arange(len(used))
-    cut = evomesh.TetMesh(mesh.points[used], remap[tets])
-    with pytest.raises(ValueError, match="box"):
+    cut = evomesh.TetMesh(mesh.points[used], remap[tets])  # a staircase: not convex
+    with pytest.raises(ValueError, match="convex"):
         evomesh.evolve(cut, 1.0)
 
 
@@ -342,7 +342,7 @@ def test_face_tags_follow_the_box_sides():
             assert on.any() and (new.face_tags[on] == 10 + 2 * axis + high).all()
     mixed = side.copy()
     mixed[0] = 99
-    with pytest.raises(ValueError, match="vary within box side"):
+    with pytest.raises(ValueError, match="vary within facet"):
         evomesh.evolve(evomesh.TetMesh(mesh.points, mesh.tetrahedra, faces, face_tags=mixed), 1.0)
 
 

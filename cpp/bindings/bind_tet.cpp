@@ -63,6 +63,33 @@ std::vector<T> to_vector(const Array& a, std::size_t n, const char* name) {
   return std::vector<T>(a.data(), a.data() + n);
 }
 
+// The domain from its arrays (Polyhedral_domain): facets (F, 3, 3), the
+// facets (E, 2) and end corners (E, 2, 3) of its edges, a neighbour mask per facet.
+Polyhedral_domain to_domain(const Float_array& facets, const Int_array& edge_facets, const Float_array& edge_ends,
+                            const Int_array& neighbours) {
+  if (facets.ndim() != 3 || facets.shape(1) != 3 || facets.shape(2) != 3) throw Input_error("facets must have shape (F, 3, 3)");
+  const auto n_edges = edge_facets.ndim() == 2 ? edge_facets.shape(0) : 0;
+  if (edge_facets.ndim() != 2 || edge_facets.shape(1) != 2) throw Input_error("edge_facets must have shape (E, 2)");
+  if (edge_ends.ndim() != 3 || edge_ends.shape(0) != n_edges || edge_ends.shape(1) != 2 || edge_ends.shape(2) != 3) {
+    throw Input_error("edge_ends must have shape (E, 2, 3)");
+  }
+  std::vector<std::array<Vec3, 3>> f(static_cast<std::size_t>(facets.shape(0)));
+  if (!f.empty()) std::memcpy(f.data(), facets.data(), f.size() * sizeof(f[0]));
+  std::vector<std::array<int, 2>> ef(static_cast<std::size_t>(n_edges));
+  for (std::size_t e = 0; e < ef.size(); ++e) {
+    for (std::size_t i = 0; i < 2; ++i) ef[e][i] = static_cast<int>(edge_facets.at(static_cast<py::ssize_t>(e), static_cast<py::ssize_t>(i)));
+  }
+  std::vector<std::array<Vec3, 2>> ends(static_cast<std::size_t>(n_edges));
+  if (!ends.empty()) std::memcpy(ends.data(), edge_ends.data(), ends.size() * sizeof(ends[0]));
+  const auto masks = to_vector<std::int64_t>(neighbours, f.size(), "neighbours");
+  for (const auto& facet : f) {
+    for (const auto& p : facet) {
+      if (!std::isfinite(p[0]) || !std::isfinite(p[1]) || !std::isfinite(p[2])) throw Input_error("facets must be finite");
+    }
+  }
+  return Polyhedral_domain(f, ef, ends, std::vector<Polyhedral_domain::Mask>(masks.begin(), masks.end()));
+}
+
 py::array_t<double> points_array(std::vector<Vec3>&& points) {
   const auto n = static_cast<py::ssize_t>(points.size());
   std::vector<double> flat(3 * points.size());
@@ -160,7 +187,9 @@ void bind_tet(py::module_& m) {
   m.def(
       "tet_step",
       [](const Float_array& points, const Int_array& tets, const Int_array& boundary, const Int_array& boundary_tet,
-         const Byte_array& steiner, const Byte_array& required, const Float_array& weight, const Float_array& box,
+         const Byte_array& steiner, const Byte_array& required, const Float_array& weight, const Float_array& facets,
+         const Int_array& edge_facets, const Float_array& edge_ends, const Int_array& neighbours,
+         const Int_array& boundary_facet,
          double cell_factor, double radius_scale, double boundary_clearance, double max_radius_edge, double sliver_angle, double max_samples, std::uint64_t seed, int threads,
          std::optional<py::function> cap) {
         Tet_step_input in;
@@ -175,8 +204,12 @@ void bind_tet(py::module_& m) {
         in.steiner = to_vector<std::uint8_t>(steiner, n, "steiner");
         in.required = to_vector<std::uint8_t>(required, n, "required");
         in.weight = to_vector<double>(weight, n, "weight");
-        if (box.ndim() != 1 || box.shape(0) != 6) throw Input_error("box must be (x0, y0, z0, x1, y1, z1)");
-        for (int i = 0; i < 3; ++i) in.lo[i] = box.at(i), in.hi[i] = box.at(i + 3);
+        in.domain = to_domain(facets, edge_facets, edge_ends, neighbours);
+        const auto facet_of = to_vector<std::int64_t>(boundary_facet, in.boundary.size(), "boundary_facet");
+        for (std::int64_t f : facet_of) {
+          if (f < 0 || static_cast<std::size_t>(f) >= in.domain.n_facets()) throw Input_error("boundary_facet out of range");
+          in.boundary_facet.push_back(static_cast<int>(f));
+        }
         const Tet_step_options options = tet_options(cell_factor, radius_scale, boundary_clearance, max_radius_edge,
                                                      sliver_angle, max_samples, seed, threads);
         Size_cap size_cap;
@@ -208,6 +241,7 @@ void bind_tet(py::module_& m) {
         out["origin"] = to_array(std::vector<std::int64_t>(r.origin.begin(), r.origin.end()));
         out["parent_tet"] = to_array(std::vector<std::int64_t>(r.parent_tet.begin(), r.parent_tet.end()));
         out["kind"] = to_array(std::move(r.kind));
+        out["facets"] = to_array(std::vector<std::int64_t>(r.facets.begin(), r.facets.end()));
         out["f"] = to_array(std::move(r.f));
         py::dict stats;
         for (const auto& [name, value] : r.stats) stats[py::str(name)] = value;
@@ -215,10 +249,28 @@ void bind_tet(py::module_& m) {
         return out;
       },
       py::arg("points"), py::arg("tetrahedra"), py::arg("boundary"), py::arg("boundary_tet"), py::arg("steiner"),
-      py::arg("required"), py::arg("weight"), py::arg("box"), py::arg("cell_factor"), py::arg("radius_scale"),
+      py::arg("required"), py::arg("weight"), py::arg("facets"), py::arg("edge_facets"),
+      py::arg("edge_ends"), py::arg("neighbours"), py::arg("boundary_facet"), py::arg("cell_factor"), py::arg("radius_scale"),
       py::arg("boundary_clearance"),
       py::arg("max_radius_edge"), py::arg("sliver_angle"), py::arg("max_samples"), py::arg("seed"), py::arg("threads"), py::arg("cap") = py::none(),
-      "One FRFC step on a box's tetrahedral mesh (evomesh.tet_evolution drives it).");
+      "One FRFC step on a convex polyhedron's tetrahedral mesh (evomesh.tet_evolution drives it).");
+
+  m.def(
+      "tet_domain_incidences",
+      [](const Float_array& points, const Float_array& facets, const Int_array& edge_facets, const Float_array& edge_ends,
+         const Int_array& neighbours) {
+        auto p = to_points3(points, "points");
+        const Polyhedral_domain domain = to_domain(facets, edge_facets, edge_ends, neighbours);
+        std::vector<std::int64_t> on(p.size());
+        {
+          py::gil_scoped_release release;
+          for (std::size_t k = 0; k < p.size(); ++k) on[k] = static_cast<std::int64_t>(domain.incidences(p[k]));
+        }
+        return to_array(std::move(on));
+      },
+      py::arg("points"), py::arg("facets"), py::arg("edge_facets"), py::arg("edge_ends"), py::arg("neighbours"),
+      "Checks the domain (its facets' exact lattices) and returns the facets each point lies on exactly, as a bit "
+      "mask per point.");
 
   m.def(
       "check_tet_options",

@@ -1,4 +1,4 @@
-// One FRFC step on a box's tetrahedral mesh (tet/tet_step.hpp): the stages
+// One FRFC step on a convex polyhedron's tetrahedral mesh (tet/tet_step.hpp): the stages
 // named in tet_step() at the end, each a function above it.
 #include "evomesh/tet/tet_step.hpp"
 
@@ -25,6 +25,7 @@ namespace {
 using Point_3 = Kernel::Point_3;
 using Envelope = nd::Cone_envelope<3>;
 using Spheres = detail::Kept_sphere_tree<3>;  // the kept spheres, for their drop filter (covers)
+using Mask = Polyhedral_domain::Mask;
 
 Point_3 to_cgal(const Vec3& p) { return Point_3(p[0], p[1], p[2]); }
 
@@ -62,26 +63,7 @@ struct Candidate {
   Index origin;  // old index or -1
   Index parent;  // old tetrahedron of a new point
   bool rejected; // by the near-boundary rule
-};
-
-class Box_domain {
- public:
-  Box_domain(const Vec3& lo, const Vec3& hi) : lo_(lo), hi_(hi) {}
-  bool on_plane(const Vec3& x, int axis) const { return x[axis] == lo_[axis] || x[axis] == hi_[axis]; }
-  int planes(const Vec3& x) const { return on_plane(x, 0) + on_plane(x, 1) + on_plane(x, 2); }
-  // The distance to the nearest box plane that x is not on (+inf on a corner).
-  double clearance(const Vec3& x) const {
-    double c = std::numeric_limits<double>::infinity();
-    for (int i = 0; i < 3; ++i) {
-      if (!on_plane(x, i)) c = std::min({c, x[i] - lo_[i], hi_[i] - x[i]});
-    }
-    return c;
-  }
-  const Vec3& lo() const { return lo_; }
-  const Vec3& hi() const { return hi_; }
-
- private:
-  Vec3 lo_, hi_;
+  Mask on;       // the facets it lies on
 };
 
 std::uint64_t edge_key(Index a, Index b) {
@@ -133,10 +115,13 @@ void check_cells(double cells, double max_samples, const char* where) {
   }
 }
 
-// Stage: samples on the box's edges (the 1-D rule: cells of side c f(q) / 2 on
-// each piece between consecutive old points of an edge).
-void sample_edges(const Tet_step_input& in, const Box_domain& box, const std::vector<double>& f_old,
+// Stage: samples on the domain's edges (the 1-D rule: cells of side c f(q) / 2
+// on each piece between consecutive old points of an edge, measured along the
+// edge's largest coordinate; points exactly on the edge,
+// Polyhedral_domain::edge_point).
+void sample_edges(const Tet_step_input& in, const std::vector<Mask>& on_old, const std::vector<double>& f_old,
                   const Tet_step_options& options, std::vector<Candidate>& out) {
+  const Polyhedral_domain& domain = in.domain;
   std::unordered_map<std::uint64_t, Index> edge_tet;
   for (std::size_t t = 0; t < in.boundary.size(); ++t) {
     const Face& face = in.boundary[t];
@@ -144,68 +129,65 @@ void sample_edges(const Tet_step_input& in, const Box_domain& box, const std::ve
   }
   const std::size_t n = in.points.size();
   double cells = 0;
-  struct Piece { Index a, b; int axis; };
+  struct Piece { Index a, b; std::size_t edge; };
   std::vector<Piece> pieces;
-  for (int axis = 0; axis < 3; ++axis) {
-    const int u = (axis + 1) % 3, v = (axis + 2) % 3;
-    for (int side = 0; side < 4; ++side) {
-      const double bu = side & 1 ? box.hi()[u] : box.lo()[u];
-      const double bv = side & 2 ? box.hi()[v] : box.lo()[v];
-      std::vector<Index> on_edge;
-      for (std::size_t p = 0; p < n; ++p) {
-        if (in.points[p][u] == bu && in.points[p][v] == bv) on_edge.push_back(static_cast<Index>(p));
-      }
-      std::sort(on_edge.begin(), on_edge.end(), [&](Index a, Index b) {
-        return in.points[static_cast<std::size_t>(a)][axis] < in.points[static_cast<std::size_t>(b)][axis];
-      });
-      for (std::size_t k = 0; k + 1 < on_edge.size(); ++k) pieces.push_back({on_edge[k], on_edge[k + 1], axis});
+  for (std::size_t e = 0; e < domain.n_edges(); ++e) {
+    const auto [f0, f1] = domain.edge_facets(e);
+    const Mask both = (Mask{1} << f0) | (Mask{1} << f1);
+    const int axis = domain.edge_axis(e);
+    std::vector<Index> on_edge;
+    for (std::size_t p = 0; p < n; ++p) {
+      if ((on_old[p] & both) == both) on_edge.push_back(static_cast<Index>(p));
     }
+    std::sort(on_edge.begin(), on_edge.end(), [&](Index a, Index b) {
+      return in.points[static_cast<std::size_t>(a)][axis] < in.points[static_cast<std::size_t>(b)][axis];
+    });
+    for (std::size_t k = 0; k + 1 < on_edge.size(); ++k) pieces.push_back({on_edge[k], on_edge[k + 1], e});
   }
   std::vector<double> sides(pieces.size());
   for (std::size_t i = 0; i < pieces.size(); ++i) {
     const auto a = static_cast<std::size_t>(pieces[i].a), b = static_cast<std::size_t>(pieces[i].b);
+    const int axis = domain.edge_axis(pieces[i].edge);
+    // The cell's side along the edge's axis (its length along the edge: c f / 2).
     sides[i] = options.cell_factor * std::min(f_old[a], f_old[b]) / 2;
-    cells += std::ceil((in.points[b][pieces[i].axis] - in.points[a][pieces[i].axis]) / sides[i]);
+    if (!domain.edge_is_axis_aligned(pieces[i].edge)) sides[i] *= domain.edge_axis_scale(pieces[i].edge);
+    cells += std::ceil((in.points[b][axis] - in.points[a][axis]) / sides[i]);
   }
-  check_cells(cells, options.max_samples, "on the box's edges");
+  check_cells(cells, options.max_samples, "on the domain's edges");
   for (std::size_t i = 0; i < pieces.size(); ++i) {
-    const auto [a, b, axis] = pieces[i];
+    const auto [a, b, e] = pieces[i];
+    const int axis = domain.edge_axis(e);
+    const auto [f0, f1] = domain.edge_facets(e);
     const auto it = edge_tet.find(edge_key(a, b));
-    if (it == edge_tet.end()) throw Input_error("consecutive points on a box edge are not joined by a boundary edge");
+    if (it == edge_tet.end()) throw Input_error("consecutive points on a domain edge are not joined by a boundary edge");
     const Vec3& pa = in.points[static_cast<std::size_t>(a)];
     const double end = in.points[static_cast<std::size_t>(b)][axis];
     const auto n_cells = static_cast<std::uint64_t>(std::ceil((end - pa[axis]) / sides[i]));
     for (std::uint64_t cell = 0; cell < n_cells; ++cell) {
-      Vec3 x = pa;
-      x[axis] = pa[axis] + (static_cast<double>(cell) + uniform(options.seed, 1, i, cell, 0)) * sides[i];
-      if (!(x[axis] > pa[axis] && x[axis] < end)) continue;
-      out.push_back({x, 0, new_edge_class, 0, -1, it->second, false});
+      const double value = pa[axis] + (static_cast<double>(cell) + uniform(options.seed, 1, i, cell, 0)) * sides[i];
+      Vec3 x;
+      if (!domain.edge_point(e, value, x) || !(x[axis] > pa[axis] && x[axis] < end)) continue;
+      out.push_back({x, 0, new_edge_class, 0, -1, it->second, false,
+                     (Mask{1} << f0) | (Mask{1} << f1)});
     }
   }
 }
 
-// Stage: samples on the box's faces (the 2-D rule: cells of side
-// c f(q) / (2 sqrt 2) over each boundary triangle), the face's coordinate
-// exact.
-void sample_faces(const Tet_step_input& in, const Box_domain& box, const std::vector<double>& f_old,
-                  const Tet_step_options& options, std::vector<Candidate>& out) {
-  struct Plane { int axis; double value; };
-  std::vector<Plane> planes(in.boundary.size());
+// Stage: samples on the domain's facets (the 2-D rule: cells of side
+// c f(q) / (2 sqrt 2) over each boundary triangle, seen in the coordinate
+// plane its facet projects onto best; a facet normal to an axis keeps that
+// coordinate exact, another facet's samples go to its lattice,
+// Polyhedral_domain::snap_to_facet).
+void sample_faces(const Tet_step_input& in, const std::vector<double>& f_old, const Tet_step_options& options,
+                  std::vector<Candidate>& out) {
+  const Polyhedral_domain& domain = in.domain;
   std::vector<double> sides(in.boundary.size());
   double cells = 0;
   for (std::size_t t = 0; t < in.boundary.size(); ++t) {
     const Face& face = in.boundary[t];
-    const Vec3& a = in.points[static_cast<std::size_t>(face[0])];
-    planes[t].axis = -1;
-    for (int axis = 0; axis < 3; ++axis) {
-      const bool flat = std::all_of(face.begin(), face.end(), [&](Index v) {
-        return in.points[static_cast<std::size_t>(v)][axis] == a[axis];
-      });
-      if (flat && (a[axis] == box.lo()[axis] || a[axis] == box.hi()[axis])) planes[t] = {axis, a[axis]};
-    }
-    if (planes[t].axis < 0) throw Input_error("a boundary triangle is not on a face of the box");
+    const auto facet = static_cast<std::size_t>(in.boundary_facet[t]);
     double f_min = std::numeric_limits<double>::infinity();
-    Vec3 lo = a, hi = a;
+    Vec3 lo = in.points[static_cast<std::size_t>(face[0])], hi = lo;
     for (Index v : face) {
       f_min = std::min(f_min, f_old[static_cast<std::size_t>(v)]);
       for (int i = 0; i < 3; ++i) {
@@ -214,13 +196,17 @@ void sample_faces(const Tet_step_input& in, const Box_domain& box, const std::ve
       }
     }
     sides[t] = options.cell_factor * f_min / (2 * std::sqrt(2.0));
-    const int u = (planes[t].axis + 1) % 3, v = (planes[t].axis + 2) % 3;
+    // In the projection lengths shrink by at most the projection scale.
+    if (domain.facet_axis(facet) < 0) sides[t] *= domain.facet_projection_scale(facet);
+    const int axis = domain.facet_projection_axis(facet), u = (axis + 1) % 3, v = (axis + 2) % 3;
     cells += std::ceil((hi[u] - lo[u]) / sides[t]) * std::ceil((hi[v] - lo[v]) / sides[t]);
   }
-  check_cells(cells, options.max_samples, "on the box's faces");
+  check_cells(cells, options.max_samples, "on the domain's facets");
   for (std::size_t t = 0; t < in.boundary.size(); ++t) {
     const Face& face = in.boundary[t];
-    const int axis = planes[t].axis, u = (axis + 1) % 3, v = (axis + 2) % 3;
+    const auto facet = static_cast<std::size_t>(in.boundary_facet[t]);
+    const int axis = domain.facet_projection_axis(facet), u = (axis + 1) % 3, v = (axis + 2) % 3;
+    const Mask on = Mask{1} << facet;
     Vec2 corner[3];
     double lo_u = std::numeric_limits<double>::infinity(), lo_v = lo_u, hi_u = -lo_u, hi_v = -lo_u;
     for (int i = 0; i < 3; ++i) {
@@ -231,6 +217,11 @@ void sample_faces(const Tet_step_input& in, const Box_domain& box, const std::ve
     }
     const int turn = orientation(corner[0], corner[1], corner[2]);
     if (turn == 0) throw Input_error("a boundary triangle is flat");
+    const auto inside = [&](const Vec2& y) {
+      return orientation(corner[0], corner[1], y) == turn && orientation(corner[1], corner[2], y) == turn &&
+             orientation(corner[2], corner[0], y) == turn;
+    };
+    const Vec3& a = in.points[static_cast<std::size_t>(face[0])];
     const auto n_u = static_cast<std::uint64_t>(std::ceil((hi_u - lo_u) / sides[t]));
     const auto n_v = static_cast<std::uint64_t>(std::ceil((hi_v - lo_v) / sides[t]));
     for (std::uint64_t i = 0; i < n_u; ++i) {
@@ -238,14 +229,13 @@ void sample_faces(const Tet_step_input& in, const Box_domain& box, const std::ve
         const std::uint64_t cell = i * n_v + j;
         const Vec2 y{lo_u + (static_cast<double>(i) + uniform(options.seed, 2, t, cell, 0)) * sides[t],
                      lo_v + (static_cast<double>(j) + uniform(options.seed, 2, t, cell, 1)) * sides[t]};
-        if (orientation(corner[0], corner[1], y) != turn || orientation(corner[1], corner[2], y) != turn ||
-            orientation(corner[2], corner[0], y) != turn) {
-          continue;
-        }
-        Vec3 x;
-        x[axis] = planes[t].value;
+        if (!inside(y)) continue;
+        Vec3 x = a;
         x[u] = y[0], x[v] = y[1];
-        out.push_back({x, 0, new_face_class, 0, -1, in.boundary_tet[t], false});
+        // On a tilted facet: onto the lattice, and still inside the triangle
+        // (the projection of points on one plane keeps their orientations).
+        if (domain.facet_axis(facet) < 0 && (!domain.snap_to_facet(facet, x) || !inside({x[u], x[v]}))) continue;
+        out.push_back({x, 0, new_face_class, 0, -1, in.boundary_tet[t], false, on});
       }
     }
   }
@@ -309,7 +299,7 @@ std::size_t sample_tets(const Tet_step_input& in, const std::vector<double>& f_o
               ++dropped[c];
               continue;
             }
-            chunk_out[c].push_back({x, 0, sampled_class, 0, -1, static_cast<Index>(t), false});
+            chunk_out[c].push_back({x, 0, sampled_class, 0, -1, static_cast<Index>(t), false, 0});
           }
         }
       }
@@ -324,11 +314,12 @@ std::size_t sample_tets(const Tet_step_input& in, const std::vector<double>& f_o
 }
 
 // The near-boundary rule (tet_step.hpp, boundary_clearance).
-void apply_clearance(const Box_domain& box, double clearance, std::vector<Candidate>& candidates, std::size_t first) {
+void apply_clearance(const Polyhedral_domain& domain, double clearance, std::vector<Candidate>& candidates,
+                     std::size_t first) {
   for (std::size_t k = first; k < candidates.size(); ++k) {
     Candidate& c = candidates[k];
     if (c.cls <= corner_class) continue;
-    c.rejected = box.clearance(c.x) < clearance * c.f;
+    c.rejected = domain.clearance(c.x, c.on) < clearance * c.f;
   }
 }
 
@@ -379,9 +370,9 @@ Spheres kept_spheres(const std::vector<Candidate>& candidates, const std::vector
   return spheres;
 }
 
-Tet_point_kind output_kind(const Candidate& c, const Box_domain& box, const Tet_step_input& in) {
-  const int planes = box.planes(c.x);
-  if (planes == 3) return Tet_point_kind::corner;
+Tet_point_kind output_kind(const Candidate& c, const Tet_step_input& in) {
+  const int planes = Polyhedral_domain::count(c.on);
+  if (planes >= 3) return Tet_point_kind::corner;
   if (planes == 2) return Tet_point_kind::edge;
   if (planes == 1) return Tet_point_kind::face;
   if (c.origin < 0) return Tet_point_kind::sampled;
@@ -513,7 +504,6 @@ Tet_step_result tet_step(const Tet_step_input& in, const Tet_step_options& optio
   }
   options.validate();
   Thread_limit limit(options.threads);
-  const Box_domain box(in.lo, in.hi);
   Tet_step_result result;
   auto stat = [&](const char* name, double value) { result.stats.emplace_back(name, value); };
 
@@ -536,21 +526,29 @@ Tet_step_result tet_step(const Tet_step_input& in, const Tet_step_options& optio
 
   // The old points and the boundary's samples, packed first.
   std::vector<Candidate> candidates(n);
+  std::vector<Mask> on_old(n);
+  {
+    constexpr std::size_t kChunk = 4096;
+    parallel_for((n + kChunk - 1) / kChunk, options.threads, [&](std::size_t c) {
+      for (std::size_t p = c * kChunk; p < std::min(n, (c + 1) * kChunk); ++p) on_old[p] = in.domain.incidences(in.points[p]);
+    });
+  }
   for (std::size_t p = 0; p < n; ++p) {
-    const int planes = box.planes(in.points[p]);
-    int cls = planes == 3 ? corner_class : planes == 2 ? old_edge_class : planes == 1 ? old_face_class
+    const Mask on = on_old[p];
+    const int planes = Polyhedral_domain::count(on);
+    int cls = planes >= 3 ? corner_class : planes == 2 ? old_edge_class : planes == 1 ? old_face_class
               : in.steiner[p] ? steiner_class : original_class;
     if (in.required[p]) cls = required_class;
-    candidates[p] = {in.points[p], f_old[p], cls, static_cast<Index>(p), static_cast<Index>(p), -1, false};
+    candidates[p] = {in.points[p], f_old[p], cls, static_cast<Index>(p), static_cast<Index>(p), -1, false, on};
   }
-  sample_edges(in, box, f_old, options, candidates);
+  sample_edges(in, on_old, f_old, options, candidates);
   const std::size_t n_edge_samples = candidates.size() - n;
-  sample_faces(in, box, f_old, options, candidates);
+  sample_faces(in, f_old, options, candidates);
   const std::size_t n_boundary_samples = candidates.size() - n;
   for (std::size_t k = n; k < candidates.size(); ++k) candidates[k].id = static_cast<Index>(k);
   std::size_t sample_evaluations = 0;
   evaluate_f(envelope, in, candidates, n, cap, options.threads, sample_evaluations);
-  apply_clearance(box, options.boundary_clearance, candidates, 0);
+  apply_clearance(in.domain, options.boundary_clearance, candidates, 0);
   // The lexical-first MIS of the 2-D step (packing.hpp), required points and
   // corners forced (the lowest classes: first in the order, never rejected).
   const std::vector<Index> first_order = packing_order_of(candidates, 0);
@@ -567,7 +565,7 @@ Tet_step_result tet_step(const Tet_step_input& in, const Tet_step_options& optio
   const std::size_t n_dropped = sample_tets(in, f_old, first_spheres, options, candidates);
   for (std::size_t k = first_sample; k < candidates.size(); ++k) candidates[k].id = static_cast<Index>(k);
   evaluate_f(envelope, in, candidates, first_sample, cap, options.threads, sample_evaluations);
-  apply_clearance(box, options.boundary_clearance, candidates, first_sample);
+  apply_clearance(in.domain, options.boundary_clearance, candidates, first_sample);
   // The samples after every sphere the first pass kept (extend_packing).
   kept_flags = extend_packing_3(centres(candidates), radii(candidates, options.radius_scale), first_order, kept_flags,
                                 packing_order_of(candidates, first_sample), options.threads);
@@ -584,7 +582,8 @@ Tet_step_result tet_step(const Tet_step_input& in, const Tet_step_options& optio
     result.points.push_back(c.x);
     result.origin.push_back(c.origin);
     result.parent_tet.push_back(c.origin >= 0 ? -1 : c.parent);
-    result.kind.push_back(static_cast<std::uint8_t>(output_kind(c, box, in)));
+    result.kind.push_back(static_cast<std::uint8_t>(output_kind(c, in)));
+    result.facets.push_back(c.on);
     result.f.push_back(c.f);
   }
   const auto triangulation_start = std::chrono::steady_clock::now();
@@ -597,7 +596,7 @@ Tet_step_result tet_step(const Tet_step_input& in, const Tet_step_options& optio
     slivers.first_movable = static_cast<std::size_t>(
         std::count_if(result.origin.begin(), result.origin.end(), [](Index o) { return o >= 0; }));
     slivers.seed = mix(options.seed ^ 0x51u);
-    result.tets = refined_delaunay(result.points, in.lo, in.hi, options.max_radius_edge, n_kept / 10 + 100, slivers,
+    result.tets = refined_delaunay(result.points, in.domain, options.max_radius_edge, n_kept / 10 + 100, slivers,
                                    report);
     // The refinement's points: located in the old mesh by a walk from the
     // old tetrahedron of a vertex of the tetrahedron they split.
@@ -605,10 +604,12 @@ Tet_step_result tet_step(const Tet_step_input& in, const Tet_step_options& optio
     for (std::size_t k = n_kept; k < result.points.size(); ++k) {
       const auto hint = static_cast<std::size_t>(report.hints[k - n_kept]);
       const Index start = result.origin[hint] >= 0 ? old.tet_of_point(result.origin[hint]) : result.parent_tet[hint];
-      const Candidate c{result.points[k], 0, sampled_class, 0, -1, old.locate(result.points[k], start), false};
+      const Candidate c{result.points[k], 0, sampled_class, 0, -1, old.locate(result.points[k], start), false,
+                        in.domain.incidences(result.points[k])};
       result.origin.push_back(-1);
       result.parent_tet.push_back(c.parent);
-      result.kind.push_back(static_cast<std::uint8_t>(output_kind(c, box, in)));
+      result.kind.push_back(static_cast<std::uint8_t>(output_kind(c, in)));
+      result.facets.push_back(c.on);
       result.f.push_back(0.0);
     }
     // Points the sliver pass moved: located again, from where they were.

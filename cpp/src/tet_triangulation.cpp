@@ -137,28 +137,58 @@ std::pair<double, double> star_quality(const Delaunay_3& triangulation, Vertex_h
 }
 
 // Where a circumcentre goes (Delaunay refinement and the sliver pass): the
-// centre itself when it lies inside the box at least half the tetrahedron's
-// shortest edge from every face; its projection onto the box face it is near
-// or beyond (that face's coordinate exact) when the projection keeps half
-// the shortest edge from the other faces; else nowhere (false).
-bool centre_placement(const Point_3& centre, double shortest, const Vec3& lo, const Vec3& hi, Vec3& x) {
+// centre itself when it lies inside the domain at least half the
+// tetrahedron's shortest edge from every facet; else its projection onto the
+// facet it is near or beyond (exactly on it) when that keeps half the
+// shortest edge from the facets around; else, when the projection is near
+// exactly one of them and the two meet at an edge, its projection onto that
+// edge, kept as far from the facets at the edge's ends (a boundary segment
+// split, as in Shewchuk's Delaunay refinement: a bad tetrahedron next to an
+// edge is resolved there); else nowhere (false). A centre of a tetrahedron
+// whose circumradius exceeds twice its shortest edge s moves by less than
+// s, so the point keeps more than s from every point of the (empty)
+// circumsphere.
+enum class Placement { centre, facet, edge };
+// A centre moved onto a facet or an edge keeps this fraction of the
+// tetrahedron's shortest edge from every point (insert_at_circumcentre).
+constexpr double kProjectedClearance = 0.4;
+
+bool centre_placement(const Point_3& centre, double shortest, const Polyhedral_domain& domain, Vec3& x,
+                      Placement& placed) {
+  using Mask = Polyhedral_domain::Mask;
   x = {centre.x(), centre.y(), centre.z()};
-  int near_axis = -1;
+  placed = Placement::centre;
+  int near = -1;
   double near_distance = 0.5 * shortest;
-  for (int a = 0; a < 3; ++a) {
-    for (const double bound : {lo[a], hi[a]}) {
-      const double distance = std::abs(x[a] - bound);
-      const bool beyond = bound == lo[a] ? x[a] <= lo[a] : x[a] >= hi[a];
-      if (beyond || distance < near_distance) near_axis = a, near_distance = beyond ? -1.0 : distance;
+  for (std::size_t f = 0; f < domain.n_facets(); ++f) {
+    const double distance = domain.distance(f, x);
+    const bool beyond = distance <= 0;
+    if (beyond || distance < near_distance) near = static_cast<int>(f), near_distance = beyond ? -1.0 : distance;
+  }
+  if (near < 0) return true;
+  const auto facet = static_cast<std::size_t>(near);
+  if (!domain.snap_to_facet(facet, x)) return false;
+  placed = Placement::facet;
+  const auto too_near = [&](const Vec3& y, Mask facets) {
+    Mask out = 0;
+    for (std::size_t g = 0; g < domain.n_facets(); ++g) {
+      if ((facets >> g & 1u) && !(domain.distance(g, y) >= 0.5 * shortest)) out |= Mask{1} << g;
     }
-  }
-  if (near_axis < 0) return true;
-  x[near_axis] = std::abs(x[near_axis] - lo[near_axis]) < std::abs(x[near_axis] - hi[near_axis]) ? lo[near_axis]
-                                                                                                  : hi[near_axis];
-  for (int a = 0; a < 3; ++a) {
-    if (a != near_axis && !(x[a] - lo[a] >= 0.5 * shortest && hi[a] - x[a] >= 0.5 * shortest)) return false;
-  }
-  return true;
+    return out;
+  };
+  const Mask around = domain.neighbours(facet) & ~(Mask{1} << facet);
+  const Mask near_facets = too_near(x, around);
+  if (near_facets == 0) return true;
+  if (Polyhedral_domain::count(near_facets) > 1) return false;
+  const int edge = domain.edge_of((Mask{1} << facet) | near_facets);
+  if (edge < 0) return false;
+  const auto e = static_cast<std::size_t>(edge);
+  if (!domain.edge_point(e, x[static_cast<std::size_t>(domain.edge_axis(e))], x)) return false;
+  placed = Placement::edge;
+  const auto [f0, f1] = domain.edge_facets(e);
+  const Mask ends = domain.neighbours(static_cast<std::size_t>(f0)) & domain.neighbours(static_cast<std::size_t>(f1)) &
+                    ~((Mask{1} << f0) | (Mask{1} << f1));
+  return too_near(x, ends) == 0;
 }
 
 std::uint64_t mix(std::uint64_t z) {
@@ -168,30 +198,41 @@ std::uint64_t mix(std::uint64_t z) {
   return z ^ (z >> 31);
 }
 
+// A uniform point u of the unit ball (rejection from the cube; counter-based
+// draws from `draw`).
+void unit_ball_point(std::uint64_t draw, double u[3]) {
+  double norm;
+  do {
+    norm = 0;
+    for (int i = 0; i < 3; ++i) {
+      draw = mix(draw);
+      u[i] = 2.0 * (static_cast<double>(draw >> 11) * 0x1.0p-53) - 1.0;
+      norm += u[i] * u[i];
+    }
+  } while (norm > 1.0);
+}
+
 // Picking regions for new points (Chew; Li and Teng): each sliver (a
 // dihedral angle below the bound or above 180 degrees minus it) with a
-// movable vertex (a new point: inside the box, or on one box face, where it
-// moves within the face so that the faces stay covered; old points and the
-// box's edges and corners never move) tries that vertex at random points
-// of a ball (a disc on a face) of radius rho times its shortest edge, and keeps the position
+// movable vertex (a new point: inside the domain, or on one facet, where it
+// moves within the facet so that the facets stay covered; old points and the
+// domain's edges and corners never move) tries that vertex at random points
+// of a ball (a disc on a facet) of radius rho times its shortest edge, and keeps the position
 // whose star has the largest dihedral margin (radius-edge still within
 // bound), if that beats where it was. A move changes every distance from the
 // point by at most rho times its shortest edge, so the spacing stays within
 // that factor of the packing's. In rounds, slivers in canonical order.
 void perturb_slivers(Delaunay_3& triangulation, std::vector<Vertex_handle>& handles, std::vector<Vec3>& points,
-                     const Sliver_options& options, const Vec3& lo, const Vec3& hi, bool first_pass,
+                     const Sliver_options& options, const Polyhedral_domain& domain, bool first_pass,
                      Refinement_report& report) {
-  // -1: the point never moves (an old point, or on a box edge or corner);
-  // 3: it moves freely (interior); 0-2: it moves within the box face
-  // normal to that axis (the face's coordinate kept exactly).
-  auto fixed_axis = [&](Index k) {
-    if (static_cast<std::size_t>(k) < options.first_movable) return -1;
-    const Vec3& x = points[static_cast<std::size_t>(k)];
-    int axis = 3;
-    for (int a = 0; a < 3; ++a) {
-      if (x[a] == lo[a] || x[a] == hi[a]) axis = axis == 3 ? a : -1;
-    }
-    return axis;
+  // -2: the point never moves (an old point, or on an edge or a corner of
+  // the domain); -1: it moves freely (interior); f >= 0: it moves within
+  // facet f (exactly on it).
+  auto movable_in = [&](Index k) {
+    if (static_cast<std::size_t>(k) < options.first_movable) return -2;
+    const Polyhedral_domain::Mask on = domain.incidences(points[static_cast<std::size_t>(k)]);
+    const int planes = Polyhedral_domain::count(on);
+    return planes == 0 ? -1 : planes == 1 ? Polyhedral_domain::first(on) : -2;
   };
   std::vector<std::uint8_t> moved(points.size(), 0);
   const auto is_sliver = [&](const Delaunay_3::Cell_handle& cell) { return dihedral_margin(cell) < options.min_dihedral; };
@@ -205,8 +246,8 @@ void perturb_slivers(Delaunay_3& triangulation, std::vector<Vertex_handle>& hand
       if (!find_cell(triangulation, handles, t, cell) || !is_sliver(cell)) continue;
       for (int q = 0; q < 4; ++q) {
         const Index index = t[static_cast<std::size_t>(q)];
-        const int fixed = fixed_axis(index);
-        if (fixed < 0) continue;
+        const int facet = movable_in(index);
+        if (facet < -1) continue;
         const Vertex_handle v = h(q);
         const Point_3 home = v->point();
         std::vector<Vertex_handle> around;
@@ -218,22 +259,11 @@ void perturb_slivers(Delaunay_3& triangulation, std::vector<Vertex_handle>& hand
         const double start = best.first;
         Point_3 best_point = home;
         for (int attempt = 0; attempt < options.attempts; ++attempt) {
-          // A uniform point of the ball (rejection from the cube, counter-based draws).
-          double u[3], norm;
-          std::uint64_t draw = mix(mix(options.seed ^ static_cast<std::uint64_t>(index)) + static_cast<std::uint64_t>(round * 64 + attempt));
-          do {
-            norm = 0;
-            for (double& c : u) {
-              draw = mix(draw);
-              c = 2.0 * (static_cast<double>(draw >> 11) * 0x1.0p-53) - 1.0;
-              norm += c * c;
-            }
-          } while (norm > 1.0);
+          double u[3];
+          unit_ball_point(mix(mix(options.seed ^ static_cast<std::uint64_t>(index)) + static_cast<std::uint64_t>(round * 64 + attempt)), u);
           Vec3 x{home.x() + reach * u[0], home.y() + reach * u[1], home.z() + reach * u[2]};
-          if (fixed < 3) x[static_cast<std::size_t>(fixed)] = points[static_cast<std::size_t>(index)][static_cast<std::size_t>(fixed)];
-          bool inside = true;
-          for (int a = 0; a < 3; ++a) inside = inside && (a == fixed || (x[a] > lo[a] && x[a] < hi[a]));
-          if (!inside) continue;
+          if (facet >= 0 && !domain.snap_to_facet(static_cast<std::size_t>(facet), x)) continue;
+          if (!domain.strictly_inside(x, facet >= 0 ? Polyhedral_domain::Mask{1} << facet : 0)) continue;
           if (triangulation.move_if_no_collision(v, Point_3(x[0], x[1], x[2])) != v) continue;
           const auto quality = star_quality(triangulation, v);
           if (quality.second <= options.max_radius_edge && quality.first > best.first) {
@@ -262,16 +292,41 @@ void perturb_slivers(Delaunay_3& triangulation, std::vector<Vertex_handle>& hand
 }
 
 // Inserts a point for tetrahedron t (its circumcentre, or that centre's
-// projection onto a box face, centre_placement) when t is still a cell; returns
+// projection onto a facet or an edge, centre_placement) when t is still a cell; returns
 // the new vertex, or a null handle when t is gone, the centre has no place or
 // the point is already there. The caller keeps it (keep_point) or removes it.
+// With picking > 0 the point is drawn at random (`draw`) in the ball of
+// radius picking times the circumradius around the centre instead (Li's
+// random off-centres).
 Vertex_handle insert_at_circumcentre(Delaunay_3& triangulation, const std::vector<Vertex_handle>& handles,
-                                     const Tet& t, const Vec3& lo, const Vec3& hi, Vec3& x) {
+                                     const Tet& t, const Polyhedral_domain& domain, Vec3& x, double picking = 0,
+                                     std::uint64_t draw = 0) {
   Delaunay_3::Cell_handle cell;
   if (!find_cell(triangulation, handles, t, cell)) return Vertex_handle();  // gone this round
-  const Point_3 centre = CGAL::circumcenter(cell->vertex(0)->point(), cell->vertex(1)->point(),
-                                            cell->vertex(2)->point(), cell->vertex(3)->point());
-  if (!centre_placement(centre, shortest_edge(cell), lo, hi, x)) return Vertex_handle();
+  Point_3 centre = CGAL::circumcenter(cell->vertex(0)->point(), cell->vertex(1)->point(),
+                                      cell->vertex(2)->point(), cell->vertex(3)->point());
+  if (picking > 0) {
+    double u[3];
+    unit_ball_point(draw, u);
+    const double reach = picking * std::sqrt(squared(centre, cell->vertex(0)->point()));
+    centre = Point_3(centre.x() + reach * u[0], centre.y() + reach * u[1], centre.z() + reach * u[2]);
+  }
+  const double shortest = shortest_edge(cell);
+  Placement placed;
+  if (!centre_placement(centre, shortest, domain, x, placed)) return Vertex_handle();
+  // A centre moved onto a facet or an edge may land next to a point (the
+  // empty circumsphere says nothing about where it moved to, say right
+  // under an interior point near the facet): a placement closer than
+  // kProjectedClearance times the tetrahedron's shortest edge to a point is
+  // refused. Without it, splits cascaded to ever shorter edges on coarse
+  // meshes of an octahedron and a tilted box (edges of 0.003, dihedrals of
+  // 1.5 degrees); with the whole shortest edge as the bound, bad tetrahedra
+  // next to box edges were left again. 0.4 measured best (docs/implementation.md).
+  const Point_3 target(x[0], x[1], x[2]);
+  if (placed != Placement::centre && squared(triangulation.nearest_vertex(target, cell)->point(), target) <
+                                         kProjectedClearance * kProjectedClearance * shortest * shortest) {
+    return Vertex_handle();
+  }
   const std::size_t before = triangulation.number_of_vertices();
   const Vertex_handle v = triangulation.insert(Point_3(x[0], x[1], x[2]), cell);
   if (triangulation.number_of_vertices() == before) return Vertex_handle();  // an existing point
@@ -290,28 +345,38 @@ void keep_point(const Vertex_handle& v, const Vec3& x, const Tet& t, std::vector
 // The slivers the perturbation left (four kept points, or new points it
 // could not move far enough): a new point inside each one's circumsphere,
 // which destroys it, at its circumcentre (the sliver's empty sphere keeps it
-// clear of every point by the circumradius) or, near or beyond a box face,
-// the centre's projection onto that face (centre_placement); the perturbation
+// clear of every point by the circumradius) or, near or beyond a facet, the
+// centre's projection onto it (centre_placement); the perturbation
 // then moves the new points. Returns how many were inserted.
 std::size_t insert_off_centres(Delaunay_3& triangulation, std::vector<Vertex_handle>& handles,
-                               std::vector<Vec3>& points, const Sliver_options& options, const Vec3& lo,
-                               const Vec3& hi, Refinement_report& report) {
+                               std::vector<Vec3>& points, const Sliver_options& options,
+                               const Polyhedral_domain& domain, Refinement_report& report) {
   const std::vector<Tet> slivers = cells_where(
       triangulation, [&](const Delaunay_3::Cell_handle& cell) { return dihedral_margin(cell) < options.min_dihedral; });
   std::size_t inserted = 0;
+  Delaunay_3::Cell_handle cell;
   for (const Tet& t : slivers) {
-    Vec3 x;
-    const Vertex_handle v = insert_at_circumcentre(triangulation, handles, t, lo, hi, x);
-    if (v == Vertex_handle()) continue;
-    // Every tetrahedron the insertion makes has v as a vertex: one whose
-    // radius-edge ratio the insertion would break is not made (removing v
-    // restores the Delaunay tetrahedra it replaced).
-    if (star_quality(triangulation, v).second > options.max_radius_edge) {
-      triangulation.remove(v);
-      continue;
+    // The centre first; where it has no place or would break the ratio,
+    // random points around it (they must destroy the sliver).
+    for (int attempt = 0; attempt <= options.attempts; ++attempt) {
+      if (!find_cell(triangulation, handles, t, cell)) break;
+      Vec3 x;
+      const std::uint64_t draw = mix(mix(options.seed ^ 0x0ffcull) + static_cast<std::uint64_t>(t[0] * 131 + t[1]) * 64 +
+                                     static_cast<std::uint64_t>(attempt));
+      const Vertex_handle v = insert_at_circumcentre(triangulation, handles, t, domain, x, attempt ? 0.5 : 0.0, draw);
+      if (v == Vertex_handle()) continue;
+      // Every tetrahedron the insertion makes has v as a vertex: one whose
+      // radius-edge ratio the insertion would break is not made (removing v
+      // restores the Delaunay tetrahedra it replaced).
+      if ((attempt > 0 && find_cell(triangulation, handles, t, cell)) ||
+          star_quality(triangulation, v).second > options.max_radius_edge) {
+        triangulation.remove(v);
+        continue;
+      }
+      keep_point(v, x, t, points, handles, report);
+      ++inserted;
+      break;
     }
-    keep_point(v, x, t, points, handles, report);
-    ++inserted;
   }
   return inserted;
 }
@@ -323,7 +388,7 @@ std::vector<Tet> delaunay_tetrahedra(const std::vector<Vec3>& points) {
   return finite_tets(triangulate(points, handles));
 }
 
-std::vector<Tet> refined_delaunay(std::vector<Vec3>& points, const Vec3& lo, const Vec3& hi, double max_ratio,
+std::vector<Tet> refined_delaunay(std::vector<Vec3>& points, const Polyhedral_domain& domain, double max_ratio,
                                   std::size_t budget, const Sliver_options& slivers, Refinement_report& report) {
   std::vector<Vertex_handle> handles;
   Delaunay_3 triangulation = triangulate(points, handles);
@@ -338,7 +403,7 @@ std::vector<Tet> refined_delaunay(std::vector<Vec3>& points, const Vec3& lo, con
     for (const Tet& t : bad) {
       if (points.size() - n_input >= budget) break;
       Vec3 x;
-      const Vertex_handle v = insert_at_circumcentre(triangulation, handles, t, lo, hi, x);
+      const Vertex_handle v = insert_at_circumcentre(triangulation, handles, t, domain, x);
       if (v == Vertex_handle()) continue;
       keep_point(v, x, t, points, handles, report);
       ++inserted;
@@ -346,12 +411,12 @@ std::vector<Tet> refined_delaunay(std::vector<Vec3>& points, const Vec3& lo, con
     if (inserted == 0) break;
   }
   if (slivers.min_dihedral > 0) {
-    perturb_slivers(triangulation, handles, points, slivers, lo, hi, true, report);
+    perturb_slivers(triangulation, handles, points, slivers, domain, true, report);
     for (int pass = 0; pass < slivers.insertion_passes && report.slivers_after > 0; ++pass) {
-      const std::size_t inserted = insert_off_centres(triangulation, handles, points, slivers, lo, hi, report);
+      const std::size_t inserted = insert_off_centres(triangulation, handles, points, slivers, domain, report);
       if (inserted == 0) break;
       report.off_centres += inserted;
-      perturb_slivers(triangulation, handles, points, slivers, lo, hi, false, report);
+      perturb_slivers(triangulation, handles, points, slivers, domain, false, report);
     }
     // The insertions may leave a tetrahedron above the ratio: counted.
     report.unresolved = cells_where(

@@ -27,6 +27,7 @@ from evomesh.packing import lexical_first_mis
 from evomesh.spacing_function import SpacingFunction, nn_spacing, spacing
 from evomesh.tet_evolution import TetOptions
 from evomesh.tet_mesh import TetLineage, TetMesh, TetPointKind, box_mesh, unit_cube_mesh
+from evomesh.tet_polyhedra import convex_polyhedron_mesh, octahedron_mesh, tilted_box_mesh
 
 __all__ = [
     "Mesh",
@@ -62,6 +63,9 @@ __all__ = [
     "TetOptions",
     "unit_cube_mesh",
     "box_mesh",
+    "convex_polyhedron_mesh",
+    "tilted_box_mesh",
+    "octahedron_mesh",
 ]
 
 __version__ = "0.1.0"

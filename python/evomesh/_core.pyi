@@ -569,7 +569,11 @@ def tet_step(
     steiner: ArrayLike,
     required: ArrayLike,
     weight: ArrayLike,
-    box: ArrayLike,
+    facets: ArrayLike,
+    edge_facets: ArrayLike,
+    edge_ends: ArrayLike,
+    neighbours: ArrayLike,
+    boundary_facet: ArrayLike,
     cell_factor: float,
     radius_scale: float,
     boundary_clearance: float,
@@ -580,6 +584,9 @@ def tet_step(
     threads: int,
     cap: Callable[[NDArray[np.float64], NDArray[np.int64]], ArrayLike] | None = None,
 ) -> dict[str, Any]: ...
+def tet_domain_incidences(
+    points: ArrayLike, facets: ArrayLike, edge_facets: ArrayLike, edge_ends: ArrayLike, neighbours: ArrayLike
+) -> NDArray[np.int64]: ...
 def check_tet_options(
     cell_factor: float,
     radius_scale: float,

@@ -1,4 +1,4 @@
-"""One step of FRFC on a tetrahedral mesh of an axis-aligned box, and the
+"""One step of FRFC on a tetrahedral mesh of a convex polyhedron, and the
 linear transfer of fields through its lineage. :func:`evomesh.evolve` calls
 :func:`evolve_tet` for a :class:`~evomesh.TetMesh`."""
 
@@ -12,6 +12,7 @@ from typing import Any, Callable
 import numpy as np
 
 from evomesh import _core
+from evomesh.tet_domains import facet_tags, polyhedral_domain, triangle_facets
 from evomesh.tet_mesh import TetLineage, TetMesh, TetPointKind, boundary_faces
 
 __all__ = ["TetOptions", "evolve_tet", "transfer_tet"]
@@ -32,24 +33,26 @@ class TetOptions:
         the old ones (with 1.0 a uniform delta = 0.5 keeps the old points and
         adds none).
     boundary_clearance : float, default 0.5
-        A point off a box plane closer to it than boundary_clearance f(x) is
-        not kept (the near-boundary rule: no flat tetrahedron on a face).
+        A point closer than boundary_clearance f(x) to the plane of a facet
+        around it that it is not on is not kept (the near-boundary rule: no
+        flat tetrahedron on a facet, no facet point next to an edge).
     max_radius_edge : float, default 2.0
         Delaunay refinement after the packing: a tetrahedron whose
         circumradius exceeds this times its shortest edge gets its
-        circumcentre (or its projection onto a box face near it), in rounds,
+        circumcentre (or its projection onto a facet near it, or onto an edge
+        when that projection is near the edge), in rounds,
         with at most a tenth of the points plus 100 insertions
         (``stats["radius_edge_unresolved"]`` counts what is left). 0: none.
     sliver_angle : float in [0, 30], default 10.0
         The sliver pass: every tetrahedron with a dihedral angle below this
         or above 180 minus it (degrees) with a new vertex tries that vertex at
         random points of a small ball (0.15 of its shortest edge; a new
-        point on a box face stays in that face) and keeps the position whose
+        point on a facet stays in that facet) and keeps the position whose
         tetrahedra around it have the largest margin of dihedral angles
-        (radius-edge still within ``max_radius_edge``). Old points, box edges
+        (radius-edge still within ``max_radius_edge``). Old points, edges
         and corners never move. The slivers left (four old points, say) get
         a new point in their circumsphere (the circumcentre, or its
-        projection onto a box face it is near or beyond), and the moves run
+        projection onto a facet it is near or beyond), and the moves run
         again, up to four times. ``stats`` reports ``slivers_before`` /
         ``slivers_after`` (tetrahedra outside the bounds), ``sliver_points_moved``
         and ``sliver_off_centres`` (points inserted). Slivers are measured,
@@ -104,60 +107,6 @@ class TetOptions:
         # The ranges of the step's own options: checked where the step checks them.
         _core.check_tet_options(self.cell_factor, self.radius_scale, self.boundary_clearance, self.max_radius_edge,
                                 self.sliver_angle, self.max_samples, self.threads or 0)
-
-
-def _box_of(mesh: TetMesh) -> np.ndarray:
-    """The mesh's bounding box (lo, hi), checked to be its domain: every
-    boundary triangle on one of the box's planes, the volumes summing to the
-    box's."""
-    points = mesh.points
-    lo, hi = points.min(axis=0), points.max(axis=0)
-    faces, _ = mesh.boundary_faces
-    p = points[faces]
-    on_plane = np.zeros(len(faces), bool)
-    for axis in range(3):
-        c = p[:, :, axis]
-        on_plane |= ((c == lo[axis]).all(axis=1)) | ((c == hi[axis]).all(axis=1))
-    if not on_plane.all():
-        raise ValueError("evolve on a TetMesh supports axis-aligned boxes only: boundary triangle "
-                         f"{faces[int(np.argmin(on_plane))].tolist()} is not on a face of the bounding box")
-    box_volume = float(np.prod(hi - lo))
-    volume = float(mesh.volumes.sum())
-    if abs(volume - box_volume) > 1e-12 * box_volume:
-        raise ValueError(f"evolve on a TetMesh supports boxes only: the volume {volume!r} is not the bounding box's "
-                         f"{box_volume!r}")
-    return np.concatenate([lo, hi])
-
-
-def _box_side(points: np.ndarray, faces: np.ndarray, box: np.ndarray) -> np.ndarray:
-    """The box side (2 axis + (0 low, 1 high)) of each boundary triangle."""
-    p = points[faces]
-    side = np.full(len(faces), -1, np.int64)
-    for axis in range(3):
-        for high in (0, 1):
-            on = (p[:, :, axis] == box[3 * high + axis]).all(axis=1)
-            side[on & (side < 0)] = 2 * axis + high
-    return side
-
-
-def _side_tags(mesh: TetMesh, box: np.ndarray) -> np.ndarray | None:
-    """The face tag of each box side (None: all faces untagged)."""
-    if not mesh.face_tags.any():
-        if len(mesh.faces) != len(mesh.boundary_faces[0]):
-            raise ValueError("evolve on a TetMesh does not support interior faces yet")
-        return None
-    faces = mesh.faces
-    side = _box_side(mesh.points, faces, box)
-    if (side < 0).any():
-        raise ValueError("evolve on a TetMesh does not support tagged interior faces yet")
-    tags = np.zeros(6, np.int64)
-    for s in range(6):
-        values = np.unique(mesh.face_tags[side == s])
-        if len(values) > 1:
-            raise ValueError(f"face tags vary within box side {s}: not supported yet (one tag per side)")
-        if len(values):
-            tags[s] = values[0]
-    return tags
 
 
 def _per_point(value: Any, n: int, name: str) -> np.ndarray:
@@ -217,13 +166,15 @@ def _size_weight(mesh: TetMesh, h: np.ndarray, options: TetOptions) -> np.ndarra
 
 def evolve_tet(mesh: TetMesh, delta: Any = None, *, size: Any = None, seed: int | None = None,
                options: TetOptions | None = None, **overrides: Any) -> TetMesh:
-    """One FRFC step on a tetrahedral mesh of an axis-aligned box.
+    """One FRFC step on a tetrahedral mesh of a convex polyhedron.
 
     Parameters
     ----------
     mesh : TetMesh
-        A mesh of an axis-aligned box (its boundary triangles on the bounding
-        box's planes, coordinates exactly equal to the bounds there).
+        A mesh of a convex polyhedron whose facets meet at 90 degrees or more
+        (:func:`evomesh.tet_domains.polyhedral_domain`): a box, or the meshes
+        of :func:`evomesh.convex_polyhedron_mesh`. Its facets and edges stay
+        exactly where they are; corners are always kept.
     delta : float or array_like, shape (n,)
         New spacing delta(p) nn(p) at every point, in [1e-6, 1e6].
     size : float, array_like of shape (n,), or callable
@@ -245,6 +196,15 @@ def evolve_tet(mesh: TetMesh, delta: Any = None, *, size: Any = None, seed: int 
         With ``origin`` (index in ``mesh``, -1 new; kept points have
         bit-identical coordinates), ``kind``, ``lineage`` (for
         :func:`evomesh.transfer`) and ``stats``.
+
+    Raises
+    ------
+    ValueError
+        A bad request, or a domain the step does not support: not convex
+        (an L-shaped block, a box with a hole), facets meeting below 90
+        degrees, a non-manifold boundary, a tilted facet whose corners leave
+        no float64 points exactly on it, face tags that vary within a facet,
+        several regions (tet_tags).
     """
     start = time.process_time()
     if not isinstance(mesh, TetMesh):
@@ -266,8 +226,8 @@ def evolve_tet(mesh: TetMesh, delta: Any = None, *, size: Any = None, seed: int 
         raise ValueError("give exactly one of delta and size")
     if len(np.unique(mesh.tet_tags)) > 1:
         raise ValueError("evolve on a TetMesh does not support several regions (tet_tags) yet")
-    box = _box_of(mesh)
-    side_tags = _side_tags(mesh, box)
+    domain = polyhedral_domain(mesh)
+    tags_of_facet = facet_tags(mesh, domain)
     n = mesh.n_points
     nn = mesh.nn_spacing
     cap: Callable[[np.ndarray, np.ndarray], np.ndarray] | None = None
@@ -300,14 +260,14 @@ def evolve_tet(mesh: TetMesh, delta: Any = None, *, size: Any = None, seed: int 
     steiner = (mesh.kind >= TetPointKind.STEINER).astype(np.uint8)
     threads = 0 if options.threads is None else options.threads
     out = _core.tet_step(mesh.points, mesh.tetrahedra, faces, face_tet, steiner, mesh.required.astype(np.uint8),
-                         weight, box, options.cell_factor, options.radius_scale, options.boundary_clearance,
-                         options.max_radius_edge, options.sliver_angle, options.max_samples, int(seed),
-                         threads, cap)
+                         weight, *domain.arrays, domain.triangle_facet, options.cell_factor, options.radius_scale,
+                         options.boundary_clearance, options.max_radius_edge, options.sliver_angle,
+                         options.max_samples, int(seed), threads, cap)
     points, tets, origin = out["points"], out["tetrahedra"], out["origin"]
     new_faces, new_face_tet = boundary_faces(tets)
     face_tags = None
-    if side_tags is not None:
-        face_tags = side_tags[_box_side(points, new_faces, box)]
+    if tags_of_facet is not None:
+        face_tags = tags_of_facet[triangle_facets(out["facets"], new_faces)]
     tet_tags = None if not mesh.tet_tags.any() else np.full(len(tets), mesh.tet_tags[0], np.int64)
     required = None
     if mesh.required.any():

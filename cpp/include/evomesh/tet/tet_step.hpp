@@ -1,6 +1,6 @@
-// One FRFC step on a tetrahedral mesh of an axis-aligned box (the paper's
+// One FRFC step on a tetrahedral mesh of a convex polyhedron (the paper's
 // Section 3.2 one dimension up): f from the old points' weights (an exact
-// cone envelope, nd/cone_envelope.hpp), samples on the box's edges, faces and
+// cone envelope, nd/cone_envelope.hpp), samples on the domain's edges, facets and
 // in the old tetrahedra, the lexical-first MIS of spheres B(x, radius_scale f(x)/2) by
 // classes (required < corner < edge < face < old interior < Steiner < sampled;
 // old before new within the boundary classes; smaller radius first, ties by a
@@ -16,19 +16,19 @@
 #include <utility>
 #include <vector>
 
+#include "evomesh/tet/polyhedral_domain.hpp"
 #include "evomesh/types.hpp"
 
 namespace evomesh::tet {
 
-using Vec3 = std::array<double, 3>;
 using Tet = std::array<Index, 4>;
 using Face = std::array<Index, 3>;
 
 // Per-point label; the numeric order is the stratum order of the packing.
 enum class Tet_point_kind : std::uint8_t {
-  corner = 0,    // a corner of the box (always kept)
-  edge = 1,      // on one edge of the box
-  face = 2,      // on one face of the box
+  corner = 0,    // a corner of the domain (always kept)
+  edge = 1,      // on one edge of the domain
+  face = 2,      // on one facet of the domain
   original = 3,  // interior, in the user's mesh
   steiner = 4,   // interior, added by an earlier step
   sampled = 5,   // interior, added by this step
@@ -43,10 +43,11 @@ struct Tet_step_options {
   // the old ones (with 1, a sample nearer than nn(p) to a kept old point p
   // always conflicts with it, whatever delta(p)).
   double radius_scale = 0.75;
-  // A candidate off the box's planes (not a corner) is rejected when it lies
-  // closer than boundary_clearance f(x) to a box plane it is not on: no
-  // interior point sits in a face's shadow (the flat "caps" a bare packing
-  // makes there), no face point next to an edge.
+  // A candidate (not a corner) is rejected when it lies closer than
+  // boundary_clearance f(x) to a facet plane it is not on
+  // (Polyhedral_domain::clearance): no interior point sits in a face's
+  // shadow (the flat "caps" a bare packing makes there), no face point next
+  // to an edge.
   double boundary_clearance = 0.5;
   // Delaunay refinement of tetrahedra whose radius-edge ratio exceeds this
   // (refined_delaunay below; 0: none), with at most a tenth of the kept
@@ -69,12 +70,13 @@ struct Tet_step_options {
 struct Tet_step_input {
   std::vector<Vec3> points;
   std::vector<Tet> tets;           // positively oriented
-  std::vector<Face> boundary;      // the boundary triangles (on the box's faces)
+  std::vector<Face> boundary;      // the boundary triangles (on the domain's facets)
   std::vector<Index> boundary_tet; // a tetrahedron of each boundary triangle
+  std::vector<int> boundary_facet; // the facet of each boundary triangle
   std::vector<std::uint8_t> steiner;   // per point: interior and added by a step
   std::vector<std::uint8_t> required;  // per point: kept whatever the request
   std::vector<double> weight;          // w_p > 0: f(x) = min_p (w_p + |x - p|)
-  Vec3 lo{}, hi{};                     // the box
+  Polyhedral_domain domain;            // convex; the hull of the points
 };
 
 // cap(x, tet, out): the largest f allowed at the new candidates x (each drawn
@@ -90,6 +92,7 @@ struct Tet_step_result {
   std::vector<Index> origin;              // old index, -1 new
   std::vector<Index> parent_tet;          // for new points: the old tetrahedron holding them; -1 kept
   std::vector<std::uint8_t> kind;         // Tet_point_kind
+  std::vector<std::uint64_t> facets;      // per point: the facets it lies on (Polyhedral_domain::Mask)
   std::vector<double> f;                  // f at each output point (radius f/2)
   std::vector<std::pair<std::string, double>> stats;
 };
@@ -112,7 +115,7 @@ std::vector<double> cone_envelope_3(const std::vector<Vec3>& sites, const std::v
 std::vector<Tet> delaunay_tetrahedra(const std::vector<Vec3>& points);
 
 // The sliver pass (refined_delaunay): new points move within picking
-// regions (new face points within their face); old points never move;
+// regions (new face points within their facet); old points never move;
 // what is left gets points inside the slivers' circumspheres.
 struct Sliver_options {
   double min_dihedral = 0;          // degrees: a sliver has a dihedral below it or above 180 minus it; 0: no pass
@@ -141,11 +144,13 @@ struct Refinement_report {
 // radius-edge ratio (Shewchuk): in rounds, every tetrahedron with circumradius
 // above max_ratio times its shortest edge (in canonical order, skipping those
 // an earlier insertion of the round destroyed) gets its circumcentre, or, when
-// that lies beyond a box face or within half the shortest edge of it, the
-// centre's projection onto that face (kept off the face's edges; none near an
-// edge). At most `budget` points, appended to `points`.
+// that lies beyond a facet or within half the shortest edge of it, the
+// centre's projection onto that facet, or onto an edge of it when the
+// projection is that near the edge (kept half the shortest edge from the
+// facets it is not on; none near a corner). At most `budget` points,
+// appended to `points`.
 // Then, with slivers.min_dihedral > 0, the sliver pass (points moved in place).
-std::vector<Tet> refined_delaunay(std::vector<Vec3>& points, const Vec3& lo, const Vec3& hi, double max_ratio,
+std::vector<Tet> refined_delaunay(std::vector<Vec3>& points, const Polyhedral_domain& domain, double max_ratio,
                                   std::size_t budget, const Sliver_options& slivers, Refinement_report& report);
 
 Tet_step_result tet_step(const Tet_step_input& input, const Tet_step_options& options, const Size_cap& cap);
