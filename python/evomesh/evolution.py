@@ -437,7 +437,11 @@ def evolve(mesh: Any, delta: Any = None, *, size: Any = None, method: str = "frf
         and ``interface_points_off_curve``, ``interface_largest_off_curve``:
         interface points farther than 8 units of rounding from phi = 0). The
         spacing comes from ``delta``/``size`` at the old points as usual
-        (absolute: the cut's short edges next to crossings do not refine),
+        (absolute: the cut's short edges next to crossings do not refine;
+        a request out of range against the old mesh's spacing raises as
+        without an interface, and a factor out of range only against a
+        crossing's short edge is clamped, counted in
+        ``interface_delta_clamped``),
         capped near the interface by its local feature size (the distance
         across the domain to the next piece of the interface, its own other
         side included: a filament, a narrow ring or a short wave is resolved

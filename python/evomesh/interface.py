@@ -1337,6 +1337,28 @@ def _spacing_at_cut(mesh: Mesh, cut: Cut, delta: Any, size: Any) -> np.ndarray:
     return h
 
 
+def _delta_at_cut(mesh: Mesh, cut: Cut, h: np.ndarray) -> tuple[np.ndarray, int]:
+    """h over the cut's own spacing as delta, and how many points had it
+    clamped into [DELTA_MIN, DELTA_MAX].
+
+    The request (size, delta, interface_band) is checked as every scope checks
+    a size (size_request.hpp), against the user's mesh: the spacing nn_M at
+    the old points, linear in the old triangle at the cut's new points. Out of
+    range raises, never clipped. The cut's own spacing can be far smaller than
+    that (a crossing next to an old point: nn of 1e-9 where h is 0.025); a
+    factor out of range only because of it is clamped, which only keeps the
+    step finer there, and counted in ``stats["interface_delta_clamped"]``."""
+    nn = np.empty(cut.mesh.n_points)
+    old = cut.old_index >= 0
+    nn[old] = mesh.nn_spacing[cut.old_index[old]]
+    new = np.flatnonzero(~old)
+    nn[new] = np.einsum("kj,kj->k", cut.barycentric[new], mesh.nn_spacing[mesh.triangles[cut.parent_triangle[new]]])
+    _core.check_size_delta(h / nn, h, nn, DELTA_MIN, DELTA_MAX)
+    delta = h / cut.mesh.nn_spacing
+    outside = (delta < DELTA_MIN) | (delta > DELTA_MAX)
+    return np.clip(delta, DELTA_MIN, DELTA_MAX), int(outside.sum())
+
+
 def _interface_geometry(geometry: Any, interface_tag: int, curve: Any, scale: float, on_interface: np.ndarray
                         ) -> BoundaryGeometry:
     """The user's curved boundaries (if any) with the interface's curve added under interface_tag."""
@@ -1423,11 +1445,7 @@ def evolve_with_interface(mesh: Mesh, delta: Any, size: Any, interface: Any, int
     if band is not None:
         width, spacing, grade = band
         h = np.minimum(h, spacing + grade * np.maximum(0.0, _distance_to_interface(cut, tag) - 0.5 * width))
-    # h over the cut's own spacing, checked as every scope checks a size
-    # (size_request.hpp): a request out of range raises, never clipped.
-    cut_nn = cut.mesh.nn_spacing
-    cut_delta = h / cut_nn
-    _core.check_size_delta(cut_delta, h, cut_nn, DELTA_MIN, DELTA_MAX)
+    cut_delta, clamped = _delta_at_cut(mesh, cut, h)
     on_interface = np.unique(cut.mesh.segments[(cut.mesh.segment_tags == tag) & ~cut.mesh.segment_is_boundary])
     extent = float(np.ptp(cut.mesh.points, axis=0).max())
     g = _interface_geometry(geometry, tag, cut.curve, extent, cut.mesh.points[on_interface])
@@ -1452,6 +1470,7 @@ def evolve_with_interface(mesh: Mesh, delta: Any, size: Any, interface: Any, int
             f"spacing of {finest} at {place} ({cause}); move the pieces apart there, coarsen interface_band "
             "or raise max_samples") from None
     extra = _placement_report(out, cut.curve, tag, extent)
+    extra["interface_delta_clamped"] = float(clamped)
     extra.update(_angle_report(out, step_arguments, tag))
     return _compose(mesh, cut, out, tag, extra)
 
