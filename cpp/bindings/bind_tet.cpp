@@ -77,7 +77,11 @@ Polyhedral_domain to_domain(const Float_array& facets, const Int_array& edge_fac
   if (!f.empty()) std::memcpy(f.data(), facets.data(), f.size() * sizeof(f[0]));
   std::vector<std::array<int, 2>> ef(static_cast<std::size_t>(n_edges));
   for (std::size_t e = 0; e < ef.size(); ++e) {
-    for (std::size_t i = 0; i < 2; ++i) ef[e][i] = static_cast<int>(edge_facets.at(static_cast<py::ssize_t>(e), static_cast<py::ssize_t>(i)));
+    for (std::size_t i = 0; i < 2; ++i) {
+      const auto facet = edge_facets.at(static_cast<py::ssize_t>(e), static_cast<py::ssize_t>(i));
+      if (facet < 0 || facet >= facets.shape(0)) throw Input_error("edge_facets must index facets");
+      ef[e][i] = static_cast<int>(facet);
+    }
   }
   std::vector<std::array<Vec3, 2>> ends(static_cast<std::size_t>(n_edges));
   if (!ends.empty()) std::memcpy(ends.data(), edge_ends.data(), ends.size() * sizeof(ends[0]));
@@ -85,6 +89,11 @@ Polyhedral_domain to_domain(const Float_array& facets, const Int_array& edge_fac
   for (const auto& facet : f) {
     for (const auto& p : facet) {
       if (!std::isfinite(p[0]) || !std::isfinite(p[1]) || !std::isfinite(p[2])) throw Input_error("facets must be finite");
+    }
+  }
+  for (const auto& edge : ends) {
+    for (const auto& p : edge) {
+      if (!std::isfinite(p[0]) || !std::isfinite(p[1]) || !std::isfinite(p[2])) throw Input_error("edge_ends must be finite");
     }
   }
   return Polyhedral_domain(f, ef, ends, std::vector<Polyhedral_domain::Mask>(masks.begin(), masks.end()));

@@ -1,5 +1,6 @@
 #include "evomesh/sampling.hpp"
 
+#include "evomesh/detail/bits.hpp"
 #include "evomesh/global_ids.hpp"
 
 #include <algorithm>
@@ -17,10 +18,9 @@ namespace evomesh {
 namespace {
 
 std::uint64_t splitmix64(std::uint64_t& x) {
-  std::uint64_t z = (x += 0x9e3779b97f4a7c15ULL);
-  z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ULL;
-  z = (z ^ (z >> 27)) * 0x94d049bb133111ebULL;
-  return z ^ (z >> 31);
+  const std::uint64_t z = detail::mix(x);
+  x += 0x9e3779b97f4a7c15ULL;
+  return z;
 }
 
 constexpr double kInvTwoSqrtTwo = 0.35355339059327373;  // 1 / (2 sqrt 2)

@@ -11,6 +11,7 @@
 #include <numeric>
 #include <unordered_map>
 
+#include "evomesh/detail/bits.hpp"
 #include "evomesh/detail/kept_sphere_tree.hpp"
 #include "evomesh/kernel.hpp"
 #include "evomesh/nd/cone_envelope.hpp"
@@ -31,12 +32,7 @@ Point_3 to_cgal(const Vec3& p) { return Point_3(p[0], p[1], p[2]); }
 
 // A counter-based random stream: the same number for the same (seed, stage,
 // element, cell, axis) whatever the thread or the order of the draws.
-std::uint64_t mix(std::uint64_t z) {
-  z += 0x9e3779b97f4a7c15ULL;
-  z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ULL;
-  z = (z ^ (z >> 27)) * 0x94d049bb133111ebULL;
-  return z ^ (z >> 31);
-}
+using evomesh::detail::mix;
 double uniform(std::uint64_t seed, std::uint64_t stage, std::uint64_t element, std::uint64_t cell, int axis) {
   const std::uint64_t h = mix(mix(mix(mix(seed) ^ stage) ^ element) ^ (cell * 4 + static_cast<std::uint64_t>(axis)));
   return static_cast<double>(h >> 11) * 0x1.0p-53;
@@ -131,14 +127,32 @@ void sample_edges(const Tet_step_input& in, const std::vector<Mask>& on_old, con
   double cells = 0;
   struct Piece { Index a, b; std::size_t edge; };
   std::vector<Piece> pieces;
+  // The old points of each edge, in index order, in one pass over the points:
+  // a point on two facets lies on their edge; a corner (three or more) on each
+  // edge of two of its facets.
+  std::vector<Mask> edge_mask(domain.n_edges());
+  std::unordered_map<Mask, std::size_t> edge_of_mask;
   for (std::size_t e = 0; e < domain.n_edges(); ++e) {
     const auto [f0, f1] = domain.edge_facets(e);
-    const Mask both = (Mask{1} << f0) | (Mask{1} << f1);
-    const int axis = domain.edge_axis(e);
-    std::vector<Index> on_edge;
-    for (std::size_t p = 0; p < n; ++p) {
-      if ((on_old[p] & both) == both) on_edge.push_back(static_cast<Index>(p));
+    edge_mask[e] = (Mask{1} << f0) | (Mask{1} << f1);
+    edge_of_mask.emplace(edge_mask[e], e);
+  }
+  std::vector<std::vector<Index>> old_on_edge(domain.n_edges());
+  for (std::size_t p = 0; p < n; ++p) {
+    const int facets = evomesh::detail::popcount(on_old[p]);
+    if (facets == 2) {
+      if (const auto it = edge_of_mask.find(on_old[p]); it != edge_of_mask.end()) {
+        old_on_edge[it->second].push_back(static_cast<Index>(p));
+      }
+    } else if (facets > 2) {
+      for (std::size_t e = 0; e < domain.n_edges(); ++e) {
+        if ((on_old[p] & edge_mask[e]) == edge_mask[e]) old_on_edge[e].push_back(static_cast<Index>(p));
+      }
     }
+  }
+  for (std::size_t e = 0; e < domain.n_edges(); ++e) {
+    const int axis = domain.edge_axis(e);
+    std::vector<Index>& on_edge = old_on_edge[e];
     std::sort(on_edge.begin(), on_edge.end(), [&](Index a, Index b) {
       return in.points[static_cast<std::size_t>(a)][axis] < in.points[static_cast<std::size_t>(b)][axis];
     });

@@ -8,6 +8,7 @@
 #include <utility>
 #include <vector>
 
+#include "evomesh/detail/bits.hpp"
 #include "evomesh/kernel.hpp"
 #include "evomesh/tet/tet_step.hpp"
 
@@ -191,12 +192,7 @@ bool centre_placement(const Point_3& centre, double shortest, const Polyhedral_d
   return too_near(x, ends) == 0;
 }
 
-std::uint64_t mix(std::uint64_t z) {
-  z += 0x9e3779b97f4a7c15ULL;
-  z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ULL;
-  z = (z ^ (z >> 27)) * 0x94d049bb133111ebULL;
-  return z ^ (z >> 31);
-}
+using evomesh::detail::mix;
 
 // A uniform point u of the unit ball (rejection from the cube; counter-based
 // draws from `draw`).

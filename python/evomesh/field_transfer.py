@@ -592,6 +592,11 @@ class TetSupermesh:
         self.old_tet = raw["old_tet"]
         self.volume = raw["volume"]
         self.identical = int(raw["identical"])
+        empty = np.flatnonzero(np.diff(self.offsets) == 0)
+        if len(empty):  # (never for a step's output: the old tetrahedra cover the domain)
+            t = int(empty[0])
+            raise ValueError(f"new tetrahedron {t} (points {new.tetrahedra[t].tolist()}) overlaps no old tetrahedron: "
+                             "old and new do not cover the same domain")
         self.new_tet = np.repeat(np.arange(new.n_tetrahedra), np.diff(self.offsets))
 
     def project_cells(self, values: Any) -> np.ndarray:

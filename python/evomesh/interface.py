@@ -780,6 +780,8 @@ def _split_double_crossings(mesh: Mesh, phi: np.ndarray, level: LevelSet, interf
         key = edges[:, 0] * (1 << 31) + edges[:, 1]  # (the same edge keeps its key from round to round)
         # an edge whose ends are closer to phi = 0 than its length allows at twice the median
         # slope of phi along the crossing edges may cross twice, too
+        if not crossing.any():  # (phi changes sign only between parts of the domain no edge joins)
+            break
         length = np.hypot(*(P[edges[:, 1]] - P[edges[:, 0]]).T)
         slope = np.median(np.abs(values[edges[crossing, 0]] - values[edges[crossing, 1]]) / length[crossing])
         close = np.abs(values[edges[:, 0]]) + np.abs(values[edges[:, 1]]) <= 2 * slope * length

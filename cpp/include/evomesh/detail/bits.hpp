@@ -35,4 +35,24 @@ inline void prefetch([[maybe_unused]] const void* address) {
 #endif
 }
 
+// Number of set bits.
+inline int popcount(std::uint64_t mask) {
+#if defined(__GNUC__) || defined(__clang__)
+  return __builtin_popcountll(mask);
+#else
+  int k = 0;
+  for (; mask; mask &= mask - 1) ++k;
+  return k;
+#endif
+}
+
+// SplitMix64's finaliser: the mixing behind every counter-based random stream
+// (the same number for the same key, whatever the thread or the order of draws).
+inline std::uint64_t mix(std::uint64_t z) {
+  z += 0x9e3779b97f4a7c15ULL;
+  z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ULL;
+  z = (z ^ (z >> 27)) * 0x94d049bb133111ebULL;
+  return z ^ (z >> 31);
+}
+
 }  // namespace evomesh::detail
