@@ -111,12 +111,14 @@ bool next_in_chain(const Cdt& tr, Vertex_handle from, Vertex_handle v, Vertex_ha
   return n == 1;
 }
 
-// Whether v -> w continues u -> v straight (turning by less than 6 degrees).
-bool goes_straight(const Point_2& u, const Point_2& v, const Point_2& w) {
-  const double ax = v.x() - u.x(), ay = v.y() - u.y(), bx = w.x() - v.x(), by = w.y() - v.y();
+// Whether c -> d points the way of a -> b (within 6 degrees).
+bool same_direction(const Point_2& a, const Point_2& b, const Point_2& c, const Point_2& d) {
+  const double ax = b.x() - a.x(), ay = b.y() - a.y(), bx = d.x() - c.x(), by = d.y() - c.y();
   const double dot = ax * bx + ay * by, cross = ax * by - ay * bx;
   return dot > 0 && std::abs(cross) <= 0.1 * dot;
 }
+// Whether v -> w continues u -> v straight (turning by less than 6 degrees).
+bool goes_straight(const Point_2& u, const Point_2& v, const Point_2& w) { return same_direction(u, v, v, w); }
 
 // Whether a -> b and c -> d are equally long to rounding (1024 units of
 // rounding of their largest coordinate: the pieces of a structured mesh's
@@ -192,8 +194,11 @@ class Marching_runs {
       for (int dir = 0; dir < 2; ++dir) {
         if (split_pieces_beyond(tr, v[1 - dir], v[dir], kReach) < kMarch) continue;
         Vertex_handle from = v[dir], at = v[1 - dir], next;
+        // (straight piece to piece and against the seed's piece: a polygon of many
+        // equal sides, a circular hole, turns little at each corner but is no run)
         while (next_in_chain(tr, from, at, next) && is_input(next) &&
                goes_straight(from->point(), at->point(), next->point()) &&
+               same_direction(v[dir]->point(), v[1 - dir]->point(), at->point(), next->point()) &&
                same_length(from->point(), at->point(), at->point(), next->point())) {
           if (!walked_.insert({at->point(), next->point()}).second) break;
           Sub_segment s = sub_segment(at, next);
