@@ -819,24 +819,28 @@ def _split_double_crossings(mesh: Mesh, phi: np.ndarray, level: LevelSet, interf
         count = split.sum(axis=1)
         rotation = np.where(count == 1, np.argmax(split, axis=1),
                             np.where(count == 2, (np.argmin(split, axis=1) + 1) % 3, 0))
-        turn = (rotation[:, None] + np.arange(3)) % 3
-        rows = np.arange(len(T))[:, None]
-        labels = np.concatenate([T[rows, turn], mid[rows, turn]], axis=1)  # (m, 6)
-        corner_w = weights[rows, turn]  # (m, 3, 3) in the rotated order
+        # the split triangles' corners and midpoints, rotated (only theirs: a few near the interface)
+        active = np.flatnonzero(count > 0)
+        position = np.full(len(T), -1, dtype=np.int64)
+        position[active] = np.arange(len(active))
+        turn = (rotation[active, None] + np.arange(3)) % 3
+        rows = active[:, None]
+        labels = np.concatenate([T[rows, turn], mid[rows, turn]], axis=1)  # (split triangles, 6)
+        corner_w = weights[rows, turn]  # (split triangles, 3, 3) in the rotated order
         along = side_t[rows, turn][:, :, None]
         label_w = np.concatenate([corner_w, (1 - along) * corner_w + along * np.roll(corner_w, -1, axis=1)], axis=1)
         pieces, piece_of = [T[count == 0]], [np.flatnonzero(count == 0)]
         piece_w = [weights[count == 0]]
         two = np.flatnonzero(count == 2)
         P = np.concatenate([P, middle])
-        x = P[labels[two]]  # the diagonals v0 - m1 and m0 - v2
+        x = P[labels[position[two]]]  # the diagonals v0 - m1 and m0 - v2
         first = np.hypot(*(x[:, 0] - x[:, 4]).T) <= np.hypot(*(x[:, 3] - x[:, 2]).T)
         for rows_of, template in ((np.flatnonzero(count == 1), _ONE_SPLIT), (two[first], _TWO_SPLIT[0]),
                                   (two[~first], _TWO_SPLIT[1]), (np.flatnonzero(count == 3), _THREE_SPLIT)):
             for local in template:
-                pieces.append(labels[rows_of][:, local])
+                pieces.append(labels[position[rows_of]][:, local])
                 piece_of.append(rows_of)
-                piece_w.append(label_w[rows_of][:, local])
+                piece_w.append(label_w[position[rows_of]][:, local])
         T = np.concatenate(pieces)
         source = np.concatenate(piece_of)
         parent = parent[source]
