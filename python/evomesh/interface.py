@@ -1586,7 +1586,9 @@ def _angle_report(out: Mesh, step_arguments: dict[str, Any], interface_tag: int)
                   f"{o.min_angle:g} next to the interface (evolve's exception for curves): its points moved onto "
                   "phi = 0 after the quality pass and the refits did not restore the angle "
                   f"({int(left)} point(s) left on their chords where phi = 0 folds within the spacing); stats "
-                  "'interface_angle_exception' has bit 1. A finer interface_band there resolves it",
+                  "'interface_angle_exception' has bit 1. Where phi = 0 is smooth there, a finer interface_band "
+                  "resolves it; at a corner of phi = 0 (where two fronts meet or touch) the angle follows the "
+                  "corner's and refining does not raise it",
                   QualityWarning, stacklevel=4)
     return report
 
