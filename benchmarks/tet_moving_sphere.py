@@ -16,7 +16,7 @@ build/peers/mmg-venv/bin/pip install mmgpy==0.17.1; never a dependency of
 evomesh). evomesh's size_factor is calibrated on the first moving step so that
 its median edge / h is within 5 % of MMG's.
 
-    .venv/bin/python benchmarks/tet_moving_sphere.py [--hmin 0.01] [--steps 4] [--no-mmg]
+    .venv/bin/python benchmarks/tet_moving_sphere.py [--hmin 0.01] [--steps 4] [--no-mmg | --no-evomesh]
 """
 
 from __future__ import annotations
@@ -156,6 +156,7 @@ def main() -> None:
     parser.add_argument("--hmin", type=float, default=0.01)
     parser.add_argument("--steps", type=int, default=4)
     parser.add_argument("--no-mmg", action="store_true")
+    parser.add_argument("--no-evomesh", action="store_true", help="MMG3D alone (its rows only)")
     parser.add_argument("--size-factor", type=float, default=None, help="skip the calibration")
     parser.add_argument("--sliver-angle", type=float, default=None, help="TetOptions.sliver_angle (0: no sliver pass)")
     args = parser.parse_args()
@@ -216,6 +217,8 @@ def main() -> None:
     sliver_angle = evomesh.TetOptions().sliver_angle if args.sliver_angle is None else args.sliver_angle
     sliver = {"sliver_angle": sliver_angle}
     size_factor = args.size_factor if args.size_factor is not None else evomesh.TetOptions().size_factor
+    if args.no_evomesh:
+        return
     if mmg_ratio is not None and args.size_factor is None:
         for _ in range(3):  # median edge / h scales with the size factor
             ratio = run_evomesh(size_factor, 1, False)
