@@ -750,12 +750,18 @@ class Supermesh:
         linear fields are reproduced and the integral grows by exactly int_U E.
         ``_gap_mass[g]`` maps s*'s three values to t's three right-hand sides.
         """
+        self._magnitude = max(float(np.abs(self.old.points).max()), float(np.abs(self.new.points).max()))
+        self._find_gaps(parent, lambda t: f"new triangle {t}")
+
+    def _find_gaps(self, parent: np.ndarray, name: Callable[[int], str]) -> None:
+        """_find_domain_change's work at ``self._magnitude`` (the distributed
+        supermesh's too, on its rank's part); ``name(t)`` names new triangle t
+        in the error."""
         old, new = self.old, self.new
         n_new = new.n_triangles
         self._new_area, edge = _areas_and_longest_sides(new)
         covered = np.bincount(self.new_triangle, self.area, minlength=n_new)
         counts = np.diff(self.offsets)
-        self._magnitude = max(float(np.abs(old.points).max()), float(np.abs(new.points).max()))
         gap = np.flatnonzero(self._new_area - covered > _area_rounding(self._magnitude, edge, counts))
         stand_in = np.full(len(gap), -1, dtype=np.int64)
         with_pairs = counts[gap] > 0
@@ -763,13 +769,11 @@ class Supermesh:
             stand_in[with_pairs] = _largest_overlap(self.new_triangle, self.old_triangle, self.area, gap[with_pairs])
         lone = np.flatnonzero(~with_pairs)
         if len(lone):
-            stand_in[lone] = self._old_triangle_at_points(gap[lone], parent)
+            stand_in[lone] = Supermesh._old_triangle_at_points(self, gap[lone], parent)
             missing = lone[stand_in[lone] < 0]
             if len(missing):
-                raise ValueError(
-                    f"new triangle {int(gap[missing[0]])} overlaps no old triangle and none of its points lies in "
-                    "one: new was not evolved from old"
-                )
+                raise ValueError(f"{name(int(gap[missing[0]]))} overlaps no old triangle and none of its points "
+                                 "lies in one: new was not evolved from old")
         self.gap_triangle = gap
         self.gap_old_triangle = stand_in
         self.gap_area = self._new_area[gap] - covered[gap]

@@ -72,10 +72,6 @@ from ..field_transfer import (
     _LINEAGE_SLACK,
     _ROUNDING_ULPS,
     Supermesh,
-    _area_rounding,
-    _areas_and_longest_sides,
-    _gap_mass,
-    _largest_overlap,
     _numeric,
     _pairs_within,
     _to_segments,
@@ -501,6 +497,12 @@ class _LocalSupermesh:
     rank's owned new triangles over the held old triangles (so its
     ``project_cells`` runs unchanged on them), and what the P1 projection needs."""
 
+    # set by Supermesh._find_gaps
+    gap_triangle: np.ndarray
+    gap_old_triangle: np.ndarray
+    gap_area: np.ndarray
+    _gap_mass: np.ndarray
+
     def __init__(self, comm: Any, old: DistributedMesh, new: DistributedMesh, mass: bool):
         self.comm = comm
         tri = new.triangles
@@ -579,31 +581,9 @@ class _LocalSupermesh:
         """Supermesh._find_domain_change on this rank's part, with the magnitude
         of both whole meshes (so the same gaps): the new triangles the old
         domain leaves uncovered, their stand-in old triangle and gap mass."""
-        old, new = self.old, self.new
-        n_new = new.n_triangles
-        self._new_area, edge = _areas_and_longest_sides(new)  # type: ignore[arg-type]
-        covered = np.bincount(self.new_triangle, self.area, minlength=n_new)
-        counts = np.diff(self.offsets)
-        gap = np.flatnonzero(self._new_area - covered > _area_rounding(self._magnitude, edge, counts))
-        stand_in = np.full(len(gap), -1, dtype=np.int64)
-        with_pairs = counts[gap] > 0
-        if with_pairs.any():
-            stand_in[with_pairs] = _largest_overlap(self.new_triangle, self.old_triangle, self.area, gap[with_pairs])
-        lone = np.flatnonzero(~with_pairs)
-        if len(lone):
-            stand_in[lone] = Supermesh._old_triangle_at_points(self, gap[lone], parent)  # type: ignore[arg-type]
-            missing = lone[stand_in[lone] < 0]
-            if len(missing):
-                gid = int(self.new_mesh.triangle_global_ids[gap[missing[0]]])
-                raise ValueError(f"new triangle with global id {gid} overlaps no old triangle and none of its "
-                                 "points lies in one: new was not evolved from old")
-        self.gap_triangle = gap
-        self.gap_old_triangle = stand_in
-        self.gap_area = self._new_area[gap] - covered[gap]
-        if not len(gap) or self.mass.size == 0:
-            self._gap_mass = np.zeros((len(gap), 3, 3))
-            return
-        self._gap_mass = _gap_mass(self, old, new, gap, stand_in)
+        global_ids = self.new_mesh.triangle_global_ids
+        Supermesh._find_gaps(self, parent,  # type: ignore[arg-type]
+                             lambda t: f"new triangle with global id {int(global_ids[t])}")
 
     def cells(self, values: np.ndarray) -> np.ndarray:
         """P0 projection: the serial project_cells on the held values."""
